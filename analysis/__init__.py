@@ -1,0 +1,1 @@
+"""Pictures and curves to numbers (paper section 4.2)."""

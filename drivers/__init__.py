@@ -1,0 +1,1 @@
+"""Devices: cameras, hotplates, and their emulators in `drivers.sim`."""
