@@ -1,0 +1,160 @@
+"""Printability facts of a designed solid: print mass, narrowest open channel, slicer profile.
+
+The paper prints with AquaSys 120 on a Prusa i3 MK3s (section 4.1): measured print density
+1.32 g/cm^3, 100% concentric infill, 0.1 mm layers, 0.2 mm lines, 245/85 C. Its one large
+measured mismatch (Fig. 10) came from narrow internal channels that clogged as the material
+swelled, hence the channel check.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from design.errors import DesignError
+
+log = logging.getLogger(__name__)
+
+PRINT_DENSITY_G_PER_CM3 = 1.32
+"""Average density of the paper's prints (section 4.1)."""
+
+
+@dataclass(frozen=True)
+class Printability:
+    """Printability facts of one solid.
+
+    Attributes
+    ----------
+    volume_mm3 : float
+    mass_g : float
+        At `PRINT_DENSITY_G_PER_CM3`.
+    min_channel_mm : float or None
+        Width of the narrowest passage leading from the outside into a wider void region;
+        None when there is none narrower than the search limit.
+    warnings : tuple of str
+    """
+
+    volume_mm3: float
+    mass_g: float
+    min_channel_mm: float | None
+    warnings: tuple[str, ...]
+
+
+def print_mass_g(volume_mm3: float, density_g_per_cm3: float = PRINT_DENSITY_G_PER_CM3) -> float:
+    """Mass of a print of the given solid volume, g (1 cm^3 = 1000 mm^3)."""
+    return float(volume_mm3) * density_g_per_cm3 / 1000.0
+
+
+def narrowest_channel_mm(solid: np.ndarray, dx_mm: float, max_width_mm: float) -> float | None:
+    """Narrowest open channel: the tightest passage from the outside into a wider void region.
+
+    The void connected to the outside (6-connected, as water flows) gets its Euclidean
+    distance D to the nearest wall. Raising a level t in steps of dx/2, the region D >= t
+    splits: a piece that loses its link to the outside while still reaching D >= t + dx is a
+    chamber entered through a passage of width about ``2 t_prev - dx / 2``, within dx / 2 (a
+    channel w voxels wide has centre-line D = (w + 1) dx / 2 for odd w, w dx / 2 for even w, with
+    D measured between voxel centres). Through-channels of constant width contain
+    no wider chamber and are not reported.
+
+    Parameters
+    ----------
+    solid : (D, H, W) ndarray of bool
+        The full solid (True = material).
+    dx_mm : float
+        Voxel edge, mm.
+    max_width_mm : float
+        Widest channel to look for, mm.
+
+    Returns
+    -------
+    float or None
+        Channel width, mm; None when no channel up to ``max_width_mm`` exists.
+    """
+    if solid.ndim != 3 or not dx_mm > 0 or not max_width_mm > 0:
+        raise DesignError(f"need a 3D solid, dx > 0 and a positive width limit; got {solid.shape}, "
+                          f"{dx_mm}, {max_width_mm}")
+    t_max = 0.5 * (max_width_mm + dx_mm)
+    pad = int(np.ceil(t_max / dx_mm)) + 2
+    void = np.pad(~solid.astype(bool), pad, constant_values=True)
+    labels, _ = ndimage.label(void)
+    outside = labels == labels[0, 0, 0]
+    dist = ndimage.distance_transform_edt(outside, sampling=dx_mm)
+    levels = dx_mm * (1.0 + 0.5 * np.arange(1, int(np.ceil(2 * (t_max / dx_mm - 1))) + 1))
+    prev = dx_mm
+    for level in levels:
+        region = dist >= level - 1e-9 * dx_mm
+        lab, count = ndimage.label(region)
+        if count > 1:
+            peaks = ndimage.maximum(dist, lab, index=np.arange(1, count + 1))
+            home = lab[0, 0, 0]
+            chambers = [k + 1 for k in range(count) if k + 1 != home and peaks[k] >= level + dx_mm - 1e-9]
+            if chambers:
+                return float(2.0 * prev - 0.5 * dx_mm)
+        prev = level
+    return None
+
+
+def assess(solid: np.ndarray, dx_mm: float, *, warn_channel_mm: float = 1.0,
+           density_g_per_cm3: float = PRINT_DENSITY_G_PER_CM3) -> Printability:
+    """Print mass and narrowest channel of a voxel solid, with warnings.
+
+    Parameters
+    ----------
+    solid : (D, H, W) ndarray of bool
+        The full solid.
+    dx_mm : float
+        Voxel edge, mm.
+    warn_channel_mm : float
+        Warn when a channel is narrower than this, mm (paper Fig. 10: narrow channels clog).
+    """
+    if not warn_channel_mm > 0:
+        raise DesignError(f"channel warning width must be > 0 mm, got {warn_channel_mm}")
+    volume = float(np.count_nonzero(solid)) * dx_mm ** 3
+    channel = narrowest_channel_mm(solid, dx_mm, 3.0 * warn_channel_mm)
+    warnings = []
+    if channel is not None and channel < warn_channel_mm:
+        warnings.append(f"narrowest open channel is {channel:.2f} mm, below {warn_channel_mm:g} mm: it may "
+                        f"clog as the material swells (paper Fig. 10)")
+    return Printability(volume, print_mass_g(volume, density_g_per_cm3), channel, tuple(warnings))
+
+
+PRUSA_SETTINGS: dict[str, str] = {
+    # section 4.1: 0.2 mm nozzle, 0.2 mm lines, 0.1 mm layers, 100% concentric infill, 245/85 C,
+    # 200 mm/s, no supports (designs are support-free by construction or extruded)
+    "nozzle_diameter": "0.2",
+    "layer_height": "0.1",
+    "first_layer_height": "0.1",
+    "extrusion_width": "0.2",
+    "first_layer_extrusion_width": "0.2",
+    "perimeter_extrusion_width": "0.2",
+    "external_perimeter_extrusion_width": "0.2",
+    "infill_extrusion_width": "0.2",
+    "solid_infill_extrusion_width": "0.2",
+    "top_infill_extrusion_width": "0.2",
+    "fill_density": "100%",
+    "fill_pattern": "concentric",
+    "top_fill_pattern": "concentric",
+    "bottom_fill_pattern": "concentric",
+    "temperature": "245",
+    "first_layer_temperature": "245",
+    "bed_temperature": "85",
+    "first_layer_bed_temperature": "85",
+    "perimeter_speed": "200",
+    "external_perimeter_speed": "200",
+    "infill_speed": "200",
+    "solid_infill_speed": "200",
+    "top_solid_infill_speed": "200",
+    "support_material": "0",
+    "filament_type": "PVA",
+    "filament_notes": "AquaSys 120 (Infinite Material Solutions), water-soluble",
+}
+
+
+def prusa_profile(name: str = "shape-from-release") -> str:
+    """A PrusaSlicer .ini profile with the paper's print settings (section 4.1)."""
+    lines = [f"# PrusaSlicer profile {name}: print settings of Panetta et al. 2022, section 4.1",
+             "# load with File > Import > Import Config"]
+    lines += [f"{key} = {value}" for key, value in PRUSA_SETTINGS.items()]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,51 @@
+"""Print mass, narrowest channel and slicer profile."""
+import numpy as np
+import pytest
+
+from design.errors import DesignError
+from design.printability import assess, narrowest_channel_mm, print_mass_g, prusa_profile
+
+
+def _hollow_ball(hole_vox: int, n: int = 40) -> np.ndarray:
+    z, y, x = np.mgrid[:n, :n, :n] - n / 2 + 0.5
+    r = np.sqrt(x ** 2 + y ** 2 + z ** 2)
+    solid = (r < 18) & (r > 8)
+    # a square hole hole_vox voxels wide from the cavity to the outside along +z
+    solid[(np.abs(x) < hole_vox / 2) & (np.abs(y) < hole_vox / 2) & (z > 0)] = False
+    return solid
+
+
+def test_print_mass_uses_paper_density():
+    # 1000 mm^3 = 1 cm^3 at 1.32 g/cm^3
+    assert print_mass_g(1000.0) == pytest.approx(1.32)
+
+
+@pytest.mark.parametrize("hole_vox", [2, 4, 6])
+def test_channel_into_a_cavity_is_measured_within_half_a_voxel(hole_vox):
+    dx = 0.1
+    width = narrowest_channel_mm(_hollow_ball(hole_vox), dx, 2.0)
+    assert width == pytest.approx(hole_vox * dx, abs=0.5 * dx + 1e-9)
+
+
+def test_solid_ball_and_sealed_cavity_have_no_open_channel():
+    z, y, x = np.mgrid[:30, :30, :30] - 14.5
+    r = np.sqrt(x ** 2 + y ** 2 + z ** 2)
+    assert narrowest_channel_mm(r < 12, 0.1, 2.0) is None
+    assert narrowest_channel_mm((r < 12) & (r > 5), 0.1, 2.0) is None
+
+
+def test_assess_warns_below_threshold():
+    report = assess(_hollow_ball(4), 0.1, warn_channel_mm=1.0)
+    assert report.min_channel_mm < 1.0 and "clog" in report.warnings[0]
+    assert report.mass_g == pytest.approx(report.volume_mm3 * 1.32e-3)
+    assert assess(_hollow_ball(4), 0.1, warn_channel_mm=0.2).warnings == ()
+    with pytest.raises(DesignError, match="warning width"):
+        assess(_hollow_ball(4), 0.1, warn_channel_mm=0.0)
+
+
+def test_prusa_profile_has_the_paper_settings():
+    text = prusa_profile()
+    settings = dict(line.split(" = ") for line in text.splitlines() if not line.startswith("#"))
+    assert settings["layer_height"] == "0.1" and settings["extrusion_width"] == "0.2"
+    assert settings["fill_density"] == "100%" and settings["fill_pattern"] == "concentric"
+    assert settings["temperature"] == "245" and settings["bed_temperature"] == "85"
