@@ -6,7 +6,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from drivers.camera.base import Camera, CameraError, CameraSettings, Capture, CaptureMissed
-from drivers.hotplate.base import Hotplate, HotplateError
+from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
 from labapp.engine import Engine
 from labapp.monitor import HotplateMonitor
 from labapp.storage import RunFolder
@@ -62,7 +62,7 @@ class BenchSession:
         if level in ("warning", "error"):
             self.last_error = message
         self.run.event(level, kind, message, self.t_s())
-        self.engine.emit(level if level in ("info", "warning", "error") else "info", kind=kind, message=message)
+        self.engine.emit(level if level in ("info", "warning", "error") else "info", topic=kind, message=message)
 
     def connect(self, setpoint_c: float | None, speed_rpm: float | None) -> None:
         """Connect and configure the camera; connect the hotplate, set it up and start heating."""
@@ -75,7 +75,7 @@ class BenchSession:
         if hp is None:
             return
         hp.connect()
-        self.monitor = HotplateMonitor(hp, self.note, poll_s=self.keepalive_s)
+        self.monitor = HotplateMonitor(hp, self.note, poll_s=self.keepalive_s, on_reading=self._publish_reading)
         if setpoint_c is not None:
             self.monitor.command(hp.set_temperature, setpoint_c)
             self.monitor.command(hp.start_heating)
@@ -84,6 +84,11 @@ class BenchSession:
         self.monitor.poll()
         self.monitor.start()
         self.note("info", "hotplate", f"hotplate connected; setpoint {setpoint_c} C, {speed_rpm} rpm, heating on")
+
+    def _publish_reading(self, reading: HotplateReading) -> None:
+        self.engine.emit("reading", plate_c=reading.plate_c, probe_c=reading.probe_c, speed_rpm=reading.speed_rpm,
+                         setpoint_c=reading.setpoint_c, setpoint_rpm=reading.setpoint_rpm, heating=reading.heating,
+                         stirring=reading.stirring, t_s=self.t_s())
 
     def wait_stable(self, setpoint_c: float, tolerance_c: float, hold_s: float, timeout_s: float,
                     step_s: float) -> None:

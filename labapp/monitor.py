@@ -30,11 +30,14 @@ class HotplateMonitor:
     poll_s : float
         Wall-clock seconds between polls (> 0).
     max_backoff_s : float
-        Longest wait between reconnect attempts.
+        Longest wait between reconnect attempts, s.
+    on_reading : callable, optional
+        Called with every good reading (from whichever thread polled).
     """
 
     def __init__(self, hotplate: Hotplate, report: Callable[[str, str, str], None], poll_s: float = 2.0,
-                 max_backoff_s: float = 30.0) -> None:
+                 max_backoff_s: float = 30.0,
+                 on_reading: Callable[[HotplateReading], None] | None = None) -> None:
         if not poll_s > 0:
             raise ValueError(f"poll_s must be > 0 s, got {poll_s}")
         self.hotplate = hotplate
@@ -44,6 +47,7 @@ class HotplateMonitor:
         self._lock = threading.RLock()
         self._latest: HotplateReading | None = None
         self._link_ok = True
+        self._on_reading = on_reading
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.failures = 0
@@ -77,6 +81,8 @@ class HotplateMonitor:
             self._link_ok = True
             self._report("info", "hotplate-link", "hotplate link restored")
         self._latest = reading
+        if self._on_reading is not None:
+            self._on_reading(reading)
         return reading
 
     def _reconnect(self) -> None:
