@@ -4,8 +4,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
+from drivers.errors import DriverError
 
-class CameraError(Exception):
+
+class CameraError(DriverError):
     """A camera could not be reached, configured or read; the message says which and why."""
 
 

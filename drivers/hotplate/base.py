@@ -4,8 +4,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
+from drivers.errors import DriverError
 
-class HotplateError(Exception):
+
+class HotplateError(DriverError):
     """The hotplate refused a command, replied garbage or lost its link; the message names the port."""
 
 

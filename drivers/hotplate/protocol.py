@@ -1,0 +1,157 @@
+"""Declarative command tables of stirring hotplates that speak NAMUR-style ASCII over RS-232.
+
+Each device quantity is one declaration; the driver (`drivers.hotplate.heidolph`) and the emulator
+(`drivers.sim.heidolph_emulator`) both read these tables, so neither formats strings by hand.
+
+Heidolph MR Hei-Tec / Hei-Connect, German operating manual v1.3, chapter "RS 232 / USB": 9600 baud,
+7 data bits, even parity, 1 stop bit; every command is answered by its echo (``IN_PV_3 25.3``);
+lines end in ``\\r\\n`` after ``PA_NEW`` (``\\n\\r`` in the old protocol); at least 0.1 s between
+commands; ``999.9`` stands for "no external probe"; "PC Err" after 10 s of silence while heating or
+stirring (the connection check, ``CC_ON``/``CC_OFF``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+from drivers.hotplate.base import HotplateError
+
+NO_PROBE_C = 999.9
+"""What the plate sends for the external probe temperature when no probe is plugged in."""
+
+
+@dataclass(frozen=True)
+class Reading:
+    """A quantity the plate reports: the query command and its unit."""
+
+    query: str
+    unit: str
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """A quantity the plate accepts: set command, read-back query, unit and the device's own range."""
+
+    command: str
+    readback: str
+    unit: str
+    low: float
+    high: float
+    decimals: int = 1
+
+    def encode(self, value: float, limit: float | None = None) -> str:
+        """Return the command line (no terminator) that sets ``value``.
+
+        Parameters
+        ----------
+        value : float
+            Requested value in ``unit``.
+        limit : float, optional
+            Client-side upper limit, tighter than the device range.
+
+        Raises
+        ------
+        HotplateError
+            If ``value`` is not finite or lies outside ``[low, min(high, limit)]``.
+        """
+        high = self.high if limit is None else min(self.high, limit)
+        if not math.isfinite(value) or not self.low <= value <= high:
+            raise HotplateError(f"{self.command}: {value!r} {self.unit} is outside the allowed range "
+                                f"[{self.low:g}, {high:g}] {self.unit}")
+        return f"{self.command} {value:.{self.decimals}f}"
+
+
+@dataclass(frozen=True)
+class ProtocolTable:
+    """Everything that differs between two plates of the same NAMUR family.
+
+    ``readings`` keys: ``probe_c``, ``plate_c``, ``speed_rpm``; ``setpoints`` keys: ``temperature``,
+    ``speed``; ``actions`` keys: ``start_heating``, ``stop_heating``, ``start_stirring``,
+    ``stop_stirring``, ``reset``, ``watchdog_on``, ``watchdog_off``, ``new_protocol``.
+    ``echo`` says whether replies start with the command; ``status_errors`` maps negative ``STATUS``
+    codes to messages.
+    """
+
+    name: str
+    readings: Mapping[str, Reading]
+    setpoints: Mapping[str, Setpoint]
+    actions: Mapping[str, str]
+    startup: tuple[str, ...]
+    status: str | None = "STATUS"
+    echo: bool = True
+    terminator: str = "\r\n"
+    old_terminator: str = "\n\r"
+    watchdog_s: float = 10.0
+    status_errors: Mapping[int, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        missing = {"probe_c", "plate_c", "speed_rpm"} - set(self.readings)
+        missing |= {"temperature", "speed"} - set(self.setpoints)
+        missing |= {"start_heating", "stop_heating", "start_stirring", "stop_stirring"} - set(self.actions)
+        if missing:
+            raise ValueError(f"protocol table {self.name!r} lacks {sorted(missing)}")
+
+    def command_names(self) -> set[str]:
+        """Every command word the plate understands (the part before the first space)."""
+        names = {r.query for r in self.readings.values()} | set(self.actions.values())
+        names |= {s.command for s in self.setpoints.values()} | {s.readback for s in self.setpoints.values()}
+        if self.status:
+            names.add(self.status)
+        return names
+
+    def payload(self, command: str, line: str) -> str:
+        """The value part of the reply ``line`` to ``command`` ('' for a bare acknowledgement).
+
+        Raises
+        ------
+        HotplateError
+            If the reply does not echo the command (garbage, or the reply to another command).
+        """
+        word = command.split(" ", 1)[0]
+        text = line.strip()
+        if not self.echo:
+            return text.split(" ", 1)[0] if text else ""
+        head, _, rest = text.partition(" ")
+        if head != word:
+            raise HotplateError(f"reply {line!r} does not echo command {word!r}")
+        return rest.strip()
+
+    def reply(self, command: str, payload: str = "") -> str:
+        """The reply line (no terminator) a plate sends to ``command``: used by the emulator."""
+        word = command.split(" ", 1)[0]
+        if not self.echo:
+            return payload
+        return f"{word} {payload}" if payload else word
+
+    def status_message(self, code: int) -> str | None:
+        """The message of a negative ``STATUS`` code, or None for a healthy status."""
+        if code >= 0:
+            return None
+        return self.status_errors.get(code, f"device error code {code}")
+
+
+HEIDOLPH_HEI_TEC = ProtocolTable(
+    name="Heidolph MR Hei-Tec",
+    readings={
+        "probe_c": Reading("IN_PV_1", "C"),
+        "plate_c": Reading("IN_PV_3", "C"),
+        "speed_rpm": Reading("IN_PV_5", "rpm"),
+    },
+    setpoints={
+        "temperature": Setpoint("OUT_SP_1", "IN_SP_1", "C", 0.0, 300.0),
+        "speed": Setpoint("OUT_SP_3", "IN_SP_3", "rpm", 0.0, 1400.0, decimals=0),
+    },
+    actions={
+        "start_heating": "START_1", "stop_heating": "STOP_1",
+        "start_stirring": "START_2", "stop_stirring": "STOP_2",
+        "reset": "RESET", "watchdog_on": "CC_ON", "watchdog_off": "CC_OFF",
+        "new_protocol": "PA_NEW",
+    },
+    startup=("PA_NEW", "CC_ON"),
+    status_errors={-1: "remote control blocked: the plate was stopped at its front panel "
+                       "(switch it off and on, or send RESET)"},
+)
+
+TABLES: dict[str, ProtocolTable] = {"heidolph": HEIDOLPH_HEI_TEC}
+"""Protocol tables by the short name used on the command line."""
