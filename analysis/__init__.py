@@ -7,12 +7,12 @@ from analysis.curve import smooth_curve, steady_state
 from analysis.decode import decode_image
 from analysis.errors import AnalysisError
 from analysis.frames import FrameList, read_frame_list
-from analysis.geometry import CropGeometry, cell_transmittance, read_cells
+from analysis.geometry import CropGeometry, cell_transmittance, default_geometry, read_cells
 from analysis.runfolder import RunCurve, analyze_run, write_cells_csv, write_curve_csv
 
 __all__ = [
     "AnalysisError", "BenchCalibration", "ConcentrationEstimate", "CropGeometry", "FrameList", "RunCurve",
-    "analyze_run", "capture_time", "cell_transmittance", "decode_image", "estimate_concentration",
+    "analyze_run", "capture_time", "cell_transmittance", "decode_image", "default_geometry", "estimate_concentration",
     "fit_bench_calibration", "read_cells", "read_frame_list", "reanchor_t0", "reference_offset",
     "smooth_curve", "steady_state", "write_cells_csv", "write_curve_csv",
 ]

@@ -88,7 +88,12 @@ class BenchCalibration:
                 "model": "T = t0 * exp(-k * conc_g_per_kg)",
                 "cells": {name: np.asarray(getattr(self, name)).tolist()
                           for name in ("t0", "t0_sigma", "k", "k_sigma", "cov_t0_k", "rms_rel", "good")}}
-        Path(path).write_text(json.dumps(data, indent=1))
+        path = Path(path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(data, indent=1))
+        except OSError as exc:
+            raise AnalysisError(f"cannot write calibration {path}: {exc.strerror or exc}") from exc
 
     @classmethod
     def load(cls, path: str | Path) -> BenchCalibration:

@@ -73,6 +73,17 @@ class CropGeometry:
             raise AnalysisError(f"bad crop geometry {data!r}: {exc}") from exc
 
 
+def default_geometry(image_shape: tuple[int, int], grid: int = 10) -> CropGeometry:
+    """A crop for a beaker standing left of the image centre, as on the paper's bench.
+
+    Centred on row ``H / 2`` and column ``W / 4``, side ``min(H, W) / 4`` rounded down to a multiple
+    of ``4 * grid`` px (at least ``grid``); mirror axis through the image centre.
+    """
+    height, width = image_shape
+    size = max(grid, min(height, width) // 4 // (4 * grid) * (4 * grid))
+    return CropGeometry(max(0, width // 4 - size // 2), max(0, height // 2 - size // 2), size, grid)
+
+
 @dataclass(frozen=True)
 class _Layout:
     """The geometry resolved on one decoded image: cell edges and the mirror offset, decoded px."""

@@ -1,0 +1,94 @@
+"""`sfr analyze`: a run folder (or plain image folder) to curve.csv, cells.csv and curve.png."""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+log = logging.getLogger(__name__)
+
+NAME = "analyze"
+HELP = "turn a run folder or image folder into a release curve (curve.csv, cells.csv, curve.png)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of `sfr analyze`."""
+    from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
+
+    parser.add_argument("run", help="run folder (frames.csv [+ run.json]) or a plain folder of images")
+    parser.add_argument("--calibration", required=True, help="bench calibration JSON (sfr calibrate-bench)")
+    parser.add_argument("--out", help="output folder (default: RUN/analysis)")
+    parser.add_argument("--interval", type=float, help="frame interval, s, for images without EXIF times")
+    parser.add_argument("--water-g", type=float, help="water mass, g (default: run.json, else the calibration's)")
+    parser.add_argument("--window-s", type=float, default=DEFAULT_WINDOW_S,
+                        help=f"Savitzky-Golay window, s (default {DEFAULT_WINDOW_S:g})")
+    parser.add_argument("--order", type=int, default=DEFAULT_ORDER,
+                        help=f"Savitzky-Golay polynomial order (default {DEFAULT_ORDER})")
+    parser.add_argument("--workers", type=int, help="decoding threads (default: all cores)")
+    parser.add_argument("--reduce", type=int, choices=(1, 2, 4, 8),
+                        help="decode downscaled by this factor (default: the calibration's)")
+    parser.add_argument("--no-plot", action="store_true", help="skip curve.png")
+
+
+def _plot(curve, path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=120)
+    minutes = curve.t_s / 60.0
+    ax.plot(minutes, curve.conc_g_per_kg, ".", ms=3, color="0.6", label="per frame")
+    ax.plot(minutes, curve.conc_smooth_g_per_kg, "-", color="C0", label="Savitzky-Golay")
+    ax.set_xlabel("time (min)")
+    ax.set_ylabel("concentration (g/kg)")
+    right = ax.secondary_yaxis("right", functions=(lambda c: c * curve.water_g / 1000.0,
+                                                   lambda m: m * 1000.0 / curve.water_g))
+    right.set_ylabel("released (g)")
+    ax.legend(loc="lower right")
+    ax.set_title("release curve (linearised sRGB, mirror-normalised)")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Analyse, write the outputs, print a summary."""
+    from pathlib import Path
+
+    from analysis import (AnalysisError, BenchCalibration, analyze_run, steady_state, write_cells_csv,
+                          write_curve_csv)
+
+    out = Path(args.out) if args.out else Path(args.run) / "analysis"
+
+    def progress(done: int, total: int) -> None:
+        if done == total or done % 10 == 0:
+            print(f"\ranalysed {done}/{total} frames", end="\n" if done == total else "", file=sys.stderr,
+                  flush=True)
+
+    try:
+        calibration = BenchCalibration.load(args.calibration)
+        out.mkdir(parents=True, exist_ok=True)
+        curve = analyze_run(args.run, calibration, interval_s=args.interval, workers=args.workers,
+                            progress=progress, reduce=args.reduce, cache_dir=out, water_g=args.water_g,
+                            window_s=args.window_s, order=args.order)
+    except AnalysisError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: cannot write to {out}: {exc.strerror or exc}; choose another --out", file=sys.stderr)
+        return 2
+    write_curve_csv(curve, out / "curve.csv")
+    write_cells_csv(curve, out / "cells.csv")
+    if not args.no_plot:
+        _plot(curve, out / "curve.png")
+    for message in curve.warnings:
+        print(f"warning: {message}", file=sys.stderr)
+    done = steady_state(curve.t_s, curve.conc_smooth_g_per_kg)
+    print(f"{len(curve.files)} frames over {curve.t_s[-1] - curve.t_s[0]:.0f} s "
+          f"(pixels linearised from sRGB before photometry); "
+          f"{int((curve.n_rejected > 0).sum())} frames had cells rejected")
+    print(f"final concentration {curve.conc_smooth_g_per_kg[-1]:.4f} g/kg, released "
+          f"{curve.released_g[-1]:.4f} g in {curve.water_g:g} g water; steady state: {'yes' if done else 'no'}")
+    print(f"wrote {out / 'curve.csv'}, {out / 'cells.csv'}" + ("" if args.no_plot else f", {out / 'curve.png'}"))
+    return 0
