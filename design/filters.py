@@ -145,7 +145,8 @@ def project(rho_tilde: np.ndarray, beta: float) -> np.ndarray:
         Steepness, > 0.
     """
     t = np.tanh(beta / 2.0)
-    return (t + np.tanh(beta * (rho_tilde - 0.5))) / (2.0 * t)
+    # the clip only removes round-off (project(0) = -6e-17), the map itself stays in [0, 1]
+    return np.clip((t + np.tanh(beta * (rho_tilde - 0.5))) / (2.0 * t), 0.0, 1.0)
 
 
 def project_adjoint(rho_tilde: np.ndarray, beta: float, g: np.ndarray) -> np.ndarray:
