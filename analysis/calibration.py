@@ -143,7 +143,8 @@ def fit_bench_calibration(cells: np.ndarray, conc_g_per_kg: np.ndarray, geometry
     reduce : int
         Decode downscaling used for ``cells``.
     outlier_factor : float
-        A cell whose residual exceeds this multiple of the median cell residual is marked not good.
+        A cell whose residual exceeds this multiple of the median cell residual is marked not good, as
+        is a cell whose attenuation ``k`` is not positive by 3 standard errors.
 
     Returns
     -------
@@ -152,7 +153,7 @@ def fit_bench_calibration(cells: np.ndarray, conc_g_per_kg: np.ndarray, geometry
     Raises
     ------
     AnalysisError
-        Shapes disagree, fewer than 3 levels, or non-positive transmittances.
+        Shapes disagree, fewer than 3 levels, non-positive transmittances, or fewer than half the cells respond.
     """
     cells = np.asarray(cells, dtype=float)
     conc = np.asarray(conc_g_per_kg, dtype=float)
@@ -169,7 +170,12 @@ def fit_bench_calibration(cells: np.ndarray, conc_g_per_kg: np.ndarray, geometry
     if not np.all(np.isfinite(cells)) or np.any(cells <= 0):
         raise AnalysisError("calibration cell transmittances must be finite and positive")
     t0, k, cov, rms_rel = _gauss_newton(cells.reshape(len(conc), -1), conc)
-    good = np.isfinite(t0) & np.isfinite(k) & (k > 0)
+    k_sigma = np.sqrt(cov[:, 1, 1])
+    good = np.isfinite(t0) & np.isfinite(k) & (k > 3 * k_sigma)
+    if good.sum() < good.size / 2:
+        raise AnalysisError(f"only {int(good.sum())} of {good.size} cells' transmittance falls significantly with "
+                            "concentration (k > 3 sigma); is the crop inside the beaker, and do the images match "
+                            "masses.csv?")
     median_rms = float(np.median(rms_rel[good])) if good.any() else np.inf
     good &= rms_rel <= outlier_factor * max(median_rms, 1e-6)
     bad = [divmod(int(i), g) for i in np.flatnonzero(~good)]
@@ -177,7 +183,7 @@ def fit_bench_calibration(cells: np.ndarray, conc_g_per_kg: np.ndarray, geometry
         log.warning("calibration: %d cells fit poorly and are not used: %s", len(bad), bad)
     shape2 = (g, g)
     return BenchCalibration(geometry, float(water_g), t0.reshape(shape2), np.sqrt(cov[:, 0, 0]).reshape(shape2),
-                            k.reshape(shape2), np.sqrt(cov[:, 1, 1]).reshape(shape2), cov[:, 0, 1].reshape(shape2),
+                            k.reshape(shape2), k_sigma.reshape(shape2), cov[:, 0, 1].reshape(shape2),
                             rms_rel.reshape(shape2), good.reshape(shape2), tuple(float(c) for c in conc),
                             image_shape, reduce, dict(camera or {}),
                             _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))

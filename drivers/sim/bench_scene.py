@@ -193,7 +193,7 @@ def _static_layers(scene: BenchScene) -> tuple[np.ndarray, np.ndarray, np.ndarra
     glass[hotplate] = 0.03
     water = inside & (rows > surface) & (rows < bottom)
     chord = np.where(water, np.sqrt(np.clip(1.0 - (dx / (radius - wall)) ** 2, 0.0, 1.0)), 0.0).astype(np.float32)
-    glass3 = glass[..., None] * np.array([1.0, 1.0, 0.98], np.float32)
+    glass3 = glass[..., None] * np.where(in_beaker[..., None], np.array([1.0, 1.0, 0.98], np.float32), 1.0)
     return panel.astype(np.float32), glass3.astype(np.float32), chord
 
 
