@@ -179,7 +179,8 @@ class HeidolphHotplate:
             self._thread.join(timeout=self.config.timeout_s * 10)
             self._thread = None
         try:
-            self._safe_off()
+            if self._port is not None:
+                self._safe_off()
         finally:
             atexit.unregister(self._atexit)
             with self._lock:
