@@ -15,6 +15,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from analysis import (CropGeometry, analyze_run, estimate_concentration, fit_bench_calibration, read_cells,
@@ -93,6 +94,35 @@ def _figures(results: dict, folder: Path) -> None:
     bottom.legend()
     fig.tight_layout()
     fig.savefig(folder / "analysis_accuracy.png")
+    plt.close(fig)
+
+    x, y, size = json.loads((BENCH / "calibration" / "truth.json").read_text())["crop"]
+    frame = cv2.imread(str(BENCH / "run" / "frame_0030.jpg"))
+    width = frame.shape[1]
+    for i in range(11):
+        step = round(i * size / 10)
+        cv2.line(frame, (x + step, y), (x + step, y + size), (0, 0, 255), 1)
+        cv2.line(frame, (x, y + step), (x + size, y + step), (0, 0, 255), 1)
+    cv2.rectangle(frame, (width - 1 - x - size, y), (width - 1 - x, y + size), (0, 160, 0), 2)
+    cv2.line(frame, (width // 2, 0), (width // 2, frame.shape[0]), (255, 0, 0), 1)
+    cv2.imwrite(str(folder / "analysis_crop.png"), frame)
+
+    cal = _calibrate(CropGeometry(x, y, size), 1)
+    with open(BENCH / "calibration" / "masses.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    cells = np.array([read_cells(BENCH / "calibration" / r["file"], CropGeometry(x, y, size)) for r in rows])
+    conc = np.array([float(r["added_mass_g"]) for r in rows]) / cal.water_g * 1000.0
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=110)
+    grid = np.linspace(0, conc.max(), 100)
+    for n, (r, c) in enumerate(((0, 0), (5, 5), (9, 9), (2, 8))):
+        ax.plot(conc, cells[:, r, c], "o", color=f"C{n}", ms=4)
+        ax.plot(grid, cal.t0[r, c] * np.exp(-cal.k[r, c] * grid), "-", color=f"C{n}",
+                label=f"cell ({r},{c}): k = {cal.k[r, c]:.4f} +/- {cal.k_sigma[r, c]:.4f} kg/g")
+    ax.set_xlabel("concentration (g/kg)")
+    ax.set_ylabel("normalised transmittance")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(folder / "analysis_calibration.png")
     plt.close(fig)
 
 
