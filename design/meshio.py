@@ -1,0 +1,94 @@
+"""Loading simulation inputs from disk: triangle meshes (mm) and density arrays, with clear errors."""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from design._validate import check_density, check_positive
+from design.errors import DesignError
+
+log = logging.getLogger(__name__)
+
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf")
+DENSITY_SUFFIXES = (".npy", ".npz")
+
+
+def load_mesh(path: str | Path) -> trimesh.Trimesh:
+    """Load a closed triangle mesh in mm (STL, OBJ, PLY, OFF, 3MF; multi-body files are merged).
+
+    Raises
+    ------
+    DesignError
+        When the file is missing, unreadable, empty, has non-finite vertices or is not watertight;
+        the message names the file.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise DesignError(f"{path}: unsupported mesh format {path.suffix!r}; use one of {', '.join(MESH_SUFFIXES)}")
+    if not path.is_file():
+        raise DesignError(f"{path}: no such file")
+    try:
+        loaded = trimesh.load(path, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises many types for a bad file
+        raise DesignError(f"{path}: cannot read mesh ({exc})") from exc
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise DesignError(f"{path}: contains no triangles")
+    return checked_mesh(loaded, str(path))
+
+
+def checked_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> trimesh.Trimesh:
+    """Return `mesh` after checking its vertices are finite and it is watertight."""
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise DesignError(f"{source}: has non-finite vertex coordinates")
+    if not mesh.is_watertight:
+        raise DesignError(f"{source}: is not watertight (it has open edges), so its inside is undefined")
+    return mesh
+
+
+def load_density(path: str | Path, dx_mm: float | None = None) -> tuple[np.ndarray, float]:
+    """Load a density array and its voxel size.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.npz`` with arrays ``rho`` and ``dx_mm``, or ``.npy`` holding rho alone.
+    dx_mm : float, optional
+        Voxel size, mm: required for ``.npy``; for ``.npz`` it must agree with the stored one if given.
+
+    Returns
+    -------
+    rho : (H, W) or (D, H, W) ndarray of float in [0, 1]
+    dx_mm : float
+
+    Raises
+    ------
+    DesignError
+        Missing file, missing keys, no voxel size, or an invalid array; the message names the file.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in DENSITY_SUFFIXES:
+        raise DesignError(f"{path}: unsupported density format {path.suffix!r}; use .npy or .npz")
+    if not path.is_file():
+        raise DesignError(f"{path}: no such file")
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise DesignError(f"{path}: cannot read array ({exc})") from exc
+    if suffix == ".npz":
+        with data:
+            missing = {"rho", "dx_mm"} - set(data.files)
+            if missing:
+                raise DesignError(f"{path}: missing array(s) {sorted(missing)}; found {sorted(data.files)}")
+            rho, stored = data["rho"], check_positive("dx_mm", data["dx_mm"], str(path))
+        if dx_mm is not None and not np.isclose(check_positive("dx_mm", dx_mm), stored, rtol=1e-9):
+            raise DesignError(f"{path}: stores dx_mm = {stored:g}, which contradicts the requested {dx_mm:g}")
+        dx = stored
+    else:
+        if dx_mm is None:
+            raise DesignError(f"{path}: a .npy array has no voxel size; give one (--voxel-size)")
+        rho, dx = data, check_positive("dx_mm", dx_mm, str(path))
+    return check_density(rho, str(path)), dx
