@@ -100,7 +100,10 @@ def decode_encoded(source: str | Path | bytes, *, reduce: int = 1) -> tuple[np.n
             image = cv2.resize(image, None, fx=1 / reduce, fy=1 / reduce, interpolation=cv2.INTER_AREA)
     if image is None:
         if not isinstance(source, (str, Path)):
-            return _decode_raw(data, name, reduce), True
+            try:
+                return _decode_raw(data, name, reduce), True
+            except AnalysisError:
+                raise AnalysisError(f"cannot decode image {name}: neither JPEG/PNG/TIFF nor camera raw") from None
         raise AnalysisError(f"cannot decode image {name}: not a readable JPEG/PNG/TIFF (corrupt or wrong type)")
     if image.dtype not in (np.uint8, np.uint16):
         raise AnalysisError(f"image {name} has unsupported sample type {image.dtype} (need 8 or 16 bit)")

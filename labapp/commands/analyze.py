@@ -13,17 +13,13 @@ HELP = "turn a run folder or image folder into a release curve (curve.csv, cells
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr analyze`."""
-    from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
-
     parser.add_argument("run", help="run folder (frames.csv [+ run.json]) or a plain folder of images")
     parser.add_argument("--calibration", required=True, help="bench calibration JSON (sfr calibrate-bench)")
     parser.add_argument("--out", help="output folder (default: RUN/analysis)")
     parser.add_argument("--interval", type=float, help="frame interval, s, for images without EXIF times")
     parser.add_argument("--water-g", type=float, help="water mass, g (default: run.json, else the calibration's)")
-    parser.add_argument("--window-s", type=float, default=DEFAULT_WINDOW_S,
-                        help=f"Savitzky-Golay window, s (default {DEFAULT_WINDOW_S:g})")
-    parser.add_argument("--order", type=int, default=DEFAULT_ORDER,
-                        help=f"Savitzky-Golay polynomial order (default {DEFAULT_ORDER})")
+    parser.add_argument("--window-s", type=float, help="Savitzky-Golay window, s (default 330 = 30 frames at 11 s)")
+    parser.add_argument("--order", type=int, help="Savitzky-Golay polynomial order (default 2)")
     parser.add_argument("--workers", type=int, help="decoding threads (default: all cores)")
     parser.add_argument("--reduce", type=int, choices=(1, 2, 4, 8),
                         help="decode downscaled by this factor (default: the calibration's)")
@@ -58,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
 
     from analysis import (AnalysisError, BenchCalibration, analyze_run, steady_state, write_cells_csv,
                           write_curve_csv)
+    from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
 
     out = Path(args.out) if args.out else Path(args.run) / "analysis"
 
@@ -71,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
         curve = analyze_run(args.run, calibration, interval_s=args.interval, workers=args.workers,
                             progress=progress, reduce=args.reduce, cache_dir=out, water_g=args.water_g,
-                            window_s=args.window_s, order=args.order)
+                            window_s=DEFAULT_WINDOW_S if args.window_s is None else args.window_s,
+                            order=DEFAULT_ORDER if args.order is None else args.order)
     except AnalysisError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -108,6 +108,11 @@ def test_corrupt_truncated_empty_and_wrong_size_images(tmp_path):
         read_cells(jpeg, CropGeometry(0, 0, 20, grid=2), expect_shape=(40, 100))
     with pytest.raises(AnalysisError, match="reduce"):
         decode_image(jpeg, reduce=3)
+    (tmp_path / "fake.nef").write_bytes(b"not raw" * 100)
+    with pytest.raises(AnalysisError, match="cannot decode camera raw"):
+        decode_image(tmp_path / "fake.nef")
+    with pytest.raises(AnalysisError, match="neither JPEG/PNG/TIFF nor camera raw"):
+        decode_image(b"not an image" * 10)
 
 
 def test_default_geometry_sits_left_of_centre():
