@@ -43,7 +43,8 @@ class FrameList:
     run : dict
         Contents of run.json ({} when absent).
     reference : Path or None
-        The clear-water reference frame, when the run names one.
+        The clear-water reference frame: run.json ``reference_file``, else ``reference.<image suffix>``
+        in a run folder (as ``labapp.storage`` writes it), else None.
     warnings : list of str
     """
 
@@ -151,6 +152,9 @@ def read_frame_list(folder: str | Path, *, interval_s: float | None = None) -> F
     else:
         files, t_s, source = _from_images(folder, interval_s, warnings)
     reference = None
+    if source == FRAMES_CSV and not run.get("reference_file"):
+        found = sorted(p for p in folder.glob("reference.*") if p.suffix.lower() in IMAGE_SUFFIXES)
+        reference = found[0] if found else None
     if run.get("reference_file"):
         reference = folder / str(run["reference_file"])
         if not reference.is_file():

@@ -74,6 +74,8 @@ def test_corrupt_and_wrong_size_frames_are_skipped_with_their_names(tmp_path):
     data = (run / rows[2]["file"]).read_bytes()
     (run / rows[2]["file"]).write_bytes(data[: len(data) // 3])
     Image.new("RGB", (400, 268)).save(run / rows[4]["file"], format="JPEG")
+    shutil.copy(BENCH / "run" / "reference.jpg", run / "reference.jpg")     # found without run.json
+    assert read_frame_list(run).reference == run / "reference.jpg"
     curve = analyze_run(run, _calibration(), workers=1)
     assert len(curve.files) == 4
     assert any(rows[2]["file"] in w and "truncated" in w for w in curve.warnings)
