@@ -1,0 +1,130 @@
+"""Everything a finished (or stopped) design run writes into its folder.
+
+``design.stl`` (+ requested formats), ``density.npz``, ``curves.csv``
+(``tau_mm,target_mm3,density_mm3,binary_mm3``), ``history.csv``, ``report.png``,
+``design.ini`` (PrusaSlicer profile) and ``summary.json``.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from design.extract import centred_iou, count_pieces, density_mesh, revoxelize
+from design.forward import simulate
+from design.objective import DesignObjective, rel_rmse
+from design.printability import assess, prusa_profile
+from design.report import save_report
+
+log = logging.getLogger(__name__)
+
+HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "grad_norm", "seconds")
+
+
+@dataclass(frozen=True)
+class DesignOutputs:
+    """Paths and headline numbers of a run's outputs."""
+
+    summary_path: Path
+    summary: dict
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _csv(columns: tuple[str, ...], rows: np.ndarray) -> str:
+    body = "\n".join(",".join(f"{v:.10g}" for v in row) for row in rows)
+    return ",".join(columns) + "\n" + body + ("\n" if len(rows) else "")
+
+
+def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
+                  history: list[list[float]], config, *, status: str, session_seconds: float) -> DesignOutputs:
+    """Extract, re-simulate, assess and write every output of a design run.
+
+    Parameters
+    ----------
+    out_dir : Path
+    problem : design.problem.Problem
+    objective : DesignObjective
+    best_x : ndarray of float, variable shape
+        The best design variables found.
+    history : list of rows (iteration, J, J_fit, J_binary, J_fab, grad_norm, seconds)
+    config : design.problem.DesignConfig
+    status : str
+    session_seconds : float
+        Wall time of this session (resumes add up through the history's seconds column).
+    """
+    space, target = problem.space, problem.target
+    rho = objective.density(best_x)
+    density_release = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
+                               dtau_mm=target.total_time_mm / (target.tau_mm.size - 1))
+    rho_full = space.unfold(rho)
+    warnings: list[str] = []
+    if np.any(rho_full >= 0.5):
+        mesh = density_mesh(rho_full, space.dx_mm, problem.origin_mm)
+        mesh.export(out_dir / "design.stl")
+        for fmt in config.formats:
+            mesh.export(out_dir / f"design.{fmt}")
+        solid = revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape)
+    else:  # a run stopped very early may still be grey everywhere
+        solid = np.zeros(problem.full_shape, dtype=bool)
+        warnings.append("no density reaches 1/2 yet: no solid extracted (design.stl not written)")
+    half = tuple(slice(n // 2 if m else 0, None) for n, m in zip(solid.shape, space.mirror))
+    binary_release = simulate(solid[half].astype(float), space.dx_mm, mirror=space.mirror,
+                              total_time_mm=target.total_time_mm,
+                              dtau_mm=target.total_time_mm / (target.tau_mm.size - 1))
+    pieces = count_pieces(solid)
+    if pieces > 1:
+        warnings.append(f"the solid has {pieces} separate pieces")
+    facts = assess(solid, space.dx_mm, warn_channel_mm=config.warn_channel_mm)
+    warnings += list(facts.warnings)
+    np.savez_compressed(out_dir / "density.npz", rho_hat=best_x, rho=rho, rho_full=rho_full, solid=solid,
+                        dx_mm=space.dx_mm, origin_mm=problem.origin_mm, mirror=np.array(space.mirror))
+    curves = np.column_stack([target.tau_mm, target.released_mm3, density_release.released_mm3,
+                              binary_release.released_mm3])
+    _write_text(out_dir / "curves.csv", _csv(("tau_mm", "target_mm3", "density_mm3", "binary_mm3"), curves))
+    _write_text(out_dir / "history.csv", _csv(HISTORY_COLUMNS, np.array(history, dtype=float).reshape(-1, 7)))
+    _write_text(out_dir / "design.ini", prusa_profile(out_dir.name))
+    iterations = len(history)
+    seconds = float(history[-1][-1]) if history else 0.0
+    summary = {
+        "status": status,
+        "target": target.source,
+        "space": space.name,
+        "rel_rmse_density": rel_rmse(density_release.released_mm3, target.released_mm3),
+        "rel_rmse_binary": rel_rmse(binary_release.released_mm3, target.released_mm3),
+        "iterations": iterations,
+        "seconds": seconds,
+        "seconds_per_iteration": seconds / iterations if iterations else None,
+        "session_seconds": session_seconds,
+        "pieces": pieces,
+        "volume_mm3": facts.volume_mm3,
+        "print_mass_g": facts.mass_g,
+        "min_channel_mm": facts.min_channel_mm,
+        "iou_with_source": (centred_iou(problem.source_solid, solid)
+                            if problem.source_solid is not None else None),
+        "target_final_mm3": target.final_mm3,
+        "total_time_mm": target.total_time_mm,
+        "dx_mm": space.dx_mm,
+        "full_shape": list(problem.full_shape),
+        "reduced_shape": list(space.grid_shape),
+        "feasible": problem.feasibility.feasible,
+        "warnings": warnings,
+        "config": asdict(config),
+    }
+    for w in warnings:
+        log.warning("%s", w)
+    save_report(out_dir / "report.png", target.tau_mm, target.released_mm3, density_release.released_mm3,
+                binary_release.released_mm3, rho_full, solid,
+                f"{target.source} | {space.name} | rel. RMSE density {summary['rel_rmse_density']:.2%}, "
+                f"binary {summary['rel_rmse_binary']:.2%} | {iterations} it.")
+    path = out_dir / "summary.json"
+    _write_text(path, json.dumps(summary, indent=2))
+    return DesignOutputs(path, summary)

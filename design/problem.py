@@ -1,0 +1,246 @@
+"""Setting up an inverse-design problem: configuration, domain, design space and target curve.
+
+A target spec is one of: a sample shape name (`design.shapes.SAMPLE_SHAPES`), a mesh file
+(.stl/.obj/.ply/.off/.3mf), a ``tau_mm,released_mm3`` CSV, or an analytic family
+``zero-order[:final=F,duration=D]`` / ``accel:q=Q[,final=F,duration=D]`` with F the total release
+as a fraction of the domain volume and D the release's end as a fraction of T (Fig. 7).
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from design.errors import DesignError
+from design.forward import total_time
+from design.meshio import load_mesh
+from design.shapes import SAMPLE_SHAPES, sample_shape
+from design.spaces import BUILD_AXIS, SPACE_CHOICES, DesignSpace, SpaceRequest, build_space
+from design.targets import (Feasibility, Target, check_feasibility, constant_acceleration, target_from_csv,
+                            target_from_mesh)
+from design.voxelize import voxelize
+
+log = logging.getLogger(__name__)
+
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf")
+DEFAULT_DOMAIN_MM = 20.0
+"""Edge of the cubic domain used when the target has no source mesh and no --domain-mm, mm."""
+
+# Hyperparameters per design space (Tables 1-2 of the paper: w_b 20-50, r 4-5, beta 3 for the
+# source-shape designs of Fig. 6). NFC uses the ICO column without the ICO term.
+SPACE_DEFAULTS: dict[str, dict[str, float]] = {
+    "nfc": {"w_binary": 20.0, "radius_vox": 4.0, "beta": 3.0},
+    "extruded": {"w_binary": 20.0, "radius_vox": 4.0, "beta": 3.0},
+}
+
+
+@dataclass(frozen=True)
+class DesignConfig:
+    """Everything a design run depends on; stored as ``config.json`` in the run folder.
+
+    Parameters
+    ----------
+    target : str
+        Target spec (see module docstring).
+    space : str
+        Design space name ("nfc", "extruded"; "ico" is reserved).
+    resolution : int
+        Voxels along the full domain's longest side (even, >= 8).
+    domain_mm : tuple of 3 float or None
+        Full domain size (x, y, z), mm; None = the source's bounding box plus ``margin`` on every
+        side (cubic for nfc), or a `DEFAULT_DOMAIN_MM` cube for targets without a source.
+    height_mm : float or None
+        Extrusion height, mm (extruded only); None = the source's height, else the domain's.
+    w_binary, radius_vox, beta : float or None
+        Eq. (4) hyperparameters; None = `SPACE_DEFAULTS` (resolved and stored explicitly).
+    w_fab : float
+        Weight of the space's fabrication term (none for nfc/extruded).
+    max_iter : int
+        Maximum objective evaluations (paper: 500).
+    ftol_rel, xtol_rel : float
+        nlopt relative tolerances on J and on the variables (0 disables).
+    lbfgs_memory : int
+        L-BFGS correction pairs m (memory O(m N)).
+    bounds : str
+        "sigmoid" (rho_hat = expit(z), unconstrained L-BFGS) or "box" (nlopt box bounds); see
+        `design.optimize`.
+    checkpoint_every : int
+        Evaluations between checkpoints.
+    margin : float
+        Empty space around a source mesh, as a fraction of its largest extent.
+    warn_channel_mm : float
+        Warn when the narrowest open channel is below this, mm.
+    allow_infeasible : bool
+        Optimise even when the feasibility check fails.
+    samples : int
+        Points of the tau grid (1001 gives dtau = T/1000, section 3.4).
+    formats : tuple of str
+        Mesh formats to export besides STL ("3mf", "obj").
+    """
+
+    target: str
+    space: str = "nfc"
+    resolution: int = 64
+    domain_mm: tuple[float, float, float] | None = None
+    height_mm: float | None = None
+    w_binary: float | None = None
+    radius_vox: float | None = None
+    beta: float | None = None
+    w_fab: float = 0.0
+    max_iter: int = 500
+    ftol_rel: float = 1e-9
+    xtol_rel: float = 0.0
+    lbfgs_memory: int = 10
+    bounds: str = "sigmoid"
+    checkpoint_every: int = 10
+    margin: float = 0.1
+    warn_channel_mm: float = 1.0
+    allow_infeasible: bool = False
+    samples: int = 1001
+    formats: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.space not in SPACE_CHOICES:
+            raise DesignError(f"space must be one of {SPACE_CHOICES}, got {self.space!r}")
+        for key, value in SPACE_DEFAULTS.get(self.space, {}).items():
+            if getattr(self, key) is None:
+                object.__setattr__(self, key, value)
+        if self.resolution < 8 or self.resolution % 2:
+            raise DesignError(f"resolution must be an even number >= 8 voxels, got {self.resolution}")
+        if self.domain_mm is not None and (len(self.domain_mm) != 3 or min(self.domain_mm) <= 0):
+            raise DesignError(f"domain must be three positive sizes in mm, got {self.domain_mm}")
+        if self.height_mm is not None and not self.height_mm > 0:
+            raise DesignError(f"extrusion height must be > 0 mm, got {self.height_mm}")
+        if self.w_binary is not None and self.w_binary < 0:
+            raise DesignError(f"w_binary must be >= 0, got {self.w_binary}")
+        if self.radius_vox is not None and not 1.0 <= self.radius_vox <= 32.0:
+            raise DesignError(f"smoothing radius must be in [1, 32] voxels, got {self.radius_vox}")
+        if self.beta is not None and not 0 < self.beta <= 64:
+            raise DesignError(f"beta must be in (0, 64], got {self.beta}")
+        if self.max_iter < 1 or self.checkpoint_every < 1 or not 1 <= self.lbfgs_memory <= 100:
+            raise DesignError(f"need max_iter >= 1, checkpoint_every >= 1, lbfgs_memory in [1, 100]; got "
+                              f"{self.max_iter}, {self.checkpoint_every}, {self.lbfgs_memory}")
+        if not 0 <= self.margin <= 2 or not self.warn_channel_mm > 0 or self.samples < 3:
+            raise DesignError(f"need margin in [0, 2], warn_channel_mm > 0, samples >= 3; got {self.margin}, "
+                              f"{self.warn_channel_mm}, {self.samples}")
+        if self.bounds not in ("sigmoid", "box"):
+            raise DesignError(f"bounds must be 'sigmoid' or 'box', got {self.bounds!r}")
+        bad = set(self.formats) - {"3mf", "obj"}
+        if bad:
+            raise DesignError(f"extra mesh formats must be among 3mf, obj; got {sorted(bad)}")
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A prepared design problem.
+
+    Attributes
+    ----------
+    space : DesignSpace
+    target : Target
+    feasibility : Feasibility
+    dx_mm : float
+    origin_mm : (3,) ndarray of float
+        Corner of the full design grid, mm (voxel i spans origin + [i, i+1) dx).
+    full_shape : tuple of 3 int
+        Voxels of the full (unfolded) simulated object.
+    source_solid : ndarray of bool or None
+        The source mesh voxelised on the full design grid (for the recovery check).
+    """
+
+    space: DesignSpace
+    target: Target
+    feasibility: Feasibility
+    dx_mm: float
+    origin_mm: np.ndarray
+    full_shape: tuple[int, int, int]
+    source_solid: np.ndarray | None
+
+
+def _parse_analytic(spec: str) -> tuple[float, float, float] | None:
+    head, _, tail = spec.partition(":")
+    if head not in ("zero-order", "accel"):
+        return None
+    params = {"q": 1.0, "final": 0.15, "duration": 0.2}
+    for item in filter(None, tail.split(",")):
+        key, _, value = item.partition("=")
+        if key not in params:
+            raise DesignError(f"unknown analytic target parameter {key!r} in {spec!r}; use q, final, duration")
+        try:
+            params[key] = float(value)
+        except ValueError as exc:
+            raise DesignError(f"bad value {value!r} for {key} in target {spec!r}") from exc
+    if head == "zero-order":
+        params["q"] = 1.0
+    return params["q"], params["final"], params["duration"]
+
+
+def _source_mesh(spec: str):
+    if spec in SAMPLE_SHAPES:
+        return sample_shape(spec)
+    path = Path(spec)
+    if path.suffix.lower() in MESH_SUFFIXES:
+        if not path.exists():
+            raise DesignError(f"target mesh {path} does not exist")
+        return load_mesh(path)
+    return None
+
+
+def _even_ceil(x: float) -> int:
+    return max(2, 2 * int(np.ceil(x / 2.0 - 1e-9)))
+
+
+def prepare(config: DesignConfig) -> Problem:
+    """Build the design space, the target on its tau grid, and the feasibility report."""
+    mesh = _source_mesh(config.target)
+    analytic = None if mesh is not None else _parse_analytic(config.target)
+    if mesh is None and analytic is None and not config.target.lower().endswith(".csv"):
+        raise DesignError(f"target {config.target!r} is neither a sample shape ({', '.join(SAMPLE_SHAPES)}), "
+                          f"a mesh file ({', '.join(MESH_SUFFIXES)}), a .csv curve, nor zero-order/accel:q=..")
+    lo = hi = None
+    if mesh is not None:
+        lo, hi = np.asarray(mesh.bounds[0], float), np.asarray(mesh.bounds[1], float)
+    if config.domain_mm is not None:
+        size = np.asarray(config.domain_mm, float)
+    elif mesh is not None:
+        size = (hi - lo) + 2.0 * config.margin * float(np.max(hi - lo))
+        if config.space == "nfc":
+            size = np.full(3, size.max())
+    else:
+        size = np.full(3, DEFAULT_DOMAIN_MM)
+    dx = float(size.max()) / config.resolution
+    full = [_even_ceil(s / dx - 1e-9) for s in size]
+    height_vox = None
+    if config.space == "extruded":
+        height = config.height_mm or (float(hi[BUILD_AXIS] - lo[BUILD_AXIS]) if mesh is not None else None)
+        if height is not None:
+            height_vox = max(1, int(round(height / dx)))
+            full[BUILD_AXIS] = max(full[BUILD_AXIS], height_vox)
+    space: DesignSpace = build_space(config.space, SpaceRequest(tuple(full), dx, height_vox))
+    sim_full = list(space.grid_shape)
+    for ax, mir in enumerate(space.mirror):
+        sim_full[ax] *= 2 if mir else 1
+    sim_full = tuple(sim_full)
+    centre = 0.5 * (lo + hi) if mesh is not None else np.zeros(3)
+    origin = centre - 0.5 * dx * np.asarray(sim_full, float)
+    t_total = total_time(space.grid_shape, dx, space.mirror)
+    domain_volume = float(np.prod(sim_full)) * dx ** 3
+    source_solid = None
+    if mesh is not None:
+        target = target_from_mesh(mesh, dx, t_total, f"mesh:{config.target}", config.samples)
+        source_solid = voxelize(mesh, dx, origin_mm=origin, shape=sim_full) > 0.5
+    elif analytic is not None:
+        q, final, duration = analytic
+        if not 0 < final <= 1 or not 0 < duration <= 1:
+            raise DesignError(f"analytic final and duration are fractions in (0, 1], got {final}, {duration}")
+        target = constant_acceleration(t_total, final * domain_volume, duration * t_total, q, config.samples)
+    else:
+        target = target_from_csv(config.target, t_total, config.samples)
+    ext = np.asarray(sim_full, float) * dx
+    area = 2.0 * float(ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2])
+    feasibility = check_feasibility(target, domain_volume, dx_mm=dx, domain_area_mm2=area)
+    log.info("design grid %s (reduced %s), dx = %.4g mm, T = %.4g mm; %s", sim_full, space.grid_shape, dx,
+             t_total, feasibility.text())
+    return Problem(space, target, feasibility, dx, origin, sim_full, source_solid)

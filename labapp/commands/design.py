@@ -1,0 +1,96 @@
+"""`sfr design`: inverse design of a shape whose simulated release matches a target curve."""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+log = logging.getLogger(__name__)
+
+NAME = "design"
+HELP = "design a printable shape whose release matches a target curve (mesh, CSV or analytic)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--target", help="sample shape name, mesh file (.stl/.obj/.ply/.off/.3mf), "
+                        "tau_mm,released_mm3 CSV, or zero-order[:final=F,duration=D] / accel:q=Q[,final=F,duration=D]")
+    parser.add_argument("--space", default="nfc", choices=("nfc", "extruded", "ico"),
+                        help="design space (ico: reserved, not available yet)")
+    parser.add_argument("--resolution", type=int, default=64, help="voxels along the domain's longest side (even)")
+    parser.add_argument("--domain-mm", type=float, nargs=3, metavar=("X", "Y", "Z"),
+                        help="design domain size, mm (default: source bounding box plus margin, cubic for nfc)")
+    parser.add_argument("--w-binary", type=float, help="weight of J_binary (default per space, Tables 1-2)")
+    parser.add_argument("--radius", type=float, help="smoothing radius, voxels (default 4)")
+    parser.add_argument("--beta", type=float, help="projection steepness (default 3)")
+    parser.add_argument("--height", type=float, metavar="MM",
+                        help="extrusion height, mm (default: the source's height, else the domain's)")
+    parser.add_argument("--max-iter", type=int, default=500, help="maximum objective evaluations (default 500)")
+    parser.add_argument("--bounds", default="sigmoid", choices=("sigmoid", "box"),
+                        help="how L-BFGS keeps rho_hat in [0, 1] (default sigmoid)")
+    parser.add_argument("--warn-channel-mm", type=float, default=1.0, help="warn below this channel width, mm")
+    parser.add_argument("--formats", nargs="*", default=[], choices=("3mf", "obj"), help="extra mesh formats")
+    parser.add_argument("--allow-infeasible", action="store_true", help="optimise even if the target fails checks")
+    parser.add_argument("--resume", action="store_true", help="continue the stopped run in --out")
+    parser.add_argument("--out", required=True, help="run folder")
+
+
+def _progress(max_iter: int):
+    """Live progress on stderr: one rewritten line on a terminal, a line every 10 evaluations otherwise."""
+    tty = sys.stderr.isatty()
+
+    def show(k: int, x, terms: dict) -> None:
+        if not tty and k % 10:
+            return
+        line = (f"it {k:4d}/{max_iter}  J {terms['J']:.5g}  fit {terms['J_fit']:.4g}  binary {terms['J_binary']:.4g}"
+                f"  |g| {terms['grad_norm']:.3g}  {terms['seconds']:.0f}s  ETA <= {terms['eta_s'] / 60:.1f} min")
+        print(("\r" + line + "   ") if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
+    return show
+
+
+def _stored_max_iter(out: str) -> int:
+    import json
+    from pathlib import Path
+
+    try:
+        return int(json.loads((Path(out) / "config.json").read_text())["max_iter"])
+    except (OSError, ValueError, KeyError):
+        return 0  # run_design reports the missing or broken run folder
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    from design.errors import DesignError
+    from design.optimize import run_design
+    from design.problem import DesignConfig
+
+    try:
+        if args.resume:
+            config = None
+        else:
+            if not args.target:
+                print("sfr design: --target is required (unless --resume)", file=sys.stderr)
+                return 2
+            config = DesignConfig(target=args.target, space=args.space, resolution=args.resolution,
+                                  domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
+                                  height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
+                                  beta=args.beta, max_iter=args.max_iter, bounds=args.bounds,
+                                  warn_channel_mm=args.warn_channel_mm, allow_infeasible=args.allow_infeasible,
+                                  formats=tuple(args.formats))
+        max_iter = config.max_iter if config else _stored_max_iter(args.out)
+        result = run_design(config, args.out, on_iteration=_progress(max_iter), resume=args.resume)
+    except DesignError as exc:
+        print(f"\nsfr design: {exc}", file=sys.stderr)
+        return 1
+    s = result.outputs.summary
+    print(file=sys.stderr)
+    print(f"{result.status} after {result.iterations} evaluations ({s['seconds']:.1f} s, "
+          f"{s['seconds_per_iteration'] or 0:.3f} s each)")
+    print(f"rel. RMSE: density {s['rel_rmse_density']:.3%}, binary solid {s['rel_rmse_binary']:.3%}")
+    print(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
+          f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}")
+    for w in s["warnings"]:
+        print(f"warning: {w}")
+    print(f"results in {result.out_dir}: design.stl, density.npz, curves.csv, report.png, history.csv, summary.json")
+    log.debug("summary %s", json.dumps(s))
+    return 0 if result.status != "interrupted" else 130

@@ -1,0 +1,70 @@
+"""The design run: outputs, checkpoints, stop, Ctrl-C and resume (tiny grids, few evaluations)."""
+import json
+
+import numpy as np
+import pytest
+
+from design.errors import DesignError
+from design.optimize import run_design
+from design.problem import DesignConfig, prepare
+
+SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)
+
+
+def test_sphere_run_writes_every_output_and_fits(tmp_path):
+    result = run_design(DesignConfig(max_iter=40, **SMALL), tmp_path / "run")
+    out = tmp_path / "run"
+    for name in ("design.stl", "density.npz", "curves.csv", "report.png", "history.csv", "summary.json",
+                 "design.ini", "config.json", "checkpoint.npz"):
+        assert (out / name).exists(), name
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("rel_rmse_density", "rel_rmse_binary", "iterations", "seconds", "seconds_per_iteration",
+                "pieces", "print_mass_g", "min_channel_mm"):
+        assert key in summary
+    assert (out / "curves.csv").read_text().splitlines()[0] == "tau_mm,target_mm3,density_mm3,binary_mm3"
+    history = np.loadtxt(out / "history.csv", delimiter=",", skiprows=1)
+    assert result.iterations == len(history) <= 40
+    assert history[-1, 1] < history[0, 1] / 5  # J falls well below the uniform start
+    # an 8^3 octant recovers the sphere's curve to a few percent within 40 evaluations
+    assert summary["rel_rmse_binary"] < 0.05 and summary["pieces"] == 1
+    assert summary["print_mass_g"] == pytest.approx(summary["volume_mm3"] * 1.32e-3)
+    assert summary["config"]["w_binary"] == 20.0  # defaults are resolved and stored
+
+
+def test_stop_then_resume_continues_the_history(tmp_path):
+    config = DesignConfig(max_iter=12, **SMALL)
+    calls = []
+    first = run_design(config, tmp_path, should_stop=lambda: len(calls) >= 5,
+                       on_iteration=lambda k, x, terms: calls.append((k, terms["eta_s"])))
+    assert first.status == "stopped" and first.iterations == 5
+    # the best design so far is written at a clean stop (after 5 evaluations it may still be grey)
+    assert (tmp_path / "density.npz").exists() and (tmp_path / "summary.json").exists()
+    with pytest.raises(DesignError, match="already holds a design run"):
+        run_design(config, tmp_path)
+    second = run_design(None, tmp_path, resume=True)
+    history = np.loadtxt(tmp_path / "history.csv", delimiter=",", skiprows=1)
+    assert second.iterations == 12 and list(history[:, 0]) == list(range(1, 13))
+    assert np.all(np.diff(history[:, -1]) > 0)  # elapsed time keeps counting across sessions
+
+
+def test_ctrl_c_stops_cleanly_with_the_best_design(tmp_path):
+    def interrupt(k, x, terms):
+        if k == 4:
+            raise KeyboardInterrupt
+
+    result = run_design(DesignConfig(max_iter=30, **SMALL), tmp_path, on_iteration=interrupt)
+    assert result.status == "interrupted" and result.iterations == 4
+    assert json.loads((tmp_path / "summary.json").read_text())["status"] == "interrupted"
+
+
+def test_configuration_guards(tmp_path):
+    with pytest.raises(DesignError, match="not available yet"):
+        prepare(DesignConfig(target="sphere", space="ico", resolution=16))
+    with pytest.raises(DesignError, match="even number"):
+        DesignConfig(target="sphere", resolution=15)
+    with pytest.raises(DesignError, match="neither a sample shape"):
+        prepare(DesignConfig(target="teapot", resolution=16))
+    with pytest.raises(DesignError, match="no readable config.json"):
+        run_design(None, tmp_path / "nothing", resume=True)
+    with pytest.raises(DesignError, match="infeasible"):
+        run_design(DesignConfig(target="zero-order:final=0.5,duration=1.0", resolution=16), tmp_path / "bad")
