@@ -18,9 +18,11 @@ _DATETIME = 306
 def _parse(stamp: str | bytes | None, subsec: str | bytes | None) -> _dt.datetime | None:
     if not stamp:
         return None
-    text = stamp.decode(errors="replace") if isinstance(stamp, bytes) else str(stamp)
+    text = (stamp.decode(errors="replace") if isinstance(stamp, bytes) else str(stamp)).strip().rstrip("\x00")
     try:
-        when = _dt.datetime.strptime(text.strip().rstrip("\x00"), "%Y:%m:%d %H:%M:%S")
+        if len(text) != 19:  # strptime would take a cut-short "2024:03:05 14:07:0" as 14:07:00
+            raise ValueError(text)
+        when = _dt.datetime.strptime(text, "%Y:%m:%d %H:%M:%S")
     except ValueError:
         log.debug("unparseable EXIF time %r", text)
         return None
@@ -48,7 +50,8 @@ def _exifread_time(path: Path) -> _dt.datetime | None:
     try:
         with open(path, "rb") as fh:
             tags = exifread.process_file(fh, details=False, stop_tag="EXIF SubSecTimeOriginal")
-    except OSError:
+    except Exception as exc:  # exifread raises IndexError, struct.error, ... on cut-short files
+        log.debug("cannot read EXIF of %s: %r", path, exc)
         return None
     stamp = tags.get("EXIF DateTimeOriginal") or tags.get("Image DateTime")
     sub = tags.get("EXIF SubSecTimeOriginal")

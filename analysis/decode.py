@@ -62,7 +62,11 @@ def _decode_raw(data: bytes, name: str, reduce: int) -> np.ndarray:
             rgb = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=False,
                                   use_auto_wb=False, user_wb=[1.0, 1.0, 1.0, 1.0], half_size=reduce >= 2)
     except (rawpy.LibRawError, ValueError) as exc:
-        raise AnalysisError(f"cannot decode camera raw {name}: {exc}") from exc
+        # rawpy's messages are bytes (b'Input/output error'); LibRaw reports a file cut short as an I/O error.
+        detail = exc.args[0].decode(errors="replace") if exc.args and isinstance(exc.args[0], bytes) else str(exc)
+        if isinstance(exc, rawpy.LibRawIOError):
+            detail += " (the file is truncated or corrupt)"
+        raise AnalysisError(f"cannot decode camera raw {name}: {detail}") from exc
     if reduce > 2:
         rgb = cv2.resize(rgb, None, fx=2 / reduce, fy=2 / reduce, interpolation=cv2.INTER_AREA)
     return rgb
