@@ -8,9 +8,10 @@ Tolerances. The decode is 16-bit: the smallest developed value here, the left-ha
 3303 codes, so rounding to a whole code moves one value by <= 0.5 / 3303 = 1.5e-4 and a ratio of two by
 <= 3e-4; the colour matrix stored as x/10000 rationals is the identity to 1e-4 (off-diagonals mix the
 other channels, up to 2.5 x brighter, into a channel by <= 2.5e-4 of it). Hence 1e-3 relative.
-Measured: ratios 0.39997..0.39998, absolute values within 2.3e-4 of the truth, doubling 2.0000..2.0003. Any mistake this path
-guards against is far outside it: camera white balance would scale R by 2 and B by 1.43, an sRGB or
-BT.709 output curve would turn 0.126 into ~0.39, auto-brightening would scale everything ~3x.
+Measured: ratios 0.39997..0.39998, absolute values within 2.3e-4 of the truth, doubling 2.0000..2.0003.
+Any mistake this path guards against is far outside it: camera white balance would scale R by 2 and B by
+1.43, an sRGB or LibRaw's default BT.709 output curve would turn 0.126 into 0.39 or 0.33, and LibRaw's
+auto-brightening (measured) scales everything by 3.17.
 Demosaicing touches only the column either side of the region edge (measured: columns 47 and 48 of 96),
 so region means use a margin of 4 px; the crops of read_cells stay >= 8 px from the edge.
 """
