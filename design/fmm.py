@@ -3,8 +3,14 @@
 The grid is padded by one voxel on every side. Padding voxels on an ordinary face are known with
 u = 0 at their centres (section 3.4); padding voxels on a mirror face (index 0 of a mirrored axis) are
 excluded, because the mirror image of a voxel on that face is the voxel itself, whose term in eq. (5),
-max(u_i - u_i, 0), vanishes. All kernels work on the flattened padded arrays with one stride per axis,
-so 2D and 3D share the same code and no kernel needs bounds checks.
+max(u_i - u_i, 0), vanishes; they are stored as known with u = inf, so they are never upwind. All
+kernels work on the flattened padded grid with one stride per axis, so 2D and 3D share the same code
+and no kernel needs bounds checks.
+
+Memory layout: one (P, 2) array holds (u, n) per voxel, with the sign of n as the "known" flag (n < 0
+once accepted; padding is known), so one cache line serves a neighbour's value and state. Far voxels
+have u = inf and n > 0, trial voxels finite u and n > 0. Fast marching visits voxels in the order of
+the front, not of memory, and cache and TLB misses on neighbour reads are most of its run time.
 """
 from __future__ import annotations
 
@@ -16,7 +22,6 @@ from numba import njit
 
 log = logging.getLogger(__name__)
 
-_FAR, _TRIAL, _KNOWN, _EXCLUDED = 0, 1, 2, 3
 
 
 @dataclass(frozen=True)
@@ -25,12 +30,9 @@ class Marching:
 
     Attributes
     ----------
-    u_pad : (P,) ndarray of float, mm
-        Dissolution times on the flattened padded grid (0 on the padding).
-    n_pad : (P,) ndarray of float
-        Slowness on the flattened padded grid (eq. 2); undefined on the padding.
-    state : (P,) ndarray of int8
-        2 for solved and ordinary padding voxels, 3 for the excluded mirror padding.
+    un : (P, 2) ndarray of float
+        Per flattened padded voxel: u (mm; 0 on ordinary padding, inf on mirror padding) and -n (the
+        slowness of eq. 2, negated as the known flag; -1 on the padding).
     order : (N,) ndarray of int64
         Flat padded indices of the interior voxels in the order the marcher accepted them.
     strides : (D,) ndarray of int64
@@ -39,13 +41,16 @@ class Marching:
     dx_mm : float
     """
 
-    u_pad: np.ndarray
-    n_pad: np.ndarray
-    state: np.ndarray
+    un: np.ndarray
     order: np.ndarray
     strides: np.ndarray
     padded_shape: tuple[int, ...]
     dx_mm: float
+
+    @property
+    def u_pad(self) -> np.ndarray:
+        """(P,) dissolution times on the flattened padded grid, mm (a view)."""
+        return self.un[:, 0]
 
     def interior(self, flat: np.ndarray) -> np.ndarray:
         """The interior (unpadded) block of a flat padded array, as a view of shape (grid shape)."""
@@ -104,64 +109,56 @@ def _push(heap, pos, size, key, idx):
     return size + 1
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _axis_min(un, i, s):
+    best = np.inf
+    if un[i - s, 1] < 0.0:
+        best = un[i - s, 0]
+    if un[i + s, 1] < 0.0 and un[i + s, 0] < best:
+        best = un[i + s, 0]
+    return best
+
+
 @njit(cache=True, nogil=True)
-def _local_solve(i, u, n, state, strides, dx):
+def _local_solve(un, i, strides, dx):
     """Solve eq. (5) at voxel i from its known neighbours, using only consistent solutions."""
-    ndim = strides.shape[0]
-    a = np.empty(3)
-    m = 0
-    for d in range(ndim):
-        s = strides[d]
-        best = np.inf
-        if state[i - s] == _KNOWN and u[i - s] < best:
-            best = u[i - s]
-        if state[i + s] == _KNOWN and u[i + s] < best:
-            best = u[i + s]
-        if best < np.inf:
-            # insertion sort of the upwind values, ascending
-            j = m
-            while j > 0 and a[j - 1] > best:
-                a[j] = a[j - 1]
-                j -= 1
-            a[j] = best
-            m += 1
-    h = n[i] * dx
+    # upwind value per axis (inf when the axis has no known neighbour), sorted ascending in scalars
+    a0 = _axis_min(un, i, strides[0])
+    a1 = _axis_min(un, i, strides[1])
+    a2 = _axis_min(un, i, strides[2]) if strides.shape[0] == 3 else np.inf
+    if a1 < a0:
+        a0, a1 = a1, a0
+    if a2 < a1:
+        a1, a2 = a2, a1
+        if a1 < a0:
+            a0, a1 = a1, a0
+    h = abs(un[i, 1]) * dx
     # one term: u = a0 + h; accept if it does not exceed the next upwind value
-    if m == 1 or a[0] + h <= a[1]:
-        return a[0] + h
+    if a0 + h <= a1:  # also when a1 is inf: a single known axis
+        return a0 + h
     # Several terms, solved for v = u - a0 with b_d = a_d - a0 < h, which avoids the cancellation
     # that (u - a_d)^2 would suffer in void voxels, where h = n_min dx is tiny next to u.
-    b1 = a[1] - a[0]
+    b1 = a1 - a0
     v = 0.5 * (b1 + np.sqrt(2.0 * h * h - b1 * b1))
-    if m == 2 or a[0] + v <= a[2]:
-        return a[0] + v
-    b2 = a[2] - a[0]
+    if a0 + v <= a2:
+        return a0 + v
+    b2 = a2 - a0
     s = b1 + b2
     v = (s + np.sqrt(s * s - 3.0 * (b1 * b1 + b2 * b2 - h * h))) / 3.0
-    return a[0] + v
+    return a0 + v
 
 
 @njit(cache=True, nogil=True)
-def _march_kernel(u, n, state, strides, dx, n_interior):
-    size_pad = u.shape[0]
+def _march_kernel(un, strides, dx, pos, heap, order):
     ndim = strides.shape[0]
-    pos = np.full(size_pad, -1, dtype=np.int32)
-    heap = np.empty((n_interior, 2))  # rows of (u, flat index); indices are exact in float64
-    order = np.empty(n_interior, dtype=np.int64)
     size = 0
-    # the initial front: interior voxels next to ordinary (u = 0) padding
-    for i in range(size_pad):
-        if state[i] != _FAR:
-            continue
-        touches = False
-        for d in range(ndim):
-            s = strides[d]
-            if state[i - s] == _KNOWN or state[i + s] == _KNOWN:
-                touches = True
-        if touches:
-            u[i] = _local_solve(i, u, n, state, strides, dx)
-            state[i] = _TRIAL
-            size = _push(heap, pos, size, u[i], i)
+    # the initial front: unknown voxels with a finite known neighbour (ordinary padding)
+    for i in range(un.shape[0]):
+        if un[i, 1] > 0.0:
+            val = _local_solve(un, i, strides, dx)
+            if val < np.inf:
+                un[i, 0] = val
+                size = _push(heap, pos, size, val, i)
     count = 0
     while size > 0:
         i = np.int64(heap[0, 1])
@@ -170,73 +167,71 @@ def _march_kernel(u, n, state, strides, dx, n_interior):
             heap[0, 0] = heap[size, 0]
             heap[0, 1] = heap[size, 1]
             _sift_down(heap, pos, 0, size)
-        state[i] = _KNOWN
+        un[i, 1] = -un[i, 1]  # accepted
         order[count] = i
         count += 1
         for d in range(ndim):
             for nb in (i - strides[d], i + strides[d]):
-                st = state[nb]
-                if st == _FAR:
-                    u[nb] = _local_solve(nb, u, n, state, strides, dx)
-                    state[nb] = _TRIAL
-                    size = _push(heap, pos, size, u[nb], nb)
-                elif st == _TRIAL:
-                    val = _local_solve(nb, u, n, state, strides, dx)
-                    if val < u[nb]:  # decrease-key
-                        u[nb] = val
-                        k = pos[nb]
-                        heap[k, 0] = val
-                        _sift_up(heap, pos, k)
+                if un[nb, 1] < 0.0:
+                    continue  # known or padding
+                val = _local_solve(un, nb, strides, dx)
+                if un[nb, 0] == np.inf:  # far -> trial
+                    un[nb, 0] = val
+                    size = _push(heap, pos, size, val, nb)
+                elif val < un[nb, 0]:  # decrease-key
+                    un[nb, 0] = val
+                    k = pos[nb]
+                    heap[k, 0] = val
+                    _sift_up(heap, pos, k)
     return order[:count]
 
 
 @njit(cache=True, nogil=True)
-def _adjoint_kernel(order, u, n, state, strides, dx, ubar):
+def _adjoint_kernel(order, un, strides, dx, ubar):
     """Reverse sweep of eq. (10): push each voxel's adjoint to the upwind neighbours it used."""
     ndim = strides.shape[0]
-    nbar = np.zeros(u.shape[0])
+    nbar = np.zeros(un.shape[0])
     nbs = np.empty(3, dtype=np.int64)
     w = np.empty(3)
     for c in range(order.shape[0] - 1, -1, -1):
         i = order[c]
-        ui = u[i]
+        ui = un[i, 0]
         total = 0.0
         for d in range(ndim):
             s = strides[d]
             best = np.inf
             nbs[d] = -1
             for nb in (i - s, i + s):
-                if state[nb] == _KNOWN and u[nb] < best:
-                    best = u[nb]
+                if un[nb, 0] < best:  # every voxel is known now; mirror padding has u = inf
+                    best = un[nb, 0]
                     nbs[d] = nb
             # active term of eq. (5) iff the neighbour is strictly upwind
             w[d] = ui - best if best < ui else 0.0
             total += w[d]
         # differentiating sum_d (u_i - a_d)^2 = (n_i dx)^2:  du_i = (sum_d w_d da_d + n_i dx^2 dn_i) / sum_d w_d
         g = ubar[i] / total
-        nbar[i] = g * n[i] * dx * dx
+        nbar[i] = -g * un[i, 1] * dx * dx
         for d in range(ndim):
             if w[d] > 0.0:
                 ubar[nbs[d]] += g * w[d]
     return nbar
 
 
-def _pad(n: np.ndarray, mirror: tuple[bool, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    padded = np.pad(n, 1)
-    state = np.full(padded.shape, _FAR, dtype=np.int8)
+def _pad(n: np.ndarray, mirror: tuple[bool, ...]) -> tuple[np.ndarray, np.ndarray]:
+    un = np.empty(tuple(s + 2 for s in n.shape) + (2,))
+    un[..., 0] = 0.0
+    un[..., 1] = -1.0
+    inner = (slice(1, -1),) * n.ndim
+    un[inner + (0,)] = np.inf
+    un[inner + (1,)] = n
     for axis in range(n.ndim):
-        for side in (0, -1):
-            index = [slice(None)] * n.ndim
-            index[axis] = side
-            state[tuple(index)] = _KNOWN
-    for axis in range(n.ndim):  # mirror faces override, corners included
         if mirror[axis]:
-            index = [slice(None)] * n.ndim
+            index = [slice(None)] * (n.ndim + 1)
             index[axis] = 0
-            state[tuple(index)] = _EXCLUDED
-    strides = np.array(padded.strides, dtype=np.int64) // padded.itemsize
-    u = np.where(state == _FAR, np.inf, 0.0)
-    return u.ravel(), padded.ravel(), state.ravel(), strides
+            index[-1] = 0
+            un[tuple(index)] = np.inf
+    strides = np.array(un.strides[:-1], dtype=np.int64) // un.strides[-2]
+    return un.reshape(-1, 2), strides
 
 
 def march(n: np.ndarray, dx_mm: float, mirror: tuple[bool, ...]) -> Marching:
@@ -255,9 +250,15 @@ def march(n: np.ndarray, dx_mm: float, mirror: tuple[bool, ...]) -> Marching:
     -------
     Marching
     """
-    u, n_pad, state, strides = _pad(np.asarray(n, dtype=np.float64), mirror)
-    order = _march_kernel(u, n_pad, state, strides, float(dx_mm), int(np.prod(n.shape)))
-    return Marching(u, n_pad, state, order, strides, tuple(s + 2 for s in n.shape), float(dx_mm))
+    un, strides = _pad(np.asarray(n, dtype=np.float64), mirror)
+    # work arrays are allocated by numpy, which asks the kernel for transparent huge pages on large
+    # arrays: the marcher's access pattern follows the front, and TLB misses dominate otherwise
+    n_interior = int(np.prod(n.shape))
+    pos = np.empty(un.shape[0], dtype=np.int32)
+    heap = np.empty((n_interior, 2))  # rows of (u, flat index); indices are exact in float64
+    order = np.empty(n_interior, dtype=np.int64)
+    order = _march_kernel(un, strides, float(dx_mm), pos, heap, order)
+    return Marching(un, order, strides, tuple(s + 2 for s in n.shape), float(dx_mm))
 
 
 def march_adjoint(marching: Marching, u_bar: np.ndarray) -> np.ndarray:
@@ -274,10 +275,9 @@ def march_adjoint(marching: Marching, u_bar: np.ndarray) -> np.ndarray:
     ndarray of float, grid shape
         dJ/dn per interior voxel.
     """
-    ubar = np.zeros(marching.u_pad.shape[0])
+    ubar = np.zeros(marching.un.shape[0])
     marching.interior(ubar)[...] = u_bar
-    nbar = _adjoint_kernel(marching.order, marching.u_pad, marching.n_pad, marching.state,
-                           marching.strides, marching.dx_mm, ubar)
+    nbar = _adjoint_kernel(marching.order, marching.un, marching.strides, marching.dx_mm, ubar)
     return np.array(marching.interior(nbar))
 
 
@@ -291,7 +291,7 @@ def eikonal_residual(marching: Marching) -> np.ndarray:
         order of the float spacing of u (~1e-16 u), however small n_i dx is.
     """
     shape = marching.padded_shape
-    u = np.where(marching.state == _EXCLUDED, np.inf, marching.u_pad).reshape(shape)
+    u = marching.u_pad.reshape(shape)
     inner = (slice(1, -1),) * len(shape)
     ui = u[inner]
     total = np.zeros(ui.shape)
@@ -301,4 +301,4 @@ def eikonal_residual(marching: Marching) -> np.ndarray:
         lo[axis] = slice(0, -2)
         hi[axis] = slice(2, None)
         total += np.maximum(ui - np.minimum(u[tuple(lo)], u[tuple(hi)]), 0.0) ** 2
-    return np.sqrt(total) - marching.interior(marching.n_pad) * marching.dx_mm
+    return np.sqrt(total) + marching.interior(marching.un[:, 1]) * marching.dx_mm  # n is stored negated
