@@ -1,4 +1,6 @@
 """Sample shapes, mesh and density loading, and the one-call mesh simulation."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
@@ -6,6 +8,8 @@ import trimesh
 from design import SAMPLE_SHAPES, DesignError, load_density, load_mesh, sample_shape, simulate_mesh
 from design.pipeline import input_grid, parse_symmetry
 from design.shapes import VOLUME_MM3
+
+FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "shapes"
 
 
 @pytest.mark.parametrize("name", SAMPLE_SHAPES)
@@ -84,3 +88,12 @@ def test_input_grid_and_symmetry_letters(tmp_path):
     assert rho.shape == (3, 4) and dx == 0.5 and mirror == (False, True)
     rho, dx, _ = input_grid("sample:csg", voxel_size_mm=1.0)
     assert dx == 1.0 and rho.ndim == 3
+
+
+@pytest.mark.parametrize("name", SAMPLE_SHAPES)
+def test_shipped_fixture_is_the_sample_shape(name):
+    # fixtures/shapes/*.stl come from fixtures/make_shape_fixtures.py; STL stores float32 vertices
+    shipped = load_mesh(FIXTURES / f"{name}.stl")
+    built = sample_shape(name)
+    assert len(shipped.faces) == len(built.faces)
+    assert shipped.volume == pytest.approx(built.volume, rel=1e-6)
