@@ -60,7 +60,8 @@ class DesignConfig:
     max_iter : int
         Maximum objective evaluations (paper: 500).
     ftol_rel, xtol_rel : float
-        nlopt relative tolerances on J and on the variables (0 disables).
+        nlopt relative tolerances on J and on the variables (0 disables; by default only the
+        iteration limit and a stalled line search end a run).
     lbfgs_memory : int
         L-BFGS correction pairs m (memory O(m N)).
     bounds : str
@@ -90,12 +91,12 @@ class DesignConfig:
     beta: float | None = None
     w_fab: float = 0.0
     max_iter: int = 500
-    ftol_rel: float = 1e-9
+    ftol_rel: float = 0.0
     xtol_rel: float = 0.0
     lbfgs_memory: int = 10
     bounds: str = "sigmoid"
     checkpoint_every: int = 10
-    margin: float = 0.1
+    margin: float = 0.25
     warn_channel_mm: float = 1.0
     allow_infeasible: bool = False
     samples: int = 1001

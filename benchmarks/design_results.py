@@ -1,0 +1,60 @@
+"""Tabulate design run folders for docs/results.md and copy their report pictures to docs/figures.
+
+    python benchmarks/design_results.py RUN_DIR [RUN_DIR ...] [--figures docs/figures]
+
+For each run folder (written by `sfr design`) prints one markdown table row from summary.json; for
+analytic zero-order targets it also prints the largest deviation of the achieved release rate from
+the target's constant rate over the middle 80% of the release (rate measured over 20 equal
+sub-intervals of that window, each 4% of the release duration). Last line: ``runs: <count>``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+
+def zero_order_deviation(curves: np.ndarray) -> dict[str, float]:
+    """Max |rate / constant - 1| over the middle 80% of a zero-order target's release."""
+    tau, target = curves[:, 0], curves[:, 1]
+    duration = tau[np.argmax(target >= target[-1] * (1 - 1e-9))]
+    const = target[-1] / duration
+    edges = np.linspace(0.1 * duration, 0.9 * duration, 21)
+    out = {}
+    for name, col in (("density", 2), ("binary", 3)):
+        rate = np.diff(np.interp(edges, tau, curves[:, col])) / np.diff(edges)
+        out[name] = float(np.abs(rate / const - 1.0).max())
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+", type=Path)
+    parser.add_argument("--figures", type=Path, help="copy each report.png here as design_<run>.png")
+    args = parser.parse_args()
+    print("| run | space | grid (reduced) | evals | s/eval | rel. RMSE density | rel. RMSE binary | IoU | pieces "
+          "| mass (g) | narrowest channel (mm) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for run in args.runs:
+        s = json.loads((run / "summary.json").read_text())
+        iou = "-" if s["iou_with_source"] is None else f"{s['iou_with_source']:.3f}"
+        chan = "none" if s["min_channel_mm"] is None else f"{s['min_channel_mm']:.2f}"
+        print(f"| {run.name} | {s['space']} | {'x'.join(map(str, s['reduced_shape']))} | {s['iterations']} "
+              f"| {s['seconds_per_iteration']:.3f} | {s['rel_rmse_density']:.3%} | {s['rel_rmse_binary']:.3%} "
+              f"| {iou} | {s['pieces']} | {s['print_mass_g']:.3f} | {chan} |")
+        if s["target"].startswith("analytic:zero-order"):
+            curves = np.loadtxt(run / "curves.csv", delimiter=",", skiprows=1)
+            dev = zero_order_deviation(curves)
+            print(f"\n{run.name}: zero-order rate deviation over the middle 80%: density {dev['density']:.1%}, "
+                  f"binary {dev['binary']:.1%}\n")
+        if args.figures:
+            args.figures.mkdir(parents=True, exist_ok=True)
+            shutil.copy(run / "report.png", args.figures / f"design_{run.name}.png")
+    print(f"runs: {len(args.runs)}")
+
+
+if __name__ == "__main__":
+    main()
