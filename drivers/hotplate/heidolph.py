@@ -1,4 +1,5 @@
-"""`HeidolphHotplate`: a Heidolph MR Hei-Tec (or any plate of `drivers.hotplate.protocol`) over pyserial.
+"""`HeidolphHotplate` (alias `NamurHotplate`): a Heidolph MR Hei-Tec, or any plate of
+`drivers.hotplate.protocol` (``table=IKA_RCT`` for IKA RCT / C-MAG), over pyserial.
 
 The port is opened with `serial.serial_for_url`, so ``/dev/ttyUSB0``, ``socket://host:port`` and the
 emulator's pseudo-terminal all work. Every exchange goes through `_exchange` (framing, pacing of at
@@ -116,15 +117,24 @@ class HeidolphHotplate:
 
     def set_temperature(self, temp_c: float) -> None:
         """Set the temperature setpoint, degrees C (probe temperature when a probe is plugged in)."""
-        line = self.table.setpoints["temperature"].encode(temp_c, self.config.max_temp_c)
-        self._exchange(line)
+        self._set("temperature", temp_c, self.config.max_temp_c)
         self._setpoint_c = temp_c
 
     def set_speed(self, speed_rpm: float) -> None:
         """Set the stirring speed setpoint, rpm."""
-        line = self.table.setpoints["speed"].encode(speed_rpm, self.config.max_speed_rpm)
-        self._exchange(line)
+        self._set("speed", speed_rpm, self.config.max_speed_rpm)
         self._setpoint_rpm = speed_rpm
+
+    def _set(self, key: str, value: float, limit: float) -> None:
+        """Send a setpoint; if the plate does not answer set commands, read it back to confirm it."""
+        sp = self.table.setpoints[key]
+        line = sp.encode(value, limit)
+        self._exchange(line)
+        if not self.table.answers(line):
+            got = float(self._exchange(sp.readback))
+            if abs(got - value) > 0.5 * 10 ** -sp.decimals + 1e-9:
+                raise HotplateError(f"{self.url}: {line!r} was not taken: {sp.readback} reads back "
+                                    f"{got:g} {sp.unit}")
 
     def start_heating(self) -> None:
         self._exchange(self.table.actions["start_heating"])
@@ -151,6 +161,8 @@ class HeidolphHotplate:
             On a lost link that could not be restored, garbage that persists, or a negative STATUS.
         """
         t = self.table
+        if t.keepalive:
+            self._exchange(t.keepalive)
         probe = float(self._exchange(t.readings["probe_c"].query))
         plate = float(self._exchange(t.readings["plate_c"].query))
         speed = float(self._exchange(t.readings["speed_rpm"].query))
@@ -214,7 +226,7 @@ class HeidolphHotplate:
         if wait > 0:
             time.sleep(wait)
         self._port.reset_input_buffer()
-        self._port.write((line + self.table.terminator).encode("ascii"))
+        self._port.write((line + self.table.line_end).encode("ascii"))
         self._last_io = time.monotonic()
 
     def _read(self, line: str) -> str:
@@ -233,6 +245,9 @@ class HeidolphHotplate:
         if self._port is None:
             raise HotplateError(f"hotplate on {self.url} is not connected")
         self._write(line)
+        if not self.table.answers(line):
+            self._port.flush()  # no reply to wait for: at least see the bytes leave before going on
+            return ""
         return self.table.payload(line, self._read(line))
 
     def _exchange(self, line: str) -> str:
@@ -328,3 +343,7 @@ class HeidolphHotplate:
         log.warning("process exiting with the hotplate on %s open: switching heating and stirring off", self.url)
         self._stop.set()
         self._safe_off()
+
+
+NamurHotplate = HeidolphHotplate
+"""The same driver under a maker-neutral name, for tables other than Heidolph's (e.g. ``IKA_RCT``)."""

@@ -1,6 +1,7 @@
-"""A Heidolph MR Hei-Tec that speaks its RS-232 bytes over a Linux pseudo-terminal.
+"""A Heidolph MR Hei-Tec (or an IKA RCT) that speaks its RS-232 bytes over a Linux pseudo-terminal.
 
-The emulator answers the commands of `drivers.hotplate.protocol.HEIDOLPH_HEI_TEC` from a thread,
+The emulator answers the commands of `drivers.hotplate.protocol.HEIDOLPH_HEI_TEC` (or of any other
+table, e.g. ``IKA_RCT``: no echo, unanswered set commands) from a thread,
 advances the thermal model of `drivers.sim.hotplate_model` in (optionally accelerated) simulated
 time, runs the plate's own connection check ("PC Err": heating and stirring off after
 ``watchdog_s`` of silence) and injects faults on request. Clients open `HeidolphEmulator.path`, a
@@ -150,7 +151,7 @@ class HeidolphEmulator:
         self._last_real = self._last_rx = self._clock()
         self._thread = threading.Thread(target=self._serve, name="heidolph-emulator", daemon=True)
         self._thread.start()
-        log.info("Heidolph emulator on %s (x%g time)", self.path, self._speed)
+        log.info("%s emulator on %s (x%g time)", self._table.name, self.path, self._speed)
         return self.path
 
     def stop(self) -> None:
@@ -284,24 +285,31 @@ class HeidolphEmulator:
             poller = select.poll()
             poller.register(self._master, select.POLLIN)
             events = poller.poll(20)
-            if any(ev & select.POLLHUP for _, ev in events):
+            hangup = any(ev & select.POLLHUP for _, ev in events)
+            if any(ev & select.POLLIN for _, ev in events):
+                # a client that writes and closes at once (unanswered commands) leaves POLLIN and POLLHUP
+                buffer = self._receive(buffer)
+            if hangup:
                 if self._client:
                     self._client_left()
                     buffer = b""
                 time.sleep(0.01)
                 continue
-            self._client = True
-            if not events:
-                continue
-            try:
-                data = os.read(self._master, 4096)
-            except OSError:
-                continue
-            buffer += bytes(b & 0x7F for b in data)
-            *lines, buffer = _LINE_END.split(buffer)
-            for line in lines:
-                if line.strip():
-                    self._handle(line.decode("ascii", "replace").strip())
+            if events:
+                self._client = True
+
+    def _receive(self, buffer: bytes) -> bytes:
+        """Read what the client sent, handle every complete line, return the incomplete rest."""
+        try:
+            data = os.read(self._master, 4096)
+        except OSError:
+            return buffer
+        buffer += bytes(b & 0x7F for b in data)
+        *lines, buffer = _LINE_END.split(buffer)
+        for line in lines:
+            if line.strip():
+                self._handle(line.decode("ascii", "replace").strip())
+        return buffer
 
     def _client_left(self) -> None:
         self._client = False
@@ -321,6 +329,8 @@ class HeidolphEmulator:
             terminator = self._table.terminator if self._new_protocol else self._table.old_terminator
         if payload is None:
             log.debug("emulator: unknown command %r ignored", line)
+            return
+        if not self._table.answers(line):
             return
         delay = self._reply_delay_s + self._slow_s
         if delay:
@@ -371,6 +381,7 @@ class HeidolphEmulator:
             self._plate = replace(p, heating=False, stirring=False)
         elif action in ("watchdog_on", "watchdog_off"):
             self._watchdog_on = action == "watchdog_on"
+            return word.partition("@")[2]  # IKA's OUT_WD1@m is answered with the time m
         elif action == "new_protocol":
             self._new_protocol = True
         return ""
