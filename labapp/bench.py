@@ -39,10 +39,11 @@ class Bench:
 class BenchSession:
     """The live connection to a bench during one procedure: devices, hotplate monitor and run-folder logging.
 
-    Every ``note`` goes both to the run's ``events.log`` and to the engine's subscribers.
+    Every ``note`` goes both to the run's ``events.log`` (when there is a run folder) and to the engine's
+    subscribers.
     """
 
-    def __init__(self, bench: Bench, engine: Engine, run: RunFolder, keepalive_s: float = 2.0) -> None:
+    def __init__(self, bench: Bench, engine: Engine, run: RunFolder | None, keepalive_s: float = 2.0) -> None:
         self.bench, self.engine, self.run = bench, engine, run
         self.keepalive_s = keepalive_s
         self.monitor: HotplateMonitor | None = None
@@ -61,7 +62,8 @@ class BenchSession:
         log.log(_LEVELS.get(level, logging.INFO), "%s: %s", kind, message)
         if level in ("warning", "error"):
             self.last_error = message
-        self.run.event(level, kind, message, self.t_s())
+        if self.run is not None:
+            self.run.event(level, kind, message, self.t_s())
         self.engine.emit(level if level in ("info", "warning", "error") else "info", topic=kind, message=message)
 
     def connect(self, setpoint_c: float | None, speed_rpm: float | None) -> None:

@@ -4,7 +4,8 @@ The Heidolph unit shows "PC Err" after 10 s without a command while heating, and
 is longer than that, so the plate is polled on its own thread every ``poll_s`` wall seconds. Every
 command to the plate goes through :meth:`HotplateMonitor.command` under one lock, so the poller and the
 procedure never interleave bytes on the wire. A lost link is reported once, then retried with back-off
-(``connect()`` again) until it comes back, which is reported too.
+(``connect()`` again) until it comes back, which is reported too; so is a drop the driver repaired by
+itself (a driver with a ``reconnects`` counter, like ``HeidolphHotplate``).
 """
 from __future__ import annotations
 
@@ -51,6 +52,7 @@ class HotplateMonitor:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.failures = 0
+        self._reconnects = getattr(hotplate, "reconnects", 0)
 
     @property
     def latest(self) -> HotplateReading | None:
@@ -80,6 +82,11 @@ class HotplateMonitor:
         if not self._link_ok:
             self._link_ok = True
             self._report("info", "hotplate-link", "hotplate link restored")
+        reconnects = getattr(self.hotplate, "reconnects", 0)
+        if reconnects > self._reconnects:
+            self._report("warning", "hotplate-link", f"hotplate link dropped and re-established by the driver "
+                         f"({reconnects} reconnects so far)")
+            self._reconnects = reconnects
         self._latest = reading
         if self._on_reading is not None:
             self._on_reading(reading)

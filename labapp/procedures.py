@@ -153,8 +153,8 @@ class RunProcedure:
     def execute(self, engine: Engine) -> None:
         """Heat, reference, drop (unless resuming after the drop), then acquire until a stop criterion."""
         cfg, session, run = self.config, self.session, self.run
-        if self.analyzer is not None and "reference.jpg" in run.meta.get("files", {}):
-            self.analyzer.set_reference(run.path / "reference.jpg")
+        if "reference.jpg" in run.meta.get("files", {}):
+            self._use_reference()
         if session.t0_unix_s is None:
             session.wait_stable(cfg.setpoint_c, cfg.tolerance_c, cfg.hold_s, cfg.heat_timeout_s, cfg.stable_step_s)
             if engine.should_stop():
@@ -195,9 +195,17 @@ class RunProcedure:
             raise ProcedureError("no reference frame: the camera failed twice")
         self.run.add_file("reference.jpg", cap.data)
         self.run.update(reference_file="reference.jpg", reference_t_unix_s=cap.t_unix_s)
-        if self.analyzer is not None:
-            self.analyzer.set_reference(self.run.path / "reference.jpg")
         self.session.note("info", "reference", "reference frame (clear water) captured")
+        self._use_reference()
+
+    def _use_reference(self) -> None:
+        if self.analyzer is None:
+            return
+        try:
+            self.analyzer.set_reference(self.run.path / "reference.jpg")
+        except Exception as exc:
+            self.session.note("warning", "reference", f"reference frame unusable for live analysis "
+                              f"({type(exc).__name__}: {exc}); the calibration's zero level is used")
 
     def _acquire(self, engine: Engine) -> None:
         cfg, session, clock = self.config, self.session, engine.clock
@@ -249,3 +257,34 @@ class RunProcedure:
         if index % 25 == 0 and free_bytes(run.path) < self.config.low_space_bytes:
             session.note("warning", "disk-space", f"disk space low: {free_bytes(run.path) / 1e9:.2f} GB free")
 
+
+
+class PreviewProcedure:
+    """Connect the bench, publish one frame (``preview`` event with the image bytes) and one reading, close.
+
+    Nothing is stored and the hotplate is not switched on: the device panel's "connect" check.
+    """
+
+    name = "preview"
+
+    def __init__(self, bench: Bench) -> None:
+        self.bench = bench
+        self.session: BenchSession | None = None
+
+    def startup(self, engine: Engine) -> None:
+        """Connect camera and hotplate (no setpoints)."""
+        self.session = BenchSession(self.bench, engine, None)
+        self.session.connect(None, None)
+
+    def execute(self, engine: Engine) -> None:
+        """One frame, one reading."""
+        cap = self.session.capture()
+        if cap is not None:
+            engine.emit("preview", data=cap.data, file=cap.file_name, t_unix_s=cap.t_unix_s)
+        if self.session.monitor is not None:
+            self.session.monitor.poll()
+
+    def shutdown(self, engine: Engine, outcome: str) -> None:
+        """Close the devices."""
+        if self.session is not None:
+            self.session.close()

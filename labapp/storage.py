@@ -360,6 +360,14 @@ def open_run(path: Path) -> RunFolder:
     return run
 
 
+def finalise_run(path: Path) -> None:
+    """Close an interrupted run without resuming it: its status becomes ``stopped``; nothing else changes."""
+    run = open_run(path)
+    run.event("info", "finalised", "finalised by the operator without resuming")
+    run.finish("stopped")
+    run.close()
+
+
 @dataclass(frozen=True)
 class VerifyReport:
     """What :func:`verify_run` found. ``ok`` is True when nothing is missing, altered, listed twice or torn."""

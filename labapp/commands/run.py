@@ -1,0 +1,149 @@
+"""`sfr run`: a release run from the terminal, on the bench or simulated, with a live status line."""
+from __future__ import annotations
+
+import argparse
+import logging
+
+log = logging.getLogger(__name__)
+
+NAME = "run"
+HELP = "acquire a release run (real bench or --simulate) with a live status line; --resume continues one"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of `sfr run`."""
+    parser.add_argument("--camera", default="gphoto2", help="gphoto2 | gphoto2:MODEL@PORT | folder:PATH")
+    parser.add_argument("--hotplate", help="hotplate serial port or URL (omit: no hotplate)")
+    parser.add_argument("--out", default="runs", help="data directory; the run gets a new folder in it")
+    parser.add_argument("--simulate", action="store_true",
+                        help="simulated camera + Heidolph emulator + a dissolving sample object")
+    parser.add_argument("--speed", type=float, default=100.0,
+                        help="simulated time acceleration (default 100; 0 = as fast as frames render)")
+    parser.add_argument("--sample", default="pill", help="shipped sample object of the simulated bench")
+    parser.add_argument("--resume", metavar="RUN_FOLDER", help="continue an interrupted run into its folder")
+    parser.add_argument("--calibration", help="bench calibration JSON (live concentration, steady-state stop); "
+                        "with --simulate and none given, a simulated calibration series runs first")
+    parser.add_argument("--name", default="run", help="run name (part of the folder name)")
+    parser.add_argument("--object", default="", help="object description")
+    parser.add_argument("--object-mass", type=float, help="object mass, g")
+    parser.add_argument("--water-g", type=float, default=500.0, help="water mass, g (default 500)")
+    parser.add_argument("--interval", type=float, default=11.0, help="frame interval, s (default 11)")
+    parser.add_argument("--setpoint", type=float, default=70.0, help="bath temperature, C (default 70)")
+    parser.add_argument("--rpm", type=float, default=150.0, help="stirring speed, rpm (default 150)")
+    parser.add_argument("--max-hours", type=float, default=4.0, help="stop after this long, h (default 4)")
+    parser.add_argument("--no-steady-stop", action="store_true", help="do not stop at steady state")
+    parser.add_argument("--notes", default="", help="free text stored in run.json")
+    parser.add_argument("--auto-drop", action="store_true", help="time zero as soon as the bath is stable and the "
+                        "reference is taken (drop the object then); default with --simulate, else Enter confirms")
+
+
+def _status_printer(status):
+    import shutil
+    import sys
+
+    def show() -> None:
+        width = shutil.get_terminal_size((120, 20)).columns - 1
+        sys.stdout.write("\r" + status.line(width).ljust(width))
+        sys.stdout.flush()
+    return show
+
+
+def run(args: argparse.Namespace) -> int:
+    """Build the bench, walk the run procedure, print the status line until it ends."""
+    import math
+    from pathlib import Path
+
+    from analysis import BenchCalibration
+    from labapp.clock import make_clock
+    from labapp.procedures import RunConfig, RunProcedure
+    from labapp.status import RunStatus
+
+    if not args.verbose:
+        logging.getLogger().setLevel(logging.WARNING)
+    speed = (math.inf if args.speed == 0 else args.speed) if args.simulate else None
+    calibration = BenchCalibration.load(args.calibration) if args.calibration else None
+    sim = None
+    if args.resume:
+        from labapp.simbench import resume_clock
+        clock = resume_clock(Path(args.resume), speed) if args.simulate else make_clock(None)
+    else:
+        clock = make_clock(speed)
+    try:
+        if args.simulate:
+            from labapp.simbench import SimulatedBench
+            if calibration is None and not args.resume:
+                from labapp.demo import simulated_calibration
+                print("no --calibration: running a simulated calibration series first ...", flush=True)
+                calibration, cal_path = simulated_calibration(Path(args.out))
+                print(f"calibration: {cal_path}", flush=True)
+            from labapp.demo import SCENE
+            sim = SimulatedBench(clock, sample=args.sample, scene=SCENE)
+            bench = sim.bench()
+        else:
+            from labapp.devices import make_bench
+            bench = make_bench(args.camera, args.hotplate)
+        if args.resume:
+            proc = RunProcedure.resume(Path(args.resume), bench, calibration)
+        else:
+            config = RunConfig(name=args.name, interval_s=args.interval, setpoint_c=args.setpoint,
+                               speed_rpm=args.rpm, max_duration_s=args.max_hours * 3600,
+                               stop_on_steady=not args.no_steady_stop, water_g=args.water_g,
+                               object_mass_g=args.object_mass if args.object_mass is not None else
+                               (sim.release.mass_g if sim else None),
+                               object_name=args.object or (sim.release.name if sim else ""), notes=args.notes,
+                               auto_drop=args.simulate or args.auto_drop)
+            proc = RunProcedure(config, bench, Path(args.out), calibration)
+        return _drive(proc, clock, bench, RunStatus())
+    finally:
+        if sim is not None:
+            sim.close()
+
+
+def _drive(proc, clock, bench, status) -> int:
+    import signal
+
+    from labapp.engine import Engine
+
+    engine = Engine(clock)
+    engine.subscribe(status.update)
+    engine.subscribe(lambda e: print(f"\n>>> {e.data['text']} (press Enter)", flush=True)
+                     if e.kind == "prompt" and not e.data.get("auto") else None)
+    show = _status_printer(status)
+    interrupts = []
+
+    def on_sigint(signum, frame) -> None:
+        interrupts.append(signum)
+        if len(interrupts) == 1:
+            print("\nCtrl-C: stopping cleanly (heating off, run finalised); Ctrl-C again aborts", flush=True)
+            engine.stop()
+        else:
+            engine.abort()
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        engine.start(proc)
+        _answer_prompts(engine, proc)
+        while engine.join(0.25) is None:
+            show()
+        show()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    print()
+    folder = proc.run.path if proc.run is not None else None
+    print(f"run {engine.outcome}: {len(proc.run.frames) if proc.run else 0} frames in {folder}")
+    if engine.error is not None:
+        print(f"error: {engine.error}")
+    return 0 if engine.outcome in ("complete", "stopped") else 1
+
+
+def _answer_prompts(engine, proc) -> None:
+    """On a real bench the drop is confirmed with Enter (in a daemon thread, so Ctrl-C still works)."""
+    import sys
+    import threading
+
+    if proc.config.auto_drop or not sys.stdin.isatty():
+        return
+
+    def wait_enter() -> None:
+        sys.stdin.readline()
+        engine.answer("drop", True)
+    threading.Thread(target=wait_enter, daemon=True).start()
