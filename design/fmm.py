@@ -7,10 +7,12 @@ max(u_i - u_i, 0), vanishes; they are stored as known with u = inf, so they are 
 kernels work on the flattened padded grid with one stride per axis, so 2D and 3D share the same code
 and no kernel needs bounds checks.
 
-Memory layout: one (P, 2) array holds (u, n) per voxel, with the sign of n as the "known" flag (n < 0
-once accepted; padding is known), so one cache line serves a neighbour's value and state. Far voxels
-have u = inf and n > 0, trial voxels finite u and n > 0. Fast marching visits voxels in the order of
-the front, not of memory, and cache and TLB misses on neighbour reads are most of its run time.
+Memory layout: one record per voxel, a row of `rec`: u, n with its sign as the "known" flag (n < 0
+once accepted; padding is known), and the smallest known neighbour value along each axis (the
+upwind candidates of eq. 5), updated when a neighbour is accepted. A trial voxel is then re-solved from
+its own cache line instead of from six scattered neighbours: fast marching visits voxels in the order
+of the front, not of memory, and scattered reads were most of its run time. Far voxels have u = inf
+and n > 0, trial voxels finite u and n > 0.
 """
 from __future__ import annotations
 
@@ -30,9 +32,10 @@ class Marching:
 
     Attributes
     ----------
-    un : (P, 2) ndarray of float
-        Per flattened padded voxel: u (mm; 0 on ordinary padding, inf on mirror padding) and -n (the
-        slowness of eq. 2, negated as the known flag; -1 on the padding).
+    rec : (P, W) ndarray of float
+        Per flattened padded voxel: u (mm; 0 on ordinary padding, inf on mirror padding), -n (the
+        slowness of eq. 2, negated as the known flag; -1 on the padding), then per axis the smallest
+        neighbour value known when the voxel was accepted; W = 4 (2D) or 8 (3D, one cache line).
     order : (N,) ndarray of int64
         Flat padded indices of the interior voxels in the order the marcher accepted them.
     strides : (D,) ndarray of int64
@@ -41,7 +44,7 @@ class Marching:
     dx_mm : float
     """
 
-    un: np.ndarray
+    rec: np.ndarray
     order: np.ndarray
     strides: np.ndarray
     padded_shape: tuple[int, ...]
@@ -50,7 +53,7 @@ class Marching:
     @property
     def u_pad(self) -> np.ndarray:
         """(P,) dissolution times on the flattened padded grid, mm (a view)."""
-        return self.un[:, 0]
+        return self.rec[:, 0]
 
     def interior(self, flat: np.ndarray) -> np.ndarray:
         """The interior (unpadded) block of a flat padded array, as a view of shape (grid shape)."""
@@ -109,30 +112,20 @@ def _push(heap, pos, size, key, idx):
     return size + 1
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _axis_min(un, i, s):
-    best = np.inf
-    if un[i - s, 1] < 0.0:
-        best = un[i - s, 0]
-    if un[i + s, 1] < 0.0 and un[i + s, 0] < best:
-        best = un[i + s, 0]
-    return best
-
-
 @njit(cache=True, nogil=True)
-def _local_solve(un, i, strides, dx):
-    """Solve eq. (5) at voxel i from its known neighbours, using only consistent solutions."""
+def _local_solve(rec, i, ndim, dx):
+    """Solve eq. (5) at voxel i from its per-axis upwind values, using only consistent solutions."""
     # upwind value per axis (inf when the axis has no known neighbour), sorted ascending in scalars
-    a0 = _axis_min(un, i, strides[0])
-    a1 = _axis_min(un, i, strides[1])
-    a2 = _axis_min(un, i, strides[2]) if strides.shape[0] == 3 else np.inf
+    a0 = rec[i, 2]
+    a1 = rec[i, 3]
+    a2 = rec[i, 4] if ndim == 3 else np.inf
     if a1 < a0:
         a0, a1 = a1, a0
     if a2 < a1:
         a1, a2 = a2, a1
         if a1 < a0:
             a0, a1 = a1, a0
-    h = abs(un[i, 1]) * dx
+    h = rec[i, 1] * dx
     # one term: u = a0 + h; accept if it does not exceed the next upwind value
     if a0 + h <= a1:  # also when a1 is inf: a single known axis
         return a0 + h
@@ -149,15 +142,15 @@ def _local_solve(un, i, strides, dx):
 
 
 @njit(cache=True, nogil=True)
-def _march_kernel(un, strides, dx, pos, heap, order):
+def _march_kernel(rec, strides, dx, pos, heap, order):
     ndim = strides.shape[0]
     size = 0
-    # the initial front: unknown voxels with a finite known neighbour (ordinary padding)
-    for i in range(un.shape[0]):
-        if un[i, 1] > 0.0:
-            val = _local_solve(un, i, strides, dx)
+    # the initial front: unknown voxels with a finite upwind value (next to ordinary padding)
+    for i in range(rec.shape[0]):
+        if rec[i, 1] > 0.0:
+            val = _local_solve(rec, i, ndim, dx)
             if val < np.inf:
-                un[i, 0] = val
+                rec[i, 0] = val
                 size = _push(heap, pos, size, val, i)
     count = 0
     while size > 0:
@@ -167,19 +160,21 @@ def _march_kernel(un, strides, dx, pos, heap, order):
             heap[0, 0] = heap[size, 0]
             heap[0, 1] = heap[size, 1]
             _sift_down(heap, pos, 0, size)
-        un[i, 1] = -un[i, 1]  # accepted
+        rec[i, 1] = -rec[i, 1]  # accepted
+        ui = rec[i, 0]
         order[count] = i
         count += 1
         for d in range(ndim):
             for nb in (i - strides[d], i + strides[d]):
-                if un[nb, 1] < 0.0:
-                    continue  # known or padding
-                val = _local_solve(un, nb, strides, dx)
-                if un[nb, 0] == np.inf:  # far -> trial
-                    un[nb, 0] = val
+                if rec[nb, 1] < 0.0 or ui >= rec[nb, 2 + d]:
+                    continue  # known or padding, or the new neighbour is not its best on this axis
+                rec[nb, 2 + d] = ui
+                val = _local_solve(rec, nb, ndim, dx)
+                if rec[nb, 0] == np.inf:  # far -> trial
+                    rec[nb, 0] = val
                     size = _push(heap, pos, size, val, nb)
-                elif val < un[nb, 0]:  # decrease-key
-                    un[nb, 0] = val
+                elif val < rec[nb, 0]:  # decrease-key
+                    rec[nb, 0] = val
                     k = pos[nb]
                     heap[k, 0] = val
                     _sift_up(heap, pos, k)
@@ -187,30 +182,30 @@ def _march_kernel(un, strides, dx, pos, heap, order):
 
 
 @njit(cache=True, nogil=True)
-def _adjoint_kernel(order, un, strides, dx, ubar):
+def _adjoint_kernel(order, rec, strides, dx, ubar):
     """Reverse sweep of eq. (10): push each voxel's adjoint to the upwind neighbours it used."""
     ndim = strides.shape[0]
-    nbar = np.zeros(un.shape[0])
+    nbar = np.zeros(rec.shape[0])
     nbs = np.empty(3, dtype=np.int64)
     w = np.empty(3)
     for c in range(order.shape[0] - 1, -1, -1):
         i = order[c]
-        ui = un[i, 0]
+        ui = rec[i, 0]
         total = 0.0
         for d in range(ndim):
             s = strides[d]
             best = np.inf
             nbs[d] = -1
             for nb in (i - s, i + s):
-                if un[nb, 0] < best:  # every voxel is known now; mirror padding has u = inf
-                    best = un[nb, 0]
+                if rec[nb, 0] < best:  # every voxel is known now; mirror padding has u = inf
+                    best = rec[nb, 0]
                     nbs[d] = nb
             # active term of eq. (5) iff the neighbour is strictly upwind
             w[d] = ui - best if best < ui else 0.0
             total += w[d]
         # differentiating sum_d (u_i - a_d)^2 = (n_i dx)^2:  du_i = (sum_d w_d da_d + n_i dx^2 dn_i) / sum_d w_d
         g = ubar[i] / total
-        nbar[i] = -g * un[i, 1] * dx * dx
+        nbar[i] = -g * rec[i, 1] * dx * dx
         for d in range(ndim):
             if w[d] > 0.0:
                 ubar[nbs[d]] += g * w[d]
@@ -218,20 +213,38 @@ def _adjoint_kernel(order, un, strides, dx, ubar):
 
 
 def _pad(n: np.ndarray, mirror: tuple[bool, ...]) -> tuple[np.ndarray, np.ndarray]:
-    un = np.empty(tuple(s + 2 for s in n.shape) + (2,))
-    un[..., 0] = 0.0
-    un[..., 1] = -1.0
-    inner = (slice(1, -1),) * n.ndim
-    un[inner + (0,)] = np.inf
-    un[inner + (1,)] = n
-    for axis in range(n.ndim):
+    ndim = n.ndim
+    u = np.zeros(tuple(s + 2 for s in n.shape))
+    for axis in range(ndim):
         if mirror[axis]:
-            index = [slice(None)] * (n.ndim + 1)
+            index = [slice(None)] * ndim
             index[axis] = 0
-            index[-1] = 0
-            un[tuple(index)] = np.inf
-    strides = np.array(un.strides[:-1], dtype=np.int64) // un.strides[-2]
-    return un.reshape(-1, 2), strides
+            u[tuple(index)] = np.inf
+    inner = (slice(1, -1),) * ndim
+    u[inner] = np.inf
+    rec = np.empty(u.shape + (4 if ndim == 2 else 8,))
+    rec[..., 0] = u
+    rec[..., 1] = -1.0
+    rec[..., 2:] = np.inf
+    rec[inner + (1,)] = n
+    for axis in range(ndim):  # upwind candidates from the padding: 0 next to ordinary faces
+        lo, hi = list(inner), list(inner)
+        lo[axis] = slice(0, -2)
+        hi[axis] = slice(2, None)
+        rec[inner + (2 + axis,)] = np.minimum(u[tuple(lo)], u[tuple(hi)])
+    strides = np.array(u.strides, dtype=np.int64) // u.itemsize
+    return rec.reshape(-1, rec.shape[-1]), strides
+
+
+def _aligned_heap(capacity: int) -> np.ndarray:
+    """(capacity, 2) rows of (u, flat index) placed so each group of four siblings fills one cache line.
+
+    The children of node k are 4k+1..4k+4, so row 1 must start on a 64-byte boundary. Indices up to
+    2^53 are exact in float64.
+    """
+    buf = np.empty(2 * capacity + 8)
+    shift = next(s for s in range(4) if (buf.ctypes.data + 16 * (s + 1)) % 64 == 0)
+    return buf[2 * shift:2 * shift + 2 * capacity].reshape(capacity, 2)
 
 
 def march(n: np.ndarray, dx_mm: float, mirror: tuple[bool, ...]) -> Marching:
@@ -250,15 +263,15 @@ def march(n: np.ndarray, dx_mm: float, mirror: tuple[bool, ...]) -> Marching:
     -------
     Marching
     """
-    un, strides = _pad(np.asarray(n, dtype=np.float64), mirror)
+    rec, strides = _pad(np.asarray(n, dtype=np.float64), mirror)
     # work arrays are allocated by numpy, which asks the kernel for transparent huge pages on large
     # arrays: the marcher's access pattern follows the front, and TLB misses dominate otherwise
     n_interior = int(np.prod(n.shape))
-    pos = np.empty(un.shape[0], dtype=np.int32)
-    heap = np.empty((n_interior, 2))  # rows of (u, flat index); indices are exact in float64
+    pos = np.empty(rec.shape[0], dtype=np.int32)
+    heap = _aligned_heap(n_interior)
     order = np.empty(n_interior, dtype=np.int64)
-    order = _march_kernel(un, strides, float(dx_mm), pos, heap, order)
-    return Marching(un, order, strides, tuple(s + 2 for s in n.shape), float(dx_mm))
+    order = _march_kernel(rec, strides, float(dx_mm), pos, heap, order)
+    return Marching(rec, order, strides, tuple(s + 2 for s in n.shape), float(dx_mm))
 
 
 def march_adjoint(marching: Marching, u_bar: np.ndarray) -> np.ndarray:
@@ -275,9 +288,9 @@ def march_adjoint(marching: Marching, u_bar: np.ndarray) -> np.ndarray:
     ndarray of float, grid shape
         dJ/dn per interior voxel.
     """
-    ubar = np.zeros(marching.un.shape[0])
+    ubar = np.zeros(marching.rec.shape[0])
     marching.interior(ubar)[...] = u_bar
-    nbar = _adjoint_kernel(marching.order, marching.un, marching.strides, marching.dx_mm, ubar)
+    nbar = _adjoint_kernel(marching.order, marching.rec, marching.strides, marching.dx_mm, ubar)
     return np.array(marching.interior(nbar))
 
 
@@ -301,4 +314,4 @@ def eikonal_residual(marching: Marching) -> np.ndarray:
         lo[axis] = slice(0, -2)
         hi[axis] = slice(2, None)
         total += np.maximum(ui - np.minimum(u[tuple(lo)], u[tuple(hi)]), 0.0) ** 2
-    return np.sqrt(total) + marching.interior(marching.un[:, 1]) * marching.dx_mm  # n is stored negated
+    return np.sqrt(total) + marching.interior(marching.rec[:, 1]) * marching.dx_mm  # n is stored negated
