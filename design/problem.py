@@ -65,7 +65,7 @@ class DesignConfig:
     lbfgs_memory : int
         L-BFGS correction pairs m (memory O(m N)).
     bounds : str
-        "sigmoid" (rho_hat = expit(z), unconstrained L-BFGS) or "box" (nlopt box bounds); see
+        "cosine" (rho_hat = (1 - cos z) / 2, unconstrained L-BFGS) or "box" (nlopt box bounds); see
         `design.optimize`.
     checkpoint_every : int
         Evaluations between checkpoints.
@@ -94,7 +94,7 @@ class DesignConfig:
     ftol_rel: float = 0.0
     xtol_rel: float = 0.0
     lbfgs_memory: int = 10
-    bounds: str = "sigmoid"
+    bounds: str = "cosine"
     checkpoint_every: int = 10
     margin: float = 0.25
     warn_channel_mm: float = 1.0
@@ -126,8 +126,8 @@ class DesignConfig:
         if not 0 <= self.margin <= 2 or not self.warn_channel_mm > 0 or self.samples < 3:
             raise DesignError(f"need margin in [0, 2], warn_channel_mm > 0, samples >= 3; got {self.margin}, "
                               f"{self.warn_channel_mm}, {self.samples}")
-        if self.bounds not in ("sigmoid", "box"):
-            raise DesignError(f"bounds must be 'sigmoid' or 'box', got {self.bounds!r}")
+        if self.bounds not in ("cosine", "box"):
+            raise DesignError(f"bounds must be 'cosine' or 'box', got {self.bounds!r}")
         bad = set(self.formats) - {"3mf", "obj"}
         if bad:
             raise DesignError(f"extra mesh formats must be among 3mf, obj; got {sorted(bad)}")

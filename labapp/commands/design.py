@@ -25,8 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=float, metavar="MM",
                         help="extrusion height, mm (default: the source's height, else the domain's)")
     parser.add_argument("--max-iter", type=int, default=500, help="maximum objective evaluations (default 500)")
-    parser.add_argument("--bounds", default="sigmoid", choices=("sigmoid", "box"),
-                        help="how L-BFGS keeps rho_hat in [0, 1] (default sigmoid)")
+    parser.add_argument("--bounds", default="cosine", choices=("cosine", "box"),
+                        help="how L-BFGS keeps rho_hat in [0, 1] (default cosine)")
     parser.add_argument("--warn-channel-mm", type=float, default=1.0, help="warn below this channel width, mm")
     parser.add_argument("--formats", nargs="*", default=[], choices=("3mf", "obj"), help="extra mesh formats")
     parser.add_argument("--allow-infeasible", action="store_true", help="optimise even if the target fails checks")
