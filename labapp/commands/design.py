@@ -35,11 +35,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _progress(max_iter: int):
-    """Live progress on stderr: one rewritten line on a terminal, a line every 10 evaluations otherwise."""
+    """Live progress on stderr: one rewritten line on a terminal, otherwise a line every 10 evaluations
+    and at the last."""
     tty = sys.stderr.isatty()
 
     def show(k: int, x, terms: dict) -> None:
-        if not tty and k % 10:
+        if not tty and k % 10 and k < max_iter:
             return
         line = (f"it {k:4d}/{max_iter}  J {terms['J']:.5g}  fit {terms['J_fit']:.4g}  binary {terms['J_binary']:.4g}"
                 f"  |g| {terms['grad_norm']:.3g}  {terms['seconds']:.0f}s  ETA <= {terms['eta_s'] / 60:.1f} min")
@@ -91,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
           f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}")
     for w in s["warnings"]:
         print(f"warning: {w}")
-    print(f"results in {result.out_dir}: design.stl, density.npz, curves.csv, report.png, history.csv, summary.json")
+    names = ("design.stl", "density.npz", "curves.csv", "report.png", "history.csv", "summary.json", "design.ini")
+    print(f"results in {result.out_dir}: {', '.join(n for n in names if (result.out_dir / n).exists())}")
     log.debug("summary %s", json.dumps(s))
     return 0 if result.status != "interrupted" else 130
