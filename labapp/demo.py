@@ -22,15 +22,13 @@ from labapp.calseries import CalibrationProcedure, SeriesConfig
 from labapp.clock import SteppedClock
 from labapp.engine import Engine, Event
 from labapp.procedures import RunConfig, RunProcedure
-from labapp.simbench import WATER_G, SampleRelease, SimulatedBench, sample_release
+from labapp.simbench import SCENE, WATER_G, SampleRelease, SimulatedBench, sample_release
 from labapp.storage import read_run, verify_run
 
 log = logging.getLogger(__name__)
 
 CAL_MASSES_G = (0.25, 0.5, 0.875, 1.25, 1.75, 2.25)
 """Cumulative filament masses of the simulated calibration series, g (up to above the sample's 1.75 g)."""
-SCENE = BenchScene(width=960, height=640, water_g=WATER_G)
-"""The demo's bench picture: the default scene at 960 x 640 px (renders in about half the time of 1200 x 800)."""
 
 
 @dataclass(frozen=True)

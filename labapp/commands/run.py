@@ -76,8 +76,7 @@ def run(args: argparse.Namespace) -> int:
                 print("no --calibration: running a simulated calibration series first ...", flush=True)
                 calibration, cal_path = simulated_calibration(Path(args.out))
                 print(f"calibration: {cal_path}", flush=True)
-            from labapp.demo import SCENE
-            sim = SimulatedBench(clock, sample=args.sample, scene=SCENE)
+            sim = SimulatedBench(clock, sample=args.sample)
             bench = sim.bench()
         else:
             from labapp.devices import make_bench

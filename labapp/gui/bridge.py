@@ -20,16 +20,17 @@ log = logging.getLogger(__name__)
 
 
 class EngineBridge(QObject):
-    """Re-emits every engine :class:`Event` as ``event`` and by kind as ``frame``/``reading``/``state``/
-    ``message``/``prompt``/``done`` (each carrying the event's data dict)."""
+    """Re-emits every engine :class:`Event` as ``event`` and by kind as ``frame``/``preview``/``reading``/
+    ``state``/``message``/``prompt``/``done`` (each carrying the event's data dict)."""
 
     event = Signal(object)
-    frame = Signal(dict)
-    reading = Signal(dict)
-    state = Signal(dict)
+    frame = Signal(object)
+    preview = Signal(object)
+    reading = Signal(object)
+    state = Signal(object)
     message = Signal(str, str)
-    prompt = Signal(dict)
-    done = Signal(dict)
+    prompt = Signal(object)
+    done = Signal(object)
 
     def __init__(self, engine: Engine, parent: QObject | None = None) -> None:
         super().__init__(parent)
@@ -40,6 +41,8 @@ class EngineBridge(QObject):
         self.event.emit(ev)
         if ev.kind == "frame":
             self.frame.emit(ev.data)
+        elif ev.kind == "preview":
+            self.preview.emit(ev.data)
         elif ev.kind == "reading":
             self.reading.emit(ev.data)
         elif ev.kind == "state":

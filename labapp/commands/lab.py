@@ -1,0 +1,66 @@
+"""`sfr lab`: the bench GUI (PySide6 + pyqtgraph)."""
+from __future__ import annotations
+
+import argparse
+import logging
+
+log = logging.getLogger(__name__)
+
+NAME = "lab"
+HELP = "start the bench GUI; --simulate runs it on the simulated camera, hotplate emulator and sample object"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of `sfr lab`."""
+    parser.add_argument("--data", default="runs", help="data directory for runs and calibrations (default ./runs)")
+    parser.add_argument("--simulate", action="store_true", help="offer the simulated bench")
+    parser.add_argument("--speed", type=float, default=100.0,
+                        help="simulated time acceleration (default 100; 0 = as fast as frames render)")
+    parser.add_argument("--sample", default="pill", help="sample object of the simulated bench (default pill)")
+    parser.add_argument("--calibration", help="bench calibration JSON to make active")
+    parser.add_argument("--autostart", action="store_true", help="start a run at once (simulated: the object drops "
+                        "by itself; with no --calibration a simulated calibration series runs first)")
+    parser.add_argument("--screenshot", metavar="PNG", help="save a screenshot of the window after --quit-after")
+    parser.add_argument("--quit-after", type=float, metavar="S",
+                        help="close after S seconds (scripted sessions, e.g. with QT_QPA_PLATFORM=offscreen)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Create the application and the main window; returns when the window closes."""
+    import math
+    import sys
+    from pathlib import Path
+
+    from PySide6.QtCore import QTimer
+    from PySide6.QtWidgets import QApplication
+
+    from labapp.gui.main_window import MainWindow
+
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    speed = (math.inf if args.speed == 0 else args.speed) if args.simulate else None
+    window = MainWindow(Path(args.data), simulate=args.simulate, speed=speed, sample=args.sample)
+    window.resize(1500, 950)
+    calibration = args.calibration
+    if args.autostart and args.simulate and not calibration:
+        from labapp.demo import simulated_calibration
+        print("running a simulated calibration series first ...", flush=True)
+        calibration = str(simulated_calibration(Path(args.data))[1])
+    if calibration:
+        window.controls.calibration.setText(calibration)
+    window.show()
+    if args.autostart:
+        window.controls.auto_drop.setChecked(args.simulate)
+        window.start_run()
+    if args.quit_after is not None:
+        def finish() -> None:
+            if args.screenshot:
+                window.grab().save(args.screenshot)
+                print(f"screenshot: {args.screenshot}")
+            window.engine.stop()
+            window.engine.join(30)
+            window.shutdown()
+            app.quit()
+        QTimer.singleShot(int(args.quit_after * 1000), finish)
+    code = app.exec()
+    window.shutdown()
+    return code

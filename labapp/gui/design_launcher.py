@@ -1,0 +1,155 @@
+"""Design launcher: a measured run or a target CSV -> inverse design in the background -> target vs achieved,
+save the STL."""
+from __future__ import annotations
+
+import csv
+import logging
+import shutil
+import threading
+import time
+from pathlib import Path
+
+import pyqtgraph as pg
+from PySide6.QtWidgets import (QComboBox, QFileDialog, QFormLayout, QHBoxLayout, QLabel, QLineEdit, QPushButton,
+                               QSpinBox, QVBoxLayout, QWidget)
+
+from labapp.gui.bridge import BackgroundTask
+from labapp.storage import sanitize_name
+from labapp.targets import NOMINAL_NOTE, run_to_target_csv
+
+log = logging.getLogger(__name__)
+
+
+def read_curves(path: Path) -> dict[str, list[float]]:
+    """Columns of a design's ``curves.csv`` (``tau_mm,target_mm3,density_mm3,binary_mm3``)."""
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return {key: [float(r[key]) for r in rows] for key in (rows[0] if rows else {})}
+
+
+class DesignLauncher(QWidget):
+    """Pick a run folder or a ``tau_mm,released_mm3`` CSV, run ``design.optimize.run_design`` off the GUI
+    thread with progress, show target vs achieved curves and save the STL."""
+
+    def __init__(self, data_dir: Path, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.data_dir = Path(data_dir)
+        self.source = QLineEdit("")
+        self.source.setPlaceholderText("run folder or tau_mm,released_mm3 CSV")
+        run_button, csv_button = QPushButton("Run folder..."), QPushButton("CSV...")
+        run_button.clicked.connect(self._pick_run)
+        csv_button.clicked.connect(self._pick_csv)
+        self.space = QComboBox()
+        self.space.addItems(["extruded", "nfc"])
+        self.resolution = QSpinBox()
+        self.resolution.setRange(8, 256)
+        self.resolution.setSingleStep(2)
+        self.resolution.setValue(32)
+        self.max_iter = QSpinBox()
+        self.max_iter.setRange(1, 5000)
+        self.max_iter.setValue(100)
+        self.start_button, self.stop_button = QPushButton("Design"), QPushButton("Stop")
+        self.save_button = QPushButton("Save STL...")
+        self.start_button.clicked.connect(self.start)
+        self.stop_button.clicked.connect(self.stop)
+        self.save_button.clicked.connect(self._save)
+        self.status = QLabel(NOMINAL_NOTE)
+        self.status.setWordWrap(True)
+        self.plot = pg.PlotWidget(title="release: target vs achieved (simulation units)")
+        self.plot.setLabel("bottom", "tau (mm)")
+        self.plot.setLabel("left", "released (mm^3)")
+        self.plot.addLegend()
+        self.target_curve = self.plot.plot([], [], pen=pg.mkPen("g", width=2), name="target")
+        self.achieved_curve = self.plot.plot([], [], pen=pg.mkPen("m", width=2, style=pg.QtCore.Qt.PenStyle.DashLine),
+                                             name="achieved (binary design)")
+        form = QFormLayout()
+        src = QHBoxLayout()
+        src.addWidget(self.source, 1)
+        src.addWidget(run_button)
+        src.addWidget(csv_button)
+        form.addRow("target", src)
+        form.addRow("design space", self.space)
+        form.addRow("resolution (voxels)", self.resolution)
+        form.addRow("max iterations", self.max_iter)
+        buttons = QHBoxLayout()
+        for b in (self.start_button, self.stop_button, self.save_button):
+            buttons.addWidget(b)
+        layout = QVBoxLayout(self)
+        layout.addLayout(form)
+        layout.addLayout(buttons)
+        layout.addWidget(self.status)
+        layout.addWidget(self.plot, 1)
+        self.task: BackgroundTask | None = None
+        self._stop = threading.Event()
+        self.out_dir: Path | None = None
+        self.stop_button.setEnabled(False)
+        self.save_button.setEnabled(False)
+
+    def _pick_run(self) -> None:
+        path = QFileDialog.getExistingDirectory(self, "measured run", str(self.data_dir))
+        if path:
+            self.source.setText(path)
+
+    def _pick_csv(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "target curve", str(self.data_dir), "CSV (*.csv)")
+        if path:
+            self.source.setText(path)
+
+    def start(self) -> None:
+        """Convert the source if it is a run, then run the design in the background."""
+        from design.optimize import run_design
+        from design.problem import DesignConfig
+
+        source = Path(self.source.text().strip())
+        if not source.exists():
+            self.status.setText(f"{source} does not exist")
+            return
+        self.out_dir = self.data_dir / "designs" / f"{time.strftime('%Y%m%d-%H%M%S')}_{sanitize_name(source.stem)}"
+        space, resolution, max_iter = self.space.currentText(), self.resolution.value(), self.max_iter.value()
+        self._stop.clear()
+        out_dir = self.out_dir
+
+        def work(progress):
+            out_dir.mkdir(parents=True)
+            target = run_to_target_csv(source, out_dir / "target.csv") if source.is_dir() else source
+            config = DesignConfig(target=str(target), space=space, resolution=resolution, max_iter=max_iter)
+            return run_design(config, out_dir / "design",
+                              on_iteration=lambda k, x, terms: progress((k, float(terms.get("J", float("nan"))))),
+                              should_stop=self._stop.is_set)
+        self.task = BackgroundTask(work, self)
+        self.task.progress.connect(self._progress)
+        self.task.finished.connect(self._finished)
+        self.task.failed.connect(self._failed)
+        self.task.start()
+        self.start_button.setEnabled(False)
+        self.stop_button.setEnabled(True)
+        self.status.setText(f"designing into {out_dir} ...")
+
+    def stop(self) -> None:
+        """Ask the optimiser to stop (the best design so far is still written)."""
+        self._stop.set()
+
+    def _progress(self, k_j: tuple[int, float]) -> None:
+        self.status.setText(f"iteration {k_j[0]}: J = {k_j[1]:.5g}")
+
+    def _finished(self, result) -> None:
+        self.start_button.setEnabled(True)
+        self.stop_button.setEnabled(False)
+        curves = read_curves(result.out_dir / "curves.csv")
+        self.target_curve.setData(curves["tau_mm"], curves["target_mm3"])
+        self.achieved_curve.setData(curves["tau_mm"], curves["binary_mm3"])
+        self.save_button.setEnabled((result.out_dir / "design.stl").is_file())
+        self.status.setText(f"design {result.status} after {result.iterations} evaluations (J = {result.best_value:.5g}) "
+                            f"in {result.out_dir}. {NOMINAL_NOTE}")
+
+    def _failed(self, message: str) -> None:
+        self.start_button.setEnabled(True)
+        self.stop_button.setEnabled(False)
+        self.status.setText(f"design failed: {message}")
+
+    def _save(self) -> None:
+        if self.out_dir is None:
+            return
+        path, _ = QFileDialog.getSaveFileName(self, "save STL", "design.stl", "STL (*.stl)")
+        if path:
+            shutil.copyfile(self.out_dir / "design" / "design.stl", path)

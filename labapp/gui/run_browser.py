@@ -1,0 +1,177 @@
+"""Run browser: past runs (interrupted ones too), reanalysis with other settings, resume, finalise, verify."""
+from __future__ import annotations
+
+import logging
+import math
+import time
+from pathlib import Path
+
+from PySide6.QtCore import Signal
+from PySide6.QtWidgets import (QDoubleSpinBox, QHBoxLayout, QLabel, QLineEdit, QPushButton, QSpinBox,
+                               QTreeWidget, QTreeWidgetItem, QVBoxLayout, QWidget)
+
+from analysis import BenchCalibration, analyze_run
+from labapp.gui.bridge import BackgroundTask
+from labapp.gui.plots import PlotsPanel
+from labapp.storage import StorageError, finalise_run, read_run, verify_run
+
+log = logging.getLogger(__name__)
+
+
+def list_runs(data_dir: Path) -> list:
+    """Snapshots of every run folder directly under ``data_dir``, newest first (unreadable ones skipped)."""
+    runs = []
+    for path in sorted(Path(data_dir).glob("*/run.json"), reverse=True):
+        try:
+            runs.append(read_run(path.parent))
+        except StorageError as exc:
+            log.warning("skipping %s: %s", path.parent, exc)
+    return runs
+
+
+class RunBrowser(QWidget):
+    """Lists runs under the data directory; the selected one can be reanalysed, resumed or finalised.
+
+    Emits ``resume_requested(path)`` (the main window resumes acquisition into that folder).
+    """
+
+    resume_requested = Signal(str)
+
+    def __init__(self, data_dir: Path, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.data_dir = Path(data_dir)
+        self.tree = QTreeWidget()
+        self.tree.setHeaderLabels(["run", "kind", "status", "frames", "created"])
+        self.tree.itemSelectionChanged.connect(self._selected)
+        self.window = QDoubleSpinBox()
+        self.window.setRange(11.0, 7200.0)
+        self.window.setValue(330.0)
+        self.window.setSuffix(" s")
+        self.order = QSpinBox()
+        self.order.setRange(0, 6)
+        self.order.setValue(2)
+        self.calibration = QLineEdit("")
+        self.calibration.setPlaceholderText("calibration JSON (default: the run's own copy)")
+        self.info = QLabel("")
+        self.info.setWordWrap(True)
+        self.plots = PlotsPanel()
+        buttons = QHBoxLayout()
+        self.refresh_button = QPushButton("Refresh")
+        self.analyse_button = QPushButton("Reanalyse")
+        self.resume_button = QPushButton("Resume acquisition")
+        self.finalise_button = QPushButton("Finalise")
+        self.verify_button = QPushButton("Verify")
+        for b, slot in ((self.refresh_button, self.refresh), (self.analyse_button, self.reanalyse),
+                        (self.resume_button, self._resume), (self.finalise_button, self._finalise),
+                        (self.verify_button, self._verify)):
+            b.clicked.connect(slot)
+            buttons.addWidget(b)
+        settings = QHBoxLayout()
+        settings.addWidget(QLabel("Savitzky-Golay window"))
+        settings.addWidget(self.window)
+        settings.addWidget(QLabel("order"))
+        settings.addWidget(self.order)
+        settings.addWidget(self.calibration, 1)
+        layout = QVBoxLayout(self)
+        layout.addWidget(self.tree, 1)
+        layout.addLayout(buttons)
+        layout.addLayout(settings)
+        layout.addWidget(self.info)
+        layout.addWidget(self.plots, 2)
+        self.task: BackgroundTask | None = None
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Re-read the data directory."""
+        self.tree.clear()
+        for snap in list_runs(self.data_dir):
+            created = time.strftime("%Y-%m-%d %H:%M", time.localtime(snap.meta.get("created_unix_s", 0)))
+            item = QTreeWidgetItem([snap.path.name, snap.meta.get("kind", "run"), snap.status,
+                                    str(len(snap.frames)), created])
+            item.setData(0, 256, str(snap.path))
+            self.tree.addTopLevelItem(item)
+        self._selected()
+
+    def selected_path(self) -> Path | None:
+        """The selected run folder."""
+        items = self.tree.selectedItems()
+        return Path(items[0].data(0, 256)) if items else None
+
+    def select(self, path: Path) -> None:
+        """Select the run at ``path`` (after :meth:`refresh`)."""
+        for i in range(self.tree.topLevelItemCount()):
+            item = self.tree.topLevelItem(i)
+            if Path(item.data(0, 256)) == Path(path):
+                self.tree.setCurrentItem(item)
+
+    def _selected(self) -> None:
+        path = self.selected_path()
+        has = path is not None
+        snap = read_run(path) if has else None
+        for b in (self.analyse_button, self.verify_button):
+            b.setEnabled(has)
+        resumable = has and snap.status in ("interrupted", "stopped") and snap.meta.get("kind") == "run"
+        self.resume_button.setEnabled(resumable)
+        self.finalise_button.setEnabled(has and snap.status == "interrupted")
+        if snap is None:
+            return
+        gaps = snap.meta.get("gaps", [])
+        self.info.setText(f"{snap.path}: {snap.status}, {len(snap.frames)} frames, {len(gaps)} gaps"
+                          + (f", torn last row of {snap.torn_bytes} bytes" if snap.torn_bytes else ""))
+        self.plots.clear()
+        for f in snap.frames:
+            self.plots.add_reading(f.t_s, f.plate_c, f.probe_c, f.speed_rpm)
+
+    def reanalyse(self) -> None:
+        """Analyse the selected run with the chosen calibration and smoothing (in the background)."""
+        path = self.selected_path()
+        if path is None or (self.task is not None and self.task.running):
+            return
+        cal_text = self.calibration.text().strip()
+        cal_path = Path(cal_text) if cal_text else path / "calibration.json"
+        if not cal_path.is_file():
+            self.info.setText(f"no calibration: {cal_path} does not exist; choose a calibration JSON")
+            return
+        window, order = self.window.value(), self.order.value()
+
+        def work(progress):
+            cal = BenchCalibration.load(cal_path)
+            return analyze_run(path, cal, window_s=window, order=order, cache_dir=path / "analysis",
+                               progress=lambda done, total: progress((done, total)))
+        self.task = BackgroundTask(work, self)
+        self.task.progress.connect(self._progress)
+        self.task.finished.connect(self.show_curve)
+        self.task.failed.connect(self.info.setText)
+        self.task.start()
+
+    def _progress(self, done_total: tuple[int, int]) -> None:
+        self.info.setText(f"analysing frame {done_total[0]} of {done_total[1]}")
+
+    def show_curve(self, curve) -> None:
+        """Slot: plot a reanalysed :class:`analysis.RunCurve`."""
+        self.plots.smooth_window_s, self.plots.smooth_order = self.window.value(), self.order.value()
+        self.plots.set_water(curve.water_g)
+        self.plots.t_s.clear()
+        self.plots.conc.clear()
+        for t, c in zip(curve.t_s, curve.conc_g_per_kg):
+            self.plots.add_frame(float(t), float(c))
+        final = curve.conc_smooth_g_per_kg[-1] if len(curve.t_s) else math.nan
+        self.info.setText(f"{len(curve.t_s)} frames analysed; final {final:.4f} g/kg = "
+                          f"{final * curve.water_g / 1000:.4f} g released; {len(curve.warnings)} warnings")
+
+    def _resume(self) -> None:
+        path = self.selected_path()
+        if path is not None:
+            self.resume_requested.emit(str(path))
+
+    def _finalise(self) -> None:
+        path = self.selected_path()
+        if path is not None:
+            finalise_run(path)
+            self.refresh()
+            self.select(path)
+
+    def _verify(self) -> None:
+        path = self.selected_path()
+        if path is not None:
+            self.info.setText("\n".join(verify_run(path).lines()[:12]))
