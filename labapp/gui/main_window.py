@@ -5,7 +5,9 @@ Every button calls the same Qt-free pieces the CLI uses (``Engine``, ``RunProced
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
+import math
 from pathlib import Path
 
 import cv2
@@ -170,6 +172,9 @@ class MainWindow(QMainWindow):
         """Start a run with the run controls' settings."""
         try:
             config, calibration, bench = self.controls.config(), self._calibration(), self.make_bench()
+            if math.isinf(self.engine.clock.speed):
+                # an instant clock only moves when the procedure sleeps: wait for the bath in 60 s steps
+                config = dataclasses.replace(config, stable_step_s=60.0)
         except Exception as exc:
             self.on_message("error", f"cannot start: {exc}")
             return
