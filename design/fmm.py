@@ -25,7 +25,6 @@ from numba import njit
 log = logging.getLogger(__name__)
 
 
-
 @dataclass(frozen=True)
 class Marching:
     """The solved dissolution times on the padded grid and what the adjoint sweep needs.
@@ -35,7 +34,7 @@ class Marching:
     rec : (P, W) ndarray of float
         Per flattened padded voxel: u (mm; 0 on ordinary padding, inf on mirror padding), -n (the
         slowness of eq. 2, negated as the known flag; -1 on the padding), then per axis the smallest
-        neighbour value known when the voxel was accepted; W = 4 (2D) or 8 (3D, one cache line).
+        known neighbour value on that axis (its upwind candidate); W = 4 (2D) or 8 (3D, one cache line).
     order : (N,) ndarray of int64
         Flat padded indices of the interior voxels in the order the marcher accepted them.
     strides : (D,) ndarray of int64
@@ -266,8 +265,8 @@ def march(n: np.ndarray, dx_mm: float, mirror: tuple[bool, ...]) -> Marching:
     Marching
     """
     rec, strides = _pad(np.asarray(n, dtype=np.float64), mirror)
-    # work arrays are allocated by numpy, which asks the kernel for transparent huge pages on large
-    # arrays: the marcher's access pattern follows the front, and TLB misses dominate otherwise
+    # work arrays come from numpy, which requests transparent huge pages for large arrays; that helps
+    # the marcher's scattered accesses along the front (heap positions fit int32 below 2^31 voxels)
     n_interior = int(np.prod(n.shape))
     pos = np.empty(rec.shape[0], dtype=np.int32)
     heap = _aligned_heap(n_interior)
