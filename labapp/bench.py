@@ -86,7 +86,7 @@ class BenchSession:
         self.monitor.poll()
         self.monitor.start()
         self.note("info", "hotplate", "hotplate connected" + ("" if setpoint_c is None else
-                  f"; setpoint {setpoint_c:g} C, {speed_rpm:g} rpm, heating on"))
+                  f"; setpoint {setpoint_c} C, {speed_rpm} rpm, heating on"))
 
     def _publish_reading(self, reading: HotplateReading) -> None:
         self.engine.emit("reading", plate_c=reading.plate_c, probe_c=reading.probe_c, speed_rpm=reading.speed_rpm,

@@ -26,41 +26,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Create the application and the main window; returns when the window closes."""
+    """Start the GUI; returns when the window closes."""
     import math
-    import sys
     from pathlib import Path
 
-    from PySide6.QtCore import QTimer
-    from PySide6.QtWidgets import QApplication
+    from labapp.gui.app import launch
 
-    from labapp.gui.main_window import MainWindow
-
-    app = QApplication.instance() or QApplication(sys.argv[:1])
     speed = (math.inf if args.speed == 0 else args.speed) if args.simulate else None
-    window = MainWindow(Path(args.data), simulate=args.simulate, speed=speed, sample=args.sample)
-    window.resize(1500, 950)
     calibration = args.calibration
     if args.autostart and args.simulate and not calibration:
         from labapp.demo import simulated_calibration
         print("running a simulated calibration series first ...", flush=True)
         calibration = str(simulated_calibration(Path(args.data))[1])
-    if calibration:
-        window.controls.calibration.setText(calibration)
-    window.show()
-    if args.autostart:
-        window.controls.auto_drop.setChecked(args.simulate)
-        window.start_run()
-    if args.quit_after is not None:
-        def finish() -> None:
-            if args.screenshot:
-                window.grab().save(args.screenshot)
-                print(f"screenshot: {args.screenshot}")
-            window.engine.stop()
-            window.engine.join(30)
-            window.shutdown()
-            app.quit()
-        QTimer.singleShot(int(args.quit_after * 1000), finish)
-    code = app.exec()
-    window.shutdown()
+    code = launch(Path(args.data), args.simulate, speed, args.sample, calibration, args.autostart,
+                  args.quit_after, args.screenshot)
+    if args.screenshot:
+        print(f"screenshot: {args.screenshot}")
     return code

@@ -69,9 +69,9 @@ class MainWindow(QMainWindow):
         self.data_dir = Path(data_dir)
         self.simulate, self.speed, self.sample = simulate, speed if simulate else None, sample
         self.engine = Engine(make_clock(self.speed))
-        self.bridge = EngineBridge(self.engine, self)
         self.status = RunStatus()
-        self.engine.subscribe(self.status.update)
+        self.engine.subscribe(self.status.update)       # before the bridge: the status is current when a signal lands
+        self.bridge = EngineBridge(self.engine, self)
         self.sim: SimulatedBench | None = None
         self.procedure = None
         self.latest_frame: str | None = None

@@ -1,0 +1,44 @@
+"""Start the bench GUI: the QApplication and the main window (``sfr lab`` calls :func:`launch`)."""
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+from PySide6.QtCore import QTimer
+from PySide6.QtWidgets import QApplication
+
+from labapp.gui.main_window import MainWindow
+
+log = logging.getLogger(__name__)
+
+
+def launch(data_dir: Path, simulate: bool, speed: float | None, sample: str, calibration: str | None,
+           autostart: bool, quit_after_s: float | None = None, screenshot: str | None = None) -> int:
+    """Show the main window and run the event loop; returns the exit code.
+
+    ``autostart`` starts a run at once (simulated: the object drops by itself); ``quit_after_s`` closes the
+    window after that many seconds, saving ``screenshot`` (PNG) first (scripted, offscreen sessions).
+    """
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    window = MainWindow(Path(data_dir), simulate=simulate, speed=speed, sample=sample)
+    window.resize(1500, 950)
+    if calibration:
+        window.controls.calibration.setText(calibration)
+    window.show()
+    if autostart:
+        window.controls.auto_drop.setChecked(simulate)
+        window.start_run()
+    if quit_after_s is not None:
+        def finish() -> None:
+            if screenshot:
+                window.grab().save(screenshot)
+                log.info("screenshot saved: %s", screenshot)
+            window.engine.stop()
+            window.engine.join(30)
+            window.shutdown()
+            app.quit()
+        QTimer.singleShot(int(quit_after_s * 1000), finish)
+    code = app.exec()
+    window.shutdown()
+    return code
