@@ -12,9 +12,9 @@ SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkp
 
 
 def test_sphere_run_writes_every_output_and_fits(tmp_path):
-    result = run_design(DesignConfig(max_iter=40, **SMALL), tmp_path / "run")
+    result = run_design(DesignConfig(max_iter=40, formats=("3mf", "obj"), **SMALL), tmp_path / "run")
     out = tmp_path / "run"
-    for name in ("design.stl", "density.npz", "curves.csv", "report.png", "history.csv", "summary.json",
+    for name in ("design.stl", "design.3mf", "design.obj", "density.npz", "curves.csv", "report.png", "history.csv", "summary.json",
                  "design.ini", "config.json", "checkpoint.npz"):
         assert (out / name).exists(), name
     summary = json.loads((out / "summary.json").read_text())
