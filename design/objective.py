@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from design.errors import DesignError
-from design.filters import SmoothingFilter, project, project_adjoint
+from design.filters import SmoothingFilter, project, project_adjoint, project_inverse
 from design.forward import Release, release_gradient, simulate
 from design.spaces import DesignSpace
 
@@ -96,21 +96,15 @@ class DesignObjective:
     def uniform_start(self) -> np.ndarray:
         """Uniform variables whose filtered mass equals the target's final release (section 5.2).
 
-        Solved by bisection on the constant value, because the filters near the domain
-        faces and the extrusion height make the mass a nonlinear function of it.
+        The normalised smoothing filter keeps a uniform field uniform, so the constant is the
+        inverse projection of the required uniform density.
         """
-        cell = self.space.dx_mm ** 3 * self.space.multiplicity
-        goal = self.target_mm3[-1]
-        lo, hi = 0.0, 1.0
-        if self.density(np.ones(self.space.var_shape)).sum() * cell < goal:
-            raise DesignError(f"target releases {goal:.4g} mm^3, more than the design domain holds")
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            if self.density(np.full(self.space.var_shape, mid)).sum() * cell < goal:
-                lo = mid
-            else:
-                hi = mid
-        return np.full(self.space.var_shape, 0.5 * (lo + hi))
+        cells = float(np.prod(self.space.grid_shape)) * self.space.dx_mm ** 3 * self.space.multiplicity
+        rho = self.target_mm3[-1] / cells
+        if rho >= 1.0:
+            raise DesignError(f"target releases {self.target_mm3[-1]:.4g} mm^3, more than the design domain "
+                              f"holds ({cells:.4g} mm^3)")
+        return np.full(self.space.var_shape, project_inverse(rho, self.beta))
 
     def evaluate(self, x: np.ndarray) -> Evaluation:
         """J and dJ/dx at variables ``x`` (variable shape, values in [0, 1])."""
