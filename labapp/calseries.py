@@ -29,8 +29,9 @@ CALIBRATION_FILE = "bench_calibration.json"
 class SeriesConfig:
     """Settings of a calibration series. Masses in g (cumulative), times in s, crop in px.
 
-    ``masses_g`` given: the series adds these by itself (simulated bench, via ``Bench.on_add_mass``) and
-    waits ``settle_s`` after each; empty: the operator is asked for each mass.
+    ``masses_g`` given: the series adds these by itself (simulated bench) and waits ``settle_s`` after each;
+    empty: the operator is asked for each mass (and ``settle_s`` is waited too: 0 on a real bench, where the
+    operator waits for the piece to dissolve). Either way ``Bench.on_add_mass`` (a simulated bench) is told.
     """
 
     crop: tuple[int, int, int]
@@ -121,6 +122,9 @@ class CalibrationProcedure:
                 session.note("warning", "mass", f"cumulative mass {new} g is not above {mass} g; ignored")
                 continue
             mass = new
+            if self.bench.on_add_mass is not None:
+                self.bench.on_add_mass(mass)
+            engine.clock.sleep(cfg.settle_s, engine.should_stop)
         if len(self.masses) >= 3:
             self._fit()
         else:

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 import pyqtgraph as pg
-from PySide6.QtWidgets import (QComboBox, QFileDialog, QFormLayout, QHBoxLayout, QLabel, QLineEdit, QPushButton,
+from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, QHBoxLayout, QLabel, QLineEdit, QPushButton,
                                QSpinBox, QVBoxLayout, QWidget)
 
 from labapp.gui.bridge import BackgroundTask
@@ -48,6 +48,10 @@ class DesignLauncher(QWidget):
         self.max_iter = QSpinBox()
         self.max_iter.setRange(1, 5000)
         self.max_iter.setValue(100)
+        self.allow_infeasible = QCheckBox("optimise even if the feasibility check fails")
+        self.allow_infeasible.setToolTip("measured curves are noisy near the end of a run; the check's report "
+                                         "is kept as feasibility.txt in the design folder")
+        self.allow_infeasible.setChecked(True)
         self.start_button, self.stop_button = QPushButton("Design"), QPushButton("Stop")
         self.save_button = QPushButton("Save STL...")
         self.start_button.clicked.connect(self.start)
@@ -71,6 +75,7 @@ class DesignLauncher(QWidget):
         form.addRow("design space", self.space)
         form.addRow("resolution (voxels)", self.resolution)
         form.addRow("max iterations", self.max_iter)
+        form.addRow("", self.allow_infeasible)
         buttons = QHBoxLayout()
         for b in (self.start_button, self.stop_button, self.save_button):
             buttons.addWidget(b)
@@ -106,13 +111,15 @@ class DesignLauncher(QWidget):
             return
         self.out_dir = self.data_dir / "designs" / f"{time.strftime('%Y%m%d-%H%M%S')}_{sanitize_name(source.stem)}"
         space, resolution, max_iter = self.space.currentText(), self.resolution.value(), self.max_iter.value()
+        allow = self.allow_infeasible.isChecked()
         self._stop.clear()
         out_dir = self.out_dir
 
         def work(progress):
             out_dir.mkdir(parents=True)
             target = run_to_target_csv(source, out_dir / "target.csv") if source.is_dir() else source
-            config = DesignConfig(target=str(target), space=space, resolution=resolution, max_iter=max_iter)
+            config = DesignConfig(target=str(target), space=space, resolution=resolution, max_iter=max_iter,
+                                  allow_infeasible=allow)
             return run_design(config, out_dir / "design",
                               on_iteration=lambda k, x, terms: progress((k, float(terms.get("J", float("nan"))))),
                               should_stop=self._stop.is_set)

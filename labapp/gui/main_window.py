@@ -218,7 +218,8 @@ class MainWindow(QMainWindow):
         try:
             masses = parse_masses(self.wizard.masses.text()) if self.wizard.masses.isEnabled() else ()
             config = SeriesConfig(crop=(x, y, size), water_g=self.wizard.water.value(), masses_g=masses,
-                                  settle_s=600.0 if self.simulate else 0.0)
+                                  settle_s=600.0 if self.simulate else 0.0,
+                                  stable_step_s=60.0 if math.isinf(self.engine.clock.speed) else 5.0)
             bench = self.make_bench()
         except Exception as exc:
             self.wizard.show_result(f"cannot start: {exc}")

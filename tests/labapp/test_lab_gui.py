@@ -64,3 +64,47 @@ def test_crop_overlay_geometry():
     xs, ys = grid_segments(10, 20, 100, 10)
     assert len(xs) == 4 * 11 and xs.min() == 10 and xs.max() == 110 and ys.max() == 120
     assert mirrored_x(100, 50, 300) == 450                       # the square mirrored across column 300
+
+
+def test_calibration_wizard_reanalysis_and_design_launcher(qtbot, tmp_path):
+    win = MainWindow(tmp_path / "data", simulate=True, speed=float("inf"), sample="sphere")
+    qtbot.addWidget(win)
+    try:
+        win.wizard.masses.setText("")                         # the operator enters every mass
+        win.wizard.start_button.click()
+        for mass in (0.25, 0.75, 1.5):
+            qtbot.waitUntil(win.wizard.capture_button.isEnabled, timeout=60_000)
+            win.wizard.mass.setValue(mass)
+            win.wizard.capture_button.click()
+        qtbot.waitUntil(win.wizard.capture_button.isEnabled, timeout=60_000)
+        win.wizard.finish_button.click()
+        qtbot.waitUntil(lambda: "calibration saved" in win.wizard.result_label.text(), timeout=60_000)
+        cal_path = Path(win.controls.calibration.text())      # now the active calibration
+        series = cal_path.parent
+        assert cal_path.name == "bench_calibration.json"
+        assert (series / "masses.csv").read_text().splitlines()[1:] == [
+            "cal_000.jpg,0.000000", "cal_001.jpg,0.250000", "cal_002.jpg,0.750000", "cal_003.jpg,1.500000"]
+
+        win.browser.refresh()                                 # reanalyse the series' frames with the fit
+        win.browser.select(series)
+        win.browser.calibration.setText(str(cal_path))
+        win.browser.window.setValue(60.0)
+        win.browser.reanalyse()
+        qtbot.waitUntil(lambda: "frames analysed" in win.browser.info.text(), timeout=60_000)
+        assert len(win.browser.plots.conc) == 4 and abs(win.browser.plots.conc[-1] - 3.0) < 0.1
+
+        target = tmp_path / "target.csv"
+        target.write_text("tau_mm,released_mm3\n0,0\n1,300\n2,500\n3,600\n")
+        win.design.source.setText(str(target))
+        win.design.resolution.setValue(16)
+        win.design.max_iter.setValue(3)
+        win.design.start()
+        qtbot.waitUntil(lambda: win.design.start_button.isEnabled() and "design" in win.design.status.text()
+                        and "evaluations" in win.design.status.text(), timeout=120_000)
+        tau, target_mm3 = win.design.target_curve.getData()
+        assert len(tau) > 10 and target_mm3[-1] == max(target_mm3)
+        assert len(win.design.achieved_curve.getData()[0]) == len(tau)
+    finally:
+        win.engine.abort()
+        win.engine.join(30)
+        win.shutdown()
