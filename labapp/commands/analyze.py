@@ -58,10 +58,12 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else Path(args.run) / "analysis"
 
+    live = sys.stderr.isatty()  # a terminal gets one updating line, a log file one line per step
+
     def progress(done: int, total: int) -> None:
-        if done == total or done % 10 == 0:
-            print(f"\ranalysed {done}/{total} frames", end="\n" if done == total else "", file=sys.stderr,
-                  flush=True)
+        if done == total or done % (10 if live else 100) == 0:
+            print(f"{chr(13) if live else ''}analysed {done}/{total} frames",
+                  end="\n" if done == total or not live else "", file=sys.stderr, flush=True)
 
     try:
         calibration = BenchCalibration.load(args.calibration)

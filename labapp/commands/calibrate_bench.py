@@ -16,7 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("folder", help="folder with the images and masses.csv (file,added_mass_g cumulative, g)")
     parser.add_argument("--water-g", type=float, default=500.0, help="water mass, g (default 500)")
     parser.add_argument("--crop", help="x,y,size of the square crop inside the beaker, px "
-                                       "(default: centred at W/4, H/2, side min(W,H)/4)")
+                                       "(default: the series' run.json crop, else centred at W/4, H/2, side min(W,H)/4)")
     parser.add_argument("--grid", type=int, default=10, help="cells per side (default 10)")
     parser.add_argument("--mirror-col", type=float, help="column of the mirror axis, px (default: image centre)")
     parser.add_argument("--no-mirror", action="store_true",
@@ -33,6 +33,19 @@ def _parse_crop(text: str) -> tuple[int, int, int]:
     except ValueError:
         raise SystemExit(f"--crop {text!r}: expected three integers x,y,size (px)") from None
     return x, y, size
+
+
+def _recorded_crop(folder) -> tuple[int, int, int] | None:
+    """The crop a series recorded by `sfr lab`/`sfr run` stored in its run.json, if any (x, y, size px)."""
+    import json
+
+    try:
+        crop = json.loads((folder / "run.json").read_text())["crop"]
+        return int(crop["x"]), int(crop["y"]), int(crop["size"])
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise SystemExit(f"error: {folder / 'run.json'} has no usable crop {{x, y, size}} (px): {exc}") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -62,8 +75,9 @@ def run(args: argparse.Namespace) -> int:
         shape = decode_image(files[0]).shape[:2] if files else None
         if shape is None:
             raise AnalysisError(f"{folder / 'masses.csv'} lists no images")
-        if args.crop:
-            geometry = CropGeometry(*_parse_crop(args.crop), args.grid, args.mirror_col, not args.no_mirror)
+        crop = _parse_crop(args.crop) if args.crop else _recorded_crop(folder)
+        if crop:
+            geometry = CropGeometry(*crop, args.grid, args.mirror_col, not args.no_mirror)
         else:
             base = default_geometry(shape, args.grid)
             geometry = CropGeometry(base.x, base.y, base.size, args.grid, args.mirror_col, not args.no_mirror)
