@@ -164,3 +164,17 @@ def test_cli_calibrate_then_analyze(tmp_path, capsys):
     assert main(["calibrate-bench", str(BENCH / "calibration"), "--crop", "700,10,80", "--out",
                  str(tmp_path / "y.json")]) == 2                        # on the bare panel: no response
     assert "is the crop inside the beaker" in capsys.readouterr().err
+
+
+def test_cli_calibration_takes_the_series_recorded_crop(tmp_path, capsys):
+    """A series folder with a run.json (as `sfr lab` records it) needs no --crop, and a run recorded with
+    the same crop analyses without a crop-mismatch warning."""
+    cal = tmp_path / "cal.json"
+    assert main(["calibrate-bench", str(BENCH / "calibration"), "--water-g", "500", "--out", str(cal)]) == 0
+    recorded = json.loads((BENCH / "calibration" / "run.json").read_text())["crop"]
+    assert f"crop x={recorded['x']} y={recorded['y']} size={recorded['size']} px" in capsys.readouterr().out
+    run, rows = _copy_run(tmp_path, n=6)
+    _write_manifest(run, rows)
+    shutil.copy(BENCH / "run" / "run.json", run / "run.json")
+    assert main(["analyze", str(run), "--calibration", str(cal), "--out", str(tmp_path / "out")]) == 0
+    assert "differs from the calibration" not in capsys.readouterr().err
