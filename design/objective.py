@@ -1,6 +1,7 @@
 """The inverse-design objective of eq. (4) and its gradient with respect to the design variables.
 
-``J = J_fit + w_b J_binary + w_f J_fab`` with ``rho = project(smooth(rho_hat, r), beta)``.
+``J = J_fit + w_b J_binary + w_f J_fab + w_r J_rate`` with ``rho = project(smooth(rho_hat, r), beta)``;
+J_rate (`design.rate.rate_fit`) is an optional rate-fit term beyond the paper (w_r = 0 gives eq. 4).
 The chain is: variables -> smoothing filter -> projection -> design-space map (replication for
 extruded designs) -> fast-marching release (eqs. 5-7) -> J; the gradient runs the chain backwards
 with the exact adjoint of every stage.
@@ -20,6 +21,7 @@ import numpy as np
 from design.errors import DesignError
 from design.filters import SmoothingFilter, project, project_adjoint, project_inverse
 from design.forward import Release, release_gradient, simulate
+from design.rate import rate_fit, release_duration
 from design.spaces import DesignSpace
 
 log = logging.getLogger(__name__)
@@ -37,7 +39,7 @@ class Evaluation:
     value : float
         J of eq. (4) in the rescaled units.
     terms : dict of str to float
-        ``J_fit``, ``J_binary``, ``J_fab`` (unweighted) and ``grad_norm``.
+        ``J_fit``, ``J_binary``, ``J_fab``, ``J_rate`` (unweighted) and ``grad_norm``.
     grad : ndarray of float, variable shape
         dJ/d rho_hat.
     rho : ndarray of float, reduced grid shape
@@ -68,15 +70,22 @@ class DesignObjective:
         Projection steepness.
     w_binary, w_fab : float
         Weights of J_binary and J_fab.
+    w_rate : float
+        Weight of the rate-fit term J_rate (0 = eq. 4 as in the paper).
+    rate_lag : int or None
+        Finite-difference lag of J_rate in tau samples; None = one voxel edge (``dx / dtau``),
+        the shortest span over which a voxel release is free of layer ripple.
     """
 
     def __init__(self, space: DesignSpace, target_mm3: np.ndarray, total_time_mm: float, *,
-                 radius_vox: float, beta: float, w_binary: float, w_fab: float = 0.0) -> None:
+                 radius_vox: float, beta: float, w_binary: float, w_fab: float = 0.0, w_rate: float = 0.0,
+                 rate_lag: int | None = None) -> None:
         target = np.asarray(target_mm3, dtype=float)
         if target.ndim != 1 or target.size < 3 or not target[-1] > 0:
             raise DesignError(f"target must be a 1D curve with >= 3 samples and a positive end, got {target.shape}")
-        if not beta > 0 or w_binary < 0 or w_fab < 0:
-            raise DesignError(f"need beta > 0, w_binary >= 0, w_fab >= 0; got {beta}, {w_binary}, {w_fab}")
+        if not beta > 0 or w_binary < 0 or w_fab < 0 or w_rate < 0:
+            raise DesignError(f"need beta > 0, w_binary >= 0, w_fab >= 0, w_rate >= 0; got {beta}, {w_binary}, "
+                              f"{w_fab}, {w_rate}")
         if w_fab > 0 and space.fab_term is None:
             raise DesignError(f"w_fab = {w_fab} but design space {space.name!r} has no fabrication term")
         self.space = space
@@ -88,6 +97,13 @@ class DesignObjective:
         self.filter = SmoothingFilter(space.var_shape, float(radius_vox), space.var_mirror)
         self.scale = (REFERENCE_MASS_MM3 / target[-1]) ** (1.0 / 3.0)  # length rescaling, see module doc
         self.dtau_mm = self.total_time_mm / (target.size - 1)
+        self.w_rate = float(w_rate)
+        lag = max(1, int(round(space.dx_mm / self.dtau_mm))) if rate_lag is None else int(rate_lag)
+        if not 1 <= lag < target.size:
+            raise DesignError(f"rate lag must be in [1, {target.size - 1}] samples, got {lag}")
+        self.rate_lag = lag
+        tau = np.linspace(0.0, self.total_time_mm, target.size)
+        self.rate_time_scale_mm = release_duration(tau, target)  # t_s of J_rate
 
     def density(self, x: np.ndarray) -> np.ndarray:
         """The reduced simulation density ``rho`` of variables ``x`` (eq. 4 filter chain)."""
@@ -121,6 +137,11 @@ class DesignObjective:
         resid = (release.released_mm3 - self.target_mm3) * s3
         j_fit = float(np.sum(resid ** 2) * self.dtau_mm / self.total_time_mm)
         d_fit_dc = 2.0 * resid * s3 * self.dtau_mm / self.total_time_mm
+        j_rate = 0.0
+        if self.w_rate > 0:  # J_rate in the rescaled units: C -> s^3 C, tau -> s tau
+            j_rate, g_rate = rate_fit(release.released_mm3 * s3, self.target_mm3 * s3, self.dtau_mm * self.scale,
+                                      self.rate_lag, self.rate_time_scale_mm * self.scale)
+            d_fit_dc = d_fit_dc + self.w_rate * g_rate * s3
         # J_binary = sum_i rho_i (1 - rho_i) dx^3 over the full object (section 3.4)
         cell = (space.dx_mm * self.scale) ** 3 * space.multiplicity
         j_bin = float(np.sum(rho * (1.0 - rho)) * cell)
@@ -130,8 +151,8 @@ class DesignObjective:
             j_fab, g_fab = space.fab_term(rho)
             grad_rho = grad_rho + self.w_fab * g_fab
         grad = self.filter.adjoint(project_adjoint(smoothed, self.beta, space.to_grid_adjoint(grad_rho)))
-        value = j_fit + self.w_binary * j_bin + self.w_fab * j_fab
-        terms = {"J": value, "J_fit": j_fit, "J_binary": j_bin, "J_fab": float(j_fab),
+        value = j_fit + self.w_binary * j_bin + self.w_fab * j_fab + self.w_rate * j_rate
+        terms = {"J": value, "J_fit": j_fit, "J_binary": j_bin, "J_fab": float(j_fab), "J_rate": j_rate,
                  "grad_norm": float(np.linalg.norm(grad))}
         return Evaluation(value, terms, grad, rho, release)
 

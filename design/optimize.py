@@ -40,6 +40,8 @@ MAX_RESTARTS = 20
 """L-BFGS restarts from the best point after nlopt ends early (see `run_design`)."""
 RESTART_GAIN = 1e-3
 """Relative decrease of J a session must achieve for another restart to be tried."""
+BETA_STAGES = 4
+"""Stages of the beta continuation (`DesignConfig.beta_final`)."""
 
 
 @dataclass(frozen=True)
@@ -104,6 +106,7 @@ class _Run:
         self.session_t0 = time.perf_counter()
         self.session_start = start
         self.cosine = config.bounds == "cosine"
+        self.stage_end = config.max_iter
 
     def to_x(self, z: np.ndarray) -> np.ndarray:
         """Design variables rho_hat from nlopt's variables."""
@@ -134,7 +137,7 @@ class _Run:
     def _step(self, z: np.ndarray, grad: np.ndarray) -> float:
         if self.stop_reason is not None:
             return self._stop(self.stop_reason, grad)
-        if self.k >= self.config.max_iter:  # nlopt's maxeval may allow one extra evaluation
+        if self.k >= self.stage_end:  # nlopt's maxeval may allow one extra evaluation
             return self._stop("max_iter", grad)
         if self.should_stop is not None and self.should_stop():
             return self._stop("stopped", grad)
@@ -169,12 +172,15 @@ class _Run:
 
 def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> str:
     cfg = run.config
+    if run.stop_reason == "max_iter":  # the previous beta stage's end, not the run's
+        run.stop_reason = None
     opt = nlopt.opt(nlopt.LD_LBFGS, x0.size)
     if not run.cosine:
         opt.set_lower_bounds(0.0)
         opt.set_upper_bounds(1.0)
     opt.set_min_objective(run)
     opt.set_maxeval(remaining)
+    run.stage_end = run.k + remaining
     opt.set_ftol_rel(cfg.ftol_rel)
     opt.set_xtol_rel(cfg.xtol_rel)
     opt.set_vector_storage(cfg.lbfgs_memory)  # L-BFGS memory: O(m N) doubles
@@ -195,6 +201,39 @@ def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> str:
         return run.stop_reason
     code = opt.last_optimize_result()
     return "max_iter" if code == nlopt.MAXEVAL_REACHED else "converged"
+
+
+def beta_stages(config: DesignConfig) -> list[tuple[float, int]]:
+    """``(beta, last evaluation)`` of each stage of a run.
+
+    Without continuation (``beta_final`` None) one stage at ``beta``. With it, `BETA_STAGES` stages
+    of equal length whose beta rises geometrically from ``beta`` to ``beta_final``.
+    """
+    if config.beta_final is None or config.beta_final == config.beta:
+        return [(float(config.beta), config.max_iter)]
+    ratios = np.linspace(0.0, 1.0, BETA_STAGES)
+    betas = config.beta * (config.beta_final / config.beta) ** ratios
+    ends = [int(round(config.max_iter * (i + 1) / BETA_STAGES)) for i in range(BETA_STAGES)]
+    return [(float(b), e) for b, e in zip(betas, ends)]
+
+
+def _stage(run: _Run, start: np.ndarray, stage_end: int) -> str:
+    """L-BFGS from ``start`` until evaluation ``stage_end``, restarting after early ends."""
+    status = "max_iter"
+    for _ in range(1 + MAX_RESTARTS):
+        remaining = stage_end - run.k
+        if remaining <= 0:
+            return "max_iter"
+        before = run.best_value
+        status = _optimise(run, start, remaining)
+        start = run.best_x.copy() if run.best_x is not None else start
+        # nlopt's L-BFGS ends early on the piecewise-smooth fast-marching objective (line-search
+        # failure, or its internal step criteria reporting success far from a minimum); restart
+        # from the best point with empty curvature memory while that still makes progress
+        if status not in ("stalled", "converged") or not run.best_value < before * (1.0 - RESTART_GAIN):
+            break
+        log.info("restarting L-BFGS from the best design (J = %.6g)", run.best_value)
+    return status
 
 
 def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration: IterationCallback | None = None,
@@ -243,7 +282,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         raise DesignError(problem.feasibility.text())
     objective = DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
                                 radius_vox=config.radius_vox, beta=config.beta, w_binary=config.w_binary,
-                                w_fab=config.w_fab)
+                                w_fab=config.w_fab, w_rate=config.w_rate)
     history: list[list[float]] = []
     ckpt = out_dir / "checkpoint.npz"
     if resume and ckpt.exists():
@@ -258,19 +297,17 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     if best_x is not None:
         run.best_x = best_x.ravel().copy()
     status, start = "max_iter", x0.ravel().copy()
-    for _ in range(1 + MAX_RESTARTS):
-        remaining = config.max_iter - run.k
-        if remaining <= 0:
-            break
-        before = run.best_value
-        status = _optimise(run, start, remaining)
+    for beta, stage_end in beta_stages(config):
+        if run.k >= stage_end:
+            continue
+        if beta != objective.beta:  # beta continuation: J changes, so the best so far is re-judged
+            log.info("beta continuation: beta = %.4g from evaluation %d", beta, run.k + 1)
+            objective.beta = beta
+            run.best_value = np.inf
+        status = _stage(run, start, stage_end)
         start = run.best_x.copy() if run.best_x is not None else start
-        # nlopt's L-BFGS ends early on the piecewise-smooth fast-marching objective (line-search
-        # failure, or its internal step criteria reporting success far from a minimum); restart
-        # from the best point with empty curvature memory while that still makes progress
-        if status not in ("stalled", "converged") or not run.best_value < before * (1.0 - RESTART_GAIN):
+        if status not in ("stalled", "converged", "max_iter"):
             break
-        log.info("restarting L-BFGS from the best design (J = %.6g)", run.best_value)
     run.checkpoint()
     best = (run.best_x if run.best_x is not None else x0.ravel()).reshape(problem.space.var_shape)
     outputs = write_outputs(out_dir, problem, objective, best, history, config, status=status,

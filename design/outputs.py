@@ -18,6 +18,7 @@ from design.extract import centred_iou, count_pieces, density_mesh, revoxelize
 from design.forward import simulate
 from design.objective import DesignObjective, rel_rmse
 from design.printability import assess, prusa_profile
+from design.rate import MID_HI, MID_LO, rate_deviation
 from design.report import save_report
 
 log = logging.getLogger(__name__)
@@ -42,6 +43,20 @@ def _write_text(path: Path, text: str) -> None:
 def _csv(columns: tuple[str, ...], rows: np.ndarray) -> str:
     body = "\n".join(",".join(f"{v:.10g}" for v in row) for row in rows)
     return ",".join(columns) + "\n" + body + ("\n" if len(rows) else "")
+
+
+def _rate_dev(target, curve_mm3: np.ndarray, vs_target: bool) -> float | None:
+    """`rate_deviation` of an achieved curve: over its own middle 80% against its own mean rate, or
+    (``vs_target``) over the target's middle 80% against the target's mean rate there. None when the
+    curve does not rise (a grey design without a solid)."""
+    if not curve_mm3[-1] > curve_mm3[0]:
+        return None
+    if not vs_target:
+        return rate_deviation(target.tau_mm, curve_mm3)
+    tau, c = target.tau_mm, target.released_mm3
+    lo, hi = np.interp([MID_LO * c[-1], MID_HI * c[-1]], c, tau)
+    ref = (MID_HI - MID_LO) * c[-1] / (hi - lo)
+    return rate_deviation(tau, curve_mm3, window_from=c, reference_rate=ref)
 
 
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
@@ -92,6 +107,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     _write_text(out_dir / "curves.csv", _csv(("tau_mm", "target_mm3", "density_mm3", "binary_mm3"), curves))
     _write_text(out_dir / "history.csv", _csv(HISTORY_COLUMNS, np.array(history, dtype=float).reshape(-1, 7)))
     _write_text(out_dir / "design.ini", prusa_profile(out_dir.name))
+    achieved = (("density", density_release.released_mm3), ("binary", binary_release.released_mm3))
     iterations = len(history)
     seconds = float(history[-1][-1]) if history else 0.0
     summary = {
@@ -100,6 +116,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         "space": space.name,
         "rel_rmse_density": rel_rmse(density_release.released_mm3, target.released_mm3),
         "rel_rmse_binary": rel_rmse(binary_release.released_mm3, target.released_mm3),
+        "rate_dev_mid80": {name: _rate_dev(target, curve, False) for name, curve in achieved},
+        "rate_dev_mid80_vs_target": {name: _rate_dev(target, curve, True) for name, curve in achieved},
         "iterations": iterations,
         "seconds": seconds,
         "seconds_per_iteration": seconds / iterations if iterations else None,

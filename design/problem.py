@@ -34,6 +34,9 @@ SPACE_DEFAULTS: dict[str, dict[str, float]] = {
     "nfc": {"w_binary": 20.0, "radius_vox": 4.0, "beta": 3.0},
     "extruded": {"w_binary": 20.0, "radius_vox": 4.0, "beta": 3.0},
 }
+ANALYTIC_W_RATE = 1.0
+"""Default weight of the rate-fit term J_rate for analytic (zero-order / accel) targets; 0 for the
+others, whose curves come from shapes or measurements (see docs/results.md, "Zero-order")."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +60,12 @@ class DesignConfig:
         Eq. (4) hyperparameters; None = `SPACE_DEFAULTS` (resolved and stored explicitly).
     w_fab : float
         Weight of the space's fabrication term (none for nfc/extruded).
+    beta_final : float or None
+        Beta continuation: raise beta geometrically from ``beta`` to ``beta_final`` over
+        `design.optimize.BETA_STAGES` equal stages of the run (None = fixed beta, as in the paper).
+    w_rate : float or None
+        Weight of the rate-fit term J_rate (`design.rate`); None = `ANALYTIC_W_RATE` for analytic
+        targets, 0 (eq. 4 as in the paper) otherwise.
     max_iter : int
         Maximum objective evaluations (paper: 500).
     ftol_rel, xtol_rel : float
@@ -90,6 +99,8 @@ class DesignConfig:
     radius_vox: float | None = None
     beta: float | None = None
     w_fab: float = 0.0
+    beta_final: float | None = None
+    w_rate: float | None = None
     max_iter: int = 500
     ftol_rel: float = 0.0
     xtol_rel: float = 0.0
@@ -108,6 +119,10 @@ class DesignConfig:
         for key, value in SPACE_DEFAULTS.get(self.space, {}).items():
             if getattr(self, key) is None:
                 object.__setattr__(self, key, value)
+        if self.w_rate is None:
+            object.__setattr__(self, "w_rate", ANALYTIC_W_RATE if _parse_analytic(self.target) else 0.0)
+        if self.w_rate < 0:
+            raise DesignError(f"w_rate must be >= 0, got {self.w_rate}")
         if self.resolution < 8 or self.resolution % 2:
             raise DesignError(f"resolution must be an even number >= 8 voxels, got {self.resolution}")
         if self.domain_mm is not None and (len(self.domain_mm) != 3 or min(self.domain_mm) <= 0):
@@ -120,6 +135,8 @@ class DesignConfig:
             raise DesignError(f"smoothing radius must be in [1, 32] voxels, got {self.radius_vox}")
         if self.beta is not None and not 0 < self.beta <= 64:
             raise DesignError(f"beta must be in (0, 64], got {self.beta}")
+        if self.beta_final is not None and not self.beta <= self.beta_final <= 64:
+            raise DesignError(f"beta_final must be in [beta, 64] = [{self.beta}, 64], got {self.beta_final}")
         if self.max_iter < 1 or self.checkpoint_every < 1 or not 1 <= self.lbfgs_memory <= 100:
             raise DesignError(f"need max_iter >= 1, checkpoint_every >= 1, lbfgs_memory in [1, 100]; got "
                               f"{self.max_iter}, {self.checkpoint_every}, {self.lbfgs_memory}")

@@ -22,6 +22,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--w-binary", type=float, help="weight of J_binary (default per space, Tables 1-2)")
     parser.add_argument("--radius", type=float, help="smoothing radius, voxels (default 4)")
     parser.add_argument("--beta", type=float, help="projection steepness (default 3)")
+    parser.add_argument("--beta-final", type=float,
+                        help="beta continuation: raise beta to this over the run in 4 stages (default: fixed beta)")
+    parser.add_argument("--w-rate", type=float,
+                        help="weight of the rate-fit term J_rate (default 1 for analytic targets, else 0)")
     parser.add_argument("--height", type=float, metavar="MM",
                         help="extrusion height, mm (default: the source's height, else the domain's)")
     parser.add_argument("--max-iter", type=int, default=500, help="maximum objective evaluations (default 500)")
@@ -75,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
             config = DesignConfig(target=args.target, space=args.space, resolution=args.resolution,
                                   domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
                                   height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
-                                  beta=args.beta, max_iter=args.max_iter, bounds=args.bounds,
+                                  beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate, max_iter=args.max_iter, bounds=args.bounds,
                                   warn_channel_mm=args.warn_channel_mm, allow_infeasible=args.allow_infeasible,
                                   formats=tuple(args.formats))
         max_iter = config.max_iter if config else _stored_max_iter(args.out)
@@ -88,6 +92,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"{result.status} after {result.iterations} evaluations ({s['seconds']:.1f} s, "
           f"{s['seconds_per_iteration'] or 0:.3f} s each)")
     print(f"rel. RMSE: density {s['rel_rmse_density']:.3%}, binary solid {s['rel_rmse_binary']:.3%}")
+    dev = {k: "-" if v is None else f"{v:.2%}" for k, v in s["rate_dev_mid80"].items()}
+    print(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid {dev['binary']}")
     print(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
           f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}")
     for w in s["warnings"]:

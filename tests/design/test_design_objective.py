@@ -10,14 +10,15 @@ from design.objective import DesignObjective, rel_rmse
 from design.spaces import SpaceRequest, build_space
 
 
-def _objective(name, request, w_fab=0.0, fab=None):
+def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0):
     space = build_space(name, request)
     if fab is not None:
         space = replace(space, fab_term=fab)
     big_t = total_time(space.grid_shape, space.dx_mm, space.mirror)
     target = simulate(np.full(space.grid_shape, 0.4), space.dx_mm, mirror=space.mirror,
                       total_time_mm=big_t).released_mm3
-    return DesignObjective(space, target, big_t, radius_vox=2.0, beta=3.0, w_binary=20.0, w_fab=w_fab)
+    return DesignObjective(space, target, big_t, radius_vox=2.0, beta=3.0, w_binary=20.0, w_fab=w_fab,
+                           w_rate=w_rate)
 
 
 class _QuadraticFab:
@@ -29,13 +30,15 @@ class _QuadraticFab:
         return float(np.sum(rho ** 2)), 2.0 * rho
 
 
-@pytest.mark.parametrize("name, request_, fab", [
-    ("nfc", SpaceRequest((12, 12, 12), 0.5), None),
-    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None),
-    ("nfc", SpaceRequest((10, 10, 10), 0.5), _QuadraticFab()),
+@pytest.mark.parametrize("name, request_, fab, w_rate", [
+    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 0.0),
+    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 0.0),
+    ("nfc", SpaceRequest((10, 10, 10), 0.5), _QuadraticFab(), 0.0),
+    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 3.0),
+    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 3.0),
 ])
-def test_full_objective_gradient_matches_central_differences(name, request_, fab):
-    objective = _objective(name, request_, w_fab=1.5 if fab else 0.0, fab=fab)
+def test_full_objective_gradient_matches_central_differences(name, request_, fab, w_rate):
+    objective = _objective(name, request_, w_fab=1.5 if fab else 0.0, fab=fab, w_rate=w_rate)
     rng = np.random.default_rng(4)
     x = rng.uniform(0.2, 0.8, objective.space.var_shape)
     ev = objective.evaluate(x)

@@ -1,0 +1,123 @@
+"""Release-rate measures: the rate-fit term of the objective and the rate-deviation metric.
+
+J_fit of eq. (4) weighs the cumulative error, to which a rate error that lasts a short time
+contributes little; a zero-order (constant-rate) target is judged on its rate. `rate_fit` is an
+optional term that compares finite-difference rates of the simulated and target curves,
+
+    J_rate = (1/T) sum_k (t_s (r_k - r*_k))^2 dtau,   r_k = (C_{k+L} - C_k) / (L dtau),
+
+with a lag of L samples and a time scale t_s (the target's release duration), so that a relative
+rate error e held over the release weighs like a relative cumulative error e in J_fit. It is linear
+in C, so its adjoint is the transposed difference operator applied to the weighted residual.
+
+`rate_deviation` is the metric the issue's zero-order requirement is judged by (see
+docs/results.md): the largest relative deviation from the mean rate over the middle 80% of the
+release.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from design.errors import DesignError
+
+log = logging.getLogger(__name__)
+
+MID_LO, MID_HI = 0.1, 0.9
+"""The middle 80% of a release: from 10% to 90% of its final mass."""
+MID_INTERVALS = 20
+"""Sub-intervals the middle 80% is split into for the rate (each 4% of the 10%-90% time span)."""
+
+
+def release_duration(tau_mm: np.ndarray, curve_mm3: np.ndarray, fraction: float = 0.999) -> float:
+    """First tau at which the curve reaches ``fraction`` of its final value, mm (linear interpolation)."""
+    c = np.asarray(curve_mm3, float)
+    level = fraction * c[-1]
+    k = int(np.argmax(c >= level))
+    if k == 0:
+        return float(tau_mm[0])
+    t0, t1, c0, c1 = tau_mm[k - 1], tau_mm[k], c[k - 1], c[k]
+    return float(t0 + (t1 - t0) * (level - c0) / (c1 - c0))
+
+
+def lag_rate(curve: np.ndarray, lag: int, dtau_mm: float) -> np.ndarray:
+    """``r_k = (C_{k+L} - C_k) / (L dtau)``, k = 0..K-1-L; (K-L,) array."""
+    return (curve[lag:] - curve[:-lag]) / (lag * dtau_mm)
+
+
+def lag_rate_adjoint(g_rate: np.ndarray, lag: int, dtau_mm: float) -> np.ndarray:
+    """Transpose of `lag_rate`: the (K,) cotangent of C from the (K-L,) cotangent of r."""
+    g = np.zeros(g_rate.size + lag)
+    g[lag:] += g_rate
+    g[:-lag] -= g_rate
+    return g / (lag * dtau_mm)
+
+
+def rate_fit(curve_mm3: np.ndarray, target_mm3: np.ndarray, dtau_mm: float, lag: int,
+             time_scale_mm: float) -> tuple[float, np.ndarray]:
+    """J_rate (module docstring) of a curve against a target on the same tau grid, and dJ_rate/dC.
+
+    Parameters
+    ----------
+    curve_mm3, target_mm3 : (K,) ndarray of float, mm^3
+        Simulated and target cumulative release on ``tau_k = k dtau``.
+    dtau_mm : float
+    lag : int
+        Finite-difference lag L in samples, 1 <= L < K.
+    time_scale_mm : float
+        t_s, mm.
+
+    Returns
+    -------
+    value : float, mm^6
+    grad : (K,) ndarray of float
+    """
+    k_count = curve_mm3.size
+    total = dtau_mm * (k_count - 1)
+    err = time_scale_mm * (lag_rate(curve_mm3, lag, dtau_mm) - lag_rate(target_mm3, lag, dtau_mm))
+    value = float(np.sum(err ** 2) * dtau_mm / total)
+    grad = lag_rate_adjoint(2.0 * err * time_scale_mm * dtau_mm / total, lag, dtau_mm)
+    return value, grad
+
+
+def rate_deviation(tau_mm: np.ndarray, curve_mm3: np.ndarray, *, window_from: np.ndarray | None = None,
+                   reference_rate: float | None = None) -> float:
+    """Largest relative deviation of a release rate from constant over the middle 80% of the release.
+
+    The middle 80% is ``[tau_10, tau_90]``, where the curve (or ``window_from``) first reaches 10%
+    and 90% of its final value (linear interpolation between samples). That span is split into
+    `MID_INTERVALS` equal sub-intervals; the rate on each is the finite difference
+    ``(C(b) - C(a)) / (b - a)`` of the linearly interpolated curve, so the window is 4% of the
+    span. Returns ``max_j |rate_j / reference - 1|`` with the reference the mean rate over the span
+    (``(C(tau_90) - C(tau_10)) / (tau_90 - tau_10)``) unless ``reference_rate`` is given.
+
+    Parameters
+    ----------
+    tau_mm, curve_mm3 : (K,) ndarray of float
+        A cumulative release curve, tau increasing.
+    window_from : (K,) ndarray of float, optional
+        Take the 10%/90% times from this curve instead (e.g. the target's).
+    reference_rate : float, optional
+        Compare against this rate (mm^3 per mm) instead of the curve's own mean.
+
+    Raises
+    ------
+    DesignError
+        If the curve never rises (no release to measure).
+    """
+    tau = np.asarray(tau_mm, float)
+    c = np.asarray(curve_mm3, float)
+    w = c if window_from is None else np.asarray(window_from, float)
+    if tau.shape != c.shape or tau.shape != w.shape or tau.ndim != 1 or tau.size < 3 or not w[-1] > w[0]:
+        raise DesignError(f"need matching 1D tau and rising release curves with >= 3 samples, got {tau.shape}, "
+                          f"{c.shape}")
+    lo, hi = (float(np.interp(f * w[-1], w, tau)) if np.all(np.diff(w) >= 0) else
+              float(tau[np.argmax(w >= f * w[-1])]) for f in (MID_LO, MID_HI))
+    if not hi > lo:
+        raise DesignError(f"the middle 80% of the release has zero duration ({lo} .. {hi} mm)")
+    edges = np.linspace(lo, hi, MID_INTERVALS + 1)
+    values = np.interp(edges, tau, c)
+    rates = np.diff(values) / np.diff(edges)
+    ref = (values[-1] - values[0]) / (hi - lo) if reference_rate is None else float(reference_rate)
+    return float(np.max(np.abs(rates / ref - 1.0)))
