@@ -26,7 +26,10 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration):
         win.controls.max_hours.setValue(2.0)
         win.controls.stop_on_steady.setChecked(False)
         win.controls.start_button.click()
-        qtbot.waitUntil(win.controls.drop_button.isEnabled, timeout=120_000)   # bath stable, reference taken
+        try:
+            qtbot.waitUntil(win.controls.drop_button.isEnabled, timeout=120_000)   # bath stable, reference taken
+        except Exception:
+            raise AssertionError(win.messages.toPlainText() + "\n" + win.status.line()) from None
         assert win.status.phase.startswith("waiting")
         win.controls.drop_button.click()
         qtbot.waitUntil(lambda: len(win.plots.t_s) >= 25, timeout=120_000)
