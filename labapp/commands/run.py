@@ -60,6 +60,18 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.verbose:
         logging.getLogger().setLevel(logging.WARNING)
+    sample = args.sample
+    if args.resume:
+        from labapp.storage import StorageError, read_run
+        try:
+            stored = read_run(Path(args.resume)).meta
+        except StorageError as exc:
+            print(exc)
+            return 1
+        if stored.get("simulated") and not args.simulate:
+            print(f"{args.resume} is a simulated run; resume it with --simulate")
+            return 1
+        sample = stored.get("object_name") or sample
     speed = (math.inf if args.speed == 0 else args.speed) if args.simulate else None
     calibration = BenchCalibration.load(args.calibration) if args.calibration else None
     sim = None
@@ -76,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
                 print("no --calibration: running a simulated calibration series first ...", flush=True)
                 calibration, cal_path = simulated_calibration(Path(args.out))
                 print(f"calibration: {cal_path}", flush=True)
-            sim = SimulatedBench(clock, sample=args.sample)
+            sim = SimulatedBench(clock, sample=sample)
             bench = sim.bench()
         else:
             from labapp.devices import make_bench
