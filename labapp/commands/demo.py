@@ -29,9 +29,8 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out) / time.strftime(f"%Y%m%d-%H%M%S_{sanitize_name(args.sample)}")
     print(f"sfr demo: a simulated bench session in {out}", flush=True)
-    logging.getLogger("labapp").setLevel(logging.ERROR)
-    logging.getLogger("analysis").setLevel(logging.ERROR)
-    logging.getLogger("drivers").setLevel(logging.ERROR)
+    if not args.verbose:   # the injected faults are the point of the run's event log, not of the terminal
+        logging.getLogger().setLevel(logging.ERROR)
     result = run_demo(out, sample=args.sample, interval_s=args.interval, progress=lambda s: print(s, flush=True))
     print()
     print(f"done in {result.wall_s:.0f} s (wall) for {result.duration_s / 3600:.2f} h of simulated bench time")
