@@ -1,4 +1,5 @@
 """The GUI, offscreen: a full simulated run driven through the main window (pytest-qt)."""
+import os
 import shutil
 from pathlib import Path
 
@@ -51,8 +52,9 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration):
         win.refresh()
         shot = tmp_path / "lab_gui_run.png"
         assert win.grab().save(str(shot))
-        FIGURES.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(shot, FIGURES / "lab_gui_run.png")
+        assert shot.stat().st_size > 10_000
+        if os.environ.get("SFR_FIGURES"):                  # refresh the docs picture on request only
+            shutil.copyfile(shot, FIGURES / "lab_gui_run.png")
 
         win.browser.refresh()
         win.browser.select(folder)
