@@ -141,11 +141,17 @@ class Engine:
         """True while a procedure's thread is alive."""
         return self._thread is not None and self._thread.is_alive()
 
-    def run(self, procedure: Procedure) -> str:
-        """Walk ``procedure`` in the calling thread; returns the outcome (one of :data:`OUTCOMES`)."""
+    def _reset(self) -> None:
         self._stop.clear()
         self._stop_reason = ""
         self.outcome, self.error = None, None
+
+    def run(self, procedure: Procedure) -> str:
+        """Walk ``procedure`` in the calling thread; returns the outcome (one of :data:`OUTCOMES`)."""
+        self._reset()
+        return self._walk(procedure)
+
+    def _walk(self, procedure: Procedure) -> str:
         outcome = "complete"
         self.emit("state", phase="starting", procedure=procedure.name)
         try:
@@ -179,7 +185,8 @@ class Engine:
         """
         if self.running:
             raise RuntimeError("the engine is already running a procedure; stop it first")
-        self._thread = threading.Thread(target=self.run, args=(procedure,), name=f"engine-{procedure.name}",
+        self._reset()           # here, not in the thread: a stop() right after start() is never lost
+        self._thread = threading.Thread(target=self._walk, args=(procedure,), name=f"engine-{procedure.name}",
                                         daemon=True)
         self._thread.start()
         return self._thread
