@@ -7,7 +7,7 @@ import logging
 log = logging.getLogger(__name__)
 
 NAME = "demo"
-HELP = "simulated bench session: calibration series, a 3-hour run of a sample object, analysis, plots"
+HELP = "simulated bench session: calibration series, a run of a sample object (hours in ~2 min), analysis, plots"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
