@@ -1,5 +1,20 @@
-"""Shared test set-up: headless Qt everywhere."""
+"""Shared test set-up: headless Qt everywhere, numba kernels compiled once before the workers start."""
 import os
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+def pytest_configure(config):
+    """In the controlling process only: fill numba's on-disk cache, so that parallel workers and the
+    `sfr` subprocesses the tests start load compiled kernels instead of compiling (and writing the
+    cache) concurrently."""
+    if hasattr(config, "workerinput"):
+        return
+    import numpy as np
+
+    from design import release_gradient, sample_shape, simulate_mesh
+
+    for symmetry in ("", "xyz"):
+        release = simulate_mesh(sample_shape("sphere"), resolution=8, symmetry=symmetry)
+        release_gradient(release, np.ones_like(release.released_mm3))
