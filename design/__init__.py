@@ -1,12 +1,24 @@
 """The embedded simulator and optimizer (paper sections 3.1-3.6)."""
 from design.concentration import Saturation, release_at_times, release_at_times_vjp, remap_time, remap_time_vjp
 from design.errors import DesignError
+from design.extract import density_mesh
+from design.filters import SmoothingFilter, project
 from design.forward import N_MIN, Release, release_gradient, simulate, total_time
 from design.meshio import load_density, load_mesh
+from design.objective import DesignObjective
+from design.optimize import DesignResult, run_design
 from design.pipeline import simulate_mesh
+from design.printability import assess, prusa_profile
+from design.problem import DesignConfig
+from design.rate import rate_deviation
 from design.shapes import SAMPLE_SHAPES, sample_shape
+from design.spaces import SPACE_CHOICES, build_space, register_space
+from design.targets import Target, check_feasibility, constant_acceleration, target_from_csv, target_from_mesh
 from design.voxelize import voxelize
 
-__all__ = ["DesignError", "N_MIN", "Release", "SAMPLE_SHAPES", "Saturation", "load_density", "load_mesh",
-           "release_at_times", "release_at_times_vjp", "release_gradient", "remap_time", "remap_time_vjp",
-           "sample_shape", "simulate", "simulate_mesh", "total_time", "voxelize"]
+__all__ = ["DesignConfig", "DesignError", "DesignObjective", "DesignResult", "N_MIN", "Release", "SAMPLE_SHAPES",
+           "SPACE_CHOICES", "Saturation", "SmoothingFilter", "Target", "assess", "build_space", "check_feasibility",
+           "constant_acceleration", "density_mesh", "load_density", "load_mesh", "project", "prusa_profile",
+           "rate_deviation", "register_space", "release_at_times", "release_at_times_vjp", "release_gradient",
+           "remap_time", "remap_time_vjp", "run_design", "sample_shape", "simulate", "simulate_mesh",
+           "target_from_csv", "target_from_mesh", "total_time", "voxelize"]

@@ -60,6 +60,8 @@ class DesignConfig:
         Eq. (4) hyperparameters; None = `SPACE_DEFAULTS` (resolved and stored explicitly).
     w_fab : float
         Weight of the space's fabrication term (none for nfc/extruded).
+    rate_window_vox : float
+        Finite-difference span of J_rate's rates, voxel edges (rounded to whole tau samples).
     beta_final : float or None
         Beta continuation: raise beta geometrically from ``beta`` to ``beta_final`` over
         `design.optimize.BETA_STAGES` equal stages of the run (None = fixed beta, as in the paper).
@@ -100,6 +102,7 @@ class DesignConfig:
     beta: float | None = None
     w_fab: float = 0.0
     beta_final: float | None = None
+    rate_window_vox: float = 1.0
     w_rate: float | None = None
     max_iter: int = 500
     ftol_rel: float = 0.0
@@ -121,8 +124,9 @@ class DesignConfig:
                 object.__setattr__(self, key, value)
         if self.w_rate is None:
             object.__setattr__(self, "w_rate", ANALYTIC_W_RATE if _parse_analytic(self.target) else 0.0)
-        if self.w_rate < 0:
-            raise DesignError(f"w_rate must be >= 0, got {self.w_rate}")
+        if self.w_rate < 0 or not 0 < self.rate_window_vox <= 64:
+            raise DesignError(f"w_rate must be >= 0 and rate_window_vox in (0, 64]; got {self.w_rate}, "
+                              f"{self.rate_window_vox}")
         if self.resolution < 8 or self.resolution % 2:
             raise DesignError(f"resolution must be an even number >= 8 voxels, got {self.resolution}")
         if self.domain_mm is not None and (len(self.domain_mm) != 3 or min(self.domain_mm) <= 0):

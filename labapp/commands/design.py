@@ -24,6 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--beta", type=float, help="projection steepness (default 3)")
     parser.add_argument("--beta-final", type=float,
                         help="beta continuation: raise beta to this over the run in 4 stages (default: fixed beta)")
+    parser.add_argument("--rate-window", type=float, default=1.0, metavar="VOX",
+                        help="finite-difference span of the rate-fit term's rates, voxels (default 1)")
     parser.add_argument("--w-rate", type=float,
                         help="weight of the rate-fit term J_rate (default 1 for analytic targets, else 0)")
     parser.add_argument("--height", type=float, metavar="MM",
@@ -79,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
             config = DesignConfig(target=args.target, space=args.space, resolution=args.resolution,
                                   domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
                                   height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
-                                  beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate, max_iter=args.max_iter, bounds=args.bounds,
+                                  beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate, rate_window_vox=args.rate_window, max_iter=args.max_iter, bounds=args.bounds,
                                   warn_channel_mm=args.warn_channel_mm, allow_infeasible=args.allow_infeasible,
                                   formats=tuple(args.formats))
         max_iter = config.max_iter if config else _stored_max_iter(args.out)
