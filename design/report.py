@@ -45,9 +45,15 @@ def report_figure(tau_mm: np.ndarray, target_mm3: np.ndarray, density_mm3: np.nd
     ax_r = fig.add_subplot(grid[0, 2:4])
     styles = (("target", target_mm3, "-", "tab:green"), ("density", density_mm3, "--", "tab:blue"),
               ("binary solid", binary_mm3, ":", "tab:red"))
+    # a release that ends early (zero-order targets) is shown zoomed, with rates over 1/100 of the view
+    t_end = float(tau_mm[np.argmax(target_mm3 >= 0.999 * target_mm3[-1])])
+    view = min(float(tau_mm[-1]), 1.5 * t_end) if t_end < 0.5 * tau_mm[-1] else float(tau_mm[-1])
+    points = max(1, int(round(100 * tau_mm[-1] / view)))
     for label, curve, ls, color in styles:
         ax_c.plot(tau_mm, curve, ls, color=color, label=label, lw=2)
-        ax_r.plot(*_rate(tau_mm, curve), ls, color=color, label=label, lw=1.5)
+        ax_r.plot(*_rate(tau_mm, curve, points), ls, color=color, label=label, lw=1.5)
+    for ax in (ax_c, ax_r):
+        ax.set_xlim(0.0, view)
     ax_c.set(xlabel="tau (mm dissolved)", ylabel="released (mm^3)", title="cumulative release")
     ax_r.set(xlabel="tau (mm dissolved)", ylabel="rate (mm^3 per mm)", title="release rate")
     ax_c.legend()
