@@ -107,7 +107,6 @@ class MainWindow(QMainWindow):
         self.bridge.frame.connect(self.on_frame)
         self.bridge.preview.connect(self.on_preview)
         self.bridge.reading.connect(self.devices.show_reading)
-        self.bridge.reading.connect(self.on_reading)
         self.bridge.state.connect(self.on_state)
         self.bridge.prompt.connect(self.on_prompt)
         self.bridge.message.connect(self.on_message)
@@ -242,17 +241,14 @@ class MainWindow(QMainWindow):
         self.latest_frame = data.get("path")
         if "added_mass_g" not in data:
             self.plots.add_frame(data["t_s"], data.get("conc_g_per_kg", float("nan")))
+            # the bath plot shows the reading logged with each frame: one time base with the release curve
+            self.plots.add_reading(data["t_s"], data.get("plate_c"), data.get("probe_c"), data.get("speed_rpm"))
 
     def on_preview(self, data: dict) -> None:
         """Show a preview frame."""
         rgb = decode_preview(data=data["data"])
         if rgb is not None:
             self.live.set_frame(rgb, f"preview {data.get('file', '')}")
-
-    def on_reading(self, data: dict) -> None:
-        """Plot a hotplate reading taken after the drop."""
-        if data.get("t_s") is not None:
-            self.plots.add_reading(data["t_s"], data.get("plate_c"), data.get("probe_c"), data.get("speed_rpm"))
 
     def on_state(self, data: dict) -> None:
         """Follow the procedure's phase."""

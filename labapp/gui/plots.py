@@ -56,6 +56,9 @@ class PlotsPanel(QWidget):
         self.speed_curve = pg.PlotCurveItem(pen=pg.mkPen((150, 150, 150), width=1, style=pg.QtCore.Qt.PenStyle.DashLine))
         self.speed_view.addItem(self.speed_curve)
         self.temps.vb.sigResized.connect(self._sync_views)
+        for plot in (self.release, self.temps):
+            for side in ("left", "right", "bottom"):
+                plot.getAxis(side).enableAutoSIPrefix(False)  # no "(x0.001)" rescaling of g/kg, g or s
         self.set_water(water_g)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)

@@ -48,6 +48,9 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration):
         assert np.allclose(t_plot, [f.t_s for f in snap.frames], atol=1e-3), (t_plot, snap.frames)  # all plotted
         assert conc_plot[-1] > conc_plot[0] + 0.1                         # the object is dissolving
         assert len(win.plots.smooth_curve.getData()[0]) == len(t_plot)
+        t_bath, plate = win.plots.plate_curve.getData()                   # the bath logged with every frame
+        assert np.allclose(t_bath, t_plot, atol=1e-3)
+        assert np.allclose(plate, [f.plate_c for f in snap.frames], atol=1e-6)
         qtbot.waitUntil(lambda: win.live.caption.text().startswith("frame_"), timeout=10_000)
         win.refresh()
         shot = tmp_path / "lab_gui_run.png"
