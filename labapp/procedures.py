@@ -232,10 +232,7 @@ class RunProcedure:
         index = len(run.frames)
         suffix = Path(cap.file_name).suffix.lower() or ".jpg"
         name = f"frame_{index:06d}{suffix}"
-        # a fresh reading for every frame (the poller's latest can be minutes old on an accelerated clock);
-        # none while the link is down, rather than a stale one
-        monitor = session.monitor
-        reading = monitor.poll() if monitor is not None and monitor.link_ok else None
+        reading = session.monitor.latest if session.monitor is not None and session.monitor.link_ok else None
         t_s = cap.t_unix_s - session.t0_unix_s
         record = run.add_frame(name, cap.data, t_s, cap.t_unix_s,
                                reading.plate_c if reading else None, reading.probe_c if reading else None,
