@@ -110,7 +110,7 @@ class SmoothingFilter:
         object.__setattr__(self, "_weights", self._valid(_pad(np.ones(self.shape), half, self.mirror)))
 
     def _conv(self, x: np.ndarray) -> np.ndarray:
-        return sfft.irfftn(sfft.rfftn(x, self._fshape) * self._kernel_hat, self._fshape, workers=-1)
+        return sfft.irfftn(sfft.rfftn(x, self._fshape, workers=-1) * self._kernel_hat, self._fshape, workers=-1)
 
     def _valid(self, padded: np.ndarray) -> np.ndarray:
         """'valid' convolution of a padded field, back on the original grid."""
