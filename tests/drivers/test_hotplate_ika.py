@@ -8,35 +8,10 @@ import serial
 from drivers.hotplate import IKA_RCT, HeidolphHotplate, HotplateConfig, HotplateError, NamurHotplate, heidolph
 from drivers.sim.heidolph_emulator import HeidolphEmulator
 
+from tests.drivers.scripted_port import ScriptedPort
+
 FAST = HotplateConfig(timeout_s=0.3, backoff_s=0.1, retries=1)
 END = b" \r \n"  # IKA commands end in "blank CR LF"; replies in CR LF
-
-
-class ScriptedPort:
-    """A pyserial stand-in: each write must equal the next expected bytes; b'' = the plate stays silent."""
-
-    def __init__(self, pairs):
-        self.pairs = list(pairs)
-        self.pending = b""
-
-    def write(self, data):
-        assert self.pairs, f"unexpected write {data!r}"
-        sent, reply = self.pairs.pop(0)
-        assert data == sent
-        self.pending = reply
-
-    def read_until(self, terminator):
-        head, sep, self.pending = self.pending.partition(terminator)
-        return head + sep
-
-    def reset_input_buffer(self):
-        self.pending = b""
-
-    def flush(self):
-        pass
-
-    def close(self):
-        pass
 
 
 @pytest.fixture

@@ -6,32 +6,10 @@ import pytest
 from drivers.hotplate import heidolph
 from drivers.hotplate import HEIDOLPH_HEI_TEC, HeidolphHotplate, HotplateConfig, HotplateError
 
+from tests.drivers.scripted_port import ScriptedPort
+
 FAST = HotplateConfig(timeout_s=0.2, backoff_s=0.1, retries=1)
 STARTUP = [(b"PA_NEW\r\n", b"PA_NEW\n\r"), (b"CC_ON\r\n", b"CC_ON\r\n")]
-
-
-class ScriptedPort:
-    """Stands in for a pyserial port: each write must equal the next expected bytes."""
-
-    def __init__(self, pairs):
-        self.pairs = list(pairs)
-        self.pending = b""
-
-    def write(self, data):
-        assert self.pairs, f"unexpected write {data!r}"
-        sent, reply = self.pairs.pop(0)
-        assert data == sent
-        self.pending = reply
-
-    def read_until(self, terminator):
-        head, sep, self.pending = self.pending.partition(terminator)
-        return head + sep
-
-    def reset_input_buffer(self):
-        self.pending = b""
-
-    def close(self):
-        pass
 
 
 @pytest.fixture

@@ -1,0 +1,32 @@
+"""A pyserial stand-in for protocol tests: (sent, reply) byte pairs, consumed in order."""
+
+
+class ScriptedPort:
+    """Each write must equal the next expected bytes; its reply is then what reads return.
+
+    A reply of ``b''`` means the plate stays silent. Tests assert ``not port.pairs`` at the end, so a pair
+    left unconsumed fails the test.
+    """
+
+    def __init__(self, pairs):
+        self.pairs = list(pairs)
+        self.pending = b""
+
+    def write(self, data):
+        assert self.pairs, f"unexpected write {data!r}"
+        sent, reply = self.pairs.pop(0)
+        assert data == sent
+        self.pending = reply
+
+    def read_until(self, terminator):
+        head, sep, self.pending = self.pending.partition(terminator)
+        return head + sep
+
+    def reset_input_buffer(self):
+        self.pending = b""
+
+    def flush(self):
+        pass
+
+    def close(self):
+        pass
