@@ -119,11 +119,27 @@ class BenchSession:
                                  f"{timeout_s} s (last reading: {last})")
         self.note("info", "stable", f"bath stable at {setpoint_c} +/- {tolerance_c} C for {hold_s:.0f} s")
 
-    def start_stirring(self) -> None:
-        """Switch the stirrer on (no-op without a hotplate)."""
-        if self.monitor is not None:
-            self.monitor.command(self.bench.hotplate.start_stirring)
-            self.note("info", "stirring", "stirring on")
+    def start_stirring(self, speed_rpm: float | None = None, timeout_s: float = 120.0, step_s: float = 2.0) -> None:
+        """Switch the stirrer on (no-op without a hotplate); with ``speed_rpm``, wait until the measured
+        speed is within 5 % of it (at most ``timeout_s``, s on the procedure clock; a warning if not)."""
+        if self.monitor is None:
+            return
+        self.monitor.command(self.bench.hotplate.start_stirring)
+        self.note("info", "stirring", "stirring on")
+        if speed_rpm is None:
+            return
+        clock = self.engine.clock
+        deadline = clock.now() + timeout_s
+        while not self.engine.should_stop():
+            reading = self.monitor.poll()
+            if reading is not None and abs(reading.speed_rpm - speed_rpm) <= 0.05 * speed_rpm:
+                self.note("info", "stirring", f"stirring steady at {reading.speed_rpm:.0f} rpm")
+                return
+            if clock.now() >= deadline:
+                self.note("warning", "stirring", f"stirrer not at {speed_rpm:.0f} rpm after {timeout_s:.0f} s "
+                          f"(last reading: {reading}); going on")
+                return
+            clock.sleep(step_s, self.engine.should_stop)
 
     def capture(self) -> Capture | None:
         """One capture; a missed or failed frame is logged and returns None, the camera is re-initialised

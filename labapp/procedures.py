@@ -159,7 +159,7 @@ class RunProcedure:
             session.wait_stable(cfg.setpoint_c, cfg.tolerance_c, cfg.hold_s, cfg.heat_timeout_s, cfg.stable_step_s)
             if engine.should_stop():
                 return
-            session.start_stirring()
+            session.start_stirring(cfg.speed_rpm)  # the reference shows the stirred bath
             if "reference.jpg" not in run.meta.get("files", {}):
                 self._capture_reference(engine)
             engine.emit("state", phase="waiting-drop")
@@ -171,7 +171,7 @@ class RunProcedure:
             run.update(t0_unix_s=session.t0_unix_s)
             session.note("info", "drop", "object dropped: time zero")
         else:
-            session.start_stirring()
+            session.start_stirring(cfg.speed_rpm)
             last = run.frames[-1].t_s if run.frames else 0.0
             run.add_gap(last, session.t_s(), "acquisition interrupted; resumed into the same folder")
         if self.bench.on_drop is not None:

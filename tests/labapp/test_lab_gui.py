@@ -51,6 +51,8 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration):
         t_bath, plate = win.plots.plate_curve.getData()                   # the bath logged with every frame
         assert np.allclose(t_bath, t_plot, atol=1e-3)
         assert np.allclose(plate, [f.plate_c for f in snap.frames], atol=1e-6)
+        speeds = [f.speed_rpm for f in snap.frames if f.speed_rpm is not None]
+        assert speeds and min(speeds) >= 0.95 * 150                     # stirred before the reference frame
         qtbot.waitUntil(lambda: win.live.caption.text().startswith("frame_"), timeout=10_000)
         win.refresh()
         shot = tmp_path / "lab_gui_run.png"
