@@ -79,7 +79,7 @@ class BenchSession:
         hp.connect()
         # poll every keepalive_s of procedure time, so that on an accelerated clock the reading logged with a
         # frame is as recent as on the real bench (the serial link itself bounds the rate)
-        poll_s = max(self.keepalive_s / max(self.engine.clock.speed, 1.0), 0.05)
+        poll_s = max(self.keepalive_s / max(self.engine.clock.speed, 1.0), min(self.keepalive_s, 0.05))
         self.monitor = HotplateMonitor(hp, self.note, poll_s=poll_s, on_reading=self._publish_reading)
         if setpoint_c is not None:
             self.monitor.command(hp.set_temperature, setpoint_c)
