@@ -211,28 +211,54 @@ def _adjoint_kernel(order, u, rec, strides, dx, ubar):
     return nbar
 
 
+@njit(cache=True, nogil=True)
+def _fill_records(rec, n, cls0, cls1, cls2, ndim):
+    """Fill the padded records in one pass; 2D grids come as (1, H, W) with ``cls0 = [0]``.
+
+    ``cls_a[i]`` classifies index i of axis a: 0 interior, 1 interior next to ordinary padding on
+    this axis (upwind candidate 0), 2 ordinary padding (u = 0), 3 mirror padding (u = inf).
+    """
+    off = ndim - 2  # n's index shift on axis 0: 1 when that axis is padded (3D)
+    for i0 in range(rec.shape[0]):
+        c0 = cls0[i0]
+        for i1 in range(rec.shape[1]):
+            c1 = cls1[i1]
+            for i2 in range(rec.shape[2]):
+                c2 = cls2[i2]
+                if c0 >= 2 or c1 >= 2 or c2 >= 2:
+                    rec[i0, i1, i2, 0] = np.inf if (c0 == 3 or c1 == 3 or c2 == 3) else 0.0
+                    rec[i0, i1, i2, 1] = -1.0
+                    for c in range(2, 2 + ndim):
+                        rec[i0, i1, i2, c] = np.inf
+                else:
+                    rec[i0, i1, i2, 0] = np.inf
+                    rec[i0, i1, i2, 1] = n[i0 - off, i1 - 1, i2 - 1]
+                    if ndim == 3:
+                        rec[i0, i1, i2, 2] = 0.0 if c0 == 1 else np.inf
+                    rec[i0, i1, i2, ndim] = 0.0 if c1 == 1 else np.inf
+                    rec[i0, i1, i2, ndim + 1] = 0.0 if c2 == 1 else np.inf
+
+
+def _axis_classes(size: int, mirror: bool) -> np.ndarray:
+    """Per padded index of one axis (interior `size`): the classes of `_fill_records`."""
+    cls = np.zeros(size + 2, dtype=np.int8)
+    cls[0] = 3 if mirror else 2
+    cls[-1] = 2
+    if not mirror:
+        cls[1] = 1
+    cls[-2] = 1
+    return cls
+
+
 def _pad(n: np.ndarray, mirror: tuple[bool, ...]) -> tuple[np.ndarray, np.ndarray]:
     ndim = n.ndim
     rec = np.empty(tuple(s + 2 for s in n.shape) + (4 if ndim == 2 else 8,))
-    # two passes over the records: (u, -n, upwind minima) = (inf, -1, inf...), then n on the interior
-    rec[..., :2 + ndim] = np.array([np.inf, -1.0] + [np.inf] * ndim)
-    inner = (slice(1, -1),) * ndim
-    rec[inner + (1,)] = n
-    for axis in range(ndim):
-        for side, inward in ((0, 1), (-1, -2)):
-            face = [slice(None)] * ndim
-            face[axis] = side
-            if not (side == 0 and mirror[axis]):
-                rec[tuple(face) + (0,)] = 0.0  # the u = 0 padding layer
-                # its interior neighbours get 0 as their upwind candidate on this axis
-                nxt = list(inner)
-                nxt[axis] = inward
-                rec[tuple(nxt) + (2 + axis,)] = 0.0
-    for axis in range(ndim):  # mirror faces stay at u = inf, corners included
-        if mirror[axis]:
-            face = [slice(None)] * ndim
-            face[axis] = 0
-            rec[tuple(face) + (0,)] = np.inf
+    classes = [_axis_classes(s, m) for s, m in zip(n.shape, mirror)]
+    if ndim == 2:
+        classes.insert(0, np.zeros(1, dtype=np.int8))
+        _fill_records(rec[np.newaxis], n[np.newaxis], *classes, ndim)
+    else:
+        _fill_records(rec, n, *classes, ndim)
     strides = np.array(rec.strides[:-1], dtype=np.int64) // rec.strides[-2]
     return rec.reshape(-1, rec.shape[-1]), strides
 

@@ -145,7 +145,8 @@ def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None =
     steps = DEFAULT_STEPS if dtau_mm is None else max(1, int(round(big_t / check_positive("dtau_mm", dtau_mm))))
     n = slowness(rho)
     marching = march(n, dx, mirror)
-    u = marching.interior(marching.u_pad)
+    # one compact copy of u: the curve, its gradient and callers then read 8 bytes per voxel, not a record
+    u = np.ascontiguousarray(marching.interior(marching.u_pad))
     if check:
         worst = float(np.abs(eikonal_residual(marching)).max())
         if worst > RESIDUAL_TOL * big_t:

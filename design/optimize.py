@@ -144,7 +144,9 @@ class _Run:
         x = self.to_x(z)
         ev = self.objective.evaluate(x.reshape(self.objective.space.var_shape))
         if grad.size:
-            grad[:] = ev.grad.ravel() * (0.5 * np.sin(z) if self.cosine else 1.0)  # chain rule of to_x
+            grad[:] = ev.grad.ravel()
+            if self.cosine:
+                grad *= 0.5 * np.sin(z)  # chain rule of to_x
         self.k += 1
         self.last_x = x.copy()
         if ev.value < self.best_value or self.best_x is None:
