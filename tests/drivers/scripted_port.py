@@ -30,3 +30,30 @@ class ScriptedPort:
 
     def close(self):
         pass
+
+
+def scripted_plates(monkeypatch, startup, **driver_kwargs):
+    """Generator for a pytest fixture: yields ``make(pairs)``, which returns a connected
+    ``HeidolphHotplate(**driver_kwargs)`` on a ScriptedPort expecting ``startup + pairs``; afterwards every
+    pair must have been consumed."""
+    import atexit
+
+    from drivers.hotplate import HeidolphHotplate, heidolph
+
+    ports, plates = [], []
+
+    def make(pairs):
+        port = ScriptedPort(startup + pairs)
+        ports.append(port)
+        monkeypatch.setattr(heidolph.serial, "serial_for_url", lambda url, **kw: port)
+        monkeypatch.setattr(heidolph.time, "sleep", lambda s: None)
+        hp = HeidolphHotplate("scripted", keep_alive=False, **driver_kwargs)
+        hp.connect()
+        plates.append(hp)
+        return hp
+
+    yield make
+    for hp in plates:
+        atexit.unregister(hp._atexit)
+    for port in ports:
+        assert not port.pairs, f"unconsumed pairs: {port.pairs}"

@@ -1,14 +1,13 @@
 """The IKA RCT / C-MAG table: byte pairs, then the driver against the emulator over a real pty."""
-import atexit
 import time
 
 import pytest
 import serial
 
-from drivers.hotplate import IKA_RCT, HeidolphHotplate, HotplateConfig, HotplateError, NamurHotplate, heidolph
+from drivers.hotplate import IKA_RCT, HeidolphHotplate, HotplateConfig, HotplateError, NamurHotplate
 from drivers.sim.heidolph_emulator import HeidolphEmulator
 
-from tests.drivers.scripted_port import ScriptedPort
+from tests.drivers.scripted_port import scripted_plates
 
 FAST = HotplateConfig(timeout_s=0.3, backoff_s=0.1, retries=1)
 END = b" \r \n"  # IKA commands end in "blank CR LF"; replies in CR LF
@@ -16,23 +15,7 @@ END = b" \r \n"  # IKA commands end in "blank CR LF"; replies in CR LF
 
 @pytest.fixture
 def plate(monkeypatch):
-    ports, plates = [], []
-
-    def make(pairs):
-        port = ScriptedPort([(b"OUT_WD1@30" + END, b"30\r\n")] + pairs)
-        ports.append(port)
-        monkeypatch.setattr(heidolph.serial, "serial_for_url", lambda url, **kw: port)
-        monkeypatch.setattr(heidolph.time, "sleep", lambda s: None)
-        hp = NamurHotplate("scripted", config=FAST, table=IKA_RCT, keep_alive=False)
-        hp.connect()
-        plates.append(hp)
-        return hp
-
-    yield make
-    for hp in plates:
-        atexit.unregister(hp._atexit)
-    for port in ports:
-        assert not port.pairs, f"unconsumed pairs: {port.pairs}"
+    yield from scripted_plates(monkeypatch, [(b"OUT_WD1@30" + END, b"30\r\n")], config=FAST, table=IKA_RCT)
 
 
 READ = [(b"OUT_WD1@30" + END, b"30\r\n"), (b"IN_PV_1" + END, b"69.8 1\r\n"), (b"IN_PV_2" + END, b"73.1 2\r\n"),

@@ -1,12 +1,9 @@
 """Heidolph protocol as (sent, reply) byte pairs; a test fails if pairs remain unconsumed."""
-import atexit
-
 import pytest
 
-from drivers.hotplate import heidolph
-from drivers.hotplate import HEIDOLPH_HEI_TEC, HeidolphHotplate, HotplateConfig, HotplateError
+from drivers.hotplate import HEIDOLPH_HEI_TEC, HotplateConfig, HotplateError
 
-from tests.drivers.scripted_port import ScriptedPort
+from tests.drivers.scripted_port import scripted_plates
 
 FAST = HotplateConfig(timeout_s=0.2, backoff_s=0.1, retries=1)
 STARTUP = [(b"PA_NEW\r\n", b"PA_NEW\n\r"), (b"CC_ON\r\n", b"CC_ON\r\n")]
@@ -15,23 +12,7 @@ STARTUP = [(b"PA_NEW\r\n", b"PA_NEW\n\r"), (b"CC_ON\r\n", b"CC_ON\r\n")]
 @pytest.fixture
 def plate(monkeypatch):
     """Returns a factory: plate(pairs) -> connected driver; checks all pairs were consumed."""
-    ports, plates = [], []
-
-    def make(pairs):
-        port = ScriptedPort(STARTUP + pairs)
-        ports.append(port)
-        monkeypatch.setattr(heidolph.serial, "serial_for_url", lambda url, **kw: port)
-        monkeypatch.setattr(heidolph.time, "sleep", lambda s: None)
-        hp = HeidolphHotplate("scripted", config=FAST, keep_alive=False)
-        hp.connect()
-        plates.append(hp)
-        return hp
-
-    yield make
-    for hp in plates:
-        atexit.unregister(hp._atexit)
-    for port in ports:
-        assert not port.pairs, f"unconsumed pairs: {port.pairs}"
+    yield from scripted_plates(monkeypatch, STARTUP, config=FAST)
 
 
 READ = [(b"IN_PV_1\r\n", b"IN_PV_1 69.8\r\n"), (b"IN_PV_3\r\n", b"IN_PV_3 73.1\r\n"),
