@@ -6,7 +6,6 @@ that file before each capture. gphoto2 is imported only in the driver's worker p
 inherits the environment set here.
 """
 import os
-import shutil
 
 import cv2
 import numpy as np
