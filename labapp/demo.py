@@ -149,18 +149,14 @@ def _plot(curve, release: SampleRelease, snap, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from labapp.release_plot import draw_release
+
     fig, (ax, bath) = plt.subplots(2, 1, figsize=(8, 7), dpi=110, sharex=True,
                                    gridspec_kw={"height_ratios": [3, 1.3]})
-    minutes = curve.t_s / 60.0
+    draw_release(ax, curve)
     truth_t = np.linspace(0.0, curve.t_s[-1], 400)
-    ax.plot(minutes, curve.conc_g_per_kg, ".", ms=2.5, color="0.6", label="per frame")
-    ax.plot(minutes, curve.conc_smooth_g_per_kg, "-", color="C0", lw=2, label="Savitzky-Golay")
     ax.plot(truth_t / 60.0, [release.conc_g_per_kg(t) for t in truth_t], "--", color="C3",
             label=f"truth: forward simulation of '{release.name}'")
-    ax.set_ylabel("concentration (g/kg)")
-    right = ax.secondary_yaxis("right", functions=(lambda c: c * curve.water_g / 1000.0,
-                                                   lambda m: m * 1000.0 / curve.water_g))
-    right.set_ylabel("released (g)")
     ax.legend(loc="lower right")
     ax.set_title("sfr demo: simulated bench, measured vs simulated release")
     t = np.array([f.t_s for f in snap.frames]) / 60.0

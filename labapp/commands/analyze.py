@@ -32,15 +32,11 @@ def _plot(curve, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from labapp.release_plot import draw_release
+
     fig, ax = plt.subplots(figsize=(7, 4), dpi=120)
-    minutes = curve.t_s / 60.0
-    ax.plot(minutes, curve.conc_g_per_kg, ".", ms=3, color="0.6", label="per frame")
-    ax.plot(minutes, curve.conc_smooth_g_per_kg, "-", color="C0", label="Savitzky-Golay")
+    draw_release(ax, curve)
     ax.set_xlabel("time (min)")
-    ax.set_ylabel("concentration (g/kg)")
-    right = ax.secondary_yaxis("right", functions=(lambda c: c * curve.water_g / 1000.0,
-                                                   lambda m: m * 1000.0 / curve.water_g))
-    right.set_ylabel("released (g)")
     ax.legend(loc="lower right")
     ax.set_title("release curve (linearised sRGB, mirror-normalised)")
     fig.tight_layout()
