@@ -19,7 +19,7 @@ import numpy as np
 
 from design._validate import check_density, check_mirror, check_positive
 from design.errors import DesignError  # re-exported: the base exception of design/
-from design.fmm import Marching, eikonal_residual, march, march_adjoint
+from design.fmm import MarchBuffers, Marching, eikonal_residual, march, march_adjoint
 from design.release import ramp_release, ramp_release_vjp
 
 log = logging.getLogger(__name__)
@@ -110,7 +110,7 @@ def total_time(shape: tuple[int, ...], dx_mm: float, mirror: tuple[bool, ...] | 
 
 def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None = None,
              dtau_mm: float | None = None, total_time_mm: float | None = None,
-             check: bool = False) -> Release:
+             check: bool = False, buffers: MarchBuffers | None = None) -> Release:
     """Simulate the release curve of a density field.
 
     Parameters
@@ -127,6 +127,9 @@ def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None =
         Curve length T, mm; default the all-solid domain's largest dissolution time.
     check : bool
         Verify eq. (5) at every voxel (residual <= 1e-12 T, round-off of u); costs one extra pass.
+    buffers : MarchBuffers, optional
+        Fast-marching work arrays to reuse (repeated solves on one grid); the gradient of the
+        previous `Release` simulated with them is then no longer available.
 
     Returns
     -------
@@ -144,7 +147,7 @@ def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None =
         "total_time_mm", total_time_mm)
     steps = DEFAULT_STEPS if dtau_mm is None else max(1, int(round(big_t / check_positive("dtau_mm", dtau_mm))))
     n = slowness(rho)
-    marching = march(n, dx, mirror)
+    marching = march(n, dx, mirror, buffers)
     # one compact copy of u: the curve, its gradient and callers then read 8 bytes per voxel, not a record
     u = np.ascontiguousarray(marching.interior(marching.u_pad))
     if check:

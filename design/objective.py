@@ -20,6 +20,7 @@ import numpy as np
 
 from design.errors import DesignError
 from design.filters import SmoothingFilter, project, project_adjoint, project_inverse
+from design.fmm import MarchBuffers
 from design.forward import Release, release_gradient, simulate
 from design.rate import rate_fit, release_duration
 from design.spaces import DesignSpace
@@ -45,6 +46,7 @@ class Evaluation:
     rho : ndarray of float, reduced grid shape
         The filtered density that was simulated.
     release : Release
+        Its gradient is unavailable once the objective has been evaluated again (shared buffers).
     """
 
     value: float
@@ -104,6 +106,7 @@ class DesignObjective:
         self.rate_lag = lag
         tau = np.linspace(0.0, self.total_time_mm, target.size)
         self.rate_time_scale_mm = release_duration(tau, target)  # t_s of J_rate
+        self._buffers = MarchBuffers(space.grid_shape)  # reused by every evaluation
 
     def density(self, x: np.ndarray) -> np.ndarray:
         """The reduced simulation density ``rho`` of variables ``x`` (eq. 4 filter chain)."""
@@ -128,7 +131,8 @@ class DesignObjective:
         smoothed = self.filter.apply(x)
         rho_var = project(smoothed, self.beta)
         rho = space.to_grid(rho_var)
-        release = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=self.total_time_mm)
+        release = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=self.total_time_mm,
+                           buffers=self._buffers)
         if release.released_mm3.shape != self.target_mm3.shape:
             raise DesignError(f"simulated curve has {release.released_mm3.size} samples, target has "
                               f"{self.target_mm3.size}")

@@ -4,7 +4,8 @@ import pytest
 import skfmm
 from scipy.ndimage import gaussian_filter
 
-from design.fmm import eikonal_residual, march, march_adjoint
+from design.errors import DesignError
+from design.fmm import MarchBuffers, eikonal_residual, march, march_adjoint
 
 
 def _field(shape, seed):
@@ -55,20 +56,45 @@ def test_matches_skfmm_first_order_on_a_void_free_field():
     np.testing.assert_allclose(m.interior(m.u_pad), ref, rtol=1e-12, atol=1e-13)
 
 
-@pytest.mark.parametrize("shape", [(15, 13), (9, 8, 10)])
-def test_adjoint_matches_central_differences(shape):
+@pytest.mark.parametrize("shape, mirror", [((15, 13), (False, False)), ((15, 13), (True, False)),
+                                           ((9, 8, 10), (False, False, False)), ((9, 8, 10), (True, True, False))])
+def test_adjoint_matches_central_differences(shape, mirror):
     n = _field(shape, 7)
     rng = np.random.default_rng(8)
     w = rng.standard_normal(shape)
     d = rng.standard_normal(shape) * n  # relative perturbation, keeps void voxels positive
-    m = march(n, 0.3, (False,) * len(shape))
+    m = march(n, 0.3, mirror)
     grad = march_adjoint(m, w)
 
     def J(x):
-        mm = march(x, 0.3, (False,) * len(shape))
+        mm = march(x, 0.3, mirror)
         return float(np.sum(w * mm.interior(mm.u_pad)))
 
     eps = 1e-6
     fd = (J(n * (1 + eps * d / n)) - J(n * (1 - eps * d / n))) / (2 * eps)
     # central differences of a piecewise-smooth function: O(eps^2) plus round-off ~1e-10/eps
     assert abs(fd - np.sum(grad * d)) <= 1e-6 * abs(fd)
+
+
+def test_reused_buffers_give_identical_solves_and_gradients():
+    shape, mirror = (12, 11, 10), (True, False, True)
+    buffers = MarchBuffers(shape)
+    w = np.random.default_rng(2).standard_normal(shape)
+    for seed in (1, 2):  # the second solve reuses everything the first one wrote
+        n = _field(shape, seed)
+        fresh = march(n, 0.2, mirror)
+        reused = march(n, 0.2, mirror, buffers)
+        assert reused.rec.ctypes.data % 64 == 0, "records must start on a cache line"
+        np.testing.assert_array_equal(reused.interior(reused.u_pad), fresh.interior(fresh.u_pad))
+        np.testing.assert_array_equal(march_adjoint(reused, w), march_adjoint(fresh, w))
+
+
+def test_a_solve_overwritten_by_a_later_one_refuses_its_adjoint():
+    shape = (6, 7, 8)
+    buffers = MarchBuffers(shape)
+    first = march(_field(shape, 1), 0.2, (False,) * 3, buffers)
+    march(_field(shape, 2), 0.2, (False,) * 3, buffers)
+    with pytest.raises(DesignError, match="overwritten"):
+        march_adjoint(first, np.ones(shape))
+    with pytest.raises(DesignError, match=r"grid shape \(6, 7, 8\)"):
+        march(np.ones((6, 7, 9)), 0.2, (False,) * 3, buffers)
