@@ -197,6 +197,8 @@ def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> str:
         if run.stop_reason is None:
             log.info("nlopt stopped (%s: %s) after %d evaluations", type(exc).__name__, exc, run.k)
             return "stalled"
+    finally:
+        run.opt = None  # nlopt's L-BFGS memory (m N doubles) goes with it
     if run.error is not None:
         raise run.error
     if run.stop_reason is not None:

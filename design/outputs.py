@@ -78,8 +78,10 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     """
     space, target = problem.space, problem.target
     rho = objective.density(best_x)
-    density_release = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
-                               dtau_mm=target.total_time_mm / (target.tau_mm.size - 1))
+    dtau_mm = target.total_time_mm / (target.tau_mm.size - 1)
+    # only the curves are kept: a Release holds its solve's work arrays (~300 MB at 128^3)
+    density_curve = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
+                             dtau_mm=dtau_mm).released_mm3
     rho_full = space.unfold(rho)
     warnings: list[str] = []
     if np.any(rho_full >= 0.5):
@@ -92,9 +94,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         solid = np.zeros(problem.full_shape, dtype=bool)
         warnings.append("no density reaches 1/2 yet: no solid extracted (design.stl not written)")
     half = tuple(slice(n // 2 if m else 0, None) for n, m in zip(solid.shape, space.mirror))
-    binary_release = simulate(solid[half].astype(float), space.dx_mm, mirror=space.mirror,
-                              total_time_mm=target.total_time_mm,
-                              dtau_mm=target.total_time_mm / (target.tau_mm.size - 1))
+    binary_curve = simulate(solid[half].astype(float), space.dx_mm, mirror=space.mirror,
+                            total_time_mm=target.total_time_mm, dtau_mm=dtau_mm).released_mm3
     pieces = count_pieces(solid)
     if pieces > 1:
         warnings.append(f"the solid has {pieces} separate pieces")
@@ -102,20 +103,20 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     warnings += list(facts.warnings)
     np.savez_compressed(out_dir / "density.npz", rho_hat=best_x, rho=rho, rho_full=rho_full, solid=solid,
                         dx_mm=space.dx_mm, origin_mm=problem.origin_mm, mirror=np.array(space.mirror))
-    curves = np.column_stack([target.tau_mm, target.released_mm3, density_release.released_mm3,
-                              binary_release.released_mm3])
+    curves = np.column_stack([target.tau_mm, target.released_mm3, density_curve,
+                              binary_curve])
     _write_text(out_dir / "curves.csv", _csv(("tau_mm", "target_mm3", "density_mm3", "binary_mm3"), curves))
     _write_text(out_dir / "history.csv", _csv(HISTORY_COLUMNS, np.array(history, dtype=float).reshape(-1, 7)))
     _write_text(out_dir / "design.ini", prusa_profile(out_dir.name))
-    achieved = (("density", density_release.released_mm3), ("binary", binary_release.released_mm3))
+    achieved = (("density", density_curve), ("binary", binary_curve))
     iterations = len(history)
     seconds = float(history[-1][-1]) if history else 0.0
     summary = {
         "status": status,
         "target": target.source,
         "space": space.name,
-        "rel_rmse_density": rel_rmse(density_release.released_mm3, target.released_mm3),
-        "rel_rmse_binary": rel_rmse(binary_release.released_mm3, target.released_mm3),
+        "rel_rmse_density": rel_rmse(density_curve, target.released_mm3),
+        "rel_rmse_binary": rel_rmse(binary_curve, target.released_mm3),
         "rate_dev_mid80": {name: _rate_dev(target, curve, False) for name, curve in achieved},
         "rate_dev_mid80_vs_target": {name: _rate_dev(target, curve, True) for name, curve in achieved},
         "iterations": iterations,
@@ -139,8 +140,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     }
     for w in warnings:
         log.warning("%s", w)
-    save_report(out_dir / "report.png", target.tau_mm, target.released_mm3, density_release.released_mm3,
-                binary_release.released_mm3, rho_full, solid,
+    save_report(out_dir / "report.png", target.tau_mm, target.released_mm3, density_curve,
+                binary_curve, rho_full, solid,
                 f"{target.source} | {space.name} | rel. RMSE density {summary['rel_rmse_density']:.2%}, "
                 f"binary {summary['rel_rmse_binary']:.2%} | {iterations} it.")
     path = out_dir / "summary.json"
