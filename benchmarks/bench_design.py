@@ -2,7 +2,8 @@
 
 For each reduced grid N^3 (nfc, octant symmetry: the full design is (2N)^3) this runs `sfr design`'s
 engine (`design.optimize.run_design`) on a zero-order target for a fixed number of evaluations and
-reads seconds per evaluation from its history (optimisation only: setup and output writing excluded),
+reads seconds per evaluation from its history (optimisation with its default checkpoints; setup and
+output writing excluded),
 over the steady state only: the evaluations after nlopt's L-BFGS memory has filled (its step costs
 grow with the number of stored pairs, up to `lbfgs_memory`). The split between our objective and
 gradient and nlopt's own work is timed around `DesignObjective.evaluate`. The baseline is
@@ -68,7 +69,7 @@ class _EvaluationTimer:
 def bench(n_reduced: int, evaluations: int, steady_from: int) -> dict:
     """One grid size: seconds per evaluation from evaluation `steady_from` on, skfmm seconds, their ratio."""
     config = DesignConfig(target="zero-order:final=0.15,duration=0.2", space="nfc", resolution=2 * n_reduced,
-                          domain_mm=(20.0, 20.0, 20.0), max_iter=evaluations, checkpoint_every=10 ** 6)
+                          domain_mm=(20.0, 20.0, 20.0), max_iter=evaluations)  # default checkpoints included
     problem = prepare(config)
     objective = DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
                                 radius_vox=config.radius_vox, beta=config.beta, w_binary=config.w_binary)
