@@ -66,7 +66,8 @@ class Marching:
 
     @property
     def u_pad(self) -> np.ndarray:
-        """(P,) dissolution times on the flattened padded grid, mm (a view)."""
+        """(P,) dissolution times on the flattened padded grid, mm (a view; see `check_current`)."""
+        self.check_current()
         return self.rec[:, 0]
 
     def interior(self, flat: np.ndarray) -> np.ndarray:

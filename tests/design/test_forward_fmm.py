@@ -96,5 +96,7 @@ def test_a_solve_overwritten_by_a_later_one_refuses_its_adjoint():
     march(_field(shape, 2), 0.2, (False,) * 3, buffers)
     with pytest.raises(DesignError, match="overwritten"):
         march_adjoint(first, np.ones(shape))
+    with pytest.raises(DesignError, match="overwritten"):
+        _ = first.u_pad
     with pytest.raises(DesignError, match=r"grid shape \(6, 7, 8\)"):
         march(np.ones((6, 7, 9)), 0.2, (False,) * 3, buffers)
