@@ -130,12 +130,14 @@ class SmoothingFilter:
         return _pad_adjoint(self._valid_adjoint(g / self._weights), self._half, self.mirror)
 
 
-def project(rho_tilde: np.ndarray, beta: float) -> np.ndarray:
-    """Threshold projection of Wang et al. (2011) at eta = 1/2 (eq. 4).
+def project(rho_tilde: np.ndarray, beta: float, eta: float = 0.5) -> np.ndarray:
+    """Threshold projection of Wang et al. (2011) (eq. 4 at eta = 1/2).
 
     The paper prints ``(tanh(b/2) - tanh(b(x - 1/2))) / (2 tanh(b/2))``, which maps 0 to 1;
     the sign in front of the second tanh is a typo, we use the increasing map of Wang et al.:
-    ``(tanh(b/2) + tanh(b(x - 1/2))) / (2 tanh(b/2))``, so 0 -> 0, 1/2 -> 1/2, 1 -> 1.
+    ``(tanh(b eta) + tanh(b (x - eta))) / (tanh(b eta) + tanh(b (1 - eta)))``, so 0 -> 0,
+    eta -> about 1/2, 1 -> 1. Thresholds other than 1/2 give the eroded (eta > 1/2) and dilated
+    (eta < 1/2) designs of the robust formulation (`design.objective`).
 
     Parameters
     ----------
@@ -143,16 +145,18 @@ def project(rho_tilde: np.ndarray, beta: float) -> np.ndarray:
         Smoothed density in [0, 1].
     beta : float
         Steepness, > 0.
+    eta : float
+        Threshold in (0, 1).
     """
-    t = np.tanh(beta / 2.0)
+    a, b = np.tanh(beta * eta), np.tanh(beta * (1.0 - eta))
     # the clip only removes round-off (project(0) = -6e-17), the map itself stays in [0, 1]
-    return np.clip((t + np.tanh(beta * (rho_tilde - 0.5))) / (2.0 * t), 0.0, 1.0)
+    return np.clip((a + np.tanh(beta * (rho_tilde - eta))) / (a + b), 0.0, 1.0)
 
 
-def project_adjoint(rho_tilde: np.ndarray, beta: float, g: np.ndarray) -> np.ndarray:
+def project_adjoint(rho_tilde: np.ndarray, beta: float, g: np.ndarray, eta: float = 0.5) -> np.ndarray:
     """Vector-Jacobian product of `project`: ``g * d project / d rho_tilde``."""
-    th = np.tanh(beta * (rho_tilde - 0.5))
-    return g * beta * (1.0 - th * th) / (2.0 * np.tanh(beta / 2.0))
+    th = np.tanh(beta * (rho_tilde - eta))
+    return g * beta * (1.0 - th * th) / (np.tanh(beta * eta) + np.tanh(beta * (1.0 - eta)))
 
 
 def project_inverse(rho: float, beta: float) -> float:

@@ -2,6 +2,12 @@
 
 ``J = J_fit + w_b J_binary + w_f J_fab + w_r J_rate`` with ``rho = project(smooth(rho_hat, r), beta)``;
 J_rate (`design.rate.rate_fit`) is an optional rate-fit term beyond the paper (w_r = 0 gives eq. 4).
+
+Robust formulation (optional, beyond the paper; Wang, Lazarov and Sigmund 2011): with
+``robust_eta = d > 0``, J_fit and J_rate are the means over three designs projected at thresholds
+1/2 - d (dilated), 1/2 and 1/2 + d (eroded); J_binary and J_fab stay on the nominal one. A design
+whose release relies on thin grey layers (which the rho = 1/2 contour deletes or fills) then pays
+for it, because those layers vanish in the eroded design. It costs three simulations per evaluation.
 The chain is: variables -> smoothing filter -> projection -> design-space map (replication for
 extruded designs) -> fast-marching release (eqs. 5-7) -> J; the gradient runs the chain backwards
 with the exact adjoint of every stage.
@@ -77,17 +83,21 @@ class DesignObjective:
     rate_lag : int or None
         Finite-difference lag of J_rate in tau samples; None = one voxel edge (``dx / dtau``),
         the shortest span over which a voxel release is free of layer ripple.
+    robust_eta : float
+        Threshold offset d of the robust formulation (module doc), in [0, 0.4]; 0 = off.
     """
 
     def __init__(self, space: DesignSpace, target_mm3: np.ndarray, total_time_mm: float, *,
                  radius_vox: float, beta: float, w_binary: float, w_fab: float = 0.0, w_rate: float = 0.0,
-                 rate_lag: int | None = None) -> None:
+                 rate_lag: int | None = None, robust_eta: float = 0.0) -> None:
         target = np.asarray(target_mm3, dtype=float)
         if target.ndim != 1 or target.size < 3 or not target[-1] > 0:
             raise DesignError(f"target must be a 1D curve with >= 3 samples and a positive end, got {target.shape}")
         if not beta > 0 or w_binary < 0 or w_fab < 0 or w_rate < 0:
             raise DesignError(f"need beta > 0, w_binary >= 0, w_fab >= 0, w_rate >= 0; got {beta}, {w_binary}, "
                               f"{w_fab}, {w_rate}")
+        if not 0.0 <= robust_eta <= 0.4:
+            raise DesignError(f"robust_eta must be in [0, 0.4], got {robust_eta}")
         if w_fab > 0 and space.fab_term is None:
             raise DesignError(f"w_fab = {w_fab} but design space {space.name!r} has no fabrication term")
         self.space = space
@@ -106,7 +116,8 @@ class DesignObjective:
         self.rate_lag = lag
         tau = np.linspace(0.0, self.total_time_mm, target.size)
         self.rate_time_scale_mm = release_duration(tau, target)  # t_s of J_rate
-        self._buffers = MarchBuffers(space.grid_shape)  # reused by every evaluation
+        self.thresholds = (0.5,) if robust_eta == 0 else (0.5 - robust_eta, 0.5, 0.5 + robust_eta)
+        self._buffers = [MarchBuffers(space.grid_shape) for _ in self.thresholds]  # reused by every evaluation
 
     def density(self, x: np.ndarray) -> np.ndarray:
         """The reduced simulation density ``rho`` of variables ``x`` (eq. 4 filter chain)."""
@@ -129,10 +140,35 @@ class DesignObjective:
         """J and dJ/dx at variables ``x`` (variable shape, values in [0, 1])."""
         space = self.space
         smoothed = self.filter.apply(x)
-        rho_var = project(smoothed, self.beta)
-        rho = space.to_grid(rho_var)
-        release = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=self.total_time_mm,
-                           buffers=self._buffers)
+        share = 1.0 / len(self.thresholds)
+        j_fit = j_rate = j_bin = j_fab = 0.0
+        grad_var = np.zeros(space.var_shape)
+        for eta, buffers in zip(self.thresholds, self._buffers):
+            rho = space.to_grid(project(smoothed, self.beta, eta))
+            release = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=self.total_time_mm,
+                               buffers=buffers)
+            fit, rate, d_curve = self._curve_terms(release)
+            j_fit += share * fit
+            j_rate += share * rate
+            grad_rho = release_gradient(release, share * d_curve)
+            if eta == 0.5:  # the nominal design: binary and fabrication terms, and what is reported
+                nominal_rho, nominal_release = rho, release
+                # J_binary = sum_i rho_i (1 - rho_i) dx^3 over the full object (section 3.4)
+                cell = (space.dx_mm * self.scale) ** 3 * space.multiplicity
+                j_bin = float(np.sum(rho * (1.0 - rho)) * cell)
+                grad_rho += self.w_binary * (1.0 - 2.0 * rho) * cell
+                if self.w_fab > 0:
+                    j_fab, g_fab = space.fab_term(rho)
+                    grad_rho += self.w_fab * g_fab
+            grad_var += project_adjoint(smoothed, self.beta, space.to_grid_adjoint(grad_rho), eta)
+        grad = self.filter.adjoint(grad_var)
+        value = j_fit + self.w_binary * j_bin + self.w_fab * j_fab + self.w_rate * j_rate
+        terms = {"J": value, "J_fit": j_fit, "J_binary": j_bin, "J_fab": float(j_fab), "J_rate": j_rate,
+                 "grad_norm": float(np.linalg.norm(grad))}
+        return Evaluation(value, terms, grad, nominal_rho, nominal_release)
+
+    def _curve_terms(self, release: Release) -> tuple[float, float, np.ndarray]:
+        """J_fit, J_rate (unweighted, rescaled units) of one simulated curve and d(J_fit + w_r J_rate)/dC."""
         if release.released_mm3.shape != self.target_mm3.shape:
             raise DesignError(f"simulated curve has {release.released_mm3.size} samples, target has "
                               f"{self.target_mm3.size}")
@@ -140,25 +176,13 @@ class DesignObjective:
         # J_fit, eq. (4) with the rectangle rule of section 3.4: (1/T) sum_k (C_k - C*_k)^2 dtau
         resid = (release.released_mm3 - self.target_mm3) * s3
         j_fit = float(np.sum(resid ** 2) * self.dtau_mm / self.total_time_mm)
-        d_fit_dc = 2.0 * resid * s3 * self.dtau_mm / self.total_time_mm
+        d_curve = 2.0 * resid * s3 * self.dtau_mm / self.total_time_mm
         j_rate = 0.0
         if self.w_rate > 0:  # J_rate in the rescaled units: C -> s^3 C, tau -> s tau
             j_rate, g_rate = rate_fit(release.released_mm3 * s3, self.target_mm3 * s3, self.dtau_mm * self.scale,
                                       self.rate_lag, self.rate_time_scale_mm * self.scale)
-            d_fit_dc = d_fit_dc + self.w_rate * g_rate * s3
-        # J_binary = sum_i rho_i (1 - rho_i) dx^3 over the full object (section 3.4)
-        cell = (space.dx_mm * self.scale) ** 3 * space.multiplicity
-        j_bin = float(np.sum(rho * (1.0 - rho)) * cell)
-        grad_rho = release_gradient(release, d_fit_dc) + self.w_binary * (1.0 - 2.0 * rho) * cell
-        j_fab = 0.0
-        if self.w_fab > 0:
-            j_fab, g_fab = space.fab_term(rho)
-            grad_rho = grad_rho + self.w_fab * g_fab
-        grad = self.filter.adjoint(project_adjoint(smoothed, self.beta, space.to_grid_adjoint(grad_rho)))
-        value = j_fit + self.w_binary * j_bin + self.w_fab * j_fab + self.w_rate * j_rate
-        terms = {"J": value, "J_fit": j_fit, "J_binary": j_bin, "J_fab": float(j_fab), "J_rate": j_rate,
-                 "grad_norm": float(np.linalg.norm(grad))}
-        return Evaluation(value, terms, grad, rho, release)
+            d_curve = d_curve + self.w_rate * g_rate * s3
+        return j_fit, j_rate, d_curve
 
 
 def rel_rmse(curve_mm3: np.ndarray, target_mm3: np.ndarray) -> float:

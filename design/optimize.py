@@ -291,7 +291,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         raise DesignError(problem.feasibility.text())
     objective = DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
                                 radius_vox=config.radius_vox, beta=config.beta, w_binary=config.w_binary,
-                                w_fab=config.w_fab, w_rate=config.w_rate,
+                                w_fab=config.w_fab, w_rate=config.w_rate, robust_eta=config.robust_eta,
                                 rate_lag=max(1, round(config.rate_window_vox * problem.space.dx_mm * (config.samples - 1)
                                                       / problem.target.total_time_mm)))
     history: list[list[float]] = []

@@ -68,6 +68,10 @@ class DesignConfig:
     w_rate : float or None
         Weight of the rate-fit term J_rate (`design.rate`); None = `ANALYTIC_W_RATE` for analytic
         targets, 0 (eq. 4 as in the paper) otherwise.
+    robust_eta : float
+        Threshold offset of the robust formulation (`design.objective`): J_fit and J_rate averaged
+        over designs projected at 1/2 - d, 1/2, 1/2 + d; 0 = off (as in the paper). Three
+        simulations per evaluation.
     max_iter : int
         Maximum objective evaluations (paper: 500).
     ftol_rel, xtol_rel : float
@@ -104,6 +108,7 @@ class DesignConfig:
     beta_final: float | None = None
     rate_window_vox: float = 1.0
     w_rate: float | None = None
+    robust_eta: float = 0.0
     max_iter: int = 500
     ftol_rel: float = 0.0
     xtol_rel: float = 0.0
@@ -127,6 +132,8 @@ class DesignConfig:
         if self.w_rate < 0 or not 0 < self.rate_window_vox <= 64:
             raise DesignError(f"w_rate must be >= 0 and rate_window_vox in (0, 64]; got {self.w_rate}, "
                               f"{self.rate_window_vox}")
+        if not 0.0 <= self.robust_eta <= 0.4:
+            raise DesignError(f"robust_eta must be in [0, 0.4], got {self.robust_eta}")
         if self.resolution < 8 or self.resolution % 2:
             raise DesignError(f"resolution must be an even number >= 8 voxels, got {self.resolution}")
         if self.domain_mm is not None and (len(self.domain_mm) != 3 or min(self.domain_mm) <= 0):

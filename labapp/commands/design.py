@@ -28,6 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="finite-difference span of the rate-fit term's rates, voxels (default 1)")
     parser.add_argument("--w-rate", type=float,
                         help="weight of the rate-fit term J_rate (default 1 for analytic targets, else 0)")
+    parser.add_argument("--robust-eta", type=float, default=0.0, metavar="D",
+                        help="robust formulation: fit the designs projected at 1/2 - D, 1/2, 1/2 + D "
+                             "(0 = off; 3 simulations per evaluation)")
     parser.add_argument("--height", type=float, metavar="MM",
                         help="extrusion height, mm (default: the source's height, else the domain's)")
     parser.add_argument("--max-iter", type=int, default=500, help="maximum objective evaluations (default 500)")
@@ -81,7 +84,9 @@ def run(args: argparse.Namespace) -> int:
             config = DesignConfig(target=args.target, space=args.space, resolution=args.resolution,
                                   domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
                                   height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
-                                  beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate, rate_window_vox=args.rate_window, max_iter=args.max_iter, bounds=args.bounds,
+                                  beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate,
+                                  rate_window_vox=args.rate_window, robust_eta=args.robust_eta,
+                                  max_iter=args.max_iter, bounds=args.bounds,
                                   warn_channel_mm=args.warn_channel_mm, allow_infeasible=args.allow_infeasible,
                                   formats=tuple(args.formats))
         max_iter = config.max_iter if config else _stored_max_iter(args.out)

@@ -64,6 +64,19 @@ def test_projection_maps_unit_interval_onto_itself_and_has_exact_derivative():
     assert project(np.array(project_inverse(0.27, beta)), beta) == pytest.approx(0.27, abs=1e-12)
 
 
+@pytest.mark.parametrize("eta", [0.4, 0.6])
+def test_eroded_and_dilated_projections_keep_the_ends_and_move_the_threshold(eta):
+    beta = 8.0
+    assert np.allclose(project(np.array([0.0, 1.0]), beta, eta), [0.0, 1.0], atol=1e-15)
+    x = np.linspace(0.05, 0.95, 7)
+    h = 1e-6
+    fd = (project(x + h, beta, eta) - project(x - h, beta, eta)) / (2 * h)
+    assert np.allclose(project_adjoint(x, beta, np.ones_like(x), eta), fd, atol=1e-8)
+    # a higher threshold removes material (eroded), a lower one adds it (dilated)
+    mid = np.array([0.5])
+    assert (project(mid, beta, eta) < 0.5) == (eta > 0.5)
+
+
 def test_smoothing_guards():
     with pytest.raises(DesignError, match="radius"):
         SmoothingFilter((8, 8, 8), 0.5, (False,) * 3)

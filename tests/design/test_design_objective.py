@@ -5,12 +5,13 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
+from design.filters import project
 from design.forward import simulate, total_time
 from design.objective import DesignObjective, rel_rmse
 from design.spaces import SpaceRequest, build_space
 
 
-def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0):
+def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0, robust_eta=0.0):
     space = build_space(name, request)
     if fab is not None:
         space = replace(space, fab_term=fab)
@@ -18,7 +19,7 @@ def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0):
     target = simulate(np.full(space.grid_shape, 0.4), space.dx_mm, mirror=space.mirror,
                       total_time_mm=big_t).released_mm3
     return DesignObjective(space, target, big_t, radius_vox=2.0, beta=3.0, w_binary=20.0, w_fab=w_fab,
-                           w_rate=w_rate)
+                           w_rate=w_rate, robust_eta=robust_eta)
 
 
 class _QuadraticFab:
@@ -30,15 +31,17 @@ class _QuadraticFab:
         return float(np.sum(rho ** 2)), 2.0 * rho
 
 
-@pytest.mark.parametrize("name, request_, fab, w_rate", [
-    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 0.0),
-    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 0.0),
-    ("nfc", SpaceRequest((10, 10, 10), 0.5), _QuadraticFab(), 0.0),
-    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 3.0),
-    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 3.0),
+@pytest.mark.parametrize("name, request_, fab, w_rate, robust_eta", [
+    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 0.0, 0.0),
+    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 0.0, 0.0),
+    ("nfc", SpaceRequest((10, 10, 10), 0.5), _QuadraticFab(), 0.0, 0.0),
+    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 3.0, 0.0),
+    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 3.0, 0.0),
+    ("nfc", SpaceRequest((12, 12, 12), 0.5), _QuadraticFab(), 3.0, 0.1),
 ])
-def test_full_objective_gradient_matches_central_differences(name, request_, fab, w_rate):
-    objective = _objective(name, request_, w_fab=1.5 if fab else 0.0, fab=fab, w_rate=w_rate)
+def test_full_objective_gradient_matches_central_differences(name, request_, fab, w_rate, robust_eta):
+    objective = _objective(name, request_, w_fab=1.5 if fab else 0.0, fab=fab, w_rate=w_rate,
+                           robust_eta=robust_eta)
     rng = np.random.default_rng(4)
     x = rng.uniform(0.2, 0.8, objective.space.var_shape)
     ev = objective.evaluate(x)
@@ -78,3 +81,24 @@ def test_objective_guards():
         DesignObjective(space, target, 4.0, radius_vox=2.0, beta=0.0, w_binary=1.0)
     with pytest.raises(DesignError, match="positive end"):
         DesignObjective(space, np.zeros(11), 4.0, radius_vox=2.0, beta=3.0, w_binary=1.0)
+    with pytest.raises(DesignError, match="robust_eta"):
+        DesignObjective(space, target, 4.0, radius_vox=2.0, beta=3.0, w_binary=1.0, robust_eta=0.45)
+
+
+def test_robust_objective_averages_the_three_thresholds():
+    request = SpaceRequest((10, 10, 10), 0.5)
+    robust = _objective("nfc", request, robust_eta=0.1)
+    x = np.random.default_rng(5).uniform(0.2, 0.8, robust.space.var_shape)
+    ev = robust.evaluate(x)
+    space, smoothed = robust.space, robust.filter.apply(x)
+    fits = []
+    for eta in (0.4, 0.5, 0.6):  # J_fit of each projected design, eq. (4) in the rescaled units
+        curve = simulate(project(smoothed, robust.beta, eta), space.dx_mm, mirror=space.mirror,
+                         total_time_mm=robust.total_time_mm).released_mm3
+        resid = (curve - robust.target_mm3) * robust.scale ** 3
+        fits.append(np.sum(resid ** 2) * robust.dtau_mm / robust.total_time_mm)
+    assert ev.terms["J_fit"] == pytest.approx(np.mean(fits), rel=1e-12)
+    # the reported density and binary term are the nominal design's
+    nominal = _objective("nfc", request).evaluate(x)
+    np.testing.assert_array_equal(ev.rho, nominal.rho)
+    assert ev.terms["J_binary"] == nominal.terms["J_binary"]

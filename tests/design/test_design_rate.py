@@ -75,6 +75,9 @@ def test_rate_weight_defaults_by_target_kind():
     assert DesignConfig(target="sphere", w_rate=2.0).w_rate == 2.0
     with pytest.raises(DesignError, match="w_rate must be >= 0"):
         DesignConfig(target="sphere", w_rate=-1.0)
+    assert DesignConfig(target="sphere").robust_eta == 0.0  # the paper's single design by default
+    with pytest.raises(DesignError, match=r"robust_eta must be in \[0, 0.4\]"):
+        DesignConfig(target="sphere", robust_eta=0.5)
 
 
 def test_rate_weight_guard():
