@@ -85,11 +85,15 @@ class DesignObjective:
         the shortest span over which a voxel release is free of layer ripple.
     robust_eta : float
         Threshold offset d of the robust formulation (module doc), in [0, 0.4]; 0 = off.
+    rate_span : (float, float)
+        J_rate counts the rates between the times the target reaches these fractions of its final
+        release (both ends of each lag inside); (0, 1) = the whole curve.
     """
 
     def __init__(self, space: DesignSpace, target_mm3: np.ndarray, total_time_mm: float, *,
                  radius_vox: float, beta: float, w_binary: float, w_fab: float = 0.0, w_rate: float = 0.0,
-                 rate_lag: int | None = None, robust_eta: float = 0.0) -> None:
+                 rate_lag: int | None = None, robust_eta: float = 0.0,
+                 rate_span: tuple[float, float] = (0.0, 1.0)) -> None:
         target = np.asarray(target_mm3, dtype=float)
         if target.ndim != 1 or target.size < 3 or not target[-1] > 0:
             raise DesignError(f"target must be a 1D curve with >= 3 samples and a positive end, got {target.shape}")
@@ -98,6 +102,8 @@ class DesignObjective:
                               f"{w_fab}, {w_rate}")
         if not 0.0 <= robust_eta <= 0.4:
             raise DesignError(f"robust_eta must be in [0, 0.4], got {robust_eta}")
+        if not 0.0 <= rate_span[0] < rate_span[1] <= 1.0:
+            raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {rate_span}")
         if w_fab > 0 and space.fab_term is None:
             raise DesignError(f"w_fab = {w_fab} but design space {space.name!r} has no fabrication term")
         self.space = space
@@ -114,6 +120,10 @@ class DesignObjective:
         if not 1 <= lag < target.size:
             raise DesignError(f"rate lag must be in [1, {target.size - 1}] samples, got {lag}")
         self.rate_lag = lag
+        # rates r_k = (C_{k+L} - C_k) / (L dtau) with tau_k at or after the lo point, tau_{k+L} at or before hi
+        first = int(np.argmax(target >= rate_span[0] * target[-1]))
+        last = target.size - 1 if rate_span[1] >= 1.0 else int(np.argmax(target >= rate_span[1] * target[-1]))
+        self.rate_samples = (first, max(first + 1, last - lag + 1))
         tau = np.linspace(0.0, self.total_time_mm, target.size)
         self.rate_time_scale_mm = release_duration(tau, target)  # t_s of J_rate
         self.thresholds = (0.5,) if robust_eta == 0 else (0.5 - robust_eta, 0.5, 0.5 + robust_eta)
@@ -180,7 +190,7 @@ class DesignObjective:
         j_rate = 0.0
         if self.w_rate > 0:  # J_rate in the rescaled units: C -> s^3 C, tau -> s tau
             j_rate, g_rate = rate_fit(release.released_mm3 * s3, self.target_mm3 * s3, self.dtau_mm * self.scale,
-                                      self.rate_lag, self.rate_time_scale_mm * self.scale)
+                                      self.rate_lag, self.rate_time_scale_mm * self.scale, self.rate_samples)
             d_curve = d_curve + self.w_rate * g_rate * s3
         return j_fit, j_rate, d_curve
 

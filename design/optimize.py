@@ -85,6 +85,7 @@ def _load_config(out_dir: Path) -> DesignConfig:
         raise DesignError(f"cannot resume: no readable config.json in {out_dir}: {exc}") from exc
     names = {f.name for f in fields(DesignConfig)}
     data = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names}
+    data.setdefault("rate_span", (0.0, 1.0))  # runs stored before the option compared the whole curve
     return DesignConfig(**data)
 
 
@@ -292,6 +293,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     objective = DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
                                 radius_vox=config.radius_vox, beta=config.beta, w_binary=config.w_binary,
                                 w_fab=config.w_fab, w_rate=config.w_rate, robust_eta=config.robust_eta,
+                                rate_span=tuple(config.rate_span),
                                 rate_lag=max(1, round(config.rate_window_vox * problem.space.dx_mm * (config.samples - 1)
                                                       / problem.target.total_time_mm)))
     history: list[list[float]] = []

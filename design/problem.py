@@ -68,6 +68,9 @@ class DesignConfig:
     w_rate : float or None
         Weight of the rate-fit term J_rate (`design.rate`); None = `ANALYTIC_W_RATE` for analytic
         targets, 0 (eq. 4 as in the paper) otherwise.
+    rate_span : (float, float)
+        J_rate compares rates only between the times the target reaches these fractions of its
+        final release (`design.rate`); (0, 1) = the whole curve, as in session 1.
     robust_eta : float
         Threshold offset of the robust formulation (`design.objective`): J_fit and J_rate averaged
         over designs projected at 1/2 - d, 1/2, 1/2 + d; 0 = off (as in the paper). Three
@@ -108,6 +111,7 @@ class DesignConfig:
     beta_final: float | None = None
     rate_window_vox: float = 1.0
     w_rate: float | None = None
+    rate_span: tuple[float, float] = (0.05, 0.95)
     robust_eta: float = 0.0
     max_iter: int = 500
     ftol_rel: float = 0.0
@@ -132,6 +136,8 @@ class DesignConfig:
         if self.w_rate < 0 or not 0 < self.rate_window_vox <= 64:
             raise DesignError(f"w_rate must be >= 0 and rate_window_vox in (0, 64]; got {self.w_rate}, "
                               f"{self.rate_window_vox}")
+        if len(self.rate_span) != 2 or not 0.0 <= self.rate_span[0] < self.rate_span[1] <= 1.0:
+            raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {self.rate_span}")
         if not 0.0 <= self.robust_eta <= 0.4:
             raise DesignError(f"robust_eta must be in [0, 0.4], got {self.robust_eta}")
         if self.resolution < 8 or self.resolution % 2:

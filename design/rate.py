@@ -8,7 +8,10 @@ optional term that compares finite-difference rates of the simulated and target 
 
 with a lag of L samples and a time scale t_s (the target's release duration), so that a relative
 rate error e held over the release weighs like a relative cumulative error e in J_fit. It is linear
-in C, so its adjoint is the transposed difference operator applied to the weighted residual.
+in C, so its adjoint is the transposed difference operator applied to the weighted residual. The sum
+may be restricted to a span of k (`DesignObjective` uses the target's 5%-95% by default): where a
+target's rate jumps, at its start and end, no solid can follow within a voxel's ramp, and matching
+the jump there pulled the design's rate off within the release (session 2, docs/results.md).
 
 `rate_deviation` is the metric the issue's zero-order requirement is judged by (see
 docs/results.md): the largest relative deviation from the mean rate over the middle 80% of the
@@ -55,7 +58,7 @@ def lag_rate_adjoint(g_rate: np.ndarray, lag: int, dtau_mm: float) -> np.ndarray
 
 
 def rate_fit(curve_mm3: np.ndarray, target_mm3: np.ndarray, dtau_mm: float, lag: int,
-             time_scale_mm: float) -> tuple[float, np.ndarray]:
+             time_scale_mm: float, span: tuple[int, int] | None = None) -> tuple[float, np.ndarray]:
     """J_rate (module docstring) of a curve against a target on the same tau grid, and dJ_rate/dC.
 
     Parameters
@@ -67,6 +70,8 @@ def rate_fit(curve_mm3: np.ndarray, target_mm3: np.ndarray, dtau_mm: float, lag:
         Finite-difference lag L in samples, 1 <= L < K.
     time_scale_mm : float
         t_s, mm.
+    span : (int, int), optional
+        Only rates r_k with ``span[0] <= k < span[1]`` count; default all.
 
     Returns
     -------
@@ -76,6 +81,9 @@ def rate_fit(curve_mm3: np.ndarray, target_mm3: np.ndarray, dtau_mm: float, lag:
     k_count = curve_mm3.size
     total = dtau_mm * (k_count - 1)
     err = time_scale_mm * (lag_rate(curve_mm3, lag, dtau_mm) - lag_rate(target_mm3, lag, dtau_mm))
+    if span is not None:
+        err[:span[0]] = 0.0
+        err[span[1]:] = 0.0
     value = float(np.sum(err ** 2) * dtau_mm / total)
     grad = lag_rate_adjoint(2.0 * err * time_scale_mm * dtau_mm / total, lag, dtau_mm)
     return value, grad

@@ -11,7 +11,7 @@ from design.objective import DesignObjective, rel_rmse
 from design.spaces import SpaceRequest, build_space
 
 
-def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0, robust_eta=0.0):
+def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0, robust_eta=0.0, rate_span=(0.0, 1.0)):
     space = build_space(name, request)
     if fab is not None:
         space = replace(space, fab_term=fab)
@@ -19,7 +19,7 @@ def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0, robust_eta=0.0):
     target = simulate(np.full(space.grid_shape, 0.4), space.dx_mm, mirror=space.mirror,
                       total_time_mm=big_t).released_mm3
     return DesignObjective(space, target, big_t, radius_vox=2.0, beta=3.0, w_binary=20.0, w_fab=w_fab,
-                           w_rate=w_rate, robust_eta=robust_eta)
+                           w_rate=w_rate, robust_eta=robust_eta, rate_span=rate_span)
 
 
 class _QuadraticFab:
@@ -40,8 +40,9 @@ class _QuadraticFab:
     ("nfc", SpaceRequest((12, 12, 12), 0.5), _QuadraticFab(), 3.0, 0.1),
 ])
 def test_full_objective_gradient_matches_central_differences(name, request_, fab, w_rate, robust_eta):
+    # the robust case also restricts J_rate to the target's 5%-95%
     objective = _objective(name, request_, w_fab=1.5 if fab else 0.0, fab=fab, w_rate=w_rate,
-                           robust_eta=robust_eta)
+                           robust_eta=robust_eta, rate_span=(0.05, 0.95) if robust_eta else (0.0, 1.0))
     rng = np.random.default_rng(4)
     x = rng.uniform(0.2, 0.8, objective.space.var_shape)
     ev = objective.evaluate(x)
