@@ -52,8 +52,7 @@ class Evaluation:
     rho : ndarray of float, reduced grid shape
         The filtered density that was simulated.
     release : Release
-        Its gradient is unavailable once the objective has been evaluated again, or `printed_value`
-        called (shared buffers).
+        Its gradient is unavailable once the objective has been evaluated again (shared buffers).
     """
 
     value: float
@@ -177,18 +176,6 @@ class DesignObjective:
         terms = {"J": value, "J_fit": j_fit, "J_binary": j_bin, "J_fab": float(j_fab), "J_rate": j_rate,
                  "grad_norm": float(np.linalg.norm(grad))}
         return Evaluation(value, terms, grad, nominal_rho, nominal_release)
-
-    def printed_value(self, rho: np.ndarray) -> float:
-        """J_fit + w_r J_rate (rescaled units) of the solid ``rho >= 1/2``: the printed design, voxel for voxel.
-
-        The outputs' solid (the rho = 1/2 contour, re-voxelised) equalled this threshold in every run
-        checked (docs/results.md); the check costs one simulation without gradient.
-        """
-        solid = (np.asarray(rho) >= 0.5).astype(float)
-        release = simulate(solid, self.space.dx_mm, mirror=self.space.mirror, total_time_mm=self.total_time_mm,
-                           buffers=self._buffers[0])
-        fit, rate, _ = self._curve_terms(release)
-        return fit + self.w_rate * rate
 
     def _curve_terms(self, release: Release) -> tuple[float, float, np.ndarray]:
         """J_fit, J_rate (unweighted, rescaled units) of one simulated curve and d(J_fit + w_r J_rate)/dC."""

@@ -85,9 +85,7 @@ def _load_config(out_dir: Path) -> DesignConfig:
         raise DesignError(f"cannot resume: no readable config.json in {out_dir}: {exc}") from exc
     names = {f.name for f in fields(DesignConfig)}
     data = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names}
-    # runs stored before these options compared the whole curve and output the best density
-    data.setdefault("rate_span", (0.0, 1.0))
-    data.setdefault("printed_checks", 0)
+    data.setdefault("rate_span", (0.0, 1.0))  # runs stored before the option compared the whole curve
     return DesignConfig(**data)
 
 
@@ -115,10 +113,6 @@ class _Run:
         self.session_start = start
         self.cosine = config.bounds == "cosine"
         self.stage_end = config.max_iter
-        self.printed_from: int | None = None  # evaluation after which the printed solid is checked
-        self.best_printed_x: np.ndarray | None = None
-        self.best_printed_value = np.inf
-        self.best_printed_k = 0
 
     def to_x(self, z: np.ndarray) -> np.ndarray:
         """Design variables rho_hat from nlopt's variables."""
@@ -164,11 +158,6 @@ class _Run:
         if ev.value < self.best_value or self.best_x is None:
             self.best_value = ev.value
             self.best_x = x.copy()
-        if self.printed_from is not None and self.k > self.printed_from and (
-                self.k - self.printed_from) % self.config.printed_checks == 0:
-            value = self.objective.printed_value(ev.rho)
-            if value < self.best_printed_value:
-                self.best_printed_value, self.best_printed_x, self.best_printed_k = value, x.copy(), self.k
         elapsed = time.perf_counter() - self.t0
         t = ev.terms
         self.history.append([self.k, t["J"], t["J_fit"], t["J_binary"], t["J_fab"], t["grad_norm"], elapsed])
@@ -181,15 +170,12 @@ class _Run:
         return ev.value
 
     def checkpoint(self) -> None:
-        """Save current and best variables (density and printed solid) with the history, atomically."""
+        """Save current and best variables with the history, atomically."""
         if self.last_x is None:
             return
-        printed = {} if self.best_printed_x is None else {
-            "best_printed_x": self.best_printed_x, "best_printed_value": self.best_printed_value,
-            "best_printed_k": self.best_printed_k}
         _atomic_save_npz(self.out_dir / "checkpoint.npz", x=self.last_x, best_x=self.best_x,
                          best_value=self.best_value, history=np.array(self.history, dtype=float).reshape(
-                             -1, len(HISTORY_COLUMNS)), **printed)
+                             -1, len(HISTORY_COLUMNS)))
 
 
 def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> str:
@@ -312,15 +298,10 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
                                                       / problem.target.total_time_mm)))
     history: list[list[float]] = []
     ckpt = out_dir / "checkpoint.npz"
-    printed: dict = {}
     if resume and ckpt.exists():
         with np.load(ckpt) as data:
             x0 = data["x"].reshape(problem.space.var_shape)
             best_x, history = data["best_x"], [list(r) for r in data["history"]]
-            if "best_printed_x" in data:
-                printed = {"best_printed_x": data["best_printed_x"].copy(),
-                           "best_printed_value": float(data["best_printed_value"]),
-                           "best_printed_k": int(data["best_printed_k"])}
         log.info("resuming %s at evaluation %d", out_dir, len(history))
     else:
         x0 = objective.uniform_start()
@@ -328,13 +309,8 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     run = _Run(objective, out_dir, config, len(history), history, on_iteration, should_stop)
     if best_x is not None:
         run.best_x = best_x.ravel().copy()
-    for name, value in printed.items():
-        setattr(run, name, value)
-    stages = beta_stages(config)
-    if len(stages) > 1 and config.printed_checks > 0:
-        run.printed_from = stages[-2][1]
     status, start = "max_iter", x0.ravel().copy()
-    for beta, stage_end in stages:
+    for beta, stage_end in beta_stages(config):
         if run.k >= stage_end:
             continue
         if beta != objective.beta:  # beta continuation: J changes, so the best so far is re-judged
@@ -346,13 +322,8 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         if status not in ("stalled", "converged", "max_iter"):
             break
     run.checkpoint()
-    if run.best_printed_x is not None:
-        best, chosen_by = run.best_printed_x, f"printed solid, evaluation {run.best_printed_k}"
-        log.info("output: the iterate whose printed solid fits best (evaluation %d)", run.best_printed_k)
-    else:
-        best, chosen_by = (run.best_x if run.best_x is not None else x0.ravel()), "objective"
-    outputs = write_outputs(out_dir, problem, objective, best.reshape(problem.space.var_shape), history, config,
-                            status=status, session_seconds=time.perf_counter() - run.session_t0,
-                            chosen_by=chosen_by)
+    best = (run.best_x if run.best_x is not None else x0.ravel()).reshape(problem.space.var_shape)
+    outputs = write_outputs(out_dir, problem, objective, best, history, config, status=status,
+                            session_seconds=time.perf_counter() - run.session_t0)
     log.info("design %s after %d evaluations: %s", status, run.k, outputs.summary_path)
     return DesignResult(out_dir, status, run.k, float(run.best_value), outputs)

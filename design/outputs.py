@@ -60,8 +60,7 @@ def _rate_dev(target, curve_mm3: np.ndarray, vs_target: bool) -> float | None:
 
 
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
-                  history: list[list[float]], config, *, status: str, session_seconds: float,
-                  chosen_by: str = "objective") -> DesignOutputs:
+                  history: list[list[float]], config, *, status: str, session_seconds: float) -> DesignOutputs:
     """Extract, re-simulate, assess and write every output of a design run.
 
     Parameters
@@ -76,8 +75,6 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     status : str
     session_seconds : float
         Wall time of this session (resumes add up through the history's seconds column).
-    chosen_by : str
-        How ``best_x`` was picked: "objective" (lowest J) or the printed-solid check.
     """
     space, target = problem.space, problem.target
     rho = objective.density(best_x)
@@ -116,7 +113,6 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     seconds = float(history[-1][-1]) if history else 0.0
     summary = {
         "status": status,
-        "chosen_by": chosen_by,
         "target": target.source,
         "space": space.name,
         "rel_rmse_density": rel_rmse(density_curve, target.released_mm3),

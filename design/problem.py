@@ -71,10 +71,6 @@ class DesignConfig:
     rate_span : (float, float)
         J_rate compares rates only between the times the target reaches these fractions of its
         final release (`design.rate`); (0, 1) = the whole curve, as in session 1.
-    printed_checks : int
-        With beta continuation, every this many evaluations of the last stage the thresholded
-        solid (rho >= 1/2, what gets printed) is simulated, and the run's output is the iterate whose
-        solid fits best (J_fit + w_r J_rate), not the best density; 0 = off.
     robust_eta : float
         Threshold offset of the robust formulation (`design.objective`): J_fit and J_rate averaged
         over designs projected at 1/2 - d, 1/2, 1/2 + d; 0 = off (as in the paper). Three
@@ -117,7 +113,6 @@ class DesignConfig:
     w_rate: float | None = None
     rate_span: tuple[float, float] = (0.05, 0.95)
     robust_eta: float = 0.0
-    printed_checks: int = 5
     max_iter: int = 500
     ftol_rel: float = 0.0
     xtol_rel: float = 0.0
@@ -143,8 +138,6 @@ class DesignConfig:
                               f"{self.rate_window_vox}")
         if len(self.rate_span) != 2 or not 0.0 <= self.rate_span[0] < self.rate_span[1] <= 1.0:
             raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {self.rate_span}")
-        if self.printed_checks < 0:
-            raise DesignError(f"printed_checks must be >= 0 (0 = off), got {self.printed_checks}")
         if not 0.0 <= self.robust_eta <= 0.4:
             raise DesignError(f"robust_eta must be in [0, 0.4], got {self.robust_eta}")
         if self.resolution < 8 or self.resolution % 2:

@@ -31,9 +31,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate-span", type=float, nargs=2, default=(0.05, 0.95), metavar=("LO", "HI"),
                         help="J_rate compares rates between the times the target reaches these fractions of "
                              "its release (default 0.05 0.95; 0 1 = whole curve)")
-    parser.add_argument("--printed-checks", type=int, default=5, metavar="N",
-                        help="with --beta-final: every N evaluations of the last stage, simulate the "
-                             "thresholded solid and output the iterate whose solid fits best (0 = off)")
     parser.add_argument("--robust-eta", type=float, default=0.0, metavar="D",
                         help="robust formulation: fit the designs projected at 1/2 - D, 1/2, 1/2 + D "
                              "(0 = off; 3 simulations per evaluation)")
@@ -92,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
                                   height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
                                   beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate,
                                   rate_window_vox=args.rate_window, rate_span=tuple(args.rate_span),
-                                  robust_eta=args.robust_eta, printed_checks=args.printed_checks,
+                                  robust_eta=args.robust_eta,
                                   max_iter=args.max_iter, bounds=args.bounds,
                                   warn_channel_mm=args.warn_channel_mm, allow_infeasible=args.allow_infeasible,
                                   formats=tuple(args.formats))

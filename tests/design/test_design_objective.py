@@ -8,7 +8,6 @@ from design.errors import DesignError
 from design.filters import project
 from design.forward import simulate, total_time
 from design.objective import DesignObjective, rel_rmse
-from design.rate import rate_fit
 from design.spaces import SpaceRequest, build_space
 
 
@@ -104,16 +103,3 @@ def test_robust_objective_averages_the_three_thresholds():
     nominal = _objective("nfc", request).evaluate(x)
     np.testing.assert_array_equal(ev.rho, nominal.rho)
     assert ev.terms["J_binary"] == nominal.terms["J_binary"]
-
-
-def test_printed_value_is_the_fit_of_the_thresholded_solid():
-    objective = _objective("nfc", SpaceRequest((10, 10, 10), 0.5), w_rate=2.0)
-    rho = objective.density(np.random.default_rng(6).uniform(0.2, 0.8, objective.space.var_shape))
-    space = objective.space
-    curve = simulate((rho >= 0.5).astype(float), space.dx_mm, mirror=space.mirror,
-                     total_time_mm=objective.total_time_mm).released_mm3
-    s3 = objective.scale ** 3
-    fit = np.sum(((curve - objective.target_mm3) * s3) ** 2) * objective.dtau_mm / objective.total_time_mm
-    rate, _ = rate_fit(curve * s3, objective.target_mm3 * s3, objective.dtau_mm * objective.scale,
-                       objective.rate_lag, objective.rate_time_scale_mm * objective.scale, objective.rate_samples)
-    assert objective.printed_value(rho) == pytest.approx(fit + 2.0 * rate, rel=1e-12)

@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.objective import DesignObjective
 from design.optimize import run_design
 from design.problem import DesignConfig, prepare
 
@@ -69,31 +68,3 @@ def test_configuration_guards(tmp_path):
         run_design(None, tmp_path / "nothing", resume=True)
     with pytest.raises(DesignError, match="infeasible"):
         run_design(DesignConfig(target="zero-order:final=0.5,duration=1.0", resolution=16), tmp_path / "bad")
-
-
-def test_last_stage_outputs_the_iterate_whose_printed_solid_fits_best(tmp_path):
-    # beta 3 -> 24 in four stages of 6 evaluations; the last stage checks the solid every 2
-    config = DesignConfig(max_iter=24, beta_final=24.0, printed_checks=2, **SMALL)
-    seen = []
-    run_design(config, tmp_path / "run", should_stop=lambda: len(seen) >= 21,
-               on_iteration=lambda k, x, terms: seen.append((k, x.copy())))
-    with np.load(tmp_path / "run" / "checkpoint.npz") as ckpt:
-        assert int(ckpt["best_printed_k"]) == 20  # the only check before the stop at 21 (then 22, 24)
-    result = run_design(None, tmp_path / "run", resume=True,
-                        on_iteration=lambda k, x, terms: seen.append((k, x.copy())))
-    assert result.iterations == 24
-    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    problem = prepare(config)
-    objective = DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
-                                radius_vox=2.0, beta=24.0, w_binary=20.0)
-    values = {k: objective.printed_value(objective.density(x.reshape(problem.space.var_shape)))
-              for k, x in seen if k in (20, 22, 24)}
-    best_k = min(values, key=values.get)
-    assert summary["chosen_by"] == f"printed solid, evaluation {best_k}", (summary["chosen_by"], values)
-    with np.load(tmp_path / "run" / "density.npz") as out:
-        np.testing.assert_array_equal(out["rho_hat"].ravel(), dict(seen)[best_k])
-
-
-def test_runs_without_continuation_output_the_best_objective(tmp_path):
-    run_design(DesignConfig(max_iter=6, **SMALL), tmp_path / "run")
-    assert json.loads((tmp_path / "run" / "summary.json").read_text())["chosen_by"] == "objective"
