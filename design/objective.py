@@ -3,14 +3,15 @@
 ``J = J_fit + w_b J_binary + w_f J_fab + w_r J_rate`` with ``rho = project(smooth(rho_hat, r), beta)``;
 J_rate (`design.rate.rate_fit`) is an optional rate-fit term beyond the paper (w_r = 0 gives eq. 4).
 
+The chain is: variables -> smoothing filter -> projection -> design-space map (replication for
+extruded designs) -> fast-marching release (eqs. 5-7) -> J; the gradient runs the chain backwards
+with the exact adjoint of every stage.
+
 Robust formulation (optional, beyond the paper; Wang, Lazarov and Sigmund 2011): with
 ``robust_eta = d > 0``, J_fit and J_rate are the means over three designs projected at thresholds
 1/2 - d (dilated), 1/2 and 1/2 + d (eroded); J_binary and J_fab stay on the nominal one. A design
 whose release relies on thin grey layers (which the rho = 1/2 contour deletes or fills) then pays
 for it, because those layers vanish in the eroded design. It costs three simulations per evaluation.
-The chain is: variables -> smoothing filter -> projection -> design-space map (replication for
-extruded designs) -> fast-marching release (eqs. 5-7) -> J; the gradient runs the chain backwards
-with the exact adjoint of every stage.
 
 Units. The terms are evaluated after rescaling lengths so that the target's final release equals
 ``REFERENCE_MASS_MM3`` (1326 mm^3: the paper's ~1.75 g prints at 1.32 g/cm^3, sections 4.1, 5.1).
