@@ -7,11 +7,14 @@ The chain is: variables -> smoothing filter -> projection -> design-space map (r
 extruded designs) -> fast-marching release (eqs. 5-7) -> J; the gradient runs the chain backwards
 with the exact adjoint of every stage.
 
-Robust formulation (optional, beyond the paper; Wang, Lazarov and Sigmund 2011): with
-``robust_eta = d > 0``, J_fit and J_rate are the means over three designs projected at thresholds
-1/2 - d (dilated), 1/2 and 1/2 + d (eroded); J_binary and J_fab stay on the nominal one. A design
-whose release relies on thin grey layers (which the rho = 1/2 contour deletes or fills) then pays
-for it, because those layers vanish in the eroded design. It costs three simulations per evaluation.
+Robust formulation (optional, beyond the paper; after Wang, Lazarov and Sigmund 2011): with
+``robust_eta = d > 0`` the designs projected at thresholds 1/2 - d (dilated) and 1/2 + d (eroded)
+are simulated too, and J_rate becomes the mean of the nominal design's J_rate and the two others'
+J_shape (`design.rate.rate_shape_fit`: the target's rate profile at their own level, since they
+hold less and more material than the target). J_fit, J_binary and J_fab stay on the nominal design.
+A design whose release relies on thin grey layers (which the rho = 1/2 contour deletes or fills)
+then pays for it, because those layers vanish in the eroded design. Three simulations per evaluation;
+needs w_r > 0.
 
 Units. The terms are evaluated after rescaling lengths so that the target's final release equals
 ``REFERENCE_MASS_MM3`` (1326 mm^3: the paper's ~1.75 g prints at 1.32 g/cm^3, sections 4.1, 5.1).
@@ -29,7 +32,7 @@ from design.errors import DesignError
 from design.filters import SmoothingFilter, project, project_adjoint, project_inverse
 from design.fmm import MarchBuffers
 from design.forward import Release, release_gradient, simulate
-from design.rate import rate_fit, release_duration
+from design.rate import rate_fit, rate_shape_fit, release_duration
 from design.spaces import DesignSpace
 
 log = logging.getLogger(__name__)
@@ -103,6 +106,8 @@ class DesignObjective:
                               f"{w_fab}, {w_rate}")
         if not 0.0 <= robust_eta <= 0.4:
             raise DesignError(f"robust_eta must be in [0, 0.4], got {robust_eta}")
+        if robust_eta > 0 and not w_rate > 0:
+            raise DesignError("the robust formulation compares release rates: it needs w_rate > 0")
         if not 0.0 <= rate_span[0] < rate_span[1] <= 1.0:
             raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {rate_span}")
         if w_fab > 0 and space.fab_term is None:
@@ -151,26 +156,30 @@ class DesignObjective:
         """J and dJ/dx at variables ``x`` (variable shape, values in [0, 1])."""
         space = self.space
         smoothed = self.filter.apply(x)
-        share = 1.0 / len(self.thresholds)
-        j_fit = j_rate = j_bin = j_fab = 0.0
+        share = 1.0 / len(self.thresholds)  # J_rate is the mean over the simulated designs
+        j_rate = j_bin = j_fab = 0.0
         grad_var = np.zeros(space.var_shape)
         for eta, buffers in zip(self.thresholds, self._buffers):
             rho = space.to_grid(project(smoothed, self.beta, eta))
             release = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=self.total_time_mm,
                                buffers=buffers)
-            fit, rate, d_curve = self._curve_terms(release)
-            j_fit += share * fit
+            if eta != 0.5:  # an eroded or dilated design of the robust formulation
+                rate, d_curve = self._shape_terms(release, share)
+                j_rate += share * rate
+                grad_var += project_adjoint(smoothed, self.beta, space.to_grid_adjoint(
+                    release_gradient(release, d_curve)), eta)
+                continue
+            j_fit, rate, d_curve = self._curve_terms(release, share)
             j_rate += share * rate
-            grad_rho = release_gradient(release, share * d_curve)
-            if eta == 0.5:  # the nominal design: binary and fabrication terms, and what is reported
-                nominal_rho, nominal_release = rho, release
-                # J_binary = sum_i rho_i (1 - rho_i) dx^3 over the full object (section 3.4)
-                cell = (space.dx_mm * self.scale) ** 3 * space.multiplicity
-                j_bin = float(np.sum(rho * (1.0 - rho)) * cell)
-                grad_rho += self.w_binary * (1.0 - 2.0 * rho) * cell
-                if self.w_fab > 0:
-                    j_fab, g_fab = space.fab_term(rho)
-                    grad_rho += self.w_fab * g_fab
+            grad_rho = release_gradient(release, d_curve)
+            nominal_rho, nominal_release = rho, release
+            # J_binary = sum_i rho_i (1 - rho_i) dx^3 over the full object (section 3.4)
+            cell = (space.dx_mm * self.scale) ** 3 * space.multiplicity
+            j_bin = float(np.sum(rho * (1.0 - rho)) * cell)
+            grad_rho += self.w_binary * (1.0 - 2.0 * rho) * cell
+            if self.w_fab > 0:
+                j_fab, g_fab = space.fab_term(rho)
+                grad_rho += self.w_fab * g_fab
             grad_var += project_adjoint(smoothed, self.beta, space.to_grid_adjoint(grad_rho), eta)
         grad = self.filter.adjoint(grad_var)
         value = j_fit + self.w_binary * j_bin + self.w_fab * j_fab + self.w_rate * j_rate
@@ -178,8 +187,8 @@ class DesignObjective:
                  "grad_norm": float(np.linalg.norm(grad))}
         return Evaluation(value, terms, grad, nominal_rho, nominal_release)
 
-    def _curve_terms(self, release: Release) -> tuple[float, float, np.ndarray]:
-        """J_fit, J_rate (unweighted, rescaled units) of one simulated curve and d(J_fit + w_r J_rate)/dC."""
+    def _curve_terms(self, release: Release, rate_share: float) -> tuple[float, float, np.ndarray]:
+        """J_fit, J_rate (unweighted, rescaled units) of one curve, and d(J_fit + w_r rate_share J_rate)/dC."""
         if release.released_mm3.shape != self.target_mm3.shape:
             raise DesignError(f"simulated curve has {release.released_mm3.size} samples, target has "
                               f"{self.target_mm3.size}")
@@ -192,8 +201,15 @@ class DesignObjective:
         if self.w_rate > 0:  # J_rate in the rescaled units: C -> s^3 C, tau -> s tau
             j_rate, g_rate = rate_fit(release.released_mm3 * s3, self.target_mm3 * s3, self.dtau_mm * self.scale,
                                       self.rate_lag, self.rate_time_scale_mm * self.scale, self.rate_samples)
-            d_curve = d_curve + self.w_rate * g_rate * s3
+            d_curve = d_curve + self.w_rate * rate_share * g_rate * s3
         return j_fit, j_rate, d_curve
+
+    def _shape_terms(self, release: Release, rate_share: float) -> tuple[float, np.ndarray]:
+        """J_shape (unweighted, rescaled units) of one curve, and d(w_r rate_share J_shape)/dC."""
+        s3 = self.scale ** 3
+        j_shape, g_shape = rate_shape_fit(release.released_mm3 * s3, self.target_mm3 * s3, self.dtau_mm * self.scale,
+                                          self.rate_lag, self.rate_time_scale_mm * self.scale, self.rate_samples)
+        return j_shape, self.w_rate * rate_share * g_shape * s3
 
 
 def rel_rmse(curve_mm3: np.ndarray, target_mm3: np.ndarray) -> float:

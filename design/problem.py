@@ -72,9 +72,9 @@ class DesignConfig:
         J_rate compares rates only between the times the target reaches these fractions of its
         final release (`design.rate`); (0, 1) = the whole curve, as in session 1.
     robust_eta : float
-        Threshold offset of the robust formulation (`design.objective`): J_fit and J_rate averaged
-        over designs projected at 1/2 - d, 1/2, 1/2 + d; 0 = off (as in the paper). Three
-        simulations per evaluation.
+        Threshold offset d of the robust formulation (`design.objective`): the designs projected at
+        1/2 - d and 1/2 + d must release with the target's rate profile too; 0 = off (as in the
+        paper). Three simulations per evaluation; needs w_rate > 0.
     max_iter : int
         Maximum objective evaluations (paper: 500).
     ftol_rel, xtol_rel : float
@@ -140,6 +140,8 @@ class DesignConfig:
             raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {self.rate_span}")
         if not 0.0 <= self.robust_eta <= 0.4:
             raise DesignError(f"robust_eta must be in [0, 0.4], got {self.robust_eta}")
+        if self.robust_eta > 0 and not self.w_rate > 0:
+            raise DesignError("the robust formulation compares release rates: it needs w_rate > 0")
         if self.resolution < 8 or self.resolution % 2:
             raise DesignError(f"resolution must be an even number >= 8 voxels, got {self.resolution}")
         if self.domain_mm is not None and (len(self.domain_mm) != 3 or min(self.domain_mm) <= 0):

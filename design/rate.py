@@ -89,6 +89,32 @@ def rate_fit(curve_mm3: np.ndarray, target_mm3: np.ndarray, dtau_mm: float, lag:
     return value, grad
 
 
+def rate_shape_fit(curve_mm3: np.ndarray, target_mm3: np.ndarray, dtau_mm: float, lag: int,
+                   time_scale_mm: float, span: tuple[int, int]) -> tuple[float, np.ndarray]:
+    """J_shape: like `rate_fit`, but against the target's rates scaled to the curve's own mean level.
+
+    ``J_shape = (1/T) sum_{k in span} (t_s (r_k - (rbar / rbar*) r*_k))^2 dtau`` with rbar, rbar* the
+    means of r, r* over the span: the rate profile must match the target's, whatever total it
+    releases. The robust formulation (`design.objective`) asks this of its eroded and dilated designs,
+    which hold less and more material than the target. Returns the value and dJ_shape/dC.
+    """
+    k_count = curve_mm3.size
+    total = dtau_mm * (k_count - 1)
+    a, b = span
+    r = lag_rate(curve_mm3, lag, dtau_mm)[a:b]
+    r_star = lag_rate(target_mm3, lag, dtau_mm)[a:b]
+    n, mean_star = r.size, r_star.mean()
+    if not mean_star > 0:
+        raise DesignError("the target releases nothing over the rate span; J_shape is undefined")
+    err = time_scale_mm * (r - r.mean() / mean_star * r_star)
+    value = float(np.sum(err ** 2) * dtau_mm / total)
+    # d err_k / d r_j = t_s (delta_kj - r*_k / (n rbar*))
+    g_r = 2.0 * time_scale_mm * dtau_mm / total * (err - np.dot(err, r_star) / (n * mean_star))
+    g_full = np.zeros(k_count - lag)
+    g_full[a:b] = g_r
+    return value, lag_rate_adjoint(g_full, lag, dtau_mm)
+
+
 def rate_deviation(tau_mm: np.ndarray, curve_mm3: np.ndarray, *, window_from: np.ndarray | None = None,
                    reference_rate: float | None = None) -> float:
     """Largest relative deviation of a release rate from constant over the middle 80% of the release.

@@ -8,6 +8,7 @@ from design.errors import DesignError
 from design.filters import project
 from design.forward import simulate, total_time
 from design.objective import DesignObjective, rel_rmse
+from design.rate import rate_fit, rate_shape_fit
 from design.spaces import SpaceRequest, build_space
 
 
@@ -86,20 +87,27 @@ def test_objective_guards():
         DesignObjective(space, target, 4.0, radius_vox=2.0, beta=3.0, w_binary=1.0, robust_eta=0.45)
 
 
-def test_robust_objective_averages_the_three_thresholds():
+def test_robust_objective_adds_the_rate_shape_of_the_eroded_and_dilated_designs():
     request = SpaceRequest((10, 10, 10), 0.5)
-    robust = _objective("nfc", request, robust_eta=0.1)
+    robust = _objective("nfc", request, w_rate=2.0, robust_eta=0.1, rate_span=(0.05, 0.95))
     x = np.random.default_rng(5).uniform(0.2, 0.8, robust.space.var_shape)
     ev = robust.evaluate(x)
-    space, smoothed = robust.space, robust.filter.apply(x)
-    fits = []
-    for eta in (0.4, 0.5, 0.6):  # J_fit of each projected design, eq. (4) in the rescaled units
+    space, smoothed, s3 = robust.space, robust.filter.apply(x), robust.scale ** 3
+    args = (robust.dtau_mm * robust.scale, robust.rate_lag, robust.rate_time_scale_mm * robust.scale,
+            robust.rate_samples)
+    rates = []
+    for eta in (0.4, 0.5, 0.6):
         curve = simulate(project(smoothed, robust.beta, eta), space.dx_mm, mirror=space.mirror,
                          total_time_mm=robust.total_time_mm).released_mm3
-        resid = (curve - robust.target_mm3) * robust.scale ** 3
-        fits.append(np.sum(resid ** 2) * robust.dtau_mm / robust.total_time_mm)
-    assert ev.terms["J_fit"] == pytest.approx(np.mean(fits), rel=1e-12)
-    # the reported density and binary term are the nominal design's
-    nominal = _objective("nfc", request).evaluate(x)
+        measure = rate_fit if eta == 0.5 else rate_shape_fit
+        rates.append(measure(curve * s3, robust.target_mm3 * s3, *args)[0])
+    assert ev.terms["J_rate"] == pytest.approx(np.mean(rates), rel=1e-12)
+    # J_fit, J_binary and the reported density are the nominal design's
+    nominal = _objective("nfc", request, w_rate=2.0, rate_span=(0.05, 0.95)).evaluate(x)
     np.testing.assert_array_equal(ev.rho, nominal.rho)
+    assert ev.terms["J_fit"] == nominal.terms["J_fit"]
     assert ev.terms["J_binary"] == nominal.terms["J_binary"]
+    with pytest.raises(DesignError, match="needs w_rate > 0"):
+        _objective("nfc", request, robust_eta=0.1)
+
+

@@ -6,7 +6,8 @@ from design.errors import DesignError
 from design.objective import DesignObjective
 from design.optimize import run_design
 from design.problem import ANALYTIC_W_RATE, DesignConfig
-from design.rate import lag_rate, lag_rate_adjoint, rate_deviation, rate_fit, release_duration
+from design.rate import (lag_rate, lag_rate_adjoint, rate_deviation, rate_fit, rate_shape_fit,
+                         release_duration)
 from design.spaces import SpaceRequest, build_space
 
 
@@ -46,6 +47,24 @@ def test_rate_fit_span_counts_only_the_rates_inside_it():
         e = np.zeros(21)
         e[k] = 1e-6
         fd = (rate_fit(c + e, target, 0.1, 3, 0.7, (5, 12))[0] - rate_fit(c - e, target, 0.1, 3, 0.7, (5, 12))[0]) / 2e-6
+        assert grad[k] == pytest.approx(fd, rel=1e-6, abs=1e-9)
+
+
+def test_rate_shape_fit_ignores_the_level_and_has_an_exact_gradient():
+    tau = np.linspace(0.0, 2.0, 41)
+    target = np.minimum(tau, 1.5) ** 1.5
+    # the same profile at 80% of the level costs nothing; J_fit and J_rate would see it
+    value, _ = rate_shape_fit(0.8 * target, target, 0.05, 2, 0.5, (3, 30))
+    assert value == pytest.approx(0.0, abs=1e-20)
+    rng = np.random.default_rng(3)
+    c = target + 0.1 * rng.normal(size=41)
+    value, grad = rate_shape_fit(c, target, 0.05, 2, 0.5, (3, 30))
+    assert value > 0 and np.all(grad[:3] == 0.0) and np.all(grad[32:] == 0.0)
+    for k in (3, 10, 31):
+        e = np.zeros(41)
+        e[k] = 1e-6
+        fd = (rate_shape_fit(c + e, target, 0.05, 2, 0.5, (3, 30))[0]
+              - rate_shape_fit(c - e, target, 0.05, 2, 0.5, (3, 30))[0]) / 2e-6
         assert grad[k] == pytest.approx(fd, rel=1e-6, abs=1e-9)
 
 
@@ -99,6 +118,8 @@ def test_rate_weight_defaults_by_target_kind():
         DesignConfig(target="sphere", rate_span=(0.9, 0.1))
     with pytest.raises(DesignError, match=r"robust_eta must be in \[0, 0.4\]"):
         DesignConfig(target="sphere", robust_eta=0.5)
+    with pytest.raises(DesignError, match="needs w_rate > 0"):
+        DesignConfig(target="sphere", robust_eta=0.05)
 
 
 def test_rate_weight_guard():
