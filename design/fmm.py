@@ -85,7 +85,7 @@ class MarchBuffers:
     """Work arrays of `march` for one grid shape, reused by every solve that is given them.
 
     A `Marching` made with buffers stays valid until the next solve with the same buffers; after
-    that its adjoint raises `DesignError`. Not thread-safe: one owner at a time.
+    that its adjoint and its u raise `DesignError`. Not thread-safe: one owner at a time.
 
     Parameters
     ----------
