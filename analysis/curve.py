@@ -7,6 +7,7 @@ distort it; on uniform samples it equals ``scipy.signal.savgol_filter(..., mode=
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 
@@ -32,8 +33,8 @@ def _check_series(t_s: np.ndarray, conc: np.ndarray) -> tuple[np.ndarray, np.nda
 
 
 def smooth_curve(t_s: np.ndarray, conc: np.ndarray, *, window_s: float = DEFAULT_WINDOW_S,
-                 order: int = DEFAULT_ORDER) -> np.ndarray:
-    """Savitzky-Golay smoothing of a curve sampled at times ``t_s``.
+                 order: int = DEFAULT_ORDER, deriv: int = 0) -> np.ndarray:
+    """Savitzky-Golay smoothing of a curve sampled at times ``t_s`` (or its time derivative).
 
     Parameters
     ----------
@@ -46,11 +47,14 @@ def smooth_curve(t_s: np.ndarray, conc: np.ndarray, *, window_s: float = DEFAULT
         is shifted to stay inside the data.
     order : int
         Polynomial order (default 2), below the number of samples in a window.
+    deriv : int
+        0 for the smoothed values, 1 for the slope of the local fits (unit of ``conc`` per s), up to ``order``.
 
     Returns
     -------
     (N,) ndarray of float
-        The smoothed curve; a copy of ``conc`` when there are too few samples for one fit.
+        The smoothed curve (or its derivative); with too few samples for one fit, a copy of ``conc``
+        (derivative: ``numpy.gradient`` of it).
 
     Raises
     ------
@@ -62,9 +66,11 @@ def smooth_curve(t_s: np.ndarray, conc: np.ndarray, *, window_s: float = DEFAULT
         raise AnalysisError(f"window_s={window_s!r} s must be positive")
     if not 0 <= order <= 6:
         raise AnalysisError(f"order={order!r} is outside 0..6")
+    if not 0 <= deriv <= order:
+        raise AnalysisError(f"deriv={deriv!r} is outside 0..order={order}")
     finite = np.isfinite(c)
     if finite.sum() <= order:
-        return c.copy()
+        return c.copy() if deriv == 0 or c.size < 2 else np.gradient(c, t)
     tf, cf = t[finite], c[finite]
     out = np.empty_like(c)
     half = 0.5 * window_s
@@ -79,7 +85,7 @@ def smooth_curve(t_s: np.ndarray, conc: np.ndarray, *, window_s: float = DEFAULT
         x = (tf[sel] - ti) / scale
         vander = np.vander(x, order + 1, increasing=True)
         coef, *_ = np.linalg.lstsq(vander, cf[sel], rcond=None)
-        out[i] = coef[0]
+        out[i] = coef[deriv] * math.factorial(deriv) / scale ** deriv
     return out
 
 

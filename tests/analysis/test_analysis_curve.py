@@ -46,3 +46,12 @@ def test_guards():
         steady_state(np.arange(3.0), np.zeros(4))
     with pytest.raises(AnalysisError, match="order"):
         smooth_curve(np.arange(3.0), np.zeros(3), order=9)
+
+
+def test_smooth_curve_slope_matches_the_analytic_derivative_on_irregular_times():
+    t = np.sort(np.random.default_rng(0).uniform(0.0, 3000.0, 300))
+    slope = smooth_curve(t, 1.0 - np.exp(-t / 1000.0), deriv=1)
+    # a quadratic over a 330 s window: the error is of order the third derivative, (165 s)^2 / 1000^3 x e^0
+    np.testing.assert_allclose(slope * 1000.0, np.exp(-t / 1000.0), atol=0.02)
+    with pytest.raises(AnalysisError, match="deriv=3"):
+        smooth_curve(t, t, deriv=3)
