@@ -1,0 +1,175 @@
+"""Checking an ``--out`` before any work starts: never over an input, a record or another command's folder.
+
+Two calls, both made before the first byte is computed or written:
+
+``check_out(path, writes, inputs=(), file=False)``
+    for a command's output folder (``writes`` names the kind it writes, e.g. ``"simulation"``) or, with
+    ``file=True``, for a single output file.
+``check_data_dir(path)``
+    for a data directory in which a new run folder will be created (``sfr run --out``, ``sfr lab --data``).
+
+Both raise :class:`OutPathError` (a :class:`labapp.errors.UsageError`, exit code 2) with a message that says
+what the path is and what to do instead. The rules:
+
+- an output file must not exist yet (it is never overwritten) and must not lie inside a record;
+- an output folder must be new, empty, or a folder of the same kind written earlier by the same command
+  (whose outputs it then replaces; ``replace=False`` refuses that too, e.g. a design run, which resumes);
+- nothing is written into a record (a run or calibration-series folder: it would appear there as an
+  unlisted file), except the ``analysis`` subfolder ``sfr analyze`` keeps beside a run;
+- an output never lies inside, nor contains, an input folder and is never an input file.
+
+A folder's kind is recognised by the files a command writes (:data:`KINDS`); a command with a new kind of
+output adds one line there.
+"""
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterable
+from pathlib import Path
+
+from labapp.errors import UsageError
+
+log = logging.getLogger(__name__)
+
+__all__ = ["KINDS", "OutPathError", "check_data_dir", "check_out", "folder_kind"]
+
+#: kind -> (what it is for the operator, marker files: the folder is of this kind if it holds all of one
+#: group). Run-folder kinds (``run``, ``calibration-series``) come from ``run.json``'s ``kind``.
+KINDS: dict[str, tuple[str, tuple[tuple[str, ...], ...]]] = {
+    "design": ("a design run folder (sfr design)", (("config.json", "feasibility.txt"), ("config.json", "checkpoint.npz"))),
+    "simulation": ("a simulation folder (sfr simulate)", (("release.csv",),)),
+    "analysis": ("an analysis folder (sfr analyze)", (("curve.csv",), ("cells_cache.npz",))),
+    "images": ("an image or calibration-series folder (input data)", (("frames.csv",), ("masses.csv",))),
+}
+RECORD_KINDS = {"run": "an acquisition run folder (a record)", "calibration-series": "a calibration-series folder (a record)"}
+ANALYSIS_SUBFOLDER = "analysis"
+_IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".nef", ".cr2", ".cr3", ".arw", ".dng", ".raf", ".orf"}
+
+
+class OutPathError(UsageError):
+    """An output path that would overwrite an input, a record or another command's files."""
+
+
+def folder_kind(path: Path) -> str | None:
+    """The kind of folder ``path`` is (a key of :data:`KINDS` or :data:`RECORD_KINDS`), ``"other"`` for a
+    non-empty folder of anything else, None for an absent or empty folder."""
+    path = Path(path)
+    if not path.is_dir():
+        return None
+    if (path / "run.json").exists():
+        try:
+            kind = json.loads((path / "run.json").read_text()).get("kind", "run")
+        except (OSError, ValueError, AttributeError):
+            kind = "run"
+        return kind if kind in RECORD_KINDS else "run"
+    for kind, (_, groups) in KINDS.items():
+        if any(all((path / name).exists() for name in group) for group in groups):
+            return kind
+    entries = [p for p in path.iterdir() if not p.name.startswith(".")]
+    if any(p.suffix.lower() in _IMAGE_SUFFIXES for p in entries):
+        return "images"
+    return "other" if entries else None
+
+
+def _describe(kind: str) -> str:
+    if kind in RECORD_KINDS:
+        return RECORD_KINDS[kind]
+    return KINDS[kind][0] if kind in KINDS else "a folder with other files"
+
+
+def _record_above(path: Path) -> Path | None:
+    """The nearest folder at or above ``path`` that is a record (has ``run.json``)."""
+    for folder in (path, *path.parents):
+        if (folder / "run.json").is_file():
+            return folder
+    return None
+
+
+def _check_inputs(path: Path, inputs: Iterable[str | Path], option: str) -> None:
+    for item in inputs:
+        if item is None or str(item).startswith("sample:"):
+            continue
+        src = Path(item).resolve()
+        if path == src:
+            raise OutPathError(f"{option} {path} is an input of this command; choose another {option}")
+        if src.is_dir() and src in path.parents:
+            raise OutPathError(f"{option} {path} lies inside the input folder {src}; choose a folder outside it")
+        if path in src.parents:
+            raise OutPathError(f"{option} {path} contains the input {src}; choose a new folder that holds no input")
+
+
+def check_out(path: str | Path, writes: str, inputs: Iterable[str | Path] = (), *, file: bool = False,
+              replace: bool = True, option: str = "--out") -> Path:
+    """Check an output path before any work; returns it (resolved). Creates nothing.
+
+    Parameters
+    ----------
+    path : str or Path
+        The output folder (or file, with ``file=True``).
+    writes : str
+        The kind of folder the command writes (``"simulation"``, ``"analysis"``, ``"design"``, ...); an
+        existing folder of this kind is accepted (``replace``) and its outputs replaced.
+    inputs : iterable of path
+        The command's input files and folders (``sample:NAME`` and None are skipped).
+    file : bool
+        ``path`` is one output file: it must not exist yet.
+    replace : bool
+        Accept an existing folder of kind ``writes`` (default True); False refuses any non-empty folder.
+    option : str
+        The option's name in messages.
+
+    Raises
+    ------
+    OutPathError
+        Naming the path, what it is, and what to do instead.
+    """
+    path = Path(path).expanduser().resolve()
+    _check_inputs(path, inputs, option)
+    if file:
+        if path.is_dir():
+            raise OutPathError(f"{option} {path} is a folder; give a file name")
+        if path.exists():
+            raise OutPathError(f"{option} {path} exists; it is never overwritten: choose a new file name "
+                               "or move the old file away first")
+        record = _record_above(path.parent)
+        if record is not None:
+            raise OutPathError(f"{option} {path} lies inside {record}, {_describe(folder_kind(record))}, which no "
+                               f"command adds files to; write it outside, e.g. {record.parent / path.name}")
+        return path
+    if path.exists() and not path.is_dir():
+        raise OutPathError(f"{option} {path} is a file; give a folder")
+    record = _record_above(path)
+    if record is not None and not (writes == "analysis" and path == record / ANALYSIS_SUBFOLDER):
+        hint = f"; its analysis goes to {record / ANALYSIS_SUBFOLDER}" if writes == "analysis" else ""
+        raise OutPathError(f"{option} {path} is or lies inside {record}, {_describe(folder_kind(record))}, which "
+                           f"no command adds files to; choose a folder outside it{hint}")
+    kind = folder_kind(path)
+    if kind is None or (kind == writes and replace):
+        return path
+    if kind == writes:
+        raise OutPathError(f"{option} {path} already holds {_describe(kind)}; choose a new folder"
+                           + (" or resume it with --resume" if writes == "design" else ""))
+    raise OutPathError(f"{option} {path} is {_describe(kind)}, not a {writes} folder; its files are not "
+                       f"overwritten: choose a new or empty folder")
+
+
+def check_data_dir(path: str | Path, option: str = "--out") -> Path:
+    """Check a data directory (where a new run folder is created) before a run starts; returns it resolved.
+
+    Raises
+    ------
+    OutPathError
+        If ``path`` is a file, or is or lies inside a record, a design, simulation or analysis folder.
+    """
+    path = Path(path).expanduser().resolve()
+    if path.exists() and not path.is_dir():
+        raise OutPathError(f"{option} {path} is a file; give the data directory that holds the run folders")
+    record = _record_above(path)
+    if record is not None:
+        raise OutPathError(f"{option} {path} is or lies inside {record}, {_describe(folder_kind(record))}; give "
+                           f"the data directory that holds run folders, e.g. {record.parent}")
+    kind = folder_kind(path)
+    if kind in KINDS and kind != "images":
+        raise OutPathError(f"{option} {path} is {_describe(kind)}; give a data directory for run folders")
+    return path
