@@ -162,7 +162,7 @@ class DesignObjective:
         for eta, buffers in zip(self.thresholds, self._buffers):
             rho = space.to_grid(project(smoothed, self.beta, eta))
             release = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=self.total_time_mm,
-                               buffers=buffers)
+                               dtau_mm=self.dtau_mm, buffers=buffers)
             if eta != 0.5:  # an eroded or dilated design of the robust formulation
                 rate, d_curve = self._shape_terms(release, share)
                 j_rate += share * rate

@@ -111,3 +111,15 @@ def test_robust_objective_adds_the_rate_shape_of_the_eroded_and_dilated_designs(
         _objective("nfc", request, robust_eta=0.1)
 
 
+
+
+def test_objective_simulates_on_the_targets_own_tau_step():
+    # a 501-sample target: the objective must simulate with dtau = T / 500, not the default T / 1000
+    space = build_space("nfc", SpaceRequest((8, 8, 8), 0.5))
+    big_t = total_time(space.grid_shape, space.dx_mm, space.mirror)
+    target = simulate(np.full(space.grid_shape, 0.4), space.dx_mm, mirror=space.mirror, total_time_mm=big_t,
+                      dtau_mm=big_t / 500).released_mm3
+    assert target.size == 501
+    objective = DesignObjective(space, target, big_t, radius_vox=2.0, beta=3.0, w_binary=1.0)
+    ev = objective.evaluate(np.full(space.var_shape, 0.5))
+    assert ev.release.released_mm3.size == 501 and np.isfinite(ev.value)
