@@ -18,8 +18,8 @@ from design.forward import total_time
 from design.meshio import load_mesh
 from design.shapes import SAMPLE_SHAPES, sample_shape
 from design.spaces import BUILD_AXIS, SPACE_CHOICES, DesignSpace, SpaceRequest, build_space
-from design.targets import (Feasibility, Target, check_feasibility, constant_acceleration, target_from_csv,
-                            target_from_mesh)
+from design.targets import (Feasibility, Target, check_feasibility, constant_acceleration, curve_end_mm,
+                            read_curve_csv, target_from_csv, target_from_mesh)
 from design.voxelize import voxelize
 
 log = logging.getLogger(__name__)
@@ -27,6 +27,8 @@ log = logging.getLogger(__name__)
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf")
 DEFAULT_DOMAIN_MM = 20.0
 """Edge of the cubic domain used when the target has no source mesh and no --domain-mm, mm."""
+CSV_HORIZON_MARGIN = 1.1
+"""A CSV target's default cube has a half-edge (about its horizon T) this much above the curve's end."""
 
 # Hyperparameters per design space (Tables 1-2 of the paper: w_b 20-50, r 4-5, beta 3 for the
 # source-shape designs of Fig. 6). NFC uses the ICO column without the ICO term.
@@ -245,6 +247,9 @@ def prepare(config: DesignConfig) -> Problem:
         size = (hi - lo) + 2.0 * config.margin * float(np.max(hi - lo))
         if config.space == "nfc":
             size = np.full(3, size.max())
+    elif analytic is None:  # a CSV curve: a cube whose horizon T holds the whole release
+        tau, c = read_curve_csv(config.target)
+        size = np.full(3, max(DEFAULT_DOMAIN_MM, CSV_HORIZON_MARGIN * 2.0 * curve_end_mm(tau, c)))
     else:
         size = np.full(3, DEFAULT_DOMAIN_MM)
     dx = float(size.max()) / config.resolution

@@ -88,8 +88,14 @@ def resample_monotone(tau_mm: np.ndarray, released_mm3: np.ndarray, grid_mm: np.
     return np.asarray(out, dtype=float)
 
 
-def target_from_csv(path: str | Path, total_time_mm: float, samples: int = 1001) -> Target:
-    """Read a ``tau_mm,released_mm3`` CSV and resample it onto the design grid."""
+def read_curve_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """The ``tau_mm`` and ``released_mm3`` columns of a target CSV, as written (no resampling).
+
+    Raises
+    ------
+    DesignError
+        If the file cannot be read or a row lacks a number in either column.
+    """
     path = Path(path)
     try:
         with path.open(newline="") as fh:
@@ -98,6 +104,35 @@ def target_from_csv(path: str | Path, total_time_mm: float, samples: int = 1001)
         c = np.array([float(r["released_mm3"]) for r in rows])
     except (OSError, KeyError, ValueError, TypeError) as exc:
         raise DesignError(f"cannot read a tau_mm,released_mm3 curve from {path}: {exc}") from exc
+    if tau.size < 2:
+        raise DesignError(f"{path}: a target curve needs >= 2 rows, got {tau.size}")
+    return tau, c
+
+
+def curve_end_mm(tau_mm: np.ndarray, released_mm3: np.ndarray) -> float:
+    """When a cumulative curve reaches its final value (its last rise), mm."""
+    c = np.asarray(released_mm3, dtype=float)
+    rising = np.flatnonzero(c < c[-1] - 1e-9 * max(abs(c[-1]), 1e-300))
+    return float(tau_mm[min(rising[-1] + 1, c.size - 1)]) if rising.size else float(tau_mm[0])
+
+
+def target_from_csv(path: str | Path, total_time_mm: float, samples: int = 1001) -> Target:
+    """Read a ``tau_mm,released_mm3`` CSV and resample it onto the design grid.
+
+    Raises
+    ------
+    DesignError
+        If the curve is unreadable or not monotone, or if it still rises after the horizon T: no
+        design in the domain releases anything after T (the all-solid domain is dissolved by then),
+        and cutting the curve at T would understate its total.
+    """
+    tau, c = read_curve_csv(path)
+    end = curve_end_mm(tau, c)
+    if end > total_time_mm:
+        at_t = float(np.interp(total_time_mm, tau, c, left=0.0))
+        raise DesignError(f"{path}: the curve rises until tau = {end:.4g} mm (to {c[-1]:.4g} mm^3), past the "
+                          f"design domain's horizon T = {total_time_mm:.4g} mm, by which it has released "
+                          f"{at_t:.4g} mm^3 ({at_t / c[-1]:.1%}); enlarge the domain so that T >= {end:.4g} mm")
     grid = tau_grid(total_time_mm, samples)
     return Target(grid, resample_monotone(tau, c, grid), f"csv:{path}")
 
