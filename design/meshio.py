@@ -31,18 +31,28 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
     if not path.is_file():
         raise DesignError(f"{path}: no such file")
     try:
-        loaded = trimesh.load(path, force="mesh", process=True)
+        # unprocessed first: processing would silently drop non-finite vertices and leave a hole
+        loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for a bad file
         raise DesignError(f"{path}: cannot read mesh ({exc})") from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise DesignError(f"{path}: contains no triangles")
-    return checked_mesh(loaded, str(path))
+    _check_finite(loaded.vertices, str(path), per_facet=path.suffix.lower() == ".stl")
+    return checked_mesh(trimesh.Trimesh(loaded.vertices, loaded.faces, process=True), str(path))
+
+
+def _check_finite(vertices: np.ndarray, source: str, per_facet: bool = False) -> None:
+    """Refuse NaN/inf vertex coordinates, naming the first bad vertex (or STL facet) and how many there are."""
+    bad = np.flatnonzero(~np.all(np.isfinite(vertices), axis=1))
+    if bad.size:
+        where = f"facet {bad[0] // 3 + 1}" if per_facet else f"vertex {bad[0] + 1}"
+        raise DesignError(f"{source}: {where} has non-finite coordinates {vertices[bad[0]].tolist()} "
+                          f"({bad.size} vertices in all); expected finite x, y, z in mm")
 
 
 def checked_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> trimesh.Trimesh:
     """Return `mesh` after checking its vertices are finite and it is watertight."""
-    if not np.all(np.isfinite(mesh.vertices)):
-        raise DesignError(f"{source}: has non-finite vertex coordinates")
+    _check_finite(mesh.vertices, source)
     if not mesh.is_watertight:
         raise DesignError(f"{source}: is not watertight (it has open edges), so its inside is undefined")
     return mesh

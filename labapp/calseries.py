@@ -3,26 +3,116 @@
 Clear water first, then: add a known piece of filament, wait until it has dissolved, enter the cumulative
 added mass, capture; repeat; fit the per-cell Beer-Lambert laws and save the calibration. The series is
 stored as a run folder (``kind: calibration-series``) with a ``masses.csv`` (``file,added_mass_g``,
-cumulative) beside ``frames.csv``, which is exactly what ``sfr calibrate-bench FOLDER`` reads too.
+cumulative) beside ``frames.csv``, which is exactly what ``sfr calibrate-bench FOLDER`` reads too:
+:func:`read_masses` and :func:`fit_series` are the one reader and the one fit of a series, for the guided
+procedure, `sfr calibrate-bench` and the GUI alike.
 """
 from __future__ import annotations
 
+import csv
 import dataclasses
 import logging
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
-from analysis import CropGeometry, fit_bench_calibration, read_cells
+from analysis import BenchCalibration, CropGeometry, decode_image, fit_bench_calibration, read_cells
 from labapp.bench import Bench, BenchSession
 from labapp.engine import Engine
+from labapp.errors import UsageError
 from labapp.storage import RunFolder, atomic_write, create_run
 
 log = logging.getLogger(__name__)
 
 CALIBRATION_FILE = "bench_calibration.json"
+MASSES_CSV = "masses.csv"
+MASS_COLUMNS = ("file", "added_mass_g")
+
+
+def read_masses(folder: Path) -> tuple[list[Path], np.ndarray]:
+    """The images and cumulative added masses (g) of a calibration series' ``masses.csv``.
+
+    Raises
+    ------
+    UsageError
+        Naming the file and row for: a missing file or column, a mass that is not a finite number >= 0,
+        an image listed twice (duplicated or contradictory rows), a mass lower than the row before (masses
+        are cumulative), or no rows.
+    """
+    path = Path(folder) / MASSES_CSV
+    try:
+        with open(path, newline="") as fh:
+            reader = csv.DictReader(fh)
+            missing = [c for c in MASS_COLUMNS if c not in (reader.fieldnames or [])]
+            if missing:
+                raise UsageError(f"{path}: missing column(s) {', '.join(missing)}; expected a header "
+                                 f"{','.join(MASS_COLUMNS)}")
+            rows = list(reader)
+    except OSError as exc:
+        raise UsageError(f"cannot read {path}: {exc.strerror or exc}") from exc
+    files: list[Path] = []
+    masses: list[float] = []
+    seen: dict[str, tuple[int, str]] = {}
+    for line, row in enumerate(rows, start=2):
+        name, text = (row.get("file") or "").strip(), (row.get("added_mass_g") or "").strip()
+        if not name:
+            raise UsageError(f"{path} row {line}: empty file name")
+        try:
+            mass = float(text)
+        except ValueError:
+            raise UsageError(f"{path} row {line}, added_mass_g: {text!r} is not a number (cumulative mass, g)") from None
+        if not math.isfinite(mass) or mass < 0:
+            raise UsageError(f"{path} row {line}, added_mass_g: {text!r}; expected a finite mass >= 0 g")
+        if name in seen:
+            first, first_mass = seen[name]
+            what = "contradicts" if float(first_mass) != mass else "duplicates"
+            raise UsageError(f"{path} row {line}: {name} is listed again ({what} row {first}, {first_mass} g); "
+                             "list each image once")
+        if masses and mass < masses[-1]:
+            raise UsageError(f"{path} row {line}, added_mass_g: {mass} g is below the row before ({masses[-1]} g); "
+                             "masses are cumulative (never decreasing)")
+        seen[name] = (line, text)
+        files.append(Path(folder) / name)
+        masses.append(mass)
+    if not files:
+        raise UsageError(f"{path} lists no images")
+    return files, np.array(masses)
+
+
+def fit_series(files: list[Path], masses_g: np.ndarray, geometry: CropGeometry, water_g: float,
+               camera: dict[str, str] | None = None, reduce: int = 1) -> BenchCalibration:
+    """Fit the per-cell Beer-Lambert calibration (paper section 4.2) of a series of images.
+
+    Parameters
+    ----------
+    files : list of Path
+        The images, in series order.
+    masses_g : (L,) ndarray of float
+        Cumulative added mass when each image was taken, g; concentration = mass / water_g * 1000 g/kg.
+    geometry : CropGeometry
+    water_g : float
+        Water mass, g.
+    camera : dict, optional
+        Camera settings to record.
+    reduce : int
+        Decode downscaling.
+
+    Raises
+    ------
+    analysis.AnalysisError
+        For an unreadable or wrong-sized image or too few levels.
+    """
+    missing = [str(f) for f in files if not Path(f).is_file()]
+    if missing:
+        raise UsageError(f"{len(missing)} image(s) of the series do not exist: {', '.join(missing[:3])}"
+                         + (" ..." if len(missing) > 3 else ""))
+    shape = _image_shape(files[0])
+    cells = np.array([read_cells(f, geometry, reduce=reduce, expect_shape=shape) for f in files])
+    conc = np.asarray(masses_g, float) / water_g * 1000.0
+    return fit_bench_calibration(cells, conc, geometry, water_g, camera or {}, image_shape=shape, reduce=reduce)
 
 
 @dataclass(frozen=True)
@@ -156,13 +246,10 @@ class CalibrationProcedure:
 
     def _fit(self) -> None:
         cfg = self.config
-        geometry = cfg.geometry()
-        cells = np.array([read_cells(self.run.path / f, geometry, reduce=cfg.reduce) for f, _ in self.masses])
         conc = np.array([m for _, m in self.masses]) / (cfg.water_g / 1000.0)
-        shape = _image_shape(self.run.path / self.masses[0][0])
-        cal = fit_bench_calibration(cells, conc, geometry, cfg.water_g,
-                                    camera={k: str(v) for k, v in dataclasses.asdict(self.bench.camera_settings).items()},
-                                    image_shape=shape, reduce=cfg.reduce)
+        cal = fit_series([self.run.path / f for f, _ in self.masses], np.array([m for _, m in self.masses]),
+                         cfg.geometry(), cfg.water_g, reduce=cfg.reduce,
+                         camera={k: str(v) for k, v in dataclasses.asdict(self.bench.camera_settings).items()})
         self.calibration_path = self.run.path / CALIBRATION_FILE
         tmp = self.run.path / f".{CALIBRATION_FILE}.fit"
         cal.save(tmp)
@@ -176,6 +263,9 @@ class CalibrationProcedure:
 
 
 def _image_shape(path: Path) -> tuple[int, int]:
-    """(H, W) of an image file, px, from its header."""
-    with Image.open(path) as image:
-        return image.height, image.width
+    """(H, W) of an image file, px, from its header (decoded when Pillow cannot read it, e.g. camera raw)."""
+    try:
+        with Image.open(path) as image:
+            return image.height, image.width
+    except OSError:
+        return decode_image(path).shape[:2]
