@@ -271,7 +271,8 @@ def prepare(config: DesignConfig) -> Problem:
     domain_volume = float(np.prod(sim_full)) * dx ** 3
     source_solid = None
     if mesh is not None:
-        target = target_from_mesh(mesh, dx, t_total, f"mesh:{config.target}", config.samples)
+        target = target_from_mesh(mesh, dx, t_total, f"mesh:{config.target}", config.samples, origin_mm=origin,
+                                  shape=sim_full)
         source_solid = voxelize(mesh, dx, origin_mm=origin, shape=sim_full) > 0.5
     elif analytic is not None:
         q, final, duration = analytic

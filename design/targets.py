@@ -171,9 +171,15 @@ def target_from_density(rho: np.ndarray, dx_mm: float, total_time_mm: float, sou
     return Target(np.asarray(release.tau_mm), np.asarray(release.released_mm3), source)
 
 
-def target_from_mesh(mesh, dx_mm: float, total_time_mm: float, source: str, samples: int = 1001) -> Target:
-    """Voxelise a source mesh (mm) at the design voxel size and simulate its release."""
-    return target_from_density(voxelize(mesh, dx_mm), dx_mm, total_time_mm, source, samples)
+def target_from_mesh(mesh, dx_mm: float, total_time_mm: float, source: str, samples: int = 1001, *,
+                     origin_mm: np.ndarray | None = None, shape: tuple[int, int, int] | None = None) -> Target:
+    """Voxelise a source mesh (mm) and simulate its release.
+
+    ``origin_mm`` and ``shape`` give the design grid (`design.voxelize.voxelize`); pass them so that
+    the target is the source as the design grid represents it, not on a grid offset from it.
+    """
+    return target_from_density(voxelize(mesh, dx_mm, origin_mm=origin_mm, shape=shape), dx_mm, total_time_mm,
+                               source, samples)
 
 
 @dataclass(frozen=True)

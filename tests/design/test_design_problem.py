@@ -30,3 +30,14 @@ def test_csv_target_without_a_domain_gets_a_horizon_that_holds_the_whole_curve(t
     assert problem.target.final_mm3 == pytest.approx(900.0)
     with pytest.raises(DesignError, match="past the design domain's horizon"):
         prepare(DesignConfig(target=str(path), resolution=16, domain_mm=(20.0, 20.0, 20.0)))
+
+
+@pytest.mark.parametrize("target, space, resolution", [("pill", "extruded", 18), ("sphere", "extruded", 16),
+                                                       ("csg", "nfc", 16)])
+def test_mesh_target_is_the_source_voxelised_on_the_design_grid(target, space, resolution):
+    # odd extrusion heights put the design grid's voxel centres half a voxel off the mesh's own grid
+    problem = prepare(DesignConfig(target=target, space=space, resolution=resolution))
+    assert problem.source_solid.shape == problem.full_shape
+    own = simulate(problem.source_solid.astype(float), problem.dx_mm, total_time_mm=problem.target.total_time_mm,
+                   dtau_mm=problem.target.total_time_mm / (problem.target.tau_mm.size - 1)).released_mm3
+    np.testing.assert_allclose(problem.target.released_mm3, own, rtol=0, atol=1e-9 * problem.target.final_mm3)
