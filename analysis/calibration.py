@@ -113,6 +113,7 @@ class BenchCalibration:
         try:
             cells = {k: np.asarray(v, dtype=bool if k == "good" else float) for k, v in data["cells"].items()}
             shape = data.get("image_shape")
+            _check_finite(path, data, cells)
             return cls(CropGeometry.from_dict(data["geometry"]), float(data["water_g"]),
                        conc_levels_g_per_kg=tuple(float(c) for c in data["conc_levels_g_per_kg"]),
                        image_shape=None if shape is None else (int(shape[0]), int(shape[1])),
@@ -120,6 +121,30 @@ class BenchCalibration:
                        created=str(data.get("created", "")), **cells)
         except (KeyError, TypeError, ValueError) as exc:
             raise AnalysisError(f"calibration {path} is incomplete or malformed: {exc}") from exc
+
+
+def _check_finite(path: str | Path, data: dict, cells: dict[str, np.ndarray]) -> None:
+    """NaN/inf is refused in ``water_g``, the levels and every field of a cell marked good (a cell that is
+    not good may hold NaN from a failed fit: it is never used)."""
+    water = float(data["water_g"])
+    if not (np.isfinite(water) and water > 0):
+        raise AnalysisError(f"calibration {path}: water_g is {data['water_g']!r}; expected a finite mass > 0 g")
+    levels = np.asarray(data["conc_levels_g_per_kg"], dtype=float)
+    if not np.all(np.isfinite(levels)):
+        i = int(np.flatnonzero(~np.isfinite(levels))[0])
+        raise AnalysisError(f"calibration {path}: conc_levels_g_per_kg[{i}] is {levels[i]}; expected a finite g/kg")
+    good = cells.get("good")
+    for key in ("t0", "k"):
+        if key not in cells or good is None or cells[key].shape != good.shape:
+            raise AnalysisError(f"calibration {path}: cells.{key} is missing or not the shape of cells.good")
+    for key, values in cells.items():
+        if key == "good" or values.shape != good.shape:
+            continue
+        bad = np.argwhere(good & ~np.isfinite(values))
+        if bad.size:
+            r, c = (int(v) for v in bad[0])
+            raise AnalysisError(f"calibration {path}: cells.{key} of cell (row {r}, col {c}) is {values[r, c]} but "
+                                f"the cell is marked good; expected a finite number ({len(bad)} such cells)")
 
 
 def fit_bench_calibration(cells: np.ndarray, conc_g_per_kg: np.ndarray, geometry: CropGeometry, water_g: float,

@@ -94,16 +94,31 @@ def read_curve_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     Raises
     ------
     DesignError
-        If the file cannot be read or a row lacks a number in either column.
+        If the file cannot be read, a row lacks a finite number in either column (the message names the
+        row and column), or a time is listed twice.
     """
     path = Path(path)
     try:
         with path.open(newline="") as fh:
             rows = list(csv.DictReader(fh))
-        tau = np.array([float(r["tau_mm"]) for r in rows])
-        c = np.array([float(r["released_mm3"]) for r in rows])
-    except (OSError, KeyError, ValueError, TypeError) as exc:
+    except OSError as exc:
         raise DesignError(f"cannot read a tau_mm,released_mm3 curve from {path}: {exc}") from exc
+    values = []
+    for line, row in enumerate(rows, start=2):
+        pair = []
+        for key in ("tau_mm", "released_mm3"):
+            try:
+                pair.append(float(row[key]))
+            except (KeyError, TypeError, ValueError):
+                raise DesignError(f"{path} row {line}, {key}: {row.get(key)!r} is not a number; expected a "
+                                  "tau_mm,released_mm3 curve") from None
+            if not np.isfinite(pair[-1]):
+                raise DesignError(f"{path} row {line}, {key}: {row[key]!r}; expected a finite number")
+        if values and pair[0] == values[-1][0]:
+            raise DesignError(f"{path} row {line}: tau_mm {pair[0]:g} is listed twice (rows {line - 1} and {line}); "
+                              "give each time once")
+        values.append(pair)
+    tau, c = (np.array(col, dtype=float) for col in zip(*values)) if values else (np.array([]), np.array([]))
     if tau.size < 2:
         raise DesignError(f"{path}: a target curve needs >= 2 rows, got {tau.size}")
     return tau, c
