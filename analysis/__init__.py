@@ -1,5 +1,6 @@
 """Pictures and curves to numbers (paper section 4.2): decoding, crop/grid/mirror normalisation,
-per-cell Beer-Lambert calibration, concentration estimates, smoothing and run-folder analysis."""
+per-cell Beer-Lambert calibration, concentration estimates, smoothing, run-folder analysis, and the
+simulation-to-bench calibration (section 4.3)."""
 from analysis.calibration import (BenchCalibration, ConcentrationEstimate, estimate_concentration,
                                   fit_bench_calibration, reanchor_t0, reference_offset)
 from analysis.capture_time import capture_time
@@ -9,10 +10,12 @@ from analysis.errors import AnalysisError
 from analysis.frames import FrameList, read_frame_list
 from analysis.geometry import CropGeometry, cell_transmittance, default_geometry, read_cells
 from analysis.runfolder import RunCurve, analyze_run, write_cells_csv, write_curve_csv
+from analysis.simcal import LooShape, ShapeRun, SimCal, SimCalFit, fit_simcal, leave_one_out
 
 __all__ = [
     "AnalysisError", "BenchCalibration", "ConcentrationEstimate", "CropGeometry", "FrameList", "RunCurve",
     "analyze_run", "capture_time", "cell_transmittance", "decode_image", "default_geometry", "estimate_concentration",
-    "fit_bench_calibration", "read_cells", "read_frame_list", "reanchor_t0", "reference_offset",
+    "fit_bench_calibration", "fit_simcal", "leave_one_out", "LooShape", "read_cells", "read_frame_list",
+    "reanchor_t0", "reference_offset", "ShapeRun", "SimCal", "SimCalFit",
     "smooth_curve", "steady_state", "write_cells_csv", "write_curve_csv",
 ]

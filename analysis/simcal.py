@@ -1,0 +1,452 @@
+"""Simulation-to-bench calibration (paper section 4.3, Appendix B): grams per mm^3 and seconds per mm.
+
+The forward model works in simulation units (tau = depth dissolved, mm; released solid, mm^3); the bench
+measures seconds and grams. Two maps bridge them:
+
+- mass: released grams per mm^3 of simulated solid, ``g_per_mm3 = weighed mass / simulated final volume``
+  per shape, pooled over shapes as total weighed mass / total simulated volume;
+- time: one ``seconds_per_mm`` shared by all shapes (tau = t / seconds_per_mm), minimising the sum over
+  shapes of the section 4.3 loss on mass-normalised curves (C = released / final)
+
+      L = int w_s |k C_s'(k t) - C_r'(t)| + |C_s(k t) - C_r(t)| dt,   k = 1 / seconds_per_mm, w_s = 1,
+
+  with C_r' the slope of the Savitzky-Golay fit (:func:`analysis.smooth_curve`). Time runs in hours inside
+  L, as in the paper's figures, so that for runs of a few hours both terms are of order one. The integral
+  covers the measured span only (a run stopped early still calibrates), and each run may carry a drop-time
+  offset t0 (C_r(t) is compared with C_s(k (t - t0)), |t0| <= ``max_offset_s``), so a drop logged a few
+  frames off does not bias k. L is not smooth in k: a log-spaced scan brackets the minimum and a bounded
+  Brent search refines it; offsets and k are then refined in turn.
+
+The second model (``saturation``, Appendix B) lets the bath slow the front as it fills:
+d tau / dt = k (1 - c(t) / c_sat), with c(t) the bath concentration (g/kg) of the run's own water mass, so
+runs with different water masses share one c_sat. Its clock is t(tau) = (1/k) int_0^tau dtau' / g(tau'),
+g = 1 - m(tau') / (c_sat W) (trapezoid on the simulated tau grid); c_sat is fitted by a bounded search
+over 1 / c_sat (0 = the constant model) around a time-scale fit at each value.
+
+Leave-one-out (section 5.1): each shape is predicted from its own weighed mass with the time scale (and
+c_sat) fitted without it; ``rel_rmse`` = RMS(predicted - measured released g) / weighed mass over the
+measured samples, with no offset (a drop-time error counts as prediction error).
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S, smooth_curve
+from analysis.errors import AnalysisError
+
+log = logging.getLogger(__name__)
+
+MODELS = ("constant", "saturation")
+"""Calibration models: constant rate (eq. 12) and the concentration-dependent rate of Appendix B."""
+DENSITY_RANGE_G_PER_CM3 = (0.8, 2.0)
+"""Weighed mass / simulated volume outside this range means a wrong mesh, unit or mass."""
+MIN_RELEASE_FRACTION = 0.05
+"""A run whose measured release never reaches this fraction of its weighed mass shows no release."""
+SECONDS_PER_MM_BOUNDS = (1.0, 1.0e6)
+"""Search range of the time scale, s per mm of tau."""
+DEFAULT_MAX_OFFSET_S = 120.0
+"""Default bound on a run's drop-time offset, s (about ten frames at 11 s)."""
+W_SLOPE = 1.0
+"""w_s of the section 4.3 loss (1, as in the paper)."""
+_HOUR_S = 3600.0
+_SCAN_PER_DECADE = 24
+_ROUNDS = 3
+
+
+@dataclass(frozen=True, eq=False)
+class ShapeRun:
+    """One calibration shape: its simulated release and its measured run.
+
+    Attributes
+    ----------
+    name : str
+        Named in messages and results (e.g. the SET.csv row and run).
+    tau_mm : (K,) ndarray of float, mm
+        Simulated tau grid from 0 to complete dissolution.
+    released_mm3 : (K,) ndarray of float, mm^3
+        Simulated cumulative released volume; its last value is the simulated solid volume.
+    t_s : (N,) ndarray of float, s since the drop, strictly increasing
+    released_g : (N,) ndarray of float, g
+        Measured (smoothed) release; may stop before complete dissolution.
+    mass_g : float
+        Weighed mass of the printed object, g.
+    water_g : float
+        Water mass of the run, g.
+    """
+
+    name: str
+    tau_mm: np.ndarray
+    released_mm3: np.ndarray
+    t_s: np.ndarray
+    released_g: np.ndarray
+    mass_g: float
+    water_g: float
+
+    def __post_init__(self) -> None:
+        tau, vol = np.asarray(self.tau_mm, float), np.asarray(self.released_mm3, float)
+        if tau.ndim != 1 or tau.shape != vol.shape or tau.size < 3 or np.any(np.diff(tau) <= 0):
+            raise AnalysisError(f"{self.name}: the simulated curve needs >= 3 increasing tau samples")
+        if not vol[-1] > 0:
+            raise AnalysisError(f"{self.name}: the simulated solid has no volume")
+        t, rel = np.asarray(self.t_s, float), np.asarray(self.released_g, float)
+        if t.ndim != 1 or t.shape != rel.shape or t.size < 5:
+            raise AnalysisError(f"{self.name}: the measured curve needs >= 5 samples, got {t.size}")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(rel))) or np.any(np.diff(t) <= 0):
+            raise AnalysisError(f"{self.name}: measured times must be finite and increasing, releases finite")
+        for field_name in ("mass_g", "water_g"):
+            value = getattr(self, field_name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise AnalysisError(f"{self.name}: {field_name} = {value!r} must be a positive number of grams")
+        density = self.mass_g / vol[-1] * 1000.0
+        lo, hi = DENSITY_RANGE_G_PER_CM3
+        if not lo <= density <= hi:
+            raise AnalysisError(f"{self.name}: weighed {self.mass_g:g} g over the simulated {vol[-1]:.1f} mm^3 "
+                                f"means {density:.3g} g/cm^3, outside {lo:g}-{hi:g} g/cm^3 (wrong mesh, mesh unit "
+                                "or mass?)")
+        if np.max(rel) < MIN_RELEASE_FRACTION * self.mass_g:
+            raise AnalysisError(f"{self.name}: the run shows no release (at most {np.max(rel):.3g} g of the weighed "
+                                f"{self.mass_g:g} g); was the object dropped, and is it the right run?")
+
+    @property
+    def volume_mm3(self) -> float:
+        """Simulated solid volume, mm^3."""
+        return float(self.released_mm3[-1])
+
+    @property
+    def g_per_mm3(self) -> float:
+        """This shape's mass scale: weighed mass / simulated volume, g/mm^3."""
+        return self.mass_g / self.volume_mm3
+
+
+@dataclass(frozen=True)
+class SimCal:
+    """The simulation-to-bench map.
+
+    Attributes
+    ----------
+    model : {'constant', 'saturation'}
+    seconds_per_mm : float
+        Seconds per mm of tau (into clean water for ``saturation``).
+    g_per_mm3 : float
+        Released grams per mm^3 of simulated solid.
+    saturation_g_per_kg : float or None
+        c_sat of the ``saturation`` model, g/kg; None for ``constant``.
+    """
+
+    model: str
+    seconds_per_mm: float
+    g_per_mm3: float
+    saturation_g_per_kg: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise AnalysisError(f"model {self.model!r} is not one of {', '.join(MODELS)}")
+        for name in ("seconds_per_mm", "g_per_mm3"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise AnalysisError(f"{name} = {value!r} must be positive")
+        if (self.model == "saturation") != (self.saturation_g_per_kg is not None):
+            raise AnalysisError("saturation_g_per_kg is given exactly for the 'saturation' model")
+        if self.saturation_g_per_kg is not None and not self.saturation_g_per_kg > 0:
+            raise AnalysisError(f"saturation_g_per_kg = {self.saturation_g_per_kg!r} must be positive")
+
+    def clock_s(self, tau_mm: np.ndarray, released_g: np.ndarray, water_g: float) -> np.ndarray:
+        """Physical time at each tau sample, s (tau / k, or Appendix B's remapping).
+
+        Parameters
+        ----------
+        tau_mm : (K,) ndarray of float, mm
+        released_g : (K,) ndarray of float, g released by each tau
+        water_g : float
+            Water mass of the bath, g.
+
+        Raises
+        ------
+        AnalysisError
+            If the release would saturate the bath.
+        """
+        tau = np.asarray(tau_mm, float)
+        if self.saturation_g_per_kg is None:
+            return tau * self.seconds_per_mm
+        capacity_g = self.saturation_g_per_kg * water_g / 1000.0
+        free = 1.0 - np.asarray(released_g, float) / capacity_g
+        if np.any(free <= 0):
+            raise AnalysisError(f"{np.max(released_g):.3g} g saturates {water_g:g} g of water at c_sat = "
+                                f"{self.saturation_g_per_kg:.3g} g/kg; dissolution would never finish")
+        inv = 1.0 / free
+        steps = 0.5 * (inv[1:] + inv[:-1]) * np.diff(tau)
+        return np.concatenate([[0.0], np.cumsum(steps)]) * self.seconds_per_mm
+
+    def to_physical(self, tau_mm: np.ndarray, released_mm3: np.ndarray, t_s: np.ndarray, water_g: float,
+                    mass_g: float | None = None) -> np.ndarray:
+        """Predicted released grams at times ``t_s`` from a simulated curve.
+
+        Parameters
+        ----------
+        tau_mm, released_mm3 : (K,) ndarray of float
+            Simulated curve from tau = 0.
+        t_s : (Q,) ndarray of float, s since the drop
+        water_g : float
+            Water mass, g (used by ``saturation``).
+        mass_g : float, optional
+            Weighed mass, g, when known (default: ``g_per_mm3`` times the simulated volume).
+
+        Returns
+        -------
+        (Q,) ndarray of float, g
+        """
+        vol = np.asarray(released_mm3, float)
+        grams = vol * (self.g_per_mm3 if mass_g is None else mass_g / vol[-1])
+        return np.interp(np.asarray(t_s, float), self.clock_s(tau_mm, grams, water_g), grams, left=0.0)
+
+    def to_simulation(self, t_s: np.ndarray, released_g: np.ndarray, water_g: float) -> tuple[np.ndarray, np.ndarray]:
+        """A measured curve in simulation units: tau (mm) and released volume (mm^3).
+
+        The measured release is known at every t, so Appendix B's ODE integrates directly:
+        tau(t) = k int_0^t (1 - c(t') / c_sat) dt' (trapezoid), tau = t / seconds_per_mm for ``constant``.
+
+        Parameters
+        ----------
+        t_s : (N,) ndarray of float, s since the drop, increasing, >= 0
+        released_g : (N,) ndarray of float, g
+        water_g : float
+
+        Returns
+        -------
+        tau_mm, released_mm3 : (N,) ndarray of float
+        """
+        t = np.asarray(t_s, float)
+        grams = np.asarray(released_g, float)
+        if self.saturation_g_per_kg is None:
+            tau = t / self.seconds_per_mm
+        else:
+            free = 1.0 - grams / (self.saturation_g_per_kg * water_g / 1000.0)
+            steps = 0.5 * (free[1:] + free[:-1]) * np.diff(t)
+            tau = (t[0] * free[0] + np.concatenate([[0.0], np.cumsum(steps)])) / self.seconds_per_mm
+        return tau, grams / self.g_per_mm3
+
+
+@dataclass(frozen=True)
+class SimCalFit:
+    """A calibration fitted to a set of shapes.
+
+    Attributes
+    ----------
+    cal : SimCal
+    g_per_mm3_per_shape : tuple of float
+        Each shape's weighed mass / simulated volume, g/mm^3.
+    offsets_s : tuple of float
+        Each run's fitted drop-time offset t0, s (measured t = true t + t0).
+    loss_per_shape : tuple of float
+        Each shape's section 4.3 loss L at the fit (time in hours).
+    """
+
+    cal: SimCal
+    g_per_mm3_per_shape: tuple[float, ...]
+    offsets_s: tuple[float, ...]
+    loss_per_shape: tuple[float, ...]
+
+    @property
+    def loss(self) -> float:
+        """Sum of L over the shapes."""
+        return float(sum(self.loss_per_shape))
+
+
+@dataclass(frozen=True, eq=False)
+class LooShape:
+    """One shape predicted by a calibration fitted without it.
+
+    Attributes
+    ----------
+    name : str
+    cal : SimCal
+        The calibration fitted on the other shapes.
+    t_s : (N,) ndarray of float, s
+    measured_g, predicted_g : (N,) ndarray of float, g
+    rel_rmse : float
+        RMS(predicted - measured) / weighed mass.
+    """
+
+    name: str
+    cal: SimCal
+    t_s: np.ndarray
+    measured_g: np.ndarray
+    predicted_g: np.ndarray
+    rel_rmse: float
+
+
+class _Prepared:
+    """A shape's normalised curves, sampled where the loss needs them (computed once)."""
+
+    def __init__(self, shape: ShapeRun, window_s: float, order: int) -> None:
+        self.shape = shape
+        self.tau = np.asarray(shape.tau_mm, float)
+        self.sim = np.asarray(shape.released_mm3, float) / shape.volume_mm3
+        self.sim_slope = np.gradient(self.sim, self.tau)          # dC_s/dtau, 1/mm
+        self.t = np.asarray(shape.t_s, float)
+        rel = np.asarray(shape.released_g, float) / shape.mass_g
+        self.meas = smooth_curve(self.t, rel, window_s=window_s, order=order)
+        self.meas_slope = smooth_curve(self.t, rel, window_s=window_s, order=order, deriv=1) * _HOUR_S   # 1/h
+        dt = np.diff(self.t) / _HOUR_S
+        self.weight = np.concatenate([[0.5 * dt[0]], 0.5 * (dt[1:] + dt[:-1]), [0.5 * dt[-1]]])   # trapezoid, h
+        self.load_fraction = shape.mass_g / shape.water_g   # g of release per g of water when complete
+
+    def loss(self, seconds_per_mm: float, inv_csat: float, offset_s: float) -> float:
+        """Section 4.3's L for this run (hours), the simulated curve on the clock of the model."""
+        free = 1.0 - inv_csat * 1000.0 * self.load_fraction * self.sim
+        if inv_csat > 0:
+            steps = 0.5 * (1.0 / free[1:] + 1.0 / free[:-1]) * np.diff(self.tau)
+            clock = np.concatenate([[0.0], np.cumsum(steps)]) * seconds_per_mm
+        else:
+            clock = self.tau * seconds_per_mm
+        t = self.t - offset_s
+        tau = np.interp(t, clock, self.tau)
+        started = (t > 0) & (t < clock[-1])
+        pred = np.interp(tau, self.tau, self.sim)
+        pred_slope = np.where(started, np.interp(tau, self.tau, self.sim_slope * free), 0.0) \
+            * (_HOUR_S / seconds_per_mm)
+        return float(np.sum(self.weight * (W_SLOPE * np.abs(pred_slope - self.meas_slope) + np.abs(pred - self.meas))))
+
+
+def _bounded(f: Callable[[float], float], lo: float, hi: float, xatol: float) -> tuple[float, float]:
+    res = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": xatol})
+    return float(res.x), float(res.fun)
+
+
+def _scan_then_refine(f: Callable[[float], float], grid: np.ndarray, xatol: float) -> tuple[float, float]:
+    """Robust 1-D minimum of a non-smooth f: best grid point, then Brent between its neighbours."""
+    values = np.array([f(x) for x in grid])
+    i = int(np.argmin(values))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    x, fx = _bounded(f, lo, hi, xatol) if hi > lo else (float(grid[i]), float(values[i]))
+    return (x, fx) if fx <= values[i] else (float(grid[i]), float(values[i]))
+
+
+def _fit_time(prepared: Sequence[_Prepared], inv_csat: float, max_offset_s: float,
+              around: float | None = None) -> tuple[float, list[float], list[float]]:
+    """Shared seconds_per_mm and per-run offsets for a given 1/c_sat; returns (s, offsets, losses)."""
+    offsets = [0.0] * len(prepared)
+
+    def total(log_s: float) -> float:
+        s = math.exp(log_s)
+        return sum(p.loss(s, inv_csat, o) for p, o in zip(prepared, offsets))
+
+    lo, hi = (math.log(b) for b in SECONDS_PER_MM_BOUNDS)
+    if around is None:
+        grid = np.linspace(lo, hi, int(round((hi - lo) / math.log(10) * _SCAN_PER_DECADE)) + 1)
+    else:
+        grid = np.linspace(math.log(around) - 0.3, math.log(around) + 0.3, 13)
+    log_s, _ = _scan_then_refine(total, grid, 1e-5)
+    for _ in range(_ROUNDS if max_offset_s > 0 else 0):
+        s = math.exp(log_s)
+        offset_grid = np.linspace(-max_offset_s, max_offset_s, 17)
+        offsets = [_scan_then_refine(lambda o, p=p: p.loss(s, inv_csat, o), offset_grid, 0.1)[0] for p in prepared]
+        log_s, _ = _bounded(total, log_s - 0.05, log_s + 0.05, 1e-6)
+    s = math.exp(log_s)
+    return s, offsets, [p.loss(s, inv_csat, o) for p, o in zip(prepared, offsets)]
+
+
+def _prepare(shapes: Sequence[ShapeRun], window_s: float, order: int) -> list[_Prepared]:
+    if not shapes:
+        raise AnalysisError("a calibration needs at least one shape")
+    names = [s.name for s in shapes]
+    if len(set(names)) != len(names):
+        raise AnalysisError(f"shape names must be unique, got {names}")
+    return [_Prepared(s, window_s, order) for s in shapes]
+
+
+def _fit_prepared(prepared: Sequence[_Prepared], model: str, max_offset_s: float) -> SimCalFit:
+    if model not in MODELS:
+        raise AnalysisError(f"model {model!r} is not one of {', '.join(MODELS)}")
+    if not 0 <= max_offset_s < math.inf:
+        raise AnalysisError(f"max_offset_s = {max_offset_s!r} must be >= 0 and finite")
+    shapes = [p.shape for p in prepared]
+    g_per_mm3 = float(sum(s.mass_g for s in shapes) / sum(s.volume_mm3 for s in shapes))
+    s, offsets, losses = _fit_time(prepared, 0.0, max_offset_s)
+    inv_csat = 0.0
+    if model == "saturation":
+        # 1/c_sat from 0 (constant rate) to where the most loaded bath would reach 90% of saturation
+        top = 0.9 / (1000.0 * max(p.load_fraction for p in prepared))
+        fits: dict[float, tuple[float, list[float], list[float]]] = {0.0: (s, offsets, losses)}
+
+        def objective(x: float) -> float:
+            if x not in fits:
+                fits[x] = _fit_time(prepared, x, max_offset_s, around=s)
+            return float(sum(fits[x][2]))
+
+        inv_csat, _ = _scan_then_refine(objective, np.linspace(0.0, top, 10), top * 1e-4)
+        objective(inv_csat)
+        s, offsets, losses = fits[inv_csat]
+        if inv_csat <= 0:   # the bounded search's best is the constant model: c_sat is then infinite
+            inv_csat = top * 1e-6
+    cal = SimCal(model, s, g_per_mm3, 1.0 / inv_csat if model == "saturation" else None)
+    return SimCalFit(cal, tuple(sh.g_per_mm3 for sh in shapes), tuple(offsets), tuple(losses))
+
+
+def fit_simcal(shapes: Sequence[ShapeRun], model: str = "constant", *, max_offset_s: float = DEFAULT_MAX_OFFSET_S,
+               window_s: float = DEFAULT_WINDOW_S, order: int = DEFAULT_ORDER) -> SimCalFit:
+    """Fit the simulation-to-bench map to measured shapes (section 4.3; Appendix B for ``saturation``).
+
+    Parameters
+    ----------
+    shapes : sequence of ShapeRun
+        At least one; the time scale is shared by all.
+    model : {'constant', 'saturation'}
+    max_offset_s : float
+        Bound on each run's drop-time offset, s (0: no offsets).
+    window_s, order
+        Savitzky-Golay settings for the measured curves and their slopes.
+
+    Returns
+    -------
+    SimCalFit
+
+    Raises
+    ------
+    AnalysisError
+        An unknown model, an empty or duplicate-named set.
+    """
+    return _fit_prepared(_prepare(shapes, window_s, order), model, max_offset_s)
+
+
+def leave_one_out(shapes: Sequence[ShapeRun], model: str = "constant", *,
+                  max_offset_s: float = DEFAULT_MAX_OFFSET_S, window_s: float = DEFAULT_WINDOW_S,
+                  order: int = DEFAULT_ORDER,
+                  progress: Callable[[int, int], None] | None = None) -> tuple[LooShape, ...]:
+    """Predict each shape with a calibration fitted to the others (section 5.1's cross-validation).
+
+    Parameters
+    ----------
+    shapes : sequence of ShapeRun
+        At least two.
+    model, max_offset_s, window_s, order
+        As in :func:`fit_simcal`.
+    progress : callable, optional
+        ``progress(done, total)`` after each left-out shape.
+
+    Returns
+    -------
+    tuple of LooShape
+        In the order of ``shapes``.
+    """
+    prepared = _prepare(shapes, window_s, order)
+    if len(prepared) < 2:
+        raise AnalysisError("leave-one-out needs at least two shapes")
+    out = []
+    for i, p in enumerate(prepared):
+        cal = _fit_prepared(prepared[:i] + prepared[i + 1:], model, max_offset_s).cal
+        sh = p.shape
+        predicted = cal.to_physical(sh.tau_mm, sh.released_mm3, sh.t_s, sh.water_g, mass_g=sh.mass_g)
+        measured = np.asarray(sh.released_g, float)
+        rel = float(np.sqrt(np.mean((predicted - measured) ** 2)) / sh.mass_g)
+        out.append(LooShape(sh.name, cal, np.asarray(sh.t_s, float), measured, predicted, rel))
+        log.info("leave-one-out %s (%s): rel_rmse %.2f%%", sh.name, model, 100 * rel)
+        if progress is not None:
+            progress(i + 1, len(prepared))
+    return tuple(out)
