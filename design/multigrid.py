@@ -1,0 +1,240 @@
+"""Conjugate gradients preconditioned by one geometric multigrid V-cycle (`design.elasticity` grids).
+
+Hierarchy. Each coarser level halves every axis whose element count is even (an odd axis is kept,
+so slabs of any height coarsen), until the grid has at most `MAX_COARSE_NODES` nodes or no axis
+can be halved. Transfer is trilinear interpolation of nodal vectors (prolongation P) and its
+transpose (restriction). Coarse operators are Galerkin, ``K_c = P^T K P``, built element by
+element: fine elements nest in coarse ones and P restricted to a child element depends only on its
+parent's nodes, so each coarse element matrix is ``sum_children P_c^T K_child P_c`` (24 x 24
+each). Averaging the SIMP moduli instead (rediscretisation) lets the PCG iteration count grow with
+the grid on high-contrast designs (10, 16, 26 iterations at 32, 64, 128 elements tall); Galerkin
+operators keep it flat. The coarsest level is factorised (scipy sparse LU) and solved directly.
+
+V-cycle. `PRE_SMOOTH` forward nodal block Gauss-Seidel sweeps, coarse correction, then as many
+backward sweeps: the cycle is a symmetric operator, as PCG needs.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.sparse.linalg as sla
+
+from design.elasticity import UNIFORM, apply_stiffness, assemble, free_mask, gauss_seidel, hex8_stiffness
+from design.errors import DesignError
+
+log = logging.getLogger(__name__)
+
+MAX_COARSE_NODES = 1500
+"""Coarsening stops at or below this many nodes; that level is solved directly."""
+PRE_SMOOTH = 1
+"""Gauss-Seidel sweeps before (forward) and after (backward) the coarse correction."""
+PCG_TOL = 1e-5
+"""Relative residual ``|f - K u| / |f|`` at which PCG stops."""
+
+
+@dataclass
+class Level:
+    """One grid of the hierarchy.
+
+    Attributes
+    ----------
+    e_mod : (nz, ny, nx) ndarray of float
+        Element moduli (finest level; on coarse levels only its shape is used).
+    ke : (24, 24) ndarray of float
+        Reference element stiffness at unit modulus (finest level).
+    kel : (nz, ny, nx, 24, 24) ndarray of float
+        Galerkin element matrices on coarse levels; `design.elasticity.UNIFORM` on the finest.
+    free : (nz + 1, ny + 1, nx + 1, 3) ndarray of float
+        1 on free dofs, 0 on constrained ones.
+    factors : tuple of 3 int or None
+        Coarsening factor (1 or 2) per axis to the next level; None on the coarsest.
+    """
+
+    e_mod: np.ndarray
+    ke: np.ndarray
+    kel: np.ndarray
+    free: np.ndarray
+    factors: tuple[int, int, int] | None = None
+    solve: Callable[[np.ndarray], np.ndarray] | None = None
+    work: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.work = np.empty_like(self.free)
+
+    def apply(self, u: np.ndarray) -> np.ndarray:
+        """``free * (K u)`` into this level's work buffer (overwritten by the next call)."""
+        apply_stiffness(self.e_mod, self.ke, self.kel, u, self.free, self.work)
+        return self.work
+
+
+def _child_prolongations(factors: tuple[int, int, int]) -> dict[tuple[int, int, int], np.ndarray]:
+    """24 x 24 maps from a coarse element's dofs to each child element's dofs, by child offset (z, y, x)."""
+    def weights(f: int, o: int) -> np.ndarray:  # (fine local node d, coarse local node b)
+        t = (o + np.arange(2)) / f
+        return np.stack([1.0 - t, t], axis=1)
+    out = {}
+    for oz in range(factors[0]):
+        for oy in range(factors[1]):
+            for ox in range(factors[2]):
+                wz, wy, wx = weights(factors[0], oz), weights(factors[1], oy), weights(factors[2], ox)
+                w = np.einsum("kK,jJ,iI->kjiKJI", wz, wy, wx).reshape(8, 8)  # local index 4 dk + 2 dj + di
+                out[(oz, oy, ox)] = np.kron(w, np.eye(3))
+    return out
+
+
+def _galerkin(level: "Level", factors: tuple[int, int, int]) -> np.ndarray:
+    """Coarse element matrices ``sum_children P_c^T K_child P_c`` of the next coarser grid."""
+    nz, ny, nx = level.e_mod.shape
+    fz, fy, fx = factors
+    kel = np.zeros((nz // fz, ny // fy, nx // fx, 24, 24))
+    for (oz, oy, ox), p in _child_prolongations(factors).items():
+        sub = (slice(oz, None, fz), slice(oy, None, fy), slice(ox, None, fx))
+        if level.kel.shape[0]:
+            kel += p.T @ level.kel[sub] @ p
+        else:
+            kel += level.e_mod[sub][..., None, None] * (p.T @ level.ke @ p)
+    return kel
+
+
+def hierarchy(e_mod: np.ndarray, h: tuple[float, float, float], nu: float, mirror_x: bool, mirror_y: bool,
+              max_coarse_nodes: int = MAX_COARSE_NODES) -> list[Level]:
+    """The multigrid levels for element moduli ``e_mod`` (nz, ny, nx) of size ``h`` (hz, hy, hx).
+
+    ``mirror_x`` / ``mirror_y`` put symmetry conditions on the x = 0 / y = 0 node planes; z = 0 is
+    clamped. Coarsening stops at ``max_coarse_nodes`` nodes or fewer.
+    """
+    level = Level(np.ascontiguousarray(e_mod), hex8_stiffness(h, nu), UNIFORM,
+                  free_mask(e_mod.shape, mirror_x, mirror_y))
+    levels = [level]
+    while True:
+        shape = level.e_mod.shape
+        nodes = int(np.prod([n + 1 for n in shape]))
+        factors = tuple(2 if n % 2 == 0 else 1 for n in shape)
+        if nodes <= max_coarse_nodes or factors == (1, 1, 1):
+            break
+        level.factors = factors
+        kel = _galerkin(level, factors)
+        level = Level(np.empty(kel.shape[:3]), level.ke, kel, free_mask(kel.shape[:3], mirror_x, mirror_y))
+        levels.append(level)
+    coarse = levels[-1]
+    free = coarse.free.ravel() > 0
+    if not free.any():
+        raise DesignError(f"elasticity grid {e_mod.shape} has no free degrees of freedom")
+    lu = sla.splu(assemble(coarse.e_mod, coarse.ke, coarse.kel)[free][:, free].tocsc())
+
+    def solve(r: np.ndarray, lu=lu, free=free) -> np.ndarray:
+        x = np.zeros(r.size)
+        x[free] = lu.solve(r.ravel()[free])
+        return x.reshape(r.shape)
+
+    coarse.solve = solve
+    if nodes > 20 * max_coarse_nodes:
+        log.warning("multigrid coarsest level %s has %d nodes: the direct solve dominates", shape, nodes)
+    return levels
+
+
+def _along(axis: int, sl: slice) -> tuple:
+    return (slice(None),) * axis + (sl,)
+
+
+def prolong(xc: np.ndarray, factors: tuple[int, int, int]) -> np.ndarray:
+    """Trilinear interpolation of a coarse nodal vector (nz, ny, nx, 3) onto the next finer grid."""
+    x = xc
+    for axis, f in enumerate(factors):
+        if f == 1:
+            continue
+        shape = list(x.shape)
+        shape[axis] = 2 * x.shape[axis] - 1
+        fine = np.empty(shape)
+        fine[_along(axis, slice(0, None, 2))] = x
+        fine[_along(axis, slice(1, None, 2))] = 0.5 * (x[_along(axis, slice(0, -1))] + x[_along(axis, slice(1, None))])
+        x = fine
+    return x
+
+
+def restrict(xf: np.ndarray, factors: tuple[int, int, int]) -> np.ndarray:
+    """Transpose of `prolong`: a fine residual (nodal vector) onto the next coarser grid."""
+    x = xf
+    for axis, f in enumerate(factors):
+        if f == 1:
+            continue
+        odd = 0.5 * x[_along(axis, slice(1, None, 2))]
+        coarse = x[_along(axis, slice(0, None, 2))].copy()
+        coarse[_along(axis, slice(0, -1))] += odd
+        coarse[_along(axis, slice(1, None))] += odd
+        x = coarse
+    return x
+
+
+def v_cycle(levels: list[Level], r: np.ndarray, depth: int = 0) -> np.ndarray:
+    """Approximate ``K^-1 r`` by one V-cycle from level ``depth`` (zero initial guess)."""
+    lev = levels[depth]
+    if lev.solve is not None:
+        return lev.solve(r)
+    x = np.zeros_like(r)
+    for _ in range(PRE_SMOOTH):
+        gauss_seidel(lev.e_mod, lev.ke, lev.kel, x, r, lev.free, True)
+    rc = restrict(r - lev.apply(x), lev.factors) * levels[depth + 1].free
+    x += prolong(v_cycle(levels, rc, depth + 1), lev.factors) * lev.free
+    for _ in range(PRE_SMOOTH):
+        gauss_seidel(lev.e_mod, lev.ke, lev.kel, x, r, lev.free, False)
+    return x
+
+
+def pcg(levels: list[Level], f: np.ndarray, u0: np.ndarray | None = None, tol: float = PCG_TOL,
+        max_iter: int = 500) -> tuple[np.ndarray, int]:
+    """Solve ``K u = f`` on the finest level by V-cycle preconditioned conjugate gradients.
+
+    Parameters
+    ----------
+    levels : list of Level
+        From `hierarchy`.
+    f : (nz + 1, ny + 1, nx + 1, 3) ndarray of float
+        Nodal forces (constrained entries are ignored).
+    u0 : same shape, optional
+        Initial guess (warm start); zero if None.
+    tol : float
+        Relative residual to reach.
+    max_iter : int
+
+    Returns
+    -------
+    u : same shape as f
+        Displacements, 0 on constrained dofs.
+    iterations : int
+        PCG iterations used (0 when the initial guess already satisfies the tolerance).
+
+    Raises
+    ------
+    DesignError
+        If the tolerance is not reached in ``max_iter`` iterations.
+    """
+    fine = levels[0]
+    f = f * fine.free
+    norm_f = float(np.linalg.norm(f))
+    u = np.zeros_like(f) if u0 is None else u0 * fine.free
+    if norm_f == 0.0:
+        return np.zeros_like(f), 0
+    r = f - fine.apply(u)
+    z = v_cycle(levels, r)
+    p = z.copy()
+    rz = float(np.vdot(r, z))
+    for it in range(max_iter + 1):
+        if np.linalg.norm(r) <= tol * norm_f:
+            return u, it
+        if it == max_iter:
+            break
+        q = fine.apply(p)
+        alpha = rz / float(np.vdot(p, q))
+        u += alpha * p
+        r -= alpha * q
+        z = v_cycle(levels, r)
+        rz_new = float(np.vdot(r, z))
+        p *= rz_new / rz
+        p += z
+        rz = rz_new
+    raise DesignError(f"multigrid PCG did not reach relative residual {tol:g} in {max_iter} iterations "
+                      f"(reached {np.linalg.norm(r) / norm_f:.3g}) on grid {fine.e_mod.shape}")
