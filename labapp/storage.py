@@ -22,11 +22,13 @@ import os
 import re
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import psutil
+
+from labapp.errors import LabError
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +40,7 @@ STATUSES = ("created", "running", "interrupted", "complete", "stopped", "aborted
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
 
-class StorageError(Exception):
+class StorageError(LabError):
     """A run folder could not be created, written or read; the message names the path."""
 
 
@@ -145,10 +147,31 @@ class FrameRecord:
 
 
 def _read_frames(path: Path) -> tuple[list[FrameRecord], int]:
-    """Parse frames.csv; returns the records and the byte length of the complete lines."""
+    """Parse frames.csv; returns the records and the byte length of the complete lines.
+
+    Raises
+    ------
+    StorageError
+        For a header that is not :data:`FRAME_COLUMNS` or a complete row that cannot be parsed (a manifest
+        torn or edited anywhere but at its last row); the message names the line.
+    """
     raw = path.read_bytes() if path.exists() else b""
     good = raw[: raw.rfind(b"\n") + 1]
-    records = [FrameRecord.from_row(row) for row in csv.DictReader(io.StringIO(good.decode()))]
+    try:
+        text = good.decode()
+    except UnicodeDecodeError as exc:
+        raise StorageError(f"{path}: not text (byte {exc.start}); the manifest is damaged") from None
+    reader = csv.DictReader(io.StringIO(text))
+    if good and tuple(reader.fieldnames or ()) != FRAME_COLUMNS:
+        raise StorageError(f"{path}: header {','.join(reader.fieldnames or [])!r} is not {','.join(FRAME_COLUMNS)!r}")
+    records = []
+    for row in reader:
+        try:
+            if None in row or None in row.values():
+                raise ValueError(f"{len(row) - (None in row)} fields, expected {len(FRAME_COLUMNS)}")
+            records.append(FrameRecord.from_row(row))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise StorageError(f"{path} line {reader.line_num}: damaged row ({exc})") from None
     return records, len(good)
 
 
@@ -197,6 +220,8 @@ def read_run(path: Path) -> RunSnapshot:
         meta = json.loads((path / RUN_JSON).read_text())
     except (OSError, ValueError) as exc:
         raise StorageError(f"{path} is not a readable run folder ({RUN_JSON}: {exc})") from exc
+    if not isinstance(meta, dict):
+        raise StorageError(f"{path}: {RUN_JSON} is not a JSON object")
     csv_path = path / FRAMES_CSV
     frames, good_len = _read_frames(csv_path)
     torn = csv_path.stat().st_size - good_len if csv_path.exists() else 0
@@ -370,9 +395,11 @@ def finalise_run(path: Path) -> None:
 
 @dataclass(frozen=True)
 class VerifyReport:
-    """What :func:`verify_run` found. ``ok`` is True when nothing is missing, altered, listed twice or torn."""
+    """What :func:`verify_run` found. ``ok`` is True when nothing is missing, altered, listed twice, unlisted,
+    torn or wrong; :attr:`reason` is the first failure in one line."""
 
     path: Path
+    kind: str
     status: str
     n_frames: int
     missing: list[str]
@@ -381,28 +408,86 @@ class VerifyReport:
     unlisted: list[str]
     gaps: list[dict[str, Any]]
     torn_bytes: int
+    problems: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
-        return not (self.missing or self.mismatched or self.duplicates or self.torn_bytes)
+        return not (self.problems or self.missing or self.mismatched or self.duplicates or self.unlisted
+                    or self.torn_bytes)
+
+    @property
+    def reason(self) -> str:
+        """The first failure, one line ("" when ok)."""
+        def some(names: list[str]) -> str:
+            return ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+        if self.problems:
+            return self.problems[0]
+        if self.missing:
+            return f"{len(self.missing)} listed file(s) absent: {some(self.missing)}"
+        if self.mismatched:
+            return f"{len(self.mismatched)} file(s) altered (SHA-256 differs): {some(self.mismatched)}"
+        if self.duplicates:
+            return f"{len(self.duplicates)} file(s) listed twice: {some(self.duplicates)}"
+        if self.unlisted:
+            return f"{len(self.unlisted)} file(s) present but not listed: {some(self.unlisted)}"
+        if self.torn_bytes:
+            return f"torn last row of {FRAMES_CSV} ({self.torn_bytes} bytes)"
+        return ""
 
     def lines(self) -> list[str]:
-        """A human-readable report, one finding per line."""
-        out = [f"{self.path}: status {self.status}, {self.n_frames} frames listed"]
+        """A human-readable report, one finding per line; the last is ``OK`` or ``FAILED: <reason>``."""
+        out = [f"{self.path}: {self.kind}, status {self.status}, {self.n_frames} frames listed"]
+        out += [f"PROBLEM {p}" for p in self.problems]
         out += [f"MISSING {name}" for name in self.missing]
-        out += [f"MISMATCH {name} (SHA-256 differs from frames.csv)" for name in self.mismatched]
+        out += [f"MISMATCH {name} (SHA-256 differs from the manifest)" for name in self.mismatched]
         out += [f"DUPLICATE {name} (listed more than once)" for name in self.duplicates]
-        out += [f"UNLISTED {name} (in the folder, not in frames.csv)" for name in self.unlisted]
+        out += [f"UNLISTED {name} (in the folder, not in the manifest)" for name in self.unlisted]
         out += [f"GAP {g['after_t_s']:.1f} s .. {g['before_t_s']:.1f} s: {g['reason']}" for g in self.gaps]
         if self.torn_bytes:
-            out.append(f"TORN last row of frames.csv ({self.torn_bytes} bytes; dropped when the run is reopened)")
-        out.append("OK" if self.ok else "FAILED")
+            out.append(f"TORN last row of {FRAMES_CSV} ({self.torn_bytes} bytes; dropped when the run is reopened)")
+        out += [f"NOTE {n}" for n in self.notes]
+        out.append("OK" if self.ok else f"FAILED: {self.reason}")
         return out
 
 
-def verify_run(path: Path) -> VerifyReport:
-    """Check every frame in ``frames.csv`` and every file under ``files`` in ``run.json`` against its SHA-256."""
-    snap = read_run(path)
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".nef", ".cr2", ".cr3", ".arw", ".dng", ".raf", ".orf")
+ANALYSIS_DIR = "analysis"
+MASSES_CSV = "masses.csv"
+
+
+def _entries(path: Path) -> list[Path]:
+    """Files and folders of ``path``, hidden ones (``.part`` leftovers) excluded."""
+    return sorted(p for p in path.iterdir() if not p.name.startswith("."))
+
+
+def _bad_event_lines(path: Path) -> list[int]:
+    """Line numbers of complete ``events.log`` lines without the five tab-separated fields."""
+    if not path.exists():
+        return []
+    lines = path.read_bytes().split(b"\n")[:-1]
+    return [i for i, line in enumerate(lines, start=1) if len(line.split(b"\t")) < 5]
+
+
+def _verify_record(path: Path) -> VerifyReport:
+    """A folder written by :mod:`labapp.storage` (``run.json`` + ``frames.csv`` with SHA-256)."""
+    problems: list[str] = []
+    try:
+        snap = read_run(path)
+    except StorageError as exc:
+        torn = f"{RUN_JSON} is torn or unreadable" if (path / RUN_JSON).exists() else f"no {RUN_JSON}"
+        return VerifyReport(path, "run folder", "unknown", 0, [], [], [], [], [], 0,
+                            [str(exc) if FRAMES_CSV in str(exc) else f"{torn}: {exc}"])
+    kind = snap.meta.get("kind", "run")
+    if kind not in ("run", "calibration-series"):
+        problems.append(f"{RUN_JSON} names kind {kind!r}; a run folder is a 'run' or a 'calibration-series'")
+    if not (path / FRAMES_CSV).is_file():
+        problems.append(f"the manifest {FRAMES_CSV} is missing")
+    if not (path / EVENTS_LOG).is_file():
+        problems.append(f"the event log {EVENTS_LOG} is missing")
+    bad = _bad_event_lines(path / EVENTS_LOG)
+    if bad:
+        problems.append(f"{EVENTS_LOG} line {bad[0]} is damaged (not time, t_s, level, kind, message)")
     listed = [(f.file, f.sha256) for f in snap.frames] + list(snap.meta.get("files", {}).items())
     seen: set[str] = set()
     missing, mismatched, duplicates = [], [], []
@@ -416,8 +501,140 @@ def verify_run(path: Path) -> VerifyReport:
             missing.append(name)
         elif sha256_file(target) != digest:
             mismatched.append(name)
-    own = {FRAMES_CSV, EVENTS_LOG, RUN_JSON}
-    unlisted = sorted(p.name for p in snap.path.iterdir()
-                      if p.is_file() and p.name not in seen and p.name not in own and not p.name.startswith("."))
-    return VerifyReport(snap.path, snap.status, len(snap.frames), missing, mismatched, duplicates, unlisted,
-                        list(snap.meta.get("gaps", [])), snap.torn_bytes)
+    own = {FRAMES_CSV, EVENTS_LOG, RUN_JSON, ANALYSIS_DIR}
+    if kind == "calibration-series":
+        own.add(MASSES_CSV)
+        problems += _check_masses(path, seen, required=True)
+    unlisted = [p.name for p in _entries(snap.path) if p.name not in seen and p.name not in own]
+    label = "calibration-series record" if kind == "calibration-series" else "acquisition run record"
+    return VerifyReport(snap.path, label, snap.status, len(snap.frames), missing, mismatched, duplicates, unlisted,
+                        list(snap.meta.get("gaps", [])), snap.torn_bytes, problems)
+
+
+def _check_masses(path: Path, listed: set[str] | None, required: bool) -> list[str]:
+    """Problems of ``masses.csv``: unreadable, non-finite or decreasing masses, an image listed twice or
+    (when ``listed`` is given) an image not in the frame manifest."""
+    import math
+
+    csv_path = path / MASSES_CSV
+    if not csv_path.is_file():
+        return [f"{MASSES_CSV} is missing"] if required else []
+    try:
+        with open(csv_path, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        return [f"{MASSES_CSV} cannot be read: {exc}"]
+    names: set[str] = set()
+    last = 0.0
+    for line, row in enumerate(rows, start=2):
+        name = row.get("file") or ""
+        try:
+            mass = float(row.get("added_mass_g") or "")
+        except ValueError:
+            return [f"{MASSES_CSV} line {line}: added_mass_g {row.get('added_mass_g')!r} is not a number"]
+        if not math.isfinite(mass) or mass < last:
+            return [f"{MASSES_CSV} line {line}: added_mass_g {mass} is not a finite cumulative mass"]
+        if name in names:
+            return [f"{MASSES_CSV} line {line}: {name} is listed twice"]
+        if listed is not None and name not in listed:
+            return [f"{MASSES_CSV} line {line}: {name} is not in {FRAMES_CSV}"]
+        if not (path / name).is_file():
+            return [f"{MASSES_CSV} line {line}: {name} is absent"]
+        names.add(name)
+        last = mass
+    return []
+
+
+def _verify_unrecorded(path: Path) -> VerifyReport:
+    """A folder not written by :mod:`labapp.storage`: a frames folder without checksums (a rendered fixture),
+    a calibration series with ``masses.csv`` only, or a plain image folder. Every image must be listed
+    where there is a manifest; nothing can be checked byte for byte."""
+    entries = _entries(path)
+    images = [p.name for p in entries if p.suffix.lower() in IMAGE_SUFFIXES]
+    problems, missing, duplicates = [], [], []
+    listed: set[str] = set()
+    meta: dict[str, Any] = {}
+    if (path / RUN_JSON).exists():
+        try:
+            meta = json.loads((path / RUN_JSON).read_text())
+            if not isinstance(meta, dict):
+                raise ValueError("not a JSON object")
+        except (OSError, ValueError) as exc:
+            problems.append(f"{RUN_JSON} is torn or unreadable: {exc}")
+    n_frames = 0
+    if (path / FRAMES_CSV).is_file():
+        kind = "frames folder without checksums (not an acquisition record)"
+        raw = (path / FRAMES_CSV).read_bytes()
+        if raw and not raw.endswith(b"\n"):
+            problems.append(f"{FRAMES_CSV}: the last row is torn (no line end)")
+        reader = csv.DictReader(io.StringIO(raw.decode(errors="replace")))
+        if not {"file", "t_s"} <= set(reader.fieldnames or ()):
+            problems.append(f"{FRAMES_CSV}: no file,t_s header")
+        else:
+            for row in reader:
+                n_frames += 1
+                try:
+                    if None in row or float(row["t_s"]) != float(row["t_s"]):
+                        raise ValueError
+                except (TypeError, ValueError):
+                    problems.append(f"{FRAMES_CSV} line {reader.line_num}: damaged row")
+                    break
+                name = row["file"]
+                if name in listed:
+                    duplicates.append(name)
+                listed.add(name)
+                if not (path / name).is_file():
+                    missing.append(name)
+        listed |= {v for k, v in meta.items() if k.endswith("_file") and isinstance(v, str)}
+        problems += _check_masses(path, None, required=False)
+        listed |= _masses_names(path)
+    elif (path / MASSES_CSV).is_file():
+        kind = "calibration-series folder without checksums (not an acquisition record)"
+        problems += _check_masses(path, None, required=True)
+        listed = _masses_names(path)
+        n_frames = len(listed)
+    elif images:
+        kind = "plain image folder (no manifest)"
+        listed = set(images)
+        n_frames = len(images)
+    else:
+        return VerifyReport(path, "not a run folder", "unknown", 0, [], [], [], [], [], 0,
+                            [f"{path} holds no run.json, {FRAMES_CSV}, {MASSES_CSV} or images: not a run, "
+                             "calibration series or image folder"])
+    unlisted = [name for name in images if name not in listed]
+    others = [p.name for p in entries if p.name not in listed and p.name not in unlisted
+              and p.name not in (FRAMES_CSV, RUN_JSON, MASSES_CSV, EVENTS_LOG, ANALYSIS_DIR)]
+    notes = ["no checksums: files are checked for presence only"] if kind != "plain image folder (no manifest)" \
+        else [f"{len(images)} images; no manifest, so nothing can be missing or altered"]
+    if others:
+        notes.append(f"other files (not frames): {', '.join(others)}")
+    return VerifyReport(path, kind, str(meta.get("status", "not recorded")), n_frames, missing, [], duplicates,
+                        unlisted, [], 0, problems, notes)
+
+
+def _masses_names(path: Path) -> set[str]:
+    try:
+        with open(path / MASSES_CSV, newline="") as fh:
+            return {row.get("file") or "" for row in csv.DictReader(fh)}
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return set()
+
+
+def verify_run(path: Path) -> VerifyReport:
+    """Check a folder as what it is; never raises for a bad folder (what is wrong is in the report).
+
+    A record written by this module (``run.json`` with ``writer_pid``/``created_unix_s`` and a checksummed
+    ``frames.csv``): every listed frame and file against its SHA-256, a manifest (``run.json``,
+    ``frames.csv``, ``events.log``, ``masses.csv``) missing or damaged anywhere, files present but
+    unlisted (only the ``analysis`` subfolder may be added), a kind other than ``run`` or
+    ``calibration-series``. Any other folder is verified as a frames folder without checksums, a
+    calibration series, or a plain image folder (see :func:`_verify_unrecorded`).
+    """
+    path = Path(path)
+    if not path.is_dir():
+        what = "does not exist" if not path.exists() else "is a file, not a folder"
+        return VerifyReport(path, "not a folder", "unknown", 0, [], [], [], [], [], 0, [f"{path} {what}"])
+    header = (path / FRAMES_CSV).read_bytes()[:200] if (path / FRAMES_CSV).is_file() else b""
+    recorded = b"sha256" in header.split(b"\n")[0] or (
+        (path / RUN_JSON).is_file() and b"created_unix_s" in (path / RUN_JSON).read_bytes())
+    return _verify_record(path) if recorded else _verify_unrecorded(path)
