@@ -1,0 +1,123 @@
+"""Where sweeps and batch analyses run: a Dask `LocalCluster` sized to this machine, or an existing
+scheduler (`dask scheduler` / `dask worker`, SLURM through dask-jobqueue; see docs/scale.md).
+
+The workers write run folders themselves, so with a remote scheduler they must see the output folder
+at the same path as this process (a shared filesystem, as on any cluster).
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import os
+import signal
+from typing import Iterator
+
+from labapp.errors import LabError
+
+log = logging.getLogger(__name__)
+
+BASE_MEMORY_GB = 0.25
+"""Resident memory of a worker before its first design: interpreter, numpy, numba kernels, GB."""
+MEMORY_PER_VOXEL_GB = (2.37 - BASE_MEMORY_GB) / 128**3
+"""Peak memory of a design per simulated voxel, GB: 2.37 GB at a 128^3 simulated grid
+(docs/benchmarks.md, inverse design, output writing included)."""
+MIRRORS = {"nfc": 8, "extruded": 4, "ico": 4}
+"""How many mirror copies of the simulated grid make the full domain, per design space: nfc mirrors all
+three axes, the printable spaces only the two build-plate axes (section 5.2)."""
+CONNECT_TIMEOUT_S = 20.0
+
+
+class ClusterError(LabError):
+    """The scheduler cannot be reached or the local cluster cannot start."""
+
+
+def design_memory_gb(resolution: int, space: str = "nfc") -> float:
+    """Peak memory of one design of `resolution` voxels along its longest side, GB (cubic domain bound)."""
+    voxels = resolution**3 / MIRRORS.get(space, 1)
+    return BASE_MEMORY_GB + MEMORY_PER_VOXEL_GB * voxels
+
+
+def local_worker_count(task_memory_gb: float, *, cores: int | None = None, memory_gb: float | None = None) -> int:
+    """Single-threaded workers this machine can run side by side: one per core, as many as the
+    available memory holds at `task_memory_gb` each (at least one)."""
+    import psutil
+
+    cores = cores or os.cpu_count() or 1
+    if memory_gb is None:
+        memory_gb = psutil.virtual_memory().available / 1e9
+    return max(1, min(cores, math.floor(0.9 * memory_gb / task_memory_gb)))
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, *, workers: int | None = None,
+                task_memory_gb: float = BASE_MEMORY_GB) -> Iterator["distributed.Client"]:  # noqa: F821
+    """A `distributed.Client` on `scheduler`, or on a new `LocalCluster` closed on exit.
+
+    Parameters
+    ----------
+    scheduler : str or None
+        ``tcp://HOST:PORT`` of a running scheduler; None starts a local cluster.
+    workers : int or None
+        Local cluster: the number of single-threaded worker processes (default `local_worker_count`).
+        Remote scheduler: wait until this many workers have joined.
+    task_memory_gb : float
+        Peak memory of one task, GB; sizes the default local cluster.
+
+    Raises
+    ------
+    ClusterError
+        The scheduler does not answer within `CONNECT_TIMEOUT_S`, or `workers` < 1.
+    """
+    from distributed import Client, LocalCluster
+
+    logging.getLogger("distributed").setLevel(max(logging.WARNING, logging.getLogger().level))
+    if workers is not None and workers < 1:
+        raise ClusterError(f"--workers must be >= 1, got {workers}")
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from exc
+        try:
+            if workers:
+                log.info("waiting for %d workers at %s", workers, scheduler)
+                client.wait_for_workers(workers)
+            yield client
+        finally:
+            client.close()
+        return
+    n = workers or local_worker_count(task_memory_gb)
+    # workers ignore SIGINT (the disposition is inherited): Ctrl-C in a terminal reaches the whole
+    # process group, and only this process should decide how running tasks stop
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if _main_thread() else None
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit="auto",
+                               dashboard_address=":8787", silence_logs=logging.ERROR)
+    except Exception as exc:  # noqa: BLE001 -- any start-up failure is reported the same way
+        raise ClusterError(f"cannot start a local Dask cluster of {n} workers: {exc}") from exc
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+    try:
+        with Client(cluster) as client:
+            yield client
+    finally:
+        cluster.close()
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def dashboard_link(client) -> str | None:
+    """The Dask dashboard's address, or None when the scheduler serves none."""
+    try:
+        info = client.scheduler_info()
+    except Exception:  # noqa: BLE001 -- a closing client has no dashboard to show
+        return None
+    if "dashboard" not in info.get("services", {}):
+        return None
+    return client.dashboard_link
