@@ -1,12 +1,19 @@
-"""The nlopt L-BFGS driver of inverse design: a resumable run in a folder (sections 3.3-3.4, 5.2).
+"""The optimiser loop of inverse design: a resumable run in a folder (sections 3.3-3.4, 5.2).
 
 `run_design` prepares the problem (`design.problem`), starts from the uniform density of
-section 5.2 (or a checkpoint), minimises eq. (4) with nlopt's LD_LBFGS, checkpoints every few
-evaluations, and on any stop (convergence, iteration limit, `should_stop`, Ctrl-C) writes the
-outputs of the best design found (`design.outputs`).
+section 5.2 (or a checkpoint), minimises eq. (4), checkpoints every few evaluations, and on any stop
+(convergence, iteration limit, `should_stop`, Ctrl-C) writes the outputs of the best design found
+(`design.outputs`).
 
-Bounds 0 <= rho_hat <= 1. With ``bounds="cosine"`` (default) nlopt sees unconstrained variables z
-and ``rho_hat = (1 - cos z) / 2``; with ``bounds="box"`` it gets the box directly. nlopt's LD_LBFGS
+Optimisers (`DesignConfig.optimizer`): "lbfgs" (default), the lean L-BFGS of `design.lbfgs`, whose
+step costs a small fraction of an evaluation and whose whole state goes into every checkpoint, so a
+resumed run repeats the uninterrupted one evaluation for evaluation; or nlopt's "LD_LBFGS",
+"LD_MMA", "LD_CCSAQ", whose internal state is not accessible: their resumes restart with an empty
+memory from the last evaluated design.
+
+Bounds 0 <= rho_hat <= 1. With ``bounds="cosine"`` (default) the optimiser sees unconstrained
+variables z and ``rho_hat = (1 - cos z) / 2``; with ``bounds="box"`` nlopt gets the box directly
+(the "lbfgs" optimiser is unconstrained and requires the cosine map). nlopt's LD_LBFGS
 (Luksan's code) handles active box bounds poorly here: on a 16^3 sphere design it needed 600
 evaluations for a 3% fit that the unconstrained form reaches in 50. A sigmoid map was tried first and
 rejected: saturated variables lose their gradient for good and L-BFGS reports success far from a
@@ -14,6 +21,11 @@ minimum (2.5% vs 1.4% on the zero-order target at 64^3); the periodic cosine map
 
 One "iteration" here is one objective-and-gradient evaluation; L-BFGS line searches occasionally
 need more than one per step, so the evaluation count bounds the work exactly.
+
+Both optimisers end early on this piecewise-smooth objective (a line search that finds no acceptable
+step, or nlopt's step criteria reporting success far from a minimum); the run then restarts from the
+best point with an empty curvature memory while each session still lowers J by `RESTART_GAIN`, at
+most `MAX_RESTARTS` times per beta stage.
 """
 from __future__ import annotations
 
@@ -29,6 +41,7 @@ import nlopt
 import numpy as np
 
 from design.errors import DesignError
+from design.lbfgs import CONVERGED, STALLED, Lbfgs, LbfgsSettings
 from design.objective import DesignObjective
 from design.outputs import HISTORY_COLUMNS, DesignOutputs, write_outputs
 from design.problem import DesignConfig, prepare
@@ -37,7 +50,7 @@ log = logging.getLogger(__name__)
 
 IterationCallback = Callable[[int, np.ndarray, dict], None]
 MAX_RESTARTS = 20
-"""L-BFGS restarts from the best point after nlopt ends early (see `run_design`)."""
+"""L-BFGS restarts from the best point after the optimiser ends early (module doc)."""
 RESTART_GAIN = 1e-3
 """Relative decrease of J a session must achieve for another restart to be tried."""
 BETA_STAGES = 4
@@ -86,6 +99,8 @@ def _load_config(out_dir: Path) -> DesignConfig:
     names = {f.name for f in fields(DesignConfig)}
     data = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names}
     data.setdefault("rate_span", (0.0, 1.0))  # runs stored before the option compared the whole curve
+    data.setdefault("optimizer", "LD_LBFGS")  # and were optimised with nlopt's L-BFGS
+    data.setdefault("allow_pieces", True)  # runs stored without the option had no connectivity term
     return DesignConfig(**data)
 
 
@@ -108,6 +123,9 @@ class _Run:
         self.stop_reason: str | None = None
         self.error: Exception | None = None
         self.opt: nlopt.opt | None = None
+        self.lbfgs: Lbfgs | None = None  # the "lbfgs" optimiser with a pending trial point
+        self.stage = 0  # index of the beta stage a resume continues with
+        self.terms: dict = {}
         self.t0 = time.perf_counter() - (history[-1][-1] if history else 0.0)
         self.session_t0 = time.perf_counter()
         self.session_start = start
@@ -115,11 +133,11 @@ class _Run:
         self.stage_end = config.max_iter
 
     def to_x(self, z: np.ndarray) -> np.ndarray:
-        """Design variables rho_hat from nlopt's variables."""
+        """Design variables rho_hat from the optimiser's variables."""
         return 0.5 * (1.0 - np.cos(z)) if self.cosine else z
 
     def from_x(self, x: np.ndarray) -> np.ndarray:
-        """nlopt's variables from rho_hat."""
+        """The optimiser's variables from rho_hat."""
         return np.arccos(np.clip(1.0 - 2.0 * x, -1.0, 1.0)) if self.cosine else x
 
     def __call__(self, z: np.ndarray, grad: np.ndarray) -> float:
@@ -143,10 +161,24 @@ class _Run:
     def _step(self, z: np.ndarray, grad: np.ndarray) -> float:
         if self.stop_reason is not None:
             return self._stop(self.stop_reason, grad)
-        if self.k >= self.stage_end:  # nlopt's maxeval may allow one extra evaluation
-            return self._stop("max_iter", grad)
+        reason = self.stop_requested()  # nlopt's maxeval may allow one extra evaluation
+        if reason is not None:
+            return self._stop(reason, grad)
+        value = self.evaluate(z, grad)
+        self.report()
+        return value
+
+    def stop_requested(self) -> str | None:
+        """"max_iter" at the stage's evaluation limit, "stopped" when `should_stop` says so, else None."""
+        if self.k >= self.stage_end:
+            return "max_iter"
         if self.should_stop is not None and self.should_stop():
-            return self._stop("stopped", grad)
+            return "stopped"
+        return None
+
+    def evaluate(self, z: np.ndarray, grad: np.ndarray) -> float:
+        """J at the optimiser's variables ``z``, dJ/dz written into ``grad`` (if not empty); records
+        the evaluation in the history and the best design."""
         x = self.to_x(z)
         ev = self.objective.evaluate(x.reshape(self.objective.space.var_shape))
         if grad.size:
@@ -160,29 +192,36 @@ class _Run:
             self.best_x = x.copy()
         elapsed = time.perf_counter() - self.t0
         t = ev.terms
-        self.history.append([self.k, t["J"], t["J_fit"], t["J_binary"], t["J_fab"], t["grad_norm"], elapsed])
+        self.history.append([self.k, t["J"], t["J_fit"], t["J_binary"], t["J_fab"], t.get("fab_seconds", 0.0),
+                             t["grad_norm"], elapsed])
         per_eval = (time.perf_counter() - self.session_t0) / (self.k - self.session_start)
-        terms = dict(t, seconds=elapsed, eta_s=per_eval * max(self.config.max_iter - self.k, 0))
+        self.terms = dict(t, seconds=elapsed, eta_s=per_eval * max(self.config.max_iter - self.k, 0))
+        return ev.value
+
+    def report(self) -> None:
+        """After an evaluation (and the optimiser's update): checkpoint when due, then `on_iteration`."""
         if self.k % self.config.checkpoint_every == 0:
             self.checkpoint()
         if self.on_iteration is not None:
-            self.on_iteration(self.k, x, terms)
-        return ev.value
+            self.on_iteration(self.k, self.last_x, self.terms)
 
     def checkpoint(self) -> None:
-        """Save current and best variables with the history, atomically."""
+        """Save current and best variables, the history, the stage and the "lbfgs" optimiser's
+        state (when a trial is pending), atomically."""
         if self.last_x is None:
             return
+        state = {} if self.lbfgs is None else {f"lbfgs_{k}": v for k, v in self.lbfgs.state().items()}
         _atomic_save_npz(self.out_dir / "checkpoint.npz", x=self.last_x, best_x=self.best_x,
-                         best_value=self.best_value, history=np.array(self.history, dtype=float).reshape(
-                             -1, len(HISTORY_COLUMNS)))
+                         best_value=self.best_value, stage=self.stage, history=np.array(
+                             self.history, dtype=float).reshape(-1, len(HISTORY_COLUMNS)), **state)
 
 
 def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> str:
+    """One nlopt session (algorithm `DesignConfig.optimizer`) from ``x0``, at most ``remaining`` evaluations."""
     cfg = run.config
     if run.stop_reason == "max_iter":  # the previous beta stage's end, not the run's
         run.stop_reason = None
-    opt = nlopt.opt(nlopt.LD_LBFGS, x0.size)
+    opt = nlopt.opt(getattr(nlopt, cfg.optimizer), x0.size)
     if not run.cosine:
         opt.set_lower_bounds(0.0)
         opt.set_upper_bounds(1.0)
@@ -191,7 +230,8 @@ def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> str:
     run.stage_end = run.k + remaining
     opt.set_ftol_rel(cfg.ftol_rel)
     opt.set_xtol_rel(cfg.xtol_rel)
-    opt.set_vector_storage(cfg.lbfgs_memory)  # L-BFGS memory: O(m N) doubles
+    if cfg.optimizer == "LD_LBFGS":
+        opt.set_vector_storage(cfg.lbfgs_memory)  # L-BFGS memory: O(m N) doubles
     run.opt = opt
     try:
         opt.optimize(run.from_x(x0))
@@ -227,8 +267,39 @@ def beta_stages(config: DesignConfig) -> list[tuple[float, int]]:
     return [(float(b), e) for b, e in zip(betas, ends)]
 
 
+def _stage_lbfgs(run: _Run, start: np.ndarray, stage_end: int, state: dict | None) -> str:
+    """`design.lbfgs` from ``start`` (or from a checkpointed ``state``) until evaluation
+    ``stage_end``, restarting after early ends (module doc)."""
+    cfg = run.config
+    if state is not None:
+        opt = Lbfgs.from_state(state)
+    else:
+        opt = Lbfgs(run.from_x(start), LbfgsSettings(memory=cfg.lbfgs_memory, ftol_rel=cfg.ftol_rel,
+                                                     xtol_rel=cfg.xtol_rel))
+    run.lbfgs, run.stage_end = opt, stage_end
+    try:
+        while True:
+            reason = run.stop_requested()
+            if reason is not None:
+                return reason
+            outcome = opt.tell(run.evaluate(opt.x_trial, opt.g_trial))
+            ended = None
+            if outcome in (CONVERGED, STALLED):  # decided before the checkpoint, which must hold it
+                if opt.restarts < MAX_RESTARTS and opt.f < opt.f_restart * (1.0 - RESTART_GAIN):
+                    log.info("restarting L-BFGS from the best design (J = %.6g)", opt.f)
+                    opt.restart()
+                else:
+                    ended = "stalled" if outcome == STALLED else "converged"
+                    run.lbfgs, run.stage = None, run.stage + 1
+            run.report()
+            if ended is not None:
+                return ended
+    except KeyboardInterrupt:
+        return "interrupted"
+
+
 def _stage(run: _Run, start: np.ndarray, stage_end: int) -> str:
-    """L-BFGS from ``start`` until evaluation ``stage_end``, restarting after early ends."""
+    """nlopt from ``start`` until evaluation ``stage_end``, restarting after early ends."""
     status = "max_iter"
     for _ in range(1 + MAX_RESTARTS):
         remaining = stage_end - run.k
@@ -262,7 +333,8 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     should_stop : callable, optional
         Polled before every evaluation; True stops cleanly (best design still written).
     resume : bool
-        Continue from ``checkpoint.npz`` (L-BFGS curvature memory restarts empty).
+        Continue from ``checkpoint.npz``: exactly where the run stopped with the "lbfgs" optimiser;
+        with nlopt's, from the last evaluated design with an empty memory.
 
     Returns
     -------
@@ -291,34 +363,51 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     if not problem.feasibility.feasible and not config.allow_infeasible:
         raise DesignError(problem.feasibility.text())
     objective = DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
-                                radius_vox=config.radius_vox, beta=config.beta, w_binary=config.w_binary,
+                                radius_vox=problem.radius_vox, beta=config.beta, w_binary=config.w_binary,
                                 w_fab=config.w_fab, w_rate=config.w_rate, robust_eta=config.robust_eta,
                                 rate_span=tuple(config.rate_span),
+                                w_conn=0.0 if config.allow_pieces else config.w_connect,
                                 rate_lag=max(1, round(config.rate_window_vox * problem.space.dx_mm * (config.samples - 1)
                                                       / problem.target.total_time_mm)))
     history: list[list[float]] = []
     ckpt = out_dir / "checkpoint.npz"
+    saved: dict[str, np.ndarray] = {}
     if resume and ckpt.exists():
         with np.load(ckpt) as data:
-            x0 = data["x"].reshape(problem.space.var_shape)
-            best_x, history = data["best_x"], [list(r) for r in data["history"]]
+            saved = {name: data[name] for name in data.files}
+        # histories stored before the fab_seconds column get it as zeros
+        history = [list(r) if len(r) == len(HISTORY_COLUMNS) else [*r[:5], 0.0, *r[5:]]
+                   for r in saved["history"]]
         log.info("resuming %s at evaluation %d", out_dir, len(history))
-    else:
-        x0 = objective.uniform_start()
-        best_x = None
+    x0 = saved["x"].reshape(problem.space.var_shape) if saved else objective.uniform_start()
     run = _Run(objective, out_dir, config, len(history), history, on_iteration, should_stop)
-    if best_x is not None:
-        run.best_x = best_x.ravel().copy()
-    status, start = "max_iter", x0.ravel().copy()
-    for beta, stage_end in beta_stages(config):
-        if run.k >= stage_end:
+    lbfgs_state = None
+    if saved:
+        run.best_x = saved["best_x"].ravel().copy()
+        run.best_value = float(saved.get("best_value", run.best_value))
+        run.stage = int(saved.get("stage", 0))
+        if config.optimizer == "lbfgs":  # its run continues from its saved state, else from the best
+            lbfgs_state = {k[len("lbfgs_"):]: v for k, v in saved.items() if k.startswith("lbfgs_")} or None
+            x0 = run.best_x.reshape(problem.space.var_shape)
+    status = "max_iter" if run.k >= config.max_iter else "stalled"  # when no stage is left to run
+    start, resume_stage = x0.ravel().copy(), run.stage
+    for i, (beta, stage_end) in enumerate(beta_stages(config)):
+        if i < resume_stage or run.k >= stage_end:
             continue
+        state = lbfgs_state if i == resume_stage else None
+        run.stage = i
         if beta != objective.beta:  # beta continuation: J changes, so the best so far is re-judged
             log.info("beta continuation: beta = %.4g from evaluation %d", beta, run.k + 1)
             objective.beta = beta
-            run.best_value = np.inf
-        status = _stage(run, start, stage_end)
+            if state is None:  # a resumed stage keeps the best of its own evaluations
+                run.best_value = np.inf
+        if config.optimizer == "lbfgs":
+            status = _stage_lbfgs(run, start, stage_end, state)
+        else:
+            status = _stage(run, start, stage_end)
         start = run.best_x.copy() if run.best_x is not None else start
+        if status in ("stalled", "converged"):
+            run.stage = i + 1
         if status not in ("stalled", "converged", "max_iter"):
             break
     run.checkpoint()

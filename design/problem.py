@@ -33,9 +33,17 @@ CSV_HORIZON_MARGIN = 1.1
 # Hyperparameters per design space (Tables 1-2 of the paper: w_b 20-50, r 4-5, beta 3 for the
 # source-shape designs of Fig. 6). NFC uses the ICO column without the ICO term.
 SPACE_DEFAULTS: dict[str, dict[str, float]] = {
-    "nfc": {"w_binary": 20.0, "radius_vox": 4.0, "beta": 3.0},
-    "extruded": {"w_binary": 20.0, "radius_vox": 4.0, "beta": 3.0},
+    "nfc": {"w_binary": 20.0, "beta": 3.0},
+    "extruded": {"w_binary": 20.0, "beta": 3.0},
 }
+DEFAULT_RADIUS_MM = 1.0
+"""Smoothing radius r when none is given, mm: the paper's r = 4 voxels at the 64-voxel sample grids
+(dx ~ 0.26 mm), fixed in mm so that the minimum feature (about r, five 0.2 mm print lines, section
+4.1) does not shrink as the resolution grows."""
+W_CONNECT = 20.0
+"""Default weight of the connectivity penalty J_conn (`design.connectivity`), as w_b."""
+OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
+"""`DesignConfig.optimizer` choices: `design.lbfgs` (default) and three nlopt algorithms."""
 ANALYTIC_W_RATE = 1.0
 """Default weight of the rate-fit term J_rate for analytic (zero-order / accel) targets; 0 for the
 others, whose curves come from shapes or measurements (see docs/results.md, "Zero-order")."""
@@ -59,7 +67,15 @@ class DesignConfig:
     height_mm : float or None
         Extrusion height, mm (extruded only); None = the source's height, else the domain's.
     w_binary, radius_vox, beta : float or None
-        Eq. (4) hyperparameters; None = `SPACE_DEFAULTS` (resolved and stored explicitly).
+        Eq. (4) hyperparameters; None = `SPACE_DEFAULTS` (resolved and stored explicitly). The
+        smoothing radius r is in voxels; give it in mm with ``radius_mm`` instead.
+    radius_mm : float or None
+        Smoothing radius r in mm (exclusive with ``radius_vox``); with neither,
+        `DEFAULT_RADIUS_MM`. Converted to voxels of the design grid (at least 1) by `prepare`.
+    allow_pieces : bool
+        Drop the connectivity penalty: the design may fall apart into pieces (as in the paper).
+    w_connect : float
+        Weight of the connectivity penalty J_conn (`design.connectivity`) unless ``allow_pieces``.
     w_fab : float
         Weight of the space's fabrication term (none for nfc/extruded).
     rate_window_vox : float
@@ -79,14 +95,16 @@ class DesignConfig:
         paper). Three simulations per evaluation; needs w_rate > 0.
     max_iter : int
         Maximum objective evaluations (paper: 500).
+    optimizer : str
+        One of `OPTIMIZERS` (see `design.optimize`).
     ftol_rel, xtol_rel : float
-        nlopt relative tolerances on J and on the variables (0 disables; by default only the
+        Relative tolerances on J and on the variables (0 disables; by default only the
         iteration limit and a stalled line search end a run).
     lbfgs_memory : int
         L-BFGS correction pairs m (memory O(m N)).
     bounds : str
-        "cosine" (rho_hat = (1 - cos z) / 2, unconstrained L-BFGS) or "box" (nlopt box bounds); see
-        `design.optimize`.
+        "cosine" (rho_hat = (1 - cos z) / 2, unconstrained L-BFGS) or "box" (nlopt box bounds, not
+        with the "lbfgs" optimiser); see `design.optimize`.
     checkpoint_every : int
         Evaluations between checkpoints.
     margin : float
@@ -108,6 +126,9 @@ class DesignConfig:
     height_mm: float | None = None
     w_binary: float | None = None
     radius_vox: float | None = None
+    radius_mm: float | None = None
+    allow_pieces: bool = False
+    w_connect: float = W_CONNECT
     beta: float | None = None
     w_fab: float = 0.0
     beta_final: float | None = None
@@ -116,6 +137,7 @@ class DesignConfig:
     rate_span: tuple[float, float] = (0.05, 0.95)
     robust_eta: float = 0.0
     max_iter: int = 500
+    optimizer: str = "lbfgs"
     ftol_rel: float = 0.0
     xtol_rel: float = 0.0
     lbfgs_memory: int = 10
@@ -154,6 +176,13 @@ class DesignConfig:
             raise DesignError(f"w_binary must be >= 0, got {self.w_binary}")
         if self.radius_vox is not None and not 1.0 <= self.radius_vox <= 32.0:
             raise DesignError(f"smoothing radius must be in [1, 32] voxels, got {self.radius_vox}")
+        if self.radius_vox is not None and self.radius_mm is not None:
+            raise DesignError(f"give the smoothing radius in voxels ({self.radius_vox}) or in mm "
+                              f"({self.radius_mm}), not both")
+        if self.radius_mm is not None and not self.radius_mm > 0:
+            raise DesignError(f"smoothing radius must be > 0 mm, got {self.radius_mm}")
+        if not self.w_connect >= 0:
+            raise DesignError(f"w_connect must be >= 0, got {self.w_connect}")
         if self.beta is not None and not 0 < self.beta <= 64:
             raise DesignError(f"beta must be in (0, 64], got {self.beta}")
         if self.beta_final is not None and not self.beta <= self.beta_final <= 64:
@@ -166,6 +195,11 @@ class DesignConfig:
                               f"{self.warn_channel_mm}, {self.samples}")
         if self.bounds not in ("cosine", "box"):
             raise DesignError(f"bounds must be 'cosine' or 'box', got {self.bounds!r}")
+        if self.optimizer not in OPTIMIZERS:
+            raise DesignError(f"optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
+        if self.optimizer == "lbfgs" and self.bounds != "cosine":
+            raise DesignError("the 'lbfgs' optimiser is unconstrained: it needs bounds='cosine' (box bounds: "
+                              "choose an nlopt optimizer)")
         bad = set(self.formats) - {"3mf", "obj"}
         if bad:
             raise DesignError(f"extra mesh formats must be among 3mf, obj; got {sorted(bad)}")
@@ -187,6 +221,8 @@ class Problem:
         Voxels of the full (unfolded) simulated object.
     source_solid : ndarray of bool or None
         The source mesh voxelised on the full design grid (for the recovery check).
+    radius_vox : float
+        Smoothing radius r on this grid, voxels (`DesignConfig.radius_vox` or its ``radius_mm``).
     """
 
     space: DesignSpace
@@ -196,6 +232,7 @@ class Problem:
     origin_mm: np.ndarray
     full_shape: tuple[int, int, int]
     source_solid: np.ndarray | None
+    radius_vox: float
 
 
 def _parse_analytic(spec: str) -> tuple[float, float, float] | None:
@@ -229,6 +266,18 @@ def _source_mesh(spec: str):
 
 def _even_ceil(x: float) -> int:
     return max(2, 2 * int(np.ceil(x / 2.0 - 1e-9)))
+
+
+def _radius_vox(config: DesignConfig, dx_mm: float) -> float:
+    """The smoothing radius in voxels of edge ``dx_mm``: as given, or from mm (at least 1 voxel)."""
+    if config.radius_vox is not None:
+        return float(config.radius_vox)
+    radius_mm = DEFAULT_RADIUS_MM if config.radius_mm is None else config.radius_mm
+    radius = max(1.0, radius_mm / dx_mm)
+    if radius > 64.0:
+        raise DesignError(f"smoothing radius {radius_mm} mm is {radius:.1f} voxels of {dx_mm:.4g} mm; the filter "
+                          f"takes at most 64 (lower the resolution or the radius)")
+    return radius
 
 
 def prepare(config: DesignConfig) -> Problem:
@@ -286,4 +335,4 @@ def prepare(config: DesignConfig) -> Problem:
     feasibility = check_feasibility(target, domain_volume, dx_mm=dx, domain_area_mm2=area)
     log.info("design grid %s (reduced %s), dx = %.4g mm, T = %.4g mm; %s", sim_full, space.grid_shape, dx,
              t_total, feasibility.text())
-    return Problem(space, target, feasibility, dx, origin, sim_full, source_solid)
+    return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, _radius_vox(config, dx))

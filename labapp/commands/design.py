@@ -20,7 +20,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--domain-mm", type=float, nargs=3, metavar=("X", "Y", "Z"),
                         help="design domain size, mm (default: source bounding box plus margin, cubic for nfc)")
     parser.add_argument("--w-binary", type=float, help="weight of J_binary (default per space, Tables 1-2)")
-    parser.add_argument("--radius", type=float, help="smoothing radius, voxels (default 4)")
+    parser.add_argument("--radius", type=float, help="smoothing radius, voxels (default: --radius-mm)")
+    parser.add_argument("--radius-mm", type=float, metavar="MM",
+                        help="smoothing radius, mm: the minimum feature size at any resolution (default 1)")
+    parser.add_argument("--allow-pieces", action="store_true",
+                        help="drop the connectivity penalty: the design may fall apart into pieces")
+    parser.add_argument("--w-connect", type=float, default=20.0,
+                        help="weight of the connectivity penalty (default 20)")
     parser.add_argument("--beta", type=float, help="projection steepness (default 3)")
     parser.add_argument("--beta-final", type=float,
                         help="beta continuation: raise beta to this over the run in 4 stages (default: fixed beta)")
@@ -39,6 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-iter", type=int, default=500, help="maximum objective evaluations (default 500)")
     parser.add_argument("--bounds", default="cosine", choices=("cosine", "box"),
                         help="how L-BFGS keeps rho_hat in [0, 1] (default cosine)")
+    parser.add_argument("--optimizer", help="lbfgs (default: lean L-BFGS, exact resume) or nlopt's LD_LBFGS, "
+                        "LD_MMA, LD_CCSAQ (box bounds need one of these); checked by the design configuration")
     parser.add_argument("--warn-channel-mm", type=float, default=1.0, help="warn below this channel width, mm")
     parser.add_argument("--formats", nargs="*", default=[], choices=("3mf", "obj"), help="extra mesh formats")
     parser.add_argument("--allow-infeasible", action="store_true", help="optimise even if the target fails checks")
@@ -87,10 +95,13 @@ def run(args: argparse.Namespace) -> int:
             config = DesignConfig(target=args.target, space=args.space, resolution=args.resolution,
                                   domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
                                   height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
+                                  radius_mm=args.radius_mm, allow_pieces=args.allow_pieces,
+                                  w_connect=args.w_connect,
                                   beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate,
                                   rate_window_vox=args.rate_window, rate_span=tuple(args.rate_span),
                                   robust_eta=args.robust_eta,
                                   max_iter=args.max_iter, bounds=args.bounds,
+                                  **({"optimizer": args.optimizer} if args.optimizer else {}),
                                   warn_channel_mm=args.warn_channel_mm, allow_infeasible=args.allow_infeasible,
                                   formats=tuple(args.formats))
         max_iter = config.max_iter if config else _stored_max_iter(args.out)
