@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from drivers.camera.base import Camera, CameraError, CameraSettings, Capture, CaptureMissed
 from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
 from labapp.engine import Engine
+from labapp.errors import LabError
 from labapp.monitor import HotplateMonitor
 from labapp.storage import RunFolder
 
@@ -15,7 +16,7 @@ log = logging.getLogger(__name__)
 _LEVELS = {"info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 
 
-class ProcedureError(Exception):
+class ProcedureError(LabError):
     """A procedure cannot go on (bath never stable, camera gone for good); the message says why."""
 
 
@@ -39,8 +40,8 @@ class Bench:
 class BenchSession:
     """The live connection to a bench during one procedure: devices, hotplate monitor and run-folder logging.
 
-    Every ``note`` goes both to the run's ``events.log`` (when there is a run folder) and to the engine's
-    subscribers.
+    Every ``note`` goes both to the run's ``events.log`` and to the engine's subscribers; notes made before
+    the run folder exists (while connecting) are written to it by :meth:`attach`.
     """
 
     def __init__(self, bench: Bench, engine: Engine, run: RunFolder | None, keepalive_s: float = 2.0) -> None:
@@ -50,6 +51,14 @@ class BenchSession:
         self.t0_unix_s: float | None = None
         self.camera_failures = 0
         self.last_error = ""
+        self._pending: list[tuple[str, str, str]] = []
+
+    def attach(self, run: RunFolder) -> None:
+        """Log into ``run`` from now on, starting with the notes made before it existed."""
+        self.run = run
+        for level, kind, message in self._pending:
+            run.event(level, kind, message, self.t_s())
+        self._pending.clear()
 
     def t_s(self, t_unix_s: float | None = None) -> float | None:
         """Seconds since the drop (None before it)."""
@@ -64,6 +73,8 @@ class BenchSession:
             self.last_error = message
         if self.run is not None:
             self.run.event(level, kind, message, self.t_s())
+        else:
+            self._pending.append((level, kind, message))
         self.engine.emit(level if level in ("info", "warning", "error") else "info", topic=kind, message=message)
 
     def connect(self, setpoint_c: float | None, speed_rpm: float | None) -> None:

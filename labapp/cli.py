@@ -46,9 +46,16 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line usage error (exit code 2) that points to ``--help``."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{self.prog}: {message} ('{self.prog} --help' lists the options)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full `sfr` argument parser with every discovered subcommand, in workflow order."""
-    parser = argparse.ArgumentParser(prog="sfr", description="Shape from Release: measure, simulate and design release.",
+    parser = _Parser(prog="sfr", description="Shape from Release: measure, simulate and design release.",
                                      epilog="exit codes: 0 success, 1 the job failed, 2 bad input or usage, "
                                             "130 interrupted")
     parser.add_argument("--version", action="version", version=f"sfr {_version()}")

@@ -35,6 +35,20 @@ class Event:
     t_unix_s: float = field(default_factory=time.time)
 
 
+def _log_failure(what: str, exc: Exception) -> None:
+    """Log a procedure's failure: an expected one (a device, a record, bad settings) in one line at info
+    level, since the ``error`` event carries it to the operator (the CLI's last line, the GUI's log); the
+    traceback only for a bug (and at debug level for the rest)."""
+    from drivers.errors import DriverError
+    from labapp.errors import LabError
+
+    if isinstance(exc, (LabError, DriverError, ValueError, OSError)):
+        log.info("%s: %s", what, exc)
+        log.debug("traceback of %s", what, exc_info=exc)
+    else:
+        log.exception("%s", what)
+
+
 class Procedure(Protocol):
     """What the engine walks. ``shutdown`` always runs, also after a failed ``startup`` or ``execute``."""
 
@@ -159,7 +173,7 @@ class Engine:
             if not self.should_stop():
                 procedure.execute(self)
         except Exception as exc:
-            log.exception("%s failed", procedure.name)
+            _log_failure(f"{procedure.name} failed", exc)
             self.error = exc
             outcome = "failed"
             self.emit("error", message=f"{type(exc).__name__}: {exc}", fatal=True)
@@ -168,7 +182,7 @@ class Engine:
         try:
             procedure.shutdown(self, outcome)
         except Exception as exc:
-            log.exception("%s shutdown failed", procedure.name)
+            _log_failure(f"{procedure.name} shutdown failed", exc)
             self.emit("error", message=f"shutdown: {type(exc).__name__}: {exc}", fatal=False)
             self.error = self.error or exc
         self.outcome = outcome

@@ -128,14 +128,18 @@ class RunProcedure:
 
     # -- engine hooks ------------------------------------------------------------------------------------
     def startup(self, engine: Engine) -> None:
-        """Open the run folder (new or resumed) and connect the devices."""
+        """Connect the devices, then open the run folder (new or resumed): a bench that cannot be reached
+        leaves no new folder behind and an interrupted run untouched."""
         cfg = self.config
+        n_frames = math.ceil(cfg.max_duration_s / cfg.interval_s)
+        if self.resume_path is None:
+            self.data_dir.mkdir(parents=True, exist_ok=True)
+            check_disk_space(self.data_dir, cfg.frame_bytes_estimate, n_frames)
+        self.session = BenchSession(self.bench, engine, None, keepalive_s=cfg.keepalive_s)
+        self.session.connect(cfg.setpoint_c, cfg.speed_rpm)
         if self.resume_path is not None:
             self.run = open_run(self.resume_path)
         else:
-            n_frames = math.ceil(cfg.max_duration_s / cfg.interval_s)
-            self.data_dir.mkdir(parents=True, exist_ok=True)
-            check_disk_space(self.data_dir, cfg.frame_bytes_estimate, n_frames)
             meta = dict(kind="run", config=dataclasses.asdict(cfg), water_g=cfg.water_g,
                         object_mass_g=cfg.object_mass_g, object_name=cfg.object_name, notes=cfg.notes,
                         interval_s=cfg.interval_s, simulated=self.bench.simulated, bench=self.bench.description,
@@ -144,11 +148,10 @@ class RunProcedure:
             if self.calibration is not None:
                 self.run.add_file("calibration.json", _calibration_bytes(self.calibration))
         engine.emit("state", phase="opened", folder=str(self.run.path), resumed=self.resume_path is not None)
-        self.session = BenchSession(self.bench, engine, self.run, keepalive_s=cfg.keepalive_s)
         self.session.t0_unix_s = self.run.meta.get("t0_unix_s")
+        self.session.attach(self.run)
         self.t_s = [f.t_s for f in self.run.frames]
         self.conc = [math.nan] * len(self.t_s)
-        self.session.connect(cfg.setpoint_c, cfg.speed_rpm)
 
     def execute(self, engine: Engine) -> None:
         """Heat, reference, drop (unless resuming after the drop), then acquire until a stop criterion."""

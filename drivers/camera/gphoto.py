@@ -29,6 +29,7 @@ RETRY_SAME_SESSION = {-110: "camera busy", -10: "timeout", -34: "I/O read error"
 RETRY_NEW_SESSION = {-7: "I/O error (camera disconnected?)", -52: "camera not found on USB",
                      -113: "camera error", -3: "out of memory / store full", -1: "unspecified error"}
 USB_CLAIMED = -53
+MODEL_NOT_FOUND = -105
 CLAIM_MESSAGE = ("the camera's USB interface is claimed by another program, usually the desktop's photo "
                  "importer (gvfs-gphoto2-volume-monitor / gvfsd-gphoto2): unmount the camera in the file "
                  "manager or run `gio mount -s gphoto2`, close other camera programs, then reconnect")
@@ -111,6 +112,9 @@ class GPhotoCamera:
             if exc.code == USB_CLAIMED:
                 raise CameraError(CLAIM_MESSAGE) from exc
             wanted = " ".join(x for x in (self.model, self.port) if x) or "any camera"
+            if exc.code == MODEL_NOT_FOUND:
+                raise CameraError(f"no camera found on USB ({wanted}): is it switched on and not claimed by "
+                                  "another program?") from exc
             raise CameraError(f"cannot open {wanted} with libgphoto2: {exc}") from exc
         log.info("camera %s on %s", self.name, self.address)
         if self._settings is not None:
