@@ -1,0 +1,506 @@
+"""Kinetic Monte Carlo voxel erosion: the baseline the forward model is compared with (section 5.1).
+
+In the spirit of Nisser et al. (TEI 2019), voxels are the sites of a lattice. A solid voxel is exposed
+when one of its face neighbours is solvent (void connected to the bath; a closed cavity fills when the
+erosion first opens it). In each time step dt every exposed voxel dissolves with probability
+
+    p_b = 1 - exp(-dt A exp(-b E_a / (R T))),
+
+an Arrhenius rate with b its number of solid face neighbours, A the pre-exponential factor (1/s), E_a
+the activation energy per solid neighbour (J/mol) and T the bath temperature. Sites with fewer solid
+neighbours (edges, corners, kinks) go first, so a flat face erodes by nucleation of pits and their
+spreading. All decisions of a step are taken on the state at its start (synchronous update). The
+voxel size enters the physics: a face recedes by about one voxel per nucleation-and-spread cycle, so a
+calibration holds for the voxel size it was tuned at (:meth:`MonteCarloParams.at_voxel_size` rescales A).
+
+The simulation only depends on A through A t: a run with A = 1 and step A dt serves every A by scaling
+time, which makes the grid search over (A, E_a) cost one simulation per E_a (:func:`tune_mc`).
+Mirror planes are unfolded: the full object is simulated, so the copies erode independently.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from design._validate import check_density, check_mirror, check_positive
+from design.errors import DesignError
+from design.forward import DEFAULT_STEPS
+
+log = logging.getLogger(__name__)
+
+GAS_CONSTANT = 8.314462618
+"""Molar gas constant R, J/(mol K)."""
+BATH_TEMP_K = 343.15
+"""Bath temperature of the measurements, 70 C (section 4.2), K."""
+DEFAULT_SEEDS = 4
+"""Independent runs averaged by default."""
+KINK_PROBABILITY = 0.2
+"""Default dt: a kink voxel (ndim solid neighbours, the site that unzips a surface step) dissolves with this
+probability per step."""
+SOLID_LEVEL = 0.5
+"""Density at or above which a voxel is a solid lattice site."""
+DEFAULT_EA_J_PER_MOL = (2500.0, 5000.0, 10000.0, 20000.0)
+"""Activation energies of the default tuning grid, J/mol (E_a / RT = 0.9 ... 7 at 70 C)."""
+A_FACTORS = (2 ** -0.375, 2 ** -0.125, 2 ** 0.125, 2 ** 0.375)
+"""Default A values of the tuning grid: these factors (steps of 2^(1/4)) times the A that matches the objects'
+median half-release time."""
+MAX_STEPS = 20_000_000
+
+
+@dataclass(frozen=True)
+class MonteCarloParams:
+    """Arrhenius parameters of the erosion model, in physical units.
+
+    Attributes
+    ----------
+    a_per_s : float
+        Pre-exponential factor A, 1/s.
+    ea_j_per_mol : float
+        Activation energy per solid face neighbour E_a, J/mol (>= 0).
+    temp_k : float
+        Bath temperature T, K (default 343.15 K = 70 C).
+    dx_mm : float or None
+        Voxel size the parameters hold for (the one they were tuned at), mm; None: any.
+    """
+
+    a_per_s: float
+    ea_j_per_mol: float
+    temp_k: float = BATH_TEMP_K
+    dx_mm: float | None = None
+
+    def __post_init__(self) -> None:
+        check_positive("a_per_s", self.a_per_s)
+        check_positive("temp_k", self.temp_k)
+        if not (math.isfinite(self.ea_j_per_mol) and self.ea_j_per_mol >= 0):
+            raise DesignError(f"ea_j_per_mol must be finite and >= 0, got {self.ea_j_per_mol!r}")
+        if self.dx_mm is not None:
+            check_positive("dx_mm", self.dx_mm)
+
+    @property
+    def epsilon(self) -> float:
+        """E_a / (R T): the log of the rate ratio between b and b + 1 solid neighbours."""
+        return self.ea_j_per_mol / (GAS_CONSTANT * self.temp_k)
+
+    def rates_per_s(self, ndim: int = 3) -> np.ndarray:
+        """(2 ndim + 1,) ndarray of float, 1/s: A exp(-b E_a / (R T)) for b = 0 .. 2 ndim."""
+        return self.a_per_s * np.exp(-np.arange(2 * ndim + 1) * self.epsilon)
+
+    def at_voxel_size(self, dx_mm: float) -> MonteCarloParams:
+        """The parameters for another voxel size: A scaled by dx_tuned / dx, so that a face keeps its speed
+        in mm/s (one voxel per cycle); the surface roughness, in voxels, is unchanged."""
+        dx = check_positive("dx_mm", dx_mm)
+        if self.dx_mm is None or math.isclose(dx, self.dx_mm, rel_tol=1e-9):
+            return MonteCarloParams(self.a_per_s, self.ea_j_per_mol, self.temp_k, dx)
+        return MonteCarloParams(self.a_per_s * self.dx_mm / dx, self.ea_j_per_mol, self.temp_k, dx)
+
+    def to_dict(self) -> dict:
+        return {"a_per_s": self.a_per_s, "ea_j_per_mol": self.ea_j_per_mol, "temp_k": self.temp_k,
+                "dx_mm": self.dx_mm}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> MonteCarloParams:
+        try:
+            return cls(float(data["a_per_s"]), float(data["ea_j_per_mol"]), float(data.get("temp_k", BATH_TEMP_K)),
+                       None if data.get("dx_mm") is None else float(data["dx_mm"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise DesignError(f"Monte Carlo parameters need numbers a_per_s, ea_j_per_mol [, temp_k, dx_mm]; "
+                              f"got {data!r} ({exc})") from exc
+
+
+@dataclass(frozen=True, eq=False)
+class MonteCarloRelease:
+    """Release curves of several seeded Monte Carlo runs and their mean.
+
+    Attributes
+    ----------
+    t_s : (K,) ndarray of float, s
+        Common time grid, 0 to the last voxel's dissolution over all runs.
+    released_mm3 : (K,) ndarray of float, mm^3
+        Mean cumulative released volume over the runs.
+    released_std_mm3 : (K,) ndarray of float, mm^3
+        Standard deviation over the runs (the spread between seeds; 0 for one run).
+    runs_mm3 : (S, K) ndarray of float, mm^3
+        Each run's curve.
+    volume_mm3 : float
+        Solid volume of the full object (voxels at density >= 0.5), mm^3.
+    dt_s : float
+        Time step, s.
+    seeds : tuple of int
+    params : MonteCarloParams
+    dissolution_s : (S, ...) ndarray of float, s
+        Per run, the time each voxel of the full (unfolded) grid dissolved; NaN for void.
+    """
+
+    t_s: np.ndarray
+    released_mm3: np.ndarray
+    released_std_mm3: np.ndarray
+    runs_mm3: np.ndarray
+    volume_mm3: float
+    dt_s: float
+    seeds: tuple[int, ...]
+    params: MonteCarloParams
+    dissolution_s: np.ndarray = field(repr=False)
+
+
+def _unfold(rho: np.ndarray, mirror: tuple[bool, ...]) -> np.ndarray:
+    for axis, m in enumerate(mirror):
+        if m:
+            rho = np.concatenate([np.flip(rho, axis), rho], axis)
+    return rho
+
+
+@njit(cache=True)
+def _flood(start, wet, solid, offsets, surface, in_surface, n_surface, stack):
+    """Mark the dry void region containing ``start`` wet and queue its solid neighbours as exposed."""
+    top = 0
+    stack[top] = start
+    top += 1
+    wet[start] = 1
+    while top > 0:
+        top -= 1
+        i = stack[top]
+        for off in offsets:
+            j = i + off
+            if solid[j]:
+                if not in_surface[j]:
+                    in_surface[j] = 1
+                    surface[n_surface] = j
+                    n_surface += 1
+            elif not wet[j]:
+                wet[j] = 1
+                stack[top] = j
+                top += 1
+    return n_surface
+
+
+@njit(cache=True)
+def _erode(solid, wet, neighbours, offsets, probability, seed, max_steps):
+    """Synchronous kinetic Monte Carlo erosion on a flattened padded grid.
+
+    solid, wet : uint8 flags; the padding is wet void. neighbours : int8 solid face-neighbour counts.
+    probability : per-step dissolution probability by neighbour count. Returns the step (1-based) at
+    which each site dissolved, -1 for void, or -2 everywhere if ``max_steps`` was reached.
+    """
+    np.random.seed(seed)
+    size = solid.size
+    step_of = np.full(size, -1, np.int64)
+    surface = np.empty(size, np.int64)
+    in_surface = np.zeros(size, np.uint8)
+    stack = np.empty(size, np.int64)
+    removed = np.empty(size, np.int64)
+    n_surface = 0
+    remaining = 0
+    for i in range(size):
+        if solid[i]:
+            remaining += 1
+            for off in offsets:
+                if wet[i + off]:
+                    in_surface[i] = 1
+                    surface[n_surface] = i
+                    n_surface += 1
+                    break
+    step = 0
+    while remaining > 0:
+        step += 1
+        if step > max_steps:
+            step_of[:] = -2
+            return step_of
+        n_removed = 0
+        for k in range(n_surface):
+            i = surface[k]
+            if np.random.random() < probability[neighbours[i]]:
+                removed[n_removed] = i
+                n_removed += 1
+        for k in range(n_removed):
+            solid[removed[k]] = 0
+            step_of[removed[k]] = step
+        remaining -= n_removed
+        for k in range(n_removed):
+            i = removed[k]
+            wet[i] = 1
+            for off in offsets:
+                j = i + off
+                if solid[j]:
+                    neighbours[j] -= 1
+                    if not in_surface[j]:
+                        in_surface[j] = 1
+                        surface[n_surface] = j
+                        n_surface += 1
+                elif not wet[j]:
+                    n_surface = _flood(j, wet, solid, offsets, surface, in_surface, n_surface, stack)
+        kept = 0
+        for k in range(n_surface):
+            i = surface[k]
+            if solid[i]:
+                surface[kept] = i
+                kept += 1
+            else:
+                in_surface[i] = 0
+        n_surface = kept
+    return step_of
+
+
+def _lattice(rho: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Padded flat solid/wet flags, solid-neighbour counts and flat neighbour offsets."""
+    solid = np.pad(rho >= SOLID_LEVEL, 1).astype(np.uint8)
+    strides = np.array([int(np.prod(solid.shape[a + 1:])) for a in range(solid.ndim)], dtype=np.int64)
+    offsets = np.concatenate([strides, -strides])
+    flat = solid.ravel()
+    inner = np.zeros(solid.shape, bool)
+    inner[(slice(1, -1),) * solid.ndim] = True
+    inner = inner.ravel()
+    idx = np.flatnonzero(inner)
+    neighbours = np.zeros(flat.size, np.int8)
+    for off in offsets:
+        neighbours[idx] += flat[idx + off]
+    # the bath: padding, plus every void voxel connected to it through void faces
+    from scipy.ndimage import label
+
+    void_regions, _ = label(solid == 0)
+    outside = np.unique(void_regions[~inner.reshape(solid.shape)])
+    wet = np.isin(void_regions, outside[outside > 0]).astype(np.uint8).ravel()
+    return flat.copy(), wet, neighbours, offsets
+
+
+def default_dt_s(params: MonteCarloParams, ndim: int = 3) -> float:
+    """The time step at which a kink voxel (ndim solid neighbours) dissolves with probability
+    :data:`KINK_PROBABILITY`, s."""
+    return -math.log1p(-KINK_PROBABILITY) / float(params.rates_per_s(ndim)[ndim])
+
+
+def erosion_times(rho: np.ndarray, params: MonteCarloParams, *, seed: int = 0, dt_s: float | None = None,
+                  mirror: tuple[bool, ...] | None = None) -> np.ndarray:
+    """Time at which each voxel of one seeded run dissolves.
+
+    Parameters
+    ----------
+    rho : (H, W) or (D, H, W) ndarray of float in [0, 1]
+        Density; voxels at >= 0.5 are solid sites. With ``mirror``, the half stored as for
+        :func:`design.forward.simulate`.
+    params : MonteCarloParams
+    seed : int
+        Seed of the run's random numbers; the same seed gives the same run.
+    dt_s : float, optional
+        Time step, s (default :func:`default_dt_s`).
+    mirror : tuple of bool, optional
+        Mirror flags per axis; the grid is unfolded to the full object.
+
+    Returns
+    -------
+    ndarray of float, s, full-object grid shape
+        Dissolution time of every solid voxel (a multiple of ``dt_s``), NaN for void.
+    """
+    rho = check_density(rho)
+    full = _unfold(rho, check_mirror(mirror, rho.ndim))
+    dt = default_dt_s(params, full.ndim) if dt_s is None else check_positive("dt_s", dt_s)
+    probability = -np.expm1(-dt * params.rates_per_s(full.ndim))
+    solid, wet, neighbours, offsets = _lattice(full)
+    steps = _erode(solid, wet, neighbours, offsets, probability, int(seed), MAX_STEPS)
+    if steps.size and steps[0] == -2:
+        raise DesignError(f"Monte Carlo erosion did not finish in {MAX_STEPS} steps of {dt:g} s; "
+                          f"raise dt_s or A")
+    steps = steps.reshape(np.array(full.shape) + 2)[(slice(1, -1),) * full.ndim]
+    return np.where(steps > 0, steps * dt, np.nan)
+
+
+def simulate_mc(rho: np.ndarray, dx_mm: float, params: MonteCarloParams, *, mirror: tuple[bool, ...] | None = None,
+                seeds: int | Sequence[int] = DEFAULT_SEEDS, dt_s: float | None = None,
+                samples: int = DEFAULT_STEPS + 1,
+                progress: Callable[[int, int], None] | None = None) -> MonteCarloRelease:
+    """Average the release curves of several seeded Monte Carlo runs.
+
+    Parameters
+    ----------
+    rho : (H, W) or (D, H, W) ndarray of float in [0, 1]
+        Density grid (see :func:`erosion_times`).
+    dx_mm : float
+        Voxel edge length, mm. When ``params.dx_mm`` differs, A is rescaled (:meth:`MonteCarloParams.at_voxel_size`).
+    params : MonteCarloParams
+    mirror : tuple of bool, optional
+    seeds : int or sequence of int
+        Number of runs (seeds 0 .. n-1) or the seeds themselves.
+    dt_s : float, optional
+        Time step, s (default :func:`default_dt_s`).
+    samples : int
+        Points of the common time grid (default 1001).
+    progress : callable, optional
+        ``progress(done, total)`` after every run.
+
+    Returns
+    -------
+    MonteCarloRelease
+    """
+    dx = check_positive("dx_mm", dx_mm)
+    params = params.at_voxel_size(dx)
+    seed_list = tuple(range(int(seeds))) if isinstance(seeds, (int, np.integer)) else tuple(int(s) for s in seeds)
+    if not seed_list:
+        raise DesignError("seeds must name at least one run")
+    if int(samples) < 2:
+        raise DesignError(f"samples must be >= 2, got {samples!r}")
+    rho = check_density(rho)
+    dt = default_dt_s(params, rho.ndim) if dt_s is None else check_positive("dt_s", dt_s)
+    times = []
+    for k, seed in enumerate(seed_list):
+        times.append(erosion_times(rho, params, seed=seed, dt_s=dt, mirror=mirror))
+        if progress is not None:
+            progress(k + 1, len(seed_list))
+    times = np.array(times)
+    voxel = dx ** rho.ndim
+    solid_count = int(np.isfinite(times[0]).sum())
+    if solid_count == 0:
+        raise DesignError(f"no voxel at density >= {SOLID_LEVEL}: nothing to erode")
+    t_end = float(np.nanmax(times))
+    grid = np.linspace(0.0, t_end, int(samples))
+    runs = np.array([np.searchsorted(np.sort(tt[np.isfinite(tt)]), grid, side="right") for tt in times]) * voxel
+    return MonteCarloRelease(grid, runs.mean(axis=0), runs.std(axis=0), runs, solid_count * voxel, dt, seed_list,
+                             params, times)
+
+
+@dataclass(frozen=True)
+class McGridPoint:
+    """One (A, E_a) combination of the tuning grid and its error.
+
+    Attributes
+    ----------
+    a_per_s : float, 1/s
+    ea_j_per_mol : float, J/mol
+    rms : float
+        Mean over the calibration objects of the RMS difference between the simulated and measured
+        fraction released, at the measured sample times (0.01 = 1 % of the object's mass).
+    """
+
+    a_per_s: float
+    ea_j_per_mol: float
+    rms: float
+
+
+@dataclass(frozen=True, eq=False)
+class McTuning:
+    """The result of :func:`tune_mc`.
+
+    Attributes
+    ----------
+    params : MonteCarloParams
+        The chosen parameters (the grid's best E_a with A refined, unless ``refine=False``), for ``dx_mm``.
+    rms : float
+        Their mean RMS error (fraction of mass).
+    per_object_rms : tuple of float
+        Their RMS error per calibration object.
+    grid : tuple of McGridPoint
+        Every combination searched, in search order.
+    grid_best : McGridPoint
+    seeds : tuple of int
+    """
+
+    params: MonteCarloParams
+    rms: float
+    per_object_rms: tuple[float, ...]
+    grid: tuple[McGridPoint, ...]
+    grid_best: McGridPoint
+    seeds: tuple[int, ...]
+
+
+def _fraction_at(sorted_s: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Fraction of voxels dissolved by dimensionless times ``s`` (one run's sorted A t values)."""
+    return np.searchsorted(sorted_s, s, side="right") / sorted_s.size
+
+
+def tune_mc(objects: Sequence[tuple[np.ndarray, float, tuple[bool, ...] | None]],
+            measured: Sequence[tuple[np.ndarray, np.ndarray]], *,
+            ea_values: Sequence[float] = DEFAULT_EA_J_PER_MOL, a_values: Sequence[float] | None = None,
+            temp_k: float = BATH_TEMP_K, seeds: int | Sequence[int] = DEFAULT_SEEDS, refine: bool = True,
+            progress: Callable[[int, int], None] | None = None) -> McTuning:
+    """Grid search of (A, E_a) against measured release curves (section 5.1: 4 x 4 = 16 combinations).
+
+    A only rescales time (see the module docstring), so each object is simulated once per E_a at A = 1
+    and every A of the grid is scored by rescaling. With ``a_values`` None, the A values for each E_a are
+    :data:`A_FACTORS` times the A that matches the median half-release time of the objects.
+
+    Parameters
+    ----------
+    objects : sequence of (rho, dx_mm, mirror)
+        Density grids of the calibration objects (as for :func:`simulate_mc`).
+    measured : sequence of (t_s, fraction)
+        Each object's measured curve: times, s, since the drop, and the fraction of its weighed mass
+        released (0 .. 1).
+    ea_values : sequence of float
+        Activation energies, J/mol (default :data:`DEFAULT_EA_J_PER_MOL`).
+    a_values : sequence of float, optional
+        Pre-exponential factors, 1/s, at the median voxel size of ``objects``.
+    temp_k : float
+        Bath temperature, K.
+    seeds : int or sequence of int
+        Runs averaged per object and E_a.
+    refine : bool
+        After the grid, refine A at the best E_a by a bounded 1-D search between its grid neighbours
+        (no further simulation).
+    progress : callable, optional
+        ``progress(done, total)`` after each simulated (object, E_a).
+
+    Returns
+    -------
+    McTuning
+    """
+    if len(objects) != len(measured) or not objects:
+        raise DesignError(f"give one measured curve per object: {len(objects)} objects, {len(measured)} curves")
+    from scipy.optimize import minimize_scalar
+
+    seed_list = tuple(range(int(seeds))) if isinstance(seeds, (int, np.integer)) else tuple(int(s) for s in seeds)
+    curves = []
+    for i, (t_s, fraction) in enumerate(measured):
+        t, f = np.asarray(t_s, float), np.asarray(fraction, float)
+        if t.ndim != 1 or t.shape != f.shape or t.size < 2 or not (np.all(np.isfinite(t)) and np.all(np.isfinite(f))):
+            raise DesignError(f"measured curve {i}: times and fractions must be finite 1-D arrays of equal length >= 2")
+        if not f.max() >= 0.5:
+            raise DesignError(f"measured curve {i} reaches only {f.max():.0%} of its mass; tuning needs at least 50 %")
+        curves.append((t, f))
+    dxs = np.array([check_positive("dx_mm", dx) for _, dx, _ in objects])
+    dx_ref = float(np.median(dxs))
+    t_half = np.array([float(np.interp(0.5, np.maximum.accumulate(f), t)) for t, f in curves])
+    total = len(ea_values) * len(objects)
+    runs: dict[float, list[list[np.ndarray]]] = {}
+    for e, ea in enumerate(ea_values):
+        unit = MonteCarloParams(1.0, float(ea), temp_k)
+        per_object = []
+        for k, (rho, _dx, mirror) in enumerate(objects):
+            per_object.append([np.sort(tt[np.isfinite(tt)].ravel())
+                               for tt in (erosion_times(rho, unit, seed=s, mirror=mirror) for s in seed_list)])
+            if progress is not None:
+                progress(e * len(objects) + k + 1, total)
+        runs[float(ea)] = per_object
+
+    def errors(ea: float, a: float) -> np.ndarray:
+        out = []
+        for (t, f), dx, seeded in zip(curves, dxs, runs[ea]):
+            scale = a * dx_ref / dx  # A at this object's voxel size
+            model = np.mean([_fraction_at(s, t * scale) for s in seeded], axis=0)
+            out.append(float(np.sqrt(np.mean((model - f) ** 2))))
+        return np.array(out)
+
+    grid = []
+    for ea in ea_values:
+        seeded_half = [np.median([s[s.size // 2] for s in seeded]) for seeded in runs[float(ea)]]
+        a_star = float(np.median(np.array(seeded_half) / t_half * dxs / dx_ref))
+        for a in (a_values if a_values is not None else [a_star * x for x in A_FACTORS]):
+            grid.append(McGridPoint(float(a), float(ea), float(errors(float(ea), float(a)).mean())))
+    best = min(grid, key=lambda g: g.rms)
+    a_best = best.a_per_s
+    if refine:
+        same = sorted(g.a_per_s for g in grid if g.ea_j_per_mol == best.ea_j_per_mol)
+        i = same.index(best.a_per_s)
+        lo = same[i - 1] if i > 0 else best.a_per_s / 2
+        hi = same[i + 1] if i + 1 < len(same) else best.a_per_s * 2
+        sol = minimize_scalar(lambda q: errors(best.ea_j_per_mol, math.exp(q)).mean(),
+                              bounds=(math.log(lo), math.log(hi)), method="bounded", options={"xatol": 1e-4})
+        if sol.fun < best.rms:
+            a_best = math.exp(float(sol.x))
+    per_object = errors(best.ea_j_per_mol, a_best)
+    params = MonteCarloParams(a_best, best.ea_j_per_mol, temp_k, dx_ref)
+    log.info("Monte Carlo tuning: A = %.4g 1/s, E_a = %.4g J/mol, RMS %.2f %% (grid best %.2f %%)", a_best,
+             best.ea_j_per_mol, 100 * per_object.mean(), 100 * best.rms)
+    return McTuning(params, float(per_object.mean()), tuple(float(x) for x in per_object), tuple(grid), best, seed_list)
