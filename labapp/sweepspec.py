@@ -25,6 +25,7 @@ import itertools
 import logging
 import re
 import tomllib
+import types
 import typing
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -179,8 +180,8 @@ def _check_value(source: str, where: str, value, key: str | None = None) -> None
         ok, expected = isinstance(value, str), "a preset name such as \"paper:pill\""
     else:
         hint = _HINTS[key]
-        kinds = {t for t in typing.get_args(hint) if t is not type(None)} or {hint}
-        kind = kinds.pop()
+        union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+        kind = next(t for t in typing.get_args(hint) if t is not type(None)) if union else hint
         if typing.get_origin(kind) is tuple:
             ok = isinstance(value, list) and all(isinstance(v, (int, float, str)) and not isinstance(v, bool)
                                                  for v in value)

@@ -1,0 +1,132 @@
+"""Sweep specs, the sweep table, ranking, failures and reruns (in-process, no Dask cluster)."""
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from labapp.contact_sheet import printable, rank, top_view
+from labapp.sweep import SweepError, folder_state, run_sweep
+from labapp.sweepspec import SpecError, combination_name, load_spec, parse_spec
+
+SMALL = 'target = "pill"\nspace = "extruded"\nresolution = 16\nmax_iter = 6\n'
+
+
+def test_grid_and_points_make_named_combinations(tmp_path):
+    (tmp_path / "t.csv").write_text("tau_mm,released_mm3\n0,0\n1,1\n")
+    spec_path = tmp_path / "s.toml"
+    spec_path.write_text('target = "t.csv"\nresolution = 24\nw_binary = 5\n[grid]\nw_binary = [10, 20.5]\n'
+                         'rate_span = [[0.0, 1.0]]\n[[points]]\nbeta = 4\n')
+    spec = load_spec(spec_path)
+    assert spec.target == str(tmp_path / "t.csv")  # relative to the spec's folder, made absolute
+    names = [c.name for c in spec.combinations]
+    assert names == ["rate_span=0x1,w_binary=10", "rate_span=0x1,w_binary=20.5", "beta=4"]
+    configs = [c.config for c in spec.combinations]
+    assert [c.w_binary for c in configs] == [10, 20.5, 5]  # a point keeps the top-level value
+    assert configs[0].rate_span == (0.0, 1.0) and configs[2].beta == 4 and configs[0].resolution == 24
+    assert spec.swept_keys == ("w_binary", "beta", "rate_span")
+    assert combination_name({"w_binary": 1.0, "preset": "paper:pill"}) == "preset=paper-pill,w_binary=1"
+    assert [c.name for c in parse_spec(SMALL).combinations] == ["default"]
+
+
+@pytest.mark.parametrize("text, match", [
+    ("resolution = 16\n", "'target' is required"),
+    (SMALL + "w_bin = 3\n", "unknown key 'w_bin'"),
+    (SMALL + "[grid]\nw_binary = 3\n", "grid.w_binary must be a non-empty list"),
+    (SMALL + "[grid]\nradius = [3]\n", "unknown key 'radius' in \\[grid\\]"),
+    (SMALL + "[grid]\nbeta = ['a']\n", "grid.beta must be a number, got 'a'"),
+    (SMALL + "[grid]\nmax_iter = [2.5]\n", "grid.max_iter must be an integer"),
+    (SMALL + "[[points]]\nbeta = 100\n", "combination beta=100: beta must be in \\(0, 64\\]"),
+    (SMALL + "[[points]]\n", "points\\[0\\] is empty"),
+    (SMALL + "[[points]]\nbeta = 3\n[[points]]\nbeta = 3.0\n", "appears twice"),
+    (SMALL + "resolution = = 3\n", "not valid TOML"),
+])
+def test_bad_specs_name_the_key(text, match):
+    with pytest.raises(SpecError, match=match):
+        parse_spec(text, source="s.toml")
+
+
+def test_a_missing_spec_file_is_named(tmp_path):
+    with pytest.raises(SpecError, match="cannot read the sweep spec .*nope.toml"):
+        load_spec(tmp_path / "nope.toml")
+
+
+def test_serial_sweep_records_failures_and_reruns_skip_done(tmp_path):
+    # radius 32 voxels does not fit a 16-voxel grid: the design fails at run time, the sweep goes on
+    spec = parse_spec(SMALL + "[grid]\nradius_vox = [2.0, 32.0]\n")
+    out = tmp_path / "sweep"
+    result = run_sweep(spec, out, contact_sheet=False)
+    by_name = {r["name"]: r for r in result.rows}
+    assert by_name["radius_vox=2"]["status"] == "max_iter"
+    assert by_name["radius_vox=32"]["status"] == "failed" and "exceeds the grid" in by_name["radius_vox=32"]["error"]
+    assert "exceeds the grid" in (out / "failed" / "radius_vox=32.txt").read_text()
+    with open(out / "sweep.csv", newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert [r["name"] for r in table] == ["radius_vox=2", "radius_vox=32"]
+    assert table[0]["iterations"] == "6" and float(table[0]["rmse_mm3"]) > 0 and table[1]["status"] == "failed"
+    done = out / "runs" / "radius_vox=2"
+    assert folder_state(done) == "done"
+    stamp = (done / "summary.json").stat().st_mtime_ns
+    # a rerun with a longer grid: the done design is skipped, the new one runs, the failure is retried
+    again_text = SMALL + "[grid]\nradius_vox = [2.0, 3.0, 32.0]\n"
+    again = run_sweep(parse_spec(again_text), out)
+    assert (done / "summary.json").stat().st_mtime_ns == stamp
+    assert [r["status"] for r in again.rows] == ["max_iter", "max_iter", "failed"]
+    assert (out / "contact_sheet.png").stat().st_size > 10_000
+    assert (out / "spec.toml").read_text() == spec.text  # the first spec is kept, the changed one beside it
+    assert [p.read_text() for p in out.glob("spec-*.toml")] == [again_text]
+    log = (out / "sweep.log").read_text()
+    assert log.count("finish radius_vox=2 ") == 1 and log.count("failed radius_vox=32 ") == 2
+
+
+def test_stopped_designs_resume_from_their_checkpoint(tmp_path):
+    from design.optimize import run_design
+    from labapp.sweep import prepare_sweep_dir
+
+    spec = parse_spec(SMALL.replace("max_iter = 6", "max_iter = 12\ncheckpoint_every = 2"))
+    out = prepare_sweep_dir(spec, tmp_path / "sweep")
+    folder = out / "runs" / "default"
+    polls = []
+    stopped = run_design(spec.combinations[0].config, folder, should_stop=lambda: len(polls) > 5 or polls.append(1))
+    assert stopped.status == "stopped" and folder_state(folder) == "resume"
+    result = run_sweep(spec, out, contact_sheet=False)
+    history = np.loadtxt(folder / "history.csv", delimiter=",", skiprows=1)
+    assert result.rows[0]["status"] == "max_iter"
+    assert history[:, 0].tolist() == list(range(1, 13))  # continued from evaluation 6, not restarted
+    assert "(resume)" in (out / "sweep.log").read_text()
+
+
+def test_out_checks_before_any_work(tmp_path):
+    spec = parse_spec(SMALL)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(SweepError, match="is a file"):
+        run_sweep(spec, tmp_path / "file")
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "notes.txt").write_text("x")
+    with pytest.raises(SweepError, match="holds other files and no sweep"):
+        run_sweep(spec, tmp_path / "other")
+    run_sweep(spec, tmp_path / "s", contact_sheet=False)
+    with pytest.raises(SweepError, match="holds a design with other settings"):
+        run_sweep(parse_spec(SMALL.replace("max_iter = 6", "max_iter = 7")), tmp_path / "s")
+
+
+def test_ranking_puts_printable_good_fits_first():
+    rows = [{"name": "a", "status": "failed", "rel_rmse_binary": ""},
+            {"name": "b", "status": "max_iter", "rel_rmse_binary": 0.01, "pieces": 2},
+            {"name": "c", "status": "max_iter", "rel_rmse_binary": 0.05, "pieces": 1, "min_channel_mm": 2.0,
+             "warn_channel_mm": 1.0},
+            {"name": "d", "status": "converged", "rel_rmse_binary": 0.03, "pieces": 1, "min_channel_mm": "",
+             "warn_channel_mm": 1.0},
+            {"name": "e", "status": "stopped", "rel_rmse_binary": 0.001, "pieces": 1},
+            {"name": "f", "status": "max_iter", "rel_rmse_binary": 0.02, "pieces": 1, "min_channel_mm": 0.5,
+             "warn_channel_mm": 1.0}]
+    assert [r["name"] for r in rank(rows)] == ["d", "c", "b", "f", "e", "a"]
+    assert not printable(rows[5]) and printable(rows[3])
+
+
+def test_top_view_is_the_height_of_the_top_voxel():
+    solid = np.zeros((2, 3, 4), dtype=bool)
+    solid[0, 0, :2] = True
+    solid[1, 2, 3] = True
+    solid[1, 1, 1:3] = True
+    assert top_view(solid, 2).tolist() == [[2, 0, 0], [0, 3, 4]]
