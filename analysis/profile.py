@@ -339,10 +339,34 @@ def similarity(reference: ReleaseProfile, test: ReleaseProfile, *, times: Sequen
     return Similarity(float(f1), float(f2), pts, ref_pct, test_pct, None, tuple(notes))
 
 
-def _mean_profile(curves: Sequence[ReleaseProfile], times: np.ndarray, label: str) -> ReleaseProfile:
-    values = np.array([c.at(times) for c in curves]).mean(axis=0)
-    totals = [c.amount_total for c in curves]
-    return ReleaseProfile(times, values, curves[0].time_unit, curves[0].amount_unit, float(np.mean(totals)), label)
+def mean_profile(curves: Sequence[ReleaseProfile], label: str = "mean") -> ReleaseProfile:
+    """The mean of replicate curves over their common time span.
+
+    Parameters
+    ----------
+    curves : sequence of ReleaseProfile
+        Same units; each interpolated linearly onto the union of their sample times inside the span.
+    label : str
+
+    Returns
+    -------
+    ReleaseProfile
+        Mean amounts, with the mean of the curves' totals as its total.
+    """
+    curves = list(curves)
+    if not curves:
+        raise AnalysisError("a mean profile needs at least one curve")
+    for curve in curves[1:]:
+        _check_pair(curves[0], curve)
+    lo = max(c.t[0] for c in curves)
+    hi = min(c.t[-1] for c in curves)
+    if lo >= hi:
+        raise AnalysisError(f"the replicate curves {', '.join(c.label for c in curves)} have no time span in common")
+    grid = np.unique(np.concatenate([c.t for c in curves]))
+    grid = grid[(grid >= lo) & (grid <= hi)]
+    values = np.array([c.at(grid) for c in curves]).mean(axis=0)
+    total = float(np.mean([c.amount_total for c in curves]))
+    return ReleaseProfile(grid, values, curves[0].time_unit, curves[0].amount_unit, total, label)
 
 
 def bootstrap_f2(references: Sequence[ReleaseProfile], tests: Sequence[ReleaseProfile], *, n_boot: int = 10000,
@@ -386,16 +410,9 @@ def bootstrap_f2(references: Sequence[ReleaseProfile], tests: Sequence[ReleasePr
         raise AnalysisError(f"n_boot={n_boot!r}; use at least 100 bootstrap samples")
     if not 0 < level < 1:
         raise AnalysisError(f"level={level!r} must lie in (0, 1)")
-    for curve in references[1:] + tests:
-        _check_pair(references[0], curve)
-    lo = max(c.t[0] for c in references + tests)
-    hi = min(c.t[-1] for c in references + tests)
-    if lo >= hi:
-        raise AnalysisError("the replicate curves have no time span in common")
-    grid = np.unique(np.concatenate([c.t for c in references + tests]))
-    grid = grid[(grid >= lo) & (grid <= hi)]
-    mean_ref = _mean_profile(references, grid, "mean reference")
-    mean_test = _mean_profile(tests, grid, "mean test")
+    mean_ref = mean_profile(references, "mean reference")
+    mean_test = mean_profile(tests, "mean test")
+    lo, hi = _check_pair(mean_ref, mean_test)
     if times is None:
         sparse = min(references + tests, key=lambda c: c.t.size)
         if sparse.t.size <= MAX_SAMPLED_POINTS:
