@@ -1,5 +1,5 @@
 """Pictures and curves to numbers (paper section 4.2): decoding, crop/grid/mirror normalisation,
-per-cell Beer-Lambert calibration, concentration estimates, smoothing, run-folder analysis, and the
+per-cell Beer-Lambert calibration, concentration estimates, smoothing, run-folder analysis, the
 simulation-to-bench calibration (section 4.3), and the release-profile metrics of dissolution testing
 (f1/f2, MDT, DE, model fits)."""
 from analysis.calibration import (BenchCalibration, ConcentrationEstimate, estimate_concentration,
