@@ -290,15 +290,18 @@ def _sha256(path: Path) -> str:
 
 
 def _copy_target(target: str, out: Path, units: str) -> str:
-    """Copy a file target into the run folder (a measured run becomes its target CSV there); record the
-    source and both SHA-256 in ``target_source.json``; returns the copy's path (the run's target)."""
-    source = Path(target)
-    if source.is_dir():
-        from labapp.targets import run_to_target_csv
+    """Record a file or folder target in ``target_source.json`` (path and SHA-256); copy a simulation-unit
+    target (CSV, mesh scaled from ``units`` to mm) into the run folder and return the copy's path, which the
+    run then optimises. A measured (physical) target is turned into its CSV in the run folder by
+    ``labapp.targets.design_from_target``; here only its source is recorded."""
+    from labapp.targets import is_physical
 
-        copy = run_to_target_csv(source, out / "target_input.csv")
-        record = {"source": str(source.resolve()), "kind": "measured run", "sha256": None}
-    elif source.is_file():
+    source = Path(target)
+    if not source.exists():
+        return target
+    record: dict[str, Any] = {"source": str(source.resolve()), "units": units,
+                              "sha256": _sha256(source) if source.is_file() else None, "copy": None}
+    if source.is_file() and not is_physical(source):
         suffix = source.suffix.lower()
         copy = out / f"target_input{suffix}"
         if suffix in _MESH_SUFFIXES:
@@ -314,80 +317,88 @@ def _copy_target(target: str, out: Path, units: str) -> str:
                 shutil.copyfile(source, copy)
         else:
             shutil.copyfile(source, copy)
-        record = {"source": str(source.resolve()), "kind": "file", "sha256": _sha256(source), "units": units}
-    else:
-        return target
-    record.update(copy=copy.name, copy_sha256=_sha256(copy))
+        record.update(copy=copy.name, copy_sha256=_sha256(copy))
+        target = str(copy.resolve())
+    elif units != "mm":
+        raise UsageError("--units applies to a mesh target")
     (out / TARGET_SOURCE).write_text(json.dumps(record, indent=2) + "\n")
-    return str(copy.resolve())
+    return target
 
 
 def _check_target_unchanged(out: Path) -> list[str]:
-    """On resume: warnings when the original target changed since the run started, or the copy was altered."""
+    """On resume: warnings when the original target changed since the run started; refuses a run whose own
+    copy of the target is missing or altered."""
     try:
         record = json.loads((out / TARGET_SOURCE).read_text())
     except FileNotFoundError:
         return []
     except (OSError, ValueError) as exc:
         raise UsageError(f"{out / TARGET_SOURCE} cannot be read: {exc}") from exc
-    warnings = []
-    copy = out / record["copy"]
-    if not copy.is_file() or _sha256(copy) != record["copy_sha256"]:
-        raise UsageError(f"{copy}: the run's copy of its target is missing or altered (SHA-256 differs from "
-                         f"{TARGET_SOURCE}); the run cannot be resumed on the target it started with")
+    if record.get("copy"):
+        copy = out / record["copy"]
+        if not copy.is_file() or _sha256(copy) != record["copy_sha256"]:
+            raise UsageError(f"{copy}: the run's copy of its target is missing or altered (SHA-256 differs from "
+                             f"{TARGET_SOURCE}); the run cannot be resumed on the target it started with")
     source = Path(record["source"])
     if record.get("sha256") and (not source.is_file() or _sha256(source) != record["sha256"]):
-        warnings.append(f"the target {source} has changed (or is gone) since this run started; resuming with the "
-                        f"copy taken at the start ({copy.name})")
-    return warnings
+        used = f"the copy taken at the start ({record['copy']})" if record.get("copy") else \
+            "the target curve written at the start"
+        return [f"the target {source} has changed (or is gone) since this run started; resuming with {used}"]
+    return []
 
 
-def design(config, out: str | Path, *, resume: bool = False, units: str = "mm",
-           on_iteration: Callable | None = None, should_stop: Callable[[], bool] | None = None,
-           on_warning: Callable[[str], None] | None = None):
+def design(config, out: str | Path, *, resume: bool = False, units: str = "mm", simcal=None,
+           bench_calibration=None, on_iteration: Callable | None = None,
+           should_stop: Callable[[], bool] | None = None, on_warning: Callable[[str], None] | None = None):
     """Start (``config``: a ``design.problem.DesignConfig``) or resume (``resume=True``) a design run in ``out``.
 
-    A new run copies a file target (CSV, mesh scaled from ``units`` to mm, or a measured run converted to
-    its CSV) into the run folder with its SHA-256 and optimises the copy, so ``--resume`` uses the target
-    the run started with; a changed original is reported through ``on_warning`` (and the log). A start that
-    is rejected (invalid or infeasible target, bad settings) removes what it wrote, so a corrected rerun
-    into the same ``out`` is not blocked.
+    A new run records a file target's path and SHA-256 in ``target_source.json`` and optimises a copy in
+    the run folder (a mesh scaled from ``units`` to mm), so ``--resume`` uses the target the run started
+    with; a changed original is reported through ``on_warning`` (and the log). A start that is rejected
+    (invalid or infeasible target, bad settings, not enough memory) removes what it wrote, so a corrected
+    rerun into the same ``out`` is not blocked. The optimisation itself, with a measured target and the
+    physical prediction through ``simcal``, is ``labapp.targets.design_from_target``.
 
     Returns
     -------
-    design.optimize.DesignResult
+    result : design.optimize.DesignResult
+    physical : dict or None
+        The summary with the physical prediction (None without ``simcal``).
 
     Raises
     ------
     UsageError
-        For an ``out`` that is another command's folder (or a design run, without ``resume``).
+        For an ``out`` that is another command's folder (or a design run, without ``resume``), or a grid
+        that would not fit in memory.
     design.DesignError
         For an invalid configuration or target, an infeasible target, or a resume mismatch.
     """
-    from design.optimize import run_design
     from labapp.meshunits import DESIGN_BYTES_PER_VOXEL, check_memory
+    from labapp.targets import design_from_target
 
     warn = on_warning or (lambda message: None)
     out = Path(out)
+    run = dict(simcal=simcal, bench_calibration=bench_calibration, on_iteration=on_iteration,
+               should_stop=should_stop)
     if resume:
         if not (out / "config.json").is_file():
             raise UsageError(f"{out} holds no design run to resume (no config.json); start one with --target")
         for w in _check_target_unchanged(out):
             log.warning("%s", w)
             warn(w)
-        return run_design(None, out, on_iteration=on_iteration, should_stop=should_stop, resume=True)
+        return design_from_target(None, out, resume=True, **run)
     out = check_out(out, "design", [config.target], replace=False)
     existed = out.exists()
     before = set(out.iterdir()) if existed else set()
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        config = dataclasses.replace(config, target=_copy_target(config.target, out, units))
         n = config.resolution
         check_memory((n, n, n), DESIGN_BYTES_PER_VOXEL, f"designing at resolution {n}")
-        return run_design(config, out, on_iteration=on_iteration, should_stop=should_stop)
+        out.mkdir(parents=True, exist_ok=True)
+        config = dataclasses.replace(config, target=_copy_target(config.target, out, units))
+        return design_from_target(config, out, **run)
     except Exception:
-        if not (out / "checkpoint.npz").exists():   # rejected before the first evaluation: leave no trace
-            for path in set(out.iterdir()) - before if out.exists() else ():
+        if not (out / "checkpoint.npz").exists():   # rejected before the first checkpoint: leave no trace
+            for path in (set(out.iterdir()) - before) if out.exists() else ():
                 shutil.rmtree(path) if path.is_dir() else path.unlink()
             if not existed and out.exists() and not any(out.iterdir()):
                 out.rmdir()

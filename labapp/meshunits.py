@@ -104,7 +104,7 @@ def check_memory(shape: tuple[int, ...], bytes_per_voxel: int, what: str) -> int
     """
     need = int(np.prod(np.array(shape, dtype=float)) * bytes_per_voxel)
     have = int(psutil.virtual_memory().available * MEMORY_FRACTION)
-    log.info("%s: grid %s needs ~%.2f GiB (%.2f GiB usable)", what, shape, need / 2**30, have / 2**30)
+    log.debug("%s: grid %s needs ~%.2f GiB (%.2f GiB usable)", what, shape, need / 2**30, have / 2**30)
     if need > have:
         raise UsageError(f"{what}: a grid of {' x '.join(map(str, shape))} voxels needs about {need / 2**30:.1f} GiB, "
                          f"only {have / 2**30:.1f} GiB of memory is available; lower --resolution "
