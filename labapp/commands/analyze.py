@@ -5,6 +5,8 @@ import argparse
 import logging
 import sys
 
+from labapp.argtypes import nonnegative_int, positive_float, positive_int
+
 log = logging.getLogger(__name__)
 
 NAME = "analyze"
@@ -16,43 +18,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", help="run folder (frames.csv [+ run.json]) or a plain folder of images")
     parser.add_argument("--calibration", required=True, help="bench calibration JSON (sfr calibrate-bench)")
     parser.add_argument("--out", help="output folder (default: RUN/analysis)")
-    parser.add_argument("--interval", type=float, help="frame interval, s, for images without EXIF times")
-    parser.add_argument("--water-g", type=float, help="water mass, g (default: run.json, else the calibration's)")
-    parser.add_argument("--window-s", type=float, help="Savitzky-Golay window, s (default 330 = 30 frames at 11 s)")
-    parser.add_argument("--order", type=int, help="Savitzky-Golay polynomial order (default 2)")
-    parser.add_argument("--workers", type=int, help="decoding threads (default: all cores)")
+    parser.add_argument("--interval", type=positive_float, help="frame interval, s, for images without EXIF times")
+    parser.add_argument("--water-g", type=positive_float, help="water mass, g (default: run.json, else the calibration's)")
+    parser.add_argument("--window-s", type=positive_float, help="Savitzky-Golay window, s (default 330 = 30 frames at 11 s)")
+    parser.add_argument("--order", type=nonnegative_int, help="Savitzky-Golay polynomial order (default 2)")
+    parser.add_argument("--workers", type=positive_int, help="decoding threads (default: all cores)")
     parser.add_argument("--reduce", type=int, choices=(1, 2, 4, 8),
                         help="decode downscaled by this factor (default: the calibration's)")
     parser.add_argument("--no-plot", action="store_true", help="skip curve.png")
 
 
-def _plot(curve, path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from labapp.release_plot import draw_release
-
-    fig, ax = plt.subplots(figsize=(7, 4), dpi=120)
-    draw_release(ax, curve)
-    ax.set_xlabel("time (min)")
-    ax.legend(loc="lower right")
-    ax.set_title("release curve (linearised sRGB, mirror-normalised)")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-
-
 def run(args: argparse.Namespace) -> int:
     """Analyse, write the outputs, print a summary."""
-    from pathlib import Path
-
-    from analysis import (AnalysisError, BenchCalibration, analyze_run, steady_state, write_cells_csv,
-                          write_curve_csv)
-    from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
-
-    out = Path(args.out) if args.out else Path(args.run) / "analysis"
+    from analysis import steady_state
+    from labapp.jobs import analyse_run
 
     live = sys.stderr.isatty()  # a terminal gets one updating line, a log file one line per step
 
@@ -61,23 +40,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"{chr(13) if live else ''}analysed {done}/{total} frames",
                   end="\n" if done == total or not live else "", file=sys.stderr, flush=True)
 
-    try:
-        calibration = BenchCalibration.load(args.calibration)
-        out.mkdir(parents=True, exist_ok=True)
-        curve = analyze_run(args.run, calibration, interval_s=args.interval, workers=args.workers,
-                            progress=progress, reduce=args.reduce, cache_dir=out, water_g=args.water_g,
-                            window_s=DEFAULT_WINDOW_S if args.window_s is None else args.window_s,
-                            order=DEFAULT_ORDER if args.order is None else args.order)
-    except AnalysisError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"error: cannot write to {out}: {exc.strerror or exc}; choose another --out", file=sys.stderr)
-        return 2
-    write_curve_csv(curve, out / "curve.csv")
-    write_cells_csv(curve, out / "cells.csv")
-    if not args.no_plot:
-        _plot(curve, out / "curve.png")
+    result = analyse_run(args.run, args.calibration, args.out, interval_s=args.interval, water_g=args.water_g,
+                         window_s=args.window_s, order=args.order, workers=args.workers, reduce=args.reduce,
+                         plot=not args.no_plot, progress=progress)
+    curve, out = result.curve, result.out
     for message in curve.warnings:
         print(f"warning: {message}", file=sys.stderr)
     done = steady_state(curve.t_s, curve.conc_smooth_g_per_kg)
