@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from labapp.errors import UsageError
+
 log = logging.getLogger(__name__)
 
 CURVE_FILES = ("curve.csv", "release_physical.csv", "curves_physical.csv")
@@ -33,7 +35,7 @@ CURVE_FILES = ("curve.csv", "release_physical.csv", "curves_physical.csv")
 _DEFAULT_COLUMN = {"curves_physical.csv": "design_released_g"}
 
 
-class CurveFileError(ValueError):
+class CurveFileError(UsageError):
     """A curve file or run folder that cannot be read as a physical release curve."""
 
 

@@ -1,13 +1,11 @@
 """The simulated bench: SimulatedCamera + Heidolph emulator + a dissolving sample object, on one clock.
 
 The object's release comes from the forward simulator (``design.forward``) and is mapped to physical units
-with fixed nominal constants (the real simulation-to-bench calibration, paper section 4.3, is a later
-issue):
-
-- print density 1.32 g/cm^3 (paper section 4.1): released g = released mm^3 x 1.32e-3;
-- dissolution rate :data:`SECONDS_PER_MM` s per mm of dissolved depth: t_s = tau_mm x SECONDS_PER_MM,
-  chosen so that a ~1.75 g object (paper section 5.1) takes about 3 hours;
-- 500 g of water: concentration g/kg = released g / 0.5 kg.
+by a hidden material (:class:`Material`, drawn from a seed): its dissolution rate (s per mm of tau) and
+print density differ from any constant of the code, and every printed object deviates from the material by
+a few percent (its own seeded draw), as real prints do. Nothing in the calibration reads them: the
+simulation-to-bench calibration (``sfr calibrate-sim``) has to recover them from the images. A sample
+object keeps its truth in :attr:`SampleRelease.truth` for tests and the demo's ``truth.json``.
 
 Everything runs on the engine's clock: the camera renders the concentration at ``clock.now()``, and the
 emulated plate's thermal model runs at the same speed (``ScaledClock``) or on the clock itself
@@ -19,7 +17,7 @@ import dataclasses
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -35,17 +33,47 @@ from labapp.storage import FRAMES_CSV, read_run
 
 log = logging.getLogger(__name__)
 
-DENSITY_G_PER_MM3 = 1.32e-3
-"""Print density of the AquaSys 120 prints, 1.32 g/cm^3 (paper section 4.1), in g/mm^3."""
-SECONDS_PER_MM = 1600.0
-"""Nominal dissolution rate: seconds per mm of dissolved depth (tau)."""
 WATER_G = 500.0
 """Water in the beaker, g (paper section 4.2)."""
-SAMPLE_MASS_G = 1.75
-"""Mass the shipped sample objects are scaled to, g (paper section 5.1)."""
 SCENE = BenchScene(width=960, height=640, water_g=WATER_G)
 """The simulated bench picture: the renderer's default scene at 960 x 640 px (renders in about half the time
 of its 1200 x 800 default; the analysis works in full-resolution px either way)."""
+MATERIAL_SEED = 20221206
+"""Seed of the simulated bench's material draw."""
+
+
+@dataclass(frozen=True)
+class Material:
+    """The simulated bench's hidden material.
+
+    Attributes
+    ----------
+    seconds_per_mm : float
+        Dissolution: seconds per mm of dissolved depth (tau).
+    density_g_per_cm3 : float
+        Print density.
+    rate_spread, density_spread : float
+        Relative standard deviation of each printed object's rate and density around the material's.
+    """
+
+    seconds_per_mm: float
+    density_g_per_cm3: float
+    rate_spread: float = 0.015
+    density_spread: float = 0.02
+
+    @classmethod
+    def draw(cls, seed: int = MATERIAL_SEED) -> Material:
+        """A material with a rate of 1000-2400 s/mm (a ~1.7 g object dissolves in 1.5-3.5 h) and a print
+        density of 1.15-1.45 g/cm^3."""
+        rng = np.random.default_rng(seed)
+        return cls(float(rng.uniform(1000.0, 2400.0)), float(rng.uniform(1.15, 1.45)))
+
+    def printed(self, index: int, seed: int = MATERIAL_SEED) -> tuple[float, float]:
+        """The ``index``-th printed object's own (seconds_per_mm, g_per_mm3)."""
+        rng = np.random.default_rng([seed, index])
+        rate, dens = rng.standard_normal(2)
+        return (float(self.seconds_per_mm * (1.0 + self.rate_spread * rate)),
+                float(self.density_g_per_cm3 * 1e-3 * (1.0 + self.density_spread * dens)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,11 +85,15 @@ class SampleRelease:
     name : str
     t_s : (K,) ndarray of float, s since the drop
     released_g : (K,) ndarray of float, g
+    truth : dict
+        Hidden ground truth of the simulated object (``seconds_per_mm``, ``g_per_mm3``, ``volume_mm3``,
+        ``mass_g``); for tests and the demo's ``truth.json``, never for the calibration.
     """
 
     name: str
     t_s: np.ndarray
     released_g: np.ndarray
+    truth: dict = field(default_factory=dict)
 
     @property
     def mass_g(self) -> float:
@@ -80,35 +112,39 @@ class SampleRelease:
         return float(np.interp(t_since_drop_s, self.t_s, self.released_g)) / (water_g / 1000.0)
 
     @classmethod
-    def from_simulation(cls, name: str, tau_mm: np.ndarray, released_mm3: np.ndarray) -> SampleRelease:
-        """Map a simulated curve (tau in mm, released mm^3) to s and g with the nominal constants."""
-        return cls(name, np.asarray(tau_mm, float) * SECONDS_PER_MM,
-                   np.asarray(released_mm3, float) * DENSITY_G_PER_MM3)
+    def from_simulation(cls, name: str, tau_mm: np.ndarray, released_mm3: np.ndarray, seconds_per_mm: float,
+                        g_per_mm3: float) -> SampleRelease:
+        """Map a simulated curve (tau in mm, released mm^3) to s and g with an object's own scales."""
+        vol = np.asarray(released_mm3, float)
+        truth = {"seconds_per_mm": seconds_per_mm, "g_per_mm3": g_per_mm3, "volume_mm3": float(vol[-1]),
+                 "mass_g": float(vol[-1] * g_per_mm3)}
+        return cls(name, np.asarray(tau_mm, float) * seconds_per_mm, vol * g_per_mm3, truth)
 
 
-def sample_release(shape: str = "pill", mass_g: float = SAMPLE_MASS_G, resolution: int = 48) -> SampleRelease:
-    """Simulate a shipped sample object scaled to ``mass_g`` (g) and map its release to s and g.
+def sample_release(shape: str = "pill", index: int = 0, resolution: int = 48,
+                   material: Material | None = None) -> SampleRelease:
+    """Simulate the ``index``-th print of a shipped sample object in the bench's hidden material.
 
     Parameters
     ----------
     shape : str
-        A name of ``design.shapes.SAMPLE_SHAPES``.
-    mass_g : float
-        Mass of the printed object, g (scales the mesh at 1.32 g/cm^3).
+        A name of ``design.shapes.SAMPLE_SHAPES`` (each 1326 mm^3).
+    index : int
+        Which print: each has its own few-percent deviation of rate and density.
     resolution : int
         Voxels along the longest side for the forward simulation.
+    material : Material, optional
+        Default :meth:`Material.draw`.
     """
     from design.pipeline import simulate_mesh
     from design.shapes import sample_shape
 
-    mesh = sample_shape(shape)
-    scale = (mass_g / DENSITY_G_PER_MM3 / mesh.volume) ** (1.0 / 3.0)
-    mesh = mesh.copy()
-    mesh.apply_scale(scale)
-    release = simulate_mesh(mesh, resolution=resolution)
-    log.info("sample %s: %.3f g, %.0f mm^3, dissolves in %.0f s (tau %.2f mm)", shape, mass_g, mesh.volume,
-             release.tau_mm[-1] * SECONDS_PER_MM, release.tau_mm[-1])
-    return SampleRelease.from_simulation(shape, release.tau_mm, release.released_mm3)
+    material = material or Material.draw()
+    seconds_per_mm, g_per_mm3 = material.printed(index)
+    release = simulate_mesh(sample_shape(shape), resolution=resolution)
+    log.info("sample %s #%d: %.3f g, dissolves in %.0f s", shape, index, release.released_mm3[-1] * g_per_mm3,
+             release.tau_mm[-1] * seconds_per_mm)
+    return SampleRelease.from_simulation(shape, release.tau_mm, release.released_mm3, seconds_per_mm, g_per_mm3)
 
 
 class _ClockedCamera:

@@ -13,7 +13,9 @@ HELP = "design a printable shape whose release matches a target curve (mesh, CSV
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--target", help="sample shape name, mesh file (.stl/.obj/.ply/.off/.3mf), "
-                        "tau_mm,released_mm3 CSV, or zero-order[:final=F,duration=D] / accel:q=Q[,final=F,duration=D]")
+                        "tau_mm,released_mm3 CSV, zero-order[:final=F,duration=D] / accel:q=Q[,final=F,duration=D], or a "
+                        "measured curve in grams over seconds (a run folder, curve.csv or any t_s,released_g CSV; "
+                        "needs --simcal)")
     parser.add_argument("--space", default="nfc", choices=("nfc", "extruded", "ico"),
                         help="design space (ico: reserved, not available yet)")
     parser.add_argument("--resolution", type=int, default=64, help="voxels along the domain's longest side (even)")
@@ -51,6 +53,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--formats", nargs="*", default=[], choices=("3mf", "obj"), help="extra mesh formats")
     parser.add_argument("--allow-infeasible", action="store_true", help="optimise even if the target fails checks")
     parser.add_argument("--resume", action="store_true", help="continue the stopped run in --out")
+    parser.add_argument("--simcal", metavar="SIMCAL.json",
+                        help="simulation calibration (sfr calibrate-sim): maps a measured target to simulation "
+                             "units and adds the design's predicted release in grams over seconds "
+                             "(curves_physical.csv, rel_rmse_physical, report.png in g over h)")
+    parser.add_argument("--calibration", metavar="BENCH_CAL.json",
+                        help="bench calibration for a run-folder target (default: the run's own)")
     parser.add_argument("--out", required=True, help="run folder")
 
 
@@ -82,8 +90,10 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from design.errors import DesignError
-    from design.optimize import run_design
+    from analysis import BenchCalibration
     from design.problem import DesignConfig
+    from labapp.simcal import load_simcal
+    from labapp.targets import design_from_target
 
     try:
         if args.resume:
@@ -105,11 +115,14 @@ def run(args: argparse.Namespace) -> int:
                                   warn_channel_mm=args.warn_channel_mm, allow_infeasible=args.allow_infeasible,
                                   formats=tuple(args.formats))
         max_iter = config.max_iter if config else _stored_max_iter(args.out)
-        result = run_design(config, args.out, on_iteration=_progress(max_iter), resume=args.resume)
+        simcal = load_simcal(args.simcal) if args.simcal else None
+        bench = BenchCalibration.load(args.calibration) if args.calibration else None
+        result, physical = design_from_target(config, args.out, simcal=simcal, bench_calibration=bench,
+                                              on_iteration=_progress(max_iter), resume=args.resume)
     except DesignError as exc:
         print(f"\nsfr design: {exc}", file=sys.stderr)
         return 1
-    s = result.outputs.summary
+    s = physical or result.outputs.summary
     print(file=sys.stderr)
     print(f"{result.status} after {result.iterations} evaluations ({s['seconds']:.1f} s, "
           f"{s['seconds_per_iteration'] or 0:.3f} s each)")
@@ -118,9 +131,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid {dev['binary']}")
     print(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
           f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}")
+    if physical is not None:
+        print(f"physical prediction ({s['simcal']['model']} model, {s['simcal']['seconds_per_mm']:.1f} s/mm): "
+              f"rel. RMSE {s['rel_rmse_physical']:.3%} of the target's final grams (curves_physical.csv)")
     for w in s["warnings"]:
         print(f"warning: {w}")
-    names = ("design.stl", "density.npz", "curves.csv", "report.png", "history.csv", "summary.json", "design.ini")
+    names = ("design.stl", "density.npz", "curves.csv", "curves_physical.csv", "report.png", "history.csv",
+             "summary.json", "design.ini")
     print(f"results in {result.out_dir}: {', '.join(n for n in names if (result.out_dir / n).exists())}")
     log.debug("summary %s", json.dumps(s))
     return 0 if result.status != "interrupted" else 130

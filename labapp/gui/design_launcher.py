@@ -15,9 +15,13 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, Q
 
 from labapp.gui.bridge import BackgroundTask
 from labapp.storage import sanitize_name
-from labapp.targets import NOMINAL_NOTE, run_to_target_csv
+from labapp.simcal import SimCalFile, load_simcal
+from labapp.targets import design_from_target
 
 log = logging.getLogger(__name__)
+
+NO_SIMCAL = ("no active simulation calibration: a measured run cannot become a target until one is made "
+             "(calibration wizard, simulation step) and made active")
 
 
 def read_curves(path: Path) -> dict[str, list[float]]:
@@ -57,7 +61,8 @@ class DesignLauncher(QWidget):
         self.start_button.clicked.connect(self.start)
         self.stop_button.clicked.connect(self.stop)
         self.save_button.clicked.connect(self._save)
-        self.status = QLabel(NOMINAL_NOTE)
+        self.simcal: SimCalFile | None = None
+        self.status = QLabel(NO_SIMCAL)
         self.status.setWordWrap(True)
         self.plot = pg.PlotWidget(title="release: target vs achieved (simulation units)")
         self.plot.setLabel("bottom", "tau (mm)")
@@ -90,6 +95,12 @@ class DesignLauncher(QWidget):
         self.stop_button.setEnabled(False)
         self.save_button.setEnabled(False)
 
+    def set_simcal(self, path: Path | None) -> None:
+        """Make a ``simcal.json`` the active simulation calibration (None: none)."""
+        self.simcal = None if path is None else load_simcal(path)
+        self.status.setText(NO_SIMCAL if self.simcal is None else f"active simulation calibration: "
+                            f"{self.simcal.describe()}")
+
     def _pick_run(self) -> None:
         path = QFileDialog.getExistingDirectory(self, "measured run", str(self.data_dir))
         if path:
@@ -102,7 +113,6 @@ class DesignLauncher(QWidget):
 
     def start(self) -> None:
         """Convert the source if it is a run, then run the design in the background."""
-        from design.optimize import run_design
         from design.problem import DesignConfig
 
         source = Path(self.source.text().strip())
@@ -115,14 +125,15 @@ class DesignLauncher(QWidget):
         self._stop.clear()
         out_dir = self.out_dir
 
+        simcal = self.simcal
+
         def work(progress):
             out_dir.mkdir(parents=True)
-            target = run_to_target_csv(source, out_dir / "target.csv") if source.is_dir() else source
-            config = DesignConfig(target=str(target), space=space, resolution=resolution, max_iter=max_iter,
+            config = DesignConfig(target=str(source), space=space, resolution=resolution, max_iter=max_iter,
                                   allow_infeasible=allow)
-            return run_design(config, out_dir / "design",
-                              on_iteration=lambda k, x, terms: progress((k, float(terms.get("J", float("nan"))))),
-                              should_stop=self._stop.is_set)
+            return design_from_target(config, out_dir / "design", simcal=simcal,
+                                      on_iteration=lambda k, x, terms: progress((k, float(terms.get("J", float("nan"))))),
+                                      should_stop=self._stop.is_set)
         self.task = BackgroundTask(work, self)
         self.task.progress.connect(self._progress)
         self.task.finished.connect(self._finished)
@@ -139,7 +150,8 @@ class DesignLauncher(QWidget):
     def _progress(self, k_j: tuple[int, float]) -> None:
         self.status.setText(f"iteration {k_j[0]}: J = {k_j[1]:.5g}")
 
-    def _finished(self, result) -> None:
+    def _finished(self, outcome) -> None:
+        result, physical = outcome
         self.start_button.setEnabled(True)
         self.stop_button.setEnabled(False)
         curves = read_curves(result.out_dir / "curves.csv")
@@ -147,7 +159,9 @@ class DesignLauncher(QWidget):
         self.achieved_curve.setData(curves["tau_mm"], curves["binary_mm3"])
         self.save_button.setEnabled((result.out_dir / "design.stl").is_file())
         self.status.setText(f"design {result.status} after {result.iterations} evaluations (J = {result.best_value:.5g}) "
-                            f"in {result.out_dir}. {NOMINAL_NOTE}")
+                            f"in {result.out_dir}." + ("" if physical is None else
+                            f" Predicted release within {physical['rel_rmse_physical']:.2%} RMS of the target; "
+                            f"print mass {physical['print_mass_g']:.3f} g."))
 
     def _failed(self, message: str) -> None:
         self.start_button.setEnabled(True)

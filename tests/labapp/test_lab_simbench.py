@@ -1,32 +1,47 @@
-"""The simulated bench: nominal unit mapping, the forward-simulated sample, and device faults during a run."""
+"""The simulated bench: its hidden material, the forward-simulated sample, and device faults during a run."""
 import numpy as np
 import pytest
 
 from labapp.clock import SteppedClock
 from labapp.engine import Engine
 from labapp.procedures import RunConfig, RunProcedure
-from labapp.simbench import DENSITY_G_PER_MM3, SECONDS_PER_MM, SampleRelease, SimulatedBench, sample_release
+from labapp.simbench import Material, SampleRelease, SimulatedBench, sample_release
 from labapp.storage import read_run, verify_run
 
 
 def _sphere(radius_mm=6.82):
     tau = np.linspace(0.0, radius_mm, 400)
-    return SampleRelease.from_simulation("sphere", tau, 4 / 3 * np.pi * (radius_mm ** 3 - (radius_mm - tau) ** 3))
+    return SampleRelease.from_simulation("sphere", tau, 4 / 3 * np.pi * (radius_mm ** 3 - (radius_mm - tau) ** 3),
+                                         1600.0, 1.32e-3)
 
 
-def test_nominal_constants_map_a_sphere_to_grams_and_hours():
+def test_an_object_maps_to_grams_and_hours_with_its_own_scales():
     release = _sphere()
-    assert release.mass_g == pytest.approx(4 / 3 * np.pi * 6.82 ** 3 * 1.32e-3)   # 1.32 g/cm^3
-    assert release.duration_s == pytest.approx(6.82 * SECONDS_PER_MM)
+    assert release.mass_g == pytest.approx(4 / 3 * np.pi * 6.82 ** 3 * 1.32e-3)
+    assert release.duration_s == pytest.approx(6.82 * 1600.0)
+    assert release.truth["mass_g"] == pytest.approx(release.mass_g)
     assert release.conc_g_per_kg(-5.0) == 0.0
     assert release.conc_g_per_kg(1e9) == pytest.approx(release.mass_g / 0.5)       # 500 g of water
-    assert DENSITY_G_PER_MM3 == 1.32e-3
 
 
-def test_the_shipped_sample_dissolves_in_about_three_hours():
-    release = sample_release("sphere", resolution=32)
-    assert release.mass_g == pytest.approx(1.75, rel=0.03)
-    assert 2.5 * 3600 < release.duration_s < 3.5 * 3600
+def test_the_hidden_material_and_each_print_differ_by_seeded_draws():
+    material = Material.draw()
+    assert 1000 <= material.seconds_per_mm <= 2400 and 1.15 <= material.density_g_per_cm3 <= 1.45
+    assert Material.draw(1) != material and Material.draw() == material
+    prints = np.array([material.printed(i) for i in range(40)])
+    rate = prints[:, 0] / material.seconds_per_mm - 1
+    dens = prints[:, 1] / (material.density_g_per_cm3 * 1e-3) - 1
+    assert 0.007 < rate.std() < 0.03 and 0.01 < dens.std() < 0.04        # a few percent, every print its own
+    assert material.printed(3) == material.printed(3) != material.printed(4)
+
+
+def test_the_shipped_sample_dissolves_in_hours():
+    material = Material(1500.0, 1.3)
+    release = sample_release("sphere", index=0, resolution=32, material=material)
+    seconds_per_mm, g_per_mm3 = material.printed(0)
+    assert release.truth["seconds_per_mm"] == seconds_per_mm and release.truth["g_per_mm3"] == g_per_mm3
+    assert release.mass_g == pytest.approx(1326 * g_per_mm3, rel=0.03)
+    assert 2.0 * 3600 < release.duration_s < 3.5 * 3600
     assert np.all(np.diff(release.released_g) >= -1e-9)
 
 
