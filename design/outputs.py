@@ -23,7 +23,8 @@ from design.report import save_report
 
 log = logging.getLogger(__name__)
 
-HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "grad_norm", "seconds")
+HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "fab_seconds", "grad_norm", "seconds")
+"""``fab_seconds``: time of that evaluation's J_fab (the ICO solves), s; ``seconds``: run time so far, s."""
 
 
 @dataclass(frozen=True)
@@ -70,7 +71,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     objective : DesignObjective
     best_x : ndarray of float, variable shape
         The best design variables found.
-    history : list of rows (iteration, J, J_fit, J_binary, J_fab, grad_norm, seconds)
+    history : list of rows with `HISTORY_COLUMNS`
     config : design.problem.DesignConfig
     status : str
     session_seconds : float
@@ -106,7 +107,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     curves = np.column_stack([target.tau_mm, target.released_mm3, density_curve,
                               binary_curve])
     _write_text(out_dir / "curves.csv", _csv(("tau_mm", "target_mm3", "density_mm3", "binary_mm3"), curves))
-    _write_text(out_dir / "history.csv", _csv(HISTORY_COLUMNS, np.array(history, dtype=float).reshape(-1, 7)))
+    rows = np.array(history, dtype=float).reshape(-1, len(HISTORY_COLUMNS))
+    _write_text(out_dir / "history.csv", _csv(HISTORY_COLUMNS, rows))
     _write_text(out_dir / "design.ini", prusa_profile(out_dir.name))
     achieved = (("density", density_curve), ("binary", binary_curve))
     iterations = len(history)

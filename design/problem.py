@@ -14,8 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from design.errors import DesignError
+from design.ico import DEFAULT_COARSEN, DEFAULT_LAYERS, IcoConfig
 from design.forward import total_time
 from design.meshio import load_mesh
+from design.presets import preset_values
 from design.shapes import SAMPLE_SHAPES, sample_shape
 from design.spaces import BUILD_AXIS, SPACE_CHOICES, DesignSpace, SpaceRequest, build_space
 from design.targets import (Feasibility, Target, check_feasibility, constant_acceleration, curve_end_mm,
@@ -35,7 +37,9 @@ CSV_HORIZON_MARGIN = 1.1
 SPACE_DEFAULTS: dict[str, dict[str, float]] = {
     "nfc": {"w_binary": 20.0, "beta": 3.0},
     "extruded": {"w_binary": 20.0, "beta": 3.0},
+    "ico": {"w_binary": 30.0, "beta": 3.0, "w_fab": 100.0},
 }
+"""The ICO w_f (Table 1: 50-200) weighs J_fab normalised to 1 at the start design (`design.ico`)."""
 DEFAULT_RADIUS_MM = 1.0
 """Smoothing radius r when none is given, mm: the paper's r = 4 voxels at the 64-voxel sample grids
 (dx ~ 0.26 mm), fixed in mm so that the minimum feature (about r, five 0.2 mm print lines, section
@@ -58,16 +62,23 @@ class DesignConfig:
     target : str
         Target spec (see module docstring).
     space : str
-        Design space name ("nfc", "extruded"; "ico" is reserved).
+        Design space name ("nfc", "extruded", "ico").
     resolution : int
         Voxels along the full domain's longest side (even, >= 8).
     domain_mm : tuple of 3 float or None
         Full domain size (x, y, z), mm; None = the source's bounding box plus ``margin`` on every
         side (cubic for nfc), or a `DEFAULT_DOMAIN_MM` cube for targets without a source.
     height_mm : float or None
-        Extrusion height, mm (extruded only); None = the source's height, else the domain's.
+        Extrusion height, mm (extruded only); None = ``height_fraction`` of the domain's longest
+        side if given, else the source's height, else the domain's.
+    height_fraction : float or None
+        Extrusion height as a fraction of the domain's longest side (set by the paper presets).
+    preset : str or None
+        ``paper:NAME``: hyperparameters of the paper's Table 1 or 2 (`design.presets`) for the
+        fields left None; explicit values win.
     w_binary, radius_vox, beta : float or None
-        Eq. (4) hyperparameters; None = `SPACE_DEFAULTS` (resolved and stored explicitly). The
+        Eq. (4) hyperparameters; None = the preset's, else `SPACE_DEFAULTS` (resolved and stored
+        explicitly). The
         smoothing radius r is in voxels; give it in mm with ``radius_mm`` instead.
     radius_mm : float or None
         Smoothing radius r in mm (exclusive with ``radius_vox``); with neither,
@@ -76,8 +87,15 @@ class DesignConfig:
         Drop the connectivity penalty: the design may fall apart into pieces (as in the paper).
     w_connect : float
         Weight of the connectivity penalty J_conn (`design.connectivity`) unless ``allow_pieces``.
-    w_fab : float
-        Weight of the space's fabrication term (none for nfc/extruded).
+    w_fab : float or None
+        Weight w_f of the space's fabrication term (ico only; None = preset or `SPACE_DEFAULTS`,
+        0 for spaces without one).
+    layers : int
+        L, partial designs of the ICO term (section 3.6).
+    ico_coarsen : int
+        Design voxels per elasticity element edge of the ICO term (`design.ico`).
+    stiffness_law : str
+        "simp" (p = 3) or "ramp" (q = 3) moduli of the ICO term.
     rate_window_vox : float
         Finite-difference span of J_rate's rates, voxel edges (rounded to whole tau samples).
     beta_final : float or None
@@ -124,13 +142,18 @@ class DesignConfig:
     resolution: int = 64
     domain_mm: tuple[float, float, float] | None = None
     height_mm: float | None = None
+    height_fraction: float | None = None
+    preset: str | None = None
     w_binary: float | None = None
     radius_vox: float | None = None
     radius_mm: float | None = None
     allow_pieces: bool = False
     w_connect: float = W_CONNECT
     beta: float | None = None
-    w_fab: float = 0.0
+    w_fab: float | None = None
+    layers: int = DEFAULT_LAYERS
+    ico_coarsen: int = DEFAULT_COARSEN
+    stiffness_law: str = "simp"
     beta_final: float | None = None
     rate_window_vox: float = 1.0
     w_rate: float | None = None
@@ -152,9 +175,17 @@ class DesignConfig:
     def __post_init__(self) -> None:
         if self.space not in SPACE_CHOICES:
             raise DesignError(f"space must be one of {SPACE_CHOICES}, got {self.space!r}")
-        for key, value in SPACE_DEFAULTS.get(self.space, {}).items():
-            if getattr(self, key) is None:
-                object.__setattr__(self, key, value)
+        presets = [preset_values(self.preset, self.space)] if self.preset is not None else []
+        for values in presets + [SPACE_DEFAULTS.get(self.space, {}), {"w_fab": 0.0}]:
+            for key, value in values.items():
+                if getattr(self, key) is None and not (key == "radius_vox" and self.radius_mm is not None):
+                    object.__setattr__(self, key, value)
+        if self.w_fab < 0 or (self.w_fab > 0 and self.space != "ico"):
+            raise DesignError(f"w_fab must be >= 0, and only the ico space has a fabrication term; got "
+                              f"{self.w_fab} for space {self.space!r}")
+        if self.height_fraction is not None and not 0 < self.height_fraction <= 1:
+            raise DesignError(f"height_fraction must be in (0, 1], got {self.height_fraction}")
+        IcoConfig(self.layers, self.ico_coarsen, self.stiffness_law)  # checks the ICO settings
         if self.w_rate is None:
             object.__setattr__(self, "w_rate", ANALYTIC_W_RATE if _parse_analytic(self.target) else 0.0)
         if self.w_rate < 0 or not 0 < self.rate_window_vox <= 64:
@@ -305,11 +336,13 @@ def prepare(config: DesignConfig) -> Problem:
     full = [_even_ceil(s / dx - 1e-9) for s in size]
     height_vox = None
     if config.space == "extruded":
-        height = config.height_mm or (float(hi[BUILD_AXIS] - lo[BUILD_AXIS]) if mesh is not None else None)
+        height = config.height_mm or (config.height_fraction * float(size.max()) if config.height_fraction else None)
+        height = height or (float(hi[BUILD_AXIS] - lo[BUILD_AXIS]) if mesh is not None else None)
         if height is not None:
             height_vox = max(1, int(round(height / dx)))
             full[BUILD_AXIS] = max(full[BUILD_AXIS], height_vox)
-    space: DesignSpace = build_space(config.space, SpaceRequest(tuple(full), dx, height_vox))
+    ico = IcoConfig(config.layers, config.ico_coarsen, config.stiffness_law)
+    space: DesignSpace = build_space(config.space, SpaceRequest(tuple(full), dx, height_vox, ico))
     sim_full = list(space.grid_shape)
     for ax, mir in enumerate(space.mirror):
         sim_full[ax] *= 2 if mir else 1

@@ -3,8 +3,8 @@
 A design space owns the variable field ``rho_hat`` (what nlopt sees), the grid on which the
 filters of eq. (4) act, and the linear map from the filtered field to the reduced
 (mirror-symmetric) simulation grid, with its adjoint. Spaces are built by name from a
-registry, so that a later module (the incremental-compliance term of section 3.6, "ico") can
-add its own with `register_space` without touching this file.
+registry (`register_space` adds more); "ico" carries the incremental-compliance term of section
+3.6 (`design.ico`) as its ``fab_term``.
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from typing import Callable, Protocol
 import numpy as np
 
 from design.errors import DesignError
+from design.ico import IcoConfig, IcoTerm, layer_tops
 
 log = logging.getLogger(__name__)
 
@@ -25,13 +26,17 @@ BUILD_AXIS = 2
 class FabTerm(Protocol):
     """A fabrication term J_fab of eq. (4), evaluated on the reduced simulation grid.
 
-    ``__call__(rho)`` returns the value and its gradient with respect to ``rho`` (same shape).
-    The incremental-compliance objective of section 3.6 is the intended implementation.
+    ``__call__(rho)`` returns the value and its gradient with respect to ``rho`` (same shape);
+    ``normalise_at(rho)`` fixes the value that divides it (the start design's), ``seconds`` is the
+    time spent in it so far. `design.ico.IcoTerm` (section 3.6) implements it.
     """
 
     name: str
+    seconds: float
 
     def __call__(self, rho: np.ndarray) -> tuple[float, np.ndarray]: ...
+
+    def normalise_at(self, rho: np.ndarray) -> float: ...
 
 
 @dataclass(frozen=True)
@@ -46,11 +51,14 @@ class SpaceRequest:
         Voxel edge length, mm.
     height_vox : int or None
         Extrusion height h in voxels (extruded spaces only; None = the full domain height).
+    ico : IcoConfig
+        Settings of the incremental-compliance term (ico space only).
     """
 
     full_shape: tuple[int, int, int]
     dx_mm: float
     height_vox: int | None = None
+    ico: IcoConfig = IcoConfig()
 
     def __post_init__(self) -> None:
         if len(self.full_shape) != 3 or min(self.full_shape) < 2:
@@ -146,17 +154,27 @@ def extruded_space(request: SpaceRequest) -> DesignSpace:
     return DesignSpace("extruded", var_shape, (True, True), tuple(grid), mirror, request.dx_mm)
 
 
+def ico_space(request: SpaceRequest) -> DesignSpace:
+    """Free 3D design with the incremental-compliance term J_fab (section 3.6), quadrant symmetry.
+
+    The build direction is +z (`BUILD_AXIS`), z = 0 the build plate; x and y are mirrored (section 5.2).
+    """
+    mirror = tuple(ax != BUILD_AXIS for ax in range(3))
+    shape = _halve(request.full_shape, mirror)
+    layer_tops(-(-shape[BUILD_AXIS] // request.ico.coarsen), request.ico.layers)  # enough elements per layer
+    term = IcoTerm(request.dx_mm, request.ico, mirror=(mirror[0], mirror[1]))
+    return DesignSpace("ico", shape, mirror, shape, mirror, request.dx_mm, fab_term=term)
+
+
 SpaceBuilder = Callable[[SpaceRequest], DesignSpace]
-_REGISTRY: dict[str, SpaceBuilder] = {"nfc": nfc_space, "extruded": extruded_space}
-_RESERVED: dict[str, str] = {
-    "ico": "the incremental-compliance fabrication term (section 3.6) has its own issue and is not available yet",
-}
+_REGISTRY: dict[str, SpaceBuilder] = {"nfc": nfc_space, "extruded": extruded_space, "ico": ico_space}
+_RESERVED: dict[str, str] = {}
 SPACE_CHOICES: tuple[str, ...] = ("nfc", "extruded", "ico")
 """Names accepted on the command line, including reserved ones that report why they are unavailable."""
 
 
 def register_space(name: str, builder: SpaceBuilder) -> None:
-    """Make a design space available by name (e.g. "ico" once its J_fab term exists)."""
+    """Make a design space available by name."""
     if name in _REGISTRY:
         raise DesignError(f"design space {name!r} is already registered")
     _REGISTRY[name] = builder

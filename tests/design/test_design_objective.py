@@ -27,6 +27,10 @@ class _QuadraticFab:
     """A stand-in J_fab = sum(rho^2) for checking the hook's gradient plumbing."""
 
     name = "quadratic"
+    seconds = 0.0
+
+    def normalise_at(self, rho):
+        return 1.0
 
     def __call__(self, rho):
         return float(np.sum(rho ** 2)), 2.0 * rho

@@ -58,8 +58,8 @@ def test_ctrl_c_stops_cleanly_with_the_best_design(tmp_path):
 
 
 def test_configuration_guards(tmp_path):
-    with pytest.raises(DesignError, match="not available yet"):
-        prepare(DesignConfig(target="sphere", space="ico", resolution=16))
+    with pytest.raises(DesignError, match="16 layers need at least as many elasticity elements along z"):
+        prepare(DesignConfig(target="sphere", space="ico", resolution=16, layers=16))
     with pytest.raises(DesignError, match="even number"):
         DesignConfig(target="sphere", resolution=15)
     with pytest.raises(DesignError, match="neither a sample shape"):
