@@ -49,6 +49,8 @@ class RunCurve:
     water_g : float
     warnings : list of str
         Skipped frames, reference trouble, manifest notes.
+    object_mass_g : float or None
+        Weighed mass of the object (run.json ``object_mass_g``), g, when recorded.
     """
 
     files: list[str]
@@ -61,6 +63,12 @@ class RunCurve:
     n_rejected: np.ndarray
     water_g: float
     warnings: list[str] = field(default_factory=list)
+    object_mass_g: float | None = None
+
+    @property
+    def released_raw_g(self) -> np.ndarray:
+        """(N,) ndarray of float, g: the unsmoothed concentration times the water mass."""
+        return self.conc_g_per_kg * self.water_g / 1000.0
 
 
 def _cache_key(calibration: BenchCalibration, reduce: int) -> str:
@@ -195,19 +203,35 @@ def analyze_run(folder: str | Path, calibration: BenchCalibration, *, interval_s
     smooth = smooth_curve(t_s, conc, window_s=window_s, order=order)
     return RunCurve([str(frames.files[i].relative_to(frames.folder)) for i in keep], t_s, conc,
                     np.array([e.uncertainty_g_per_kg for e in estimates]), smooth, smooth * water / 1000.0,
-                    cells, np.array([len(e.rejected_cells) for e in estimates]), water, warnings)
+                    cells, np.array([len(e.rejected_cells) for e in estimates]), water, warnings,
+                    _positive_or_none(frames.run.get("object_mass_g")))
+
+
+def _positive_or_none(value: object) -> float | None:
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return None
+    return v if np.isfinite(v) and v > 0 else None
 
 
 def write_curve_csv(curve: RunCurve, path: str | Path) -> None:
-    """``curve.csv``: ``t_s,conc_g_per_kg,conc_smooth_g_per_kg,released_g,uncertainty_g_per_kg,file``."""
+    """``curve.csv``: ``t_s,conc_g_per_kg,conc_smooth_g_per_kg,released_g,uncertainty_g_per_kg,n_rejected_cells,
+    file,released_raw_g`` and, when the object's mass is known, ``released_pct`` (smoothed release in percent
+    of that mass)."""
+    with_pct = curve.object_mass_g is not None
+    raw = curve.released_raw_g
     with open(path, "w", newline="") as fh:
         out = csv.writer(fh)
         out.writerow(["t_s", "conc_g_per_kg", "conc_smooth_g_per_kg", "released_g", "uncertainty_g_per_kg",
-                      "n_rejected_cells", "file"])
+                      "n_rejected_cells", "file", "released_raw_g"] + (["released_pct"] if with_pct else []))
         for i, name in enumerate(curve.files):
-            out.writerow([f"{curve.t_s[i]:.3f}", f"{curve.conc_g_per_kg[i]:.6f}",
-                          f"{curve.conc_smooth_g_per_kg[i]:.6f}", f"{curve.released_g[i]:.6f}",
-                          f"{curve.uncertainty_g_per_kg[i]:.6f}", int(curve.n_rejected[i]), name])
+            row = [f"{curve.t_s[i]:.3f}", f"{curve.conc_g_per_kg[i]:.6f}", f"{curve.conc_smooth_g_per_kg[i]:.6f}",
+                   f"{curve.released_g[i]:.6f}", f"{curve.uncertainty_g_per_kg[i]:.6f}", int(curve.n_rejected[i]),
+                   name, f"{raw[i]:.6f}"]
+            if with_pct:
+                row.append(f"{100.0 * curve.released_g[i] / curve.object_mass_g:.4f}")
+            out.writerow(row)
 
 
 def write_cells_csv(curve: RunCurve, path: str | Path) -> None:

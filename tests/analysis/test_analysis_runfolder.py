@@ -178,3 +178,24 @@ def test_cli_calibration_takes_the_series_recorded_crop(tmp_path, capsys):
     shutil.copy(BENCH / "run" / "run.json", run / "run.json")
     assert main(["analyze", str(run), "--calibration", str(cal), "--out", str(tmp_path / "out")]) == 0
     assert "differs from the calibration" not in capsys.readouterr().err
+
+
+def test_curve_csv_has_raw_grams_and_percent_of_the_weighed_mass(tmp_path):
+    from analysis.runfolder import RunCurve, write_curve_csv
+
+    n = 3
+    conc = np.array([0.0, 1.0, 2.0])
+    smooth = np.array([0.1, 1.0, 1.9])
+    curve = RunCurve(["a.jpg", "b.jpg", "c.jpg"], np.array([0.0, 11.0, 22.0]), conc, np.full(n, 0.01), smooth,
+                     smooth * 0.5, np.zeros((n, 2, 2)), np.zeros(n, int), 500.0, object_mass_g=1.9)
+    write_curve_csv(curve, tmp_path / "curve.csv")
+    with open(tmp_path / "curve.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [float(r["released_raw_g"]) for r in rows] == [0.0, 0.5, 1.0]      # conc x 0.5 kg, unsmoothed
+    assert [float(r["released_pct"]) for r in rows] == pytest.approx([100 * 0.05 / 1.9, 100 * 0.5 / 1.9, 50.0], abs=1e-4)
+    unknown = RunCurve(curve.files, curve.t_s, conc, curve.uncertainty_g_per_kg, smooth, smooth * 0.5, curve.cells,
+                       curve.n_rejected, 500.0)
+    write_curve_csv(unknown, tmp_path / "curve2.csv")
+    with open(tmp_path / "curve2.csv", newline="") as fh:
+        header = next(csv.reader(fh))
+    assert "released_raw_g" in header and "released_pct" not in header
