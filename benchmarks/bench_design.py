@@ -1,109 +1,158 @@
-"""Seconds per L-BFGS iteration of inverse design vs one scikit-fmm forward solve on the same grid.
+"""Seconds per iteration of inverse design against one scikit-fmm forward solve on the same grid.
 
 For each reduced grid N^3 (nfc, octant symmetry: the full design is (2N)^3) this runs `sfr design`'s
-engine (`design.optimize.run_design`) on a zero-order target for a fixed number of evaluations and
-reads seconds per evaluation from its history (optimisation with its default checkpoints; setup and
-output writing excluded),
-over the steady state only: the evaluations after nlopt's L-BFGS memory has filled (its step costs
-grow with the number of stored pairs, up to `lbfgs_memory`). The split between our objective and
-gradient and nlopt's own work is timed around `DesignObjective.evaluate`. The baseline is
-`skfmm.travel_time` (first order) on the same N^3 grid with the same slowness as the uniform start,
-timed in the same process. Peak memory is the process's maximum resident set size.
+engine (`design.optimize.run_design`, default optimiser and checkpoints) on a zero-order target in a
+20 mm cube. After a warm-up (the L-BFGS memory fills; its step cost grows with the stored pairs), it
+alternates, for ``--rounds`` rounds, a block of design iterations (one checkpoint interval, so every
+block holds one checkpoint) with a block of first-order `skfmm.travel_time` solves of the design's
+current density on the same N^3 grid, from inside the run's progress callback. Each round's ratio
+compares the two blocks measured within the same minute, so a slow period of the shared machine
+slows both; the headline is the median ratio over the rounds, printed with its spread.
 
-    python benchmarks/bench_design.py [--quick]
+An iteration is the wall time between two progress callbacks (objective, gradient, optimiser step,
+bookkeeping and checkpoint). Its breakdown: "objective" is `DesignObjective.evaluate` less its
+adjoint chain; "gradient" is that adjoint chain (release-curve VJP, projection and filter adjoints);
+"optimiser" is `Lbfgs.tell` (for nlopt, the rest of the iteration after everything else);
+"checkpoint" is the run's wait for `_Run.checkpoint` (starting it, and waiting for the thread that
+writes it while the next evaluation runs); "bookkeeping" what remains (cosine map, history); "writer"
+is that thread's own time, overlapped with the evaluations, not part of the sum. Peak memory
+is the process's maximum resident set size, the run's output stage at full resolution included.
 
-Last line: ``iter_over_skfmm_128: <ratio>`` (``iter_over_skfmm_64`` with --quick).
+    python benchmarks/bench_design.py [--quick] [--rounds R] [--optimizer NAME]
+
+Last line: ``iter_over_skfmm_128: <median ratio>`` (``iter_over_skfmm_64`` with --quick).
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import tempfile
 import time
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import numpy as np
 import skfmm
 
+import design.objective
+import design.optimize
+from design.filters import SmoothingFilter
+from design.lbfgs import Lbfgs
 from design.objective import DesignObjective
 from design.optimize import run_design
-from design.problem import DesignConfig, prepare
+from design.problem import DesignConfig
+
+PARTS = ("evaluate", "gradient", "optimiser", "checkpoint", "writer")
 
 
-def skfmm_seconds(rho: np.ndarray, dx_mm: float, repeats: int) -> float:
-    """Best-of-``repeats`` wall time of a first-order scikit-fmm travel-time solve, s."""
+def skfmm_seconds(rho: np.ndarray, dx_mm: float) -> float:
+    """Wall time of one first-order scikit-fmm travel-time solve through density ``rho``, s."""
     phi = np.pad(np.ones(rho.shape), 1, constant_values=-1.0)  # front on the padding layer
     speed = np.pad(1.0 / (rho + (1.0 - rho) * 1e-6), 1, constant_values=1.0)
-    best = np.inf
-    for _ in range(repeats):
+    t0 = time.perf_counter()
+    skfmm.travel_time(phi, speed, dx=dx_mm, order=1)
+    return time.perf_counter() - t0
+
+
+@contextmanager
+def _timed(owner: object, name: str, totals: dict[str, float], part: str, keep: dict | None = None):
+    """Replace ``owner.name`` by a wrapper adding its wall time to ``totals[part]``; ``keep`` gets
+    the last (instance, result) of a method."""
+    original = getattr(owner, name)
+
+    def wrapper(*args, **kwargs):
         t0 = time.perf_counter()
-        skfmm.travel_time(phi, speed, dx=dx_mm, order=1)
-        best = min(best, time.perf_counter() - t0)
-    return best
+        result = original(*args, **kwargs)
+        totals[part] += time.perf_counter() - t0
+        if keep is not None:
+            keep["result"] = result
+        return result
+
+    setattr(owner, name, wrapper)
+    try:
+        yield
+    finally:
+        setattr(owner, name, original)
 
 
-class _EvaluationTimer:
-    """Wraps `DesignObjective.evaluate` to record the wall time of every call, s."""
-
-    def __init__(self) -> None:
-        self.seconds: list[float] = []
-        self._evaluate = DesignObjective.evaluate
-
-    def __enter__(self) -> "_EvaluationTimer":
-        timer, evaluate = self, self._evaluate
-
-        def timed(objective, x):
-            t0 = time.perf_counter()
-            result = evaluate(objective, x)
-            timer.seconds.append(time.perf_counter() - t0)
-            return result
-
-        DesignObjective.evaluate = timed
-        return self
-
-    def __exit__(self, *exc) -> None:
-        DesignObjective.evaluate = self._evaluate
-
-
-def bench(n_reduced: int, evaluations: int, steady_from: int) -> dict:
-    """One grid size: seconds per evaluation from evaluation `steady_from` on, skfmm seconds, their ratio."""
+def bench(n_reduced: int, warmup: int, rounds: int, block: int, solves: int, optimizer: str) -> dict:
+    """One grid size: per-round seconds per iteration, its breakdown, skfmm seconds and their ratio."""
     config = DesignConfig(target="zero-order:final=0.15,duration=0.2", space="nfc", resolution=2 * n_reduced,
-                          domain_mm=(20.0, 20.0, 20.0), max_iter=evaluations)  # default checkpoints included
-    problem = prepare(config)
-    objective = DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
-                                radius_vox=config.radius_vox, beta=config.beta, w_binary=config.w_binary)
-    rho0 = objective.density(objective.uniform_start())
-    base = skfmm_seconds(rho0, problem.dx_mm, repeats=3)
-    with tempfile.TemporaryDirectory() as tmp, _EvaluationTimer() as timer:
-        run_design(config, Path(tmp) / "run")
-        history = np.loadtxt(Path(tmp) / "run" / "history.csv", delimiter=",", skiprows=1, ndmin=2)
-    # history row k holds the elapsed time at the end of evaluation k + 1
-    window = history[steady_from - 1:, -1]
-    per_eval = float((window[-1] - window[0]) / (len(window) - 1))
-    objective_s = float(np.mean(timer.seconds[steady_from:len(history)]))
-    return {"n_reduced": n_reduced, "full": 2 * n_reduced, "evaluations": len(history),
-            "steady_from": steady_from, "seconds_per_iteration": per_eval, "objective_seconds": objective_s,
-            "optimizer_seconds": per_eval - objective_s, "skfmm_seconds": base, "ratio": per_eval / base,
-            "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 ** 2}
+                          domain_mm=(20.0, 20.0, 20.0), max_iter=warmup + rounds * block, checkpoint_every=block,
+                          optimizer=optimizer)
+    totals = dict.fromkeys(PARTS, 0.0)
+    last: dict = {}
+    marks: dict = {"out": None, "iter": 0.0, "n": 0, "parts": dict(totals)}
+    per_round: list[dict] = []
+
+    def on_iteration(k: int, x, terms) -> None:
+        now = time.perf_counter()
+        if k > warmup:
+            marks["iter"] += now - marks["out"]
+            marks["n"] += 1
+        if k >= warmup and (k - warmup) % block == 0:
+            if k > warmup:  # end of a round's design block: its skfmm block
+                load = os.getloadavg()[0]
+                rho = np.asarray(last["result"].rho)
+                base = float(np.median([skfmm_seconds(rho, problem_dx) for _ in range(solves)]))
+                parts = {p: (totals[p] - marks["parts"][p]) / marks["n"] for p in PARTS}
+                per_round.append({"seconds_per_iteration": marks["iter"] / marks["n"], "skfmm_seconds": base,
+                                  "load_before": marks["load"], "load_after": load, **parts})
+            marks.update(iter=0.0, n=0, parts=dict(totals), load=os.getloadavg()[0])
+        marks["out"] = time.perf_counter()
+
+    problem_dx = config.domain_mm[0] / config.resolution
+    with tempfile.TemporaryDirectory() as tmp, ExitStack() as patches:
+        patches.enter_context(_timed(DesignObjective, "evaluate", totals, "evaluate", last))
+        for name in ("release_gradient", "project_adjoint"):
+            patches.enter_context(_timed(design.objective, name, totals, "gradient"))
+        patches.enter_context(_timed(SmoothingFilter, "adjoint", totals, "gradient"))
+        patches.enter_context(_timed(Lbfgs, "tell", totals, "optimiser"))
+        patches.enter_context(_timed(design.optimize._Run, "checkpoint", totals, "checkpoint"))
+        patches.enter_context(_timed(design.optimize._Run, "wait_checkpoint", totals, "checkpoint"))
+        patches.enter_context(_timed(design.optimize, "_atomic_save_npz", totals, "writer"))
+        run_design(config, Path(tmp) / "run", on_iteration=on_iteration)
+    for r in per_round:
+        r["objective"] = r.pop("evaluate") - r["gradient"]
+        if optimizer != "lbfgs":  # nlopt's step is not visible: it is the remainder
+            r["optimiser"] = r["seconds_per_iteration"] - r["objective"] - r["gradient"] - r["checkpoint"]
+        r["bookkeeping"] = (r["seconds_per_iteration"] - r["objective"] - r["gradient"] - r["optimiser"]
+                            - r["checkpoint"])
+        r["ratio"] = r["seconds_per_iteration"] / r["skfmm_seconds"]
+    ratios = [r["ratio"] for r in per_round]
+    return {"n_reduced": n_reduced, "full": 2 * n_reduced, "optimizer": optimizer, "warmup": warmup, "block": block,
+            "rounds": per_round, "ratio_median": float(np.median(ratios)), "ratio_min": min(ratios),
+            "ratio_max": max(ratios), "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 ** 2}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="64^3 only, few evaluations")
+    parser.add_argument("--quick", action="store_true", help="64^3 only, three short rounds")
+    parser.add_argument("--rounds", type=int, default=3, help="alternating rounds per grid (>= 3)")
+    parser.add_argument("--optimizer", default=DesignConfig.optimizer, help="design optimiser (default: the default)")
     args = parser.parse_args()
-    # L-BFGS keeps lbfgs_memory = 10 pairs, full after ~11 evaluations; --quick stops before that
-    sizes = [(64, 8, 2)] if args.quick else [(64, 30, 13), (128, 26, 13)]
-    results = [bench(n, evals, steady) for n, evals, steady in sizes]
+    if args.rounds < 3:
+        parser.error("--rounds must be at least 3 for a median with a spread")
+    # warm-up: the default L-BFGS memory (10 pairs) is full after ~11 evaluations
+    sizes = [(64, 4, 3)] if args.quick else [(64, 12, 10), (128, 12, 10)]
+    solves = {64: 5, 128: 3}
+    print(f"load average at start: {os.getloadavg()}")
+    results = [bench(n, warmup, args.rounds, block, solves[n], args.optimizer) for n, warmup, block in sizes]
     for r in results:
         print(json.dumps(r))
     for r in results:
-        print(f"{r['n_reduced']}^3 reduced ({r['full']}^3 full), evaluations {r['steady_from']}-{r['evaluations']}: "
-              f"{r['seconds_per_iteration']:.3f} s/iteration (objective + gradient {r['objective_seconds']:.3f} s, "
-              f"nlopt {r['optimizer_seconds']:.3f} s), skfmm {r['skfmm_seconds']:.3f} s, ratio {r['ratio']:.2f}, "
-              f"peak RSS {r['peak_rss_gb']:.2f} GB")
+        print(f"{r['n_reduced']}^3 reduced ({r['full']}^3 full), {r['optimizer']}, {len(r['rounds'])} rounds of "
+              f"{r['block']} iterations after {r['warmup']}, peak RSS {r['peak_rss_gb']:.2f} GB")
+        print("  round  s/iter  objective  gradient  optimiser  checkpoint  bookkeeping  (writer)  skfmm  ratio  load")
+        for i, q in enumerate(r["rounds"], 1):
+            print(f"  {i:5d}  {q['seconds_per_iteration']:.3f}  {q['objective']:9.3f}  {q['gradient']:8.3f}  "
+                  f"{q['optimiser']:9.3f}  {q['checkpoint']:10.3f}  {q['bookkeeping']:11.3f}  {q['writer']:8.3f}  "
+                  f"{q['skfmm_seconds']:.3f}  {q['ratio']:.3f}  {q['load_before']:.2f}-{q['load_after']:.2f}")
+        print(f"  ratio median {r['ratio_median']:.3f} (spread {r['ratio_min']:.3f}-{r['ratio_max']:.3f})")
     last = results[-1]
-    print(f"iter_over_skfmm_{last['n_reduced']}: {last['ratio']:.3f}")
+    print(f"iter_over_skfmm_{last['n_reduced']}: {last['ratio_median']:.3f}")
 
 
 if __name__ == "__main__":
