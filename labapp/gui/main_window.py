@@ -21,7 +21,9 @@ from labapp.bench import Bench
 from labapp.calseries import CalibrationProcedure, SeriesConfig
 from labapp.clock import make_clock
 from labapp.devices import make_bench
+from labapp import jobs
 from labapp.engine import Engine
+from labapp.errors import UsageError
 from labapp.gui.bridge import EngineBridge
 from labapp.gui.calibration_wizard import CalibrationWizard, parse_masses
 from labapp.gui.design_launcher import DesignLauncher
@@ -30,7 +32,7 @@ from labapp.gui.live_view import LiveView
 from labapp.gui.plots import PlotsPanel
 from labapp.gui.run_browser import RunBrowser
 from labapp.gui.run_controls import RunControls
-from labapp.procedures import PreviewProcedure, RunProcedure
+from labapp.procedures import PreviewProcedure
 from labapp.simbench import SimulatedBench, resume_clock
 from labapp.status import RunStatus
 
@@ -182,7 +184,12 @@ class MainWindow(QMainWindow):
         if calibration is not None:
             g = calibration.geometry
             self.live.set_geometry(g.x, g.y, g.size, g.grid, g.mirror_col)
-        self._start(RunProcedure(config, bench, self.data_dir, calibration))
+        try:
+            proc = jobs.new_run(config, bench, self.data_dir, calibration)
+        except UsageError as exc:
+            self.on_message("error", f"cannot start: {exc}")
+            return
+        self._start(proc)
 
     def resume_run(self, folder: str) -> None:
         """Resume acquisition into an interrupted run folder."""
@@ -190,12 +197,16 @@ class MainWindow(QMainWindow):
             self.on_message("warning", "the engine is busy; stop the current procedure first")
             return
         try:
-            if self.simulate and self.devices.camera_spec() == SIMULATED:
+            simulated = bool(jobs.resumable(folder).meta.get("simulated"))
+            if simulated != (self.devices.camera_spec() == SIMULATED):
+                raise UsageError(f"{folder} was recorded on a {'simulated' if simulated else 'real'} bench; "
+                                 f"choose {'the simulated' if simulated else 'a real'} camera in the device panel")
+            if simulated:
                 self.engine.clock = resume_clock(Path(folder), self.speed)
                 if self.sim is not None:
                     self.sim.close()
                     self.sim = None
-            proc = RunProcedure.resume(Path(folder), self.make_bench(), self._calibration())
+            proc = jobs.resume_run(Path(folder), self.make_bench(), self._calibration())
         except Exception as exc:
             self.on_message("error", f"cannot resume {folder}: {exc}")
             return

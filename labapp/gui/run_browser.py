@@ -10,10 +10,13 @@ from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (QDoubleSpinBox, QHBoxLayout, QLabel, QLineEdit, QPushButton, QSpinBox,
                                QTreeWidget, QTreeWidgetItem, QVBoxLayout, QWidget)
 
-from analysis import BenchCalibration, analyze_run
+from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
+from labapp import jobs
+from labapp.errors import UsageError
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.plots import PlotsPanel
-from labapp.storage import StorageError, finalise_run, read_run, verify_run
+from labapp.outpaths import ANALYSIS_SUBFOLDER
+from labapp.storage import StorageError, finalise_run, read_run
 
 log = logging.getLogger(__name__)
 
@@ -45,11 +48,11 @@ class RunBrowser(QWidget):
         self.tree.itemSelectionChanged.connect(self._selected)
         self.window = QDoubleSpinBox()
         self.window.setRange(11.0, 7200.0)
-        self.window.setValue(330.0)
+        self.window.setValue(DEFAULT_WINDOW_S)
         self.window.setSuffix(" s")
         self.order = QSpinBox()
         self.order.setRange(0, 6)
-        self.order.setValue(2)
+        self.order.setValue(DEFAULT_ORDER)
         self.calibration = QLineEdit("")
         self.calibration.setPlaceholderText("calibration JSON (default: the run's own copy)")
         self.info = QLabel("")
@@ -107,11 +110,14 @@ class RunBrowser(QWidget):
     def _selected(self) -> None:
         path = self.selected_path()
         has = path is not None
-        snap = read_run(path) if has else None
+        try:
+            snap = read_run(path) if has else None
+        except StorageError as exc:
+            self.info.setText(str(exc))
+            snap, has = None, False
         for b in (self.analyse_button, self.verify_button):
             b.setEnabled(has)
-        resumable = has and snap.status in ("interrupted", "stopped") and snap.meta.get("kind") == "run"
-        self.resume_button.setEnabled(resumable)
+        self.resume_button.setEnabled(has and snap.status == "interrupted" and snap.meta.get("kind", "run") == "run")
         self.finalise_button.setEnabled(has and snap.status == "interrupted")
         if snap is None:
             return
@@ -123,7 +129,8 @@ class RunBrowser(QWidget):
             self.plots.add_reading(f.t_s, f.plate_c, f.probe_c, f.speed_rpm)
 
     def reanalyse(self) -> None:
-        """Analyse the selected run with the chosen calibration and smoothing (in the background)."""
+        """Analyse the selected run with the chosen calibration and smoothing (in the background), writing
+        ``RUN/analysis/curve.csv``, ``cells.csv`` and ``curve.png`` as ``sfr analyze`` does."""
         path = self.selected_path()
         if path is None or (self.task is not None and self.task.running):
             return
@@ -135,9 +142,8 @@ class RunBrowser(QWidget):
         window, order = self.window.value(), self.order.value()
 
         def work(progress):
-            cal = BenchCalibration.load(cal_path)
-            return analyze_run(path, cal, window_s=window, order=order, cache_dir=path / "analysis",
-                               progress=lambda done, total: progress((done, total)))
+            return jobs.analyse_run(path, cal_path, path / ANALYSIS_SUBFOLDER, window_s=window, order=order,
+                                    progress=lambda done, total: progress((done, total))).curve
         self.task = BackgroundTask(work, self)
         self.task.progress.connect(self._progress)
         self.task.finished.connect(self.show_curve)
@@ -161,8 +167,14 @@ class RunBrowser(QWidget):
 
     def _resume(self) -> None:
         path = self.selected_path()
-        if path is not None:
-            self.resume_requested.emit(str(path))
+        if path is None:
+            return
+        try:
+            jobs.resumable(path)
+        except UsageError as exc:
+            self.info.setText(str(exc))
+            return
+        self.resume_requested.emit(str(path))
 
     def _finalise(self) -> None:
         path = self.selected_path()
@@ -174,4 +186,5 @@ class RunBrowser(QWidget):
     def _verify(self) -> None:
         path = self.selected_path()
         if path is not None:
-            self.info.setText("\n".join(verify_run(path).lines()[:12]))
+            lines = jobs.verify(path).lines()
+            self.info.setText("\n".join(lines[:11] + lines[-1:]))
