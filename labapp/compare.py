@@ -107,6 +107,32 @@ def summarize(profile: ReleaseProfile, until_s: float | None = None) -> CurveSum
                         fit_release_models(profile))
 
 
+def release_summary(t_s: np.ndarray, released_g: np.ndarray, mass_g: float | None = None,
+                    label: str = "curve") -> dict:
+    """MDT, DE and the ranked model fits of one physical curve, as the JSON the analysis and design
+    summaries carry (``{"error": ...}`` when the curve cannot be summarised, e.g. no release yet).
+
+    Parameters
+    ----------
+    t_s : (N,) ndarray of float, s
+    released_g : (N,) ndarray of float, g
+    mass_g : float, optional
+        The weighed mass (100 %); default the final release.
+    label : str
+        Named in error messages.
+    """
+    from analysis import AnalysisError
+
+    try:
+        summary = summarize(ReleaseProfile(t_s, released_g, "s", "g", mass_g, label))
+    except AnalysisError as exc:
+        return {"error": str(exc)}
+    best = summary.best
+    return {"mdt_s": summary.mdt_s, "de_pct": summary.de_pct, "until_s": summary.until_s,
+            "total_g": summary.total_g, "best_fit": fit_dict(best),
+            "best_fit_text": best.describe() if best else None, "fits": [fit_dict(f) for f in summary.fits]}
+
+
 def _read_group(paths: Sequence[str | Path], calibration, name: str) -> list[ReleaseProfile]:
     return [profile_of(read_physical_curve(p, calibration=calibration), f"{name}: {p}" if len(paths) > 1 else str(p))
             for p in paths]

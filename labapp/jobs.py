@@ -52,7 +52,8 @@ def analyse_run(run: str | Path, calibration: str | Path, out: str | Path | None
                 interval_s: float | None = None, water_g: float | None = None, window_s: float | None = None,
                 order: int | None = None, workers: int | None = None, reduce: int | None = None,
                 plot: bool = True, progress: Callable[[int, int], None] | None = None) -> AnalysisOutputs:
-    """Analyse a run folder or a plain image folder into ``curve.csv``, ``cells.csv`` (and ``curve.png``).
+    """Analyse a run folder or a plain image folder into ``curve.csv``, ``cells.csv``, ``summary.json`` (with
+    MDT, DE and the ranked model fits of the release) and ``curve.png``.
 
     Parameters
     ----------
@@ -88,13 +89,24 @@ def analyse_run(run: str | Path, calibration: str | Path, out: str | Path | None
                         cache_dir=out, water_g=water_g,
                         window_s=DEFAULT_WINDOW_S if window_s is None else window_s,
                         order=DEFAULT_ORDER if order is None else order)
-    files = [out / "curve.csv", out / "cells.csv"]
+    files = [out / "curve.csv", out / "cells.csv", out / "summary.json"]
     write_curve_csv(curve, files[0])
     write_cells_csv(curve, files[1])
+    files[2].write_text(json.dumps(_analysis_summary(curve, run), indent=2) + "\n")
     if plot:
         files.append(out / "curve.png")
         _plot_curve(curve, files[-1])
     return AnalysisOutputs(curve, out, tuple(files))
+
+
+def _analysis_summary(curve, run: Path) -> dict[str, Any]:
+    """``summary.json`` of an analysis: the run's totals and its release metrics (MDT, DE, model fits)."""
+    from labapp.compare import release_summary
+
+    return {"run": str(run), "frames": len(curve.files), "duration_s": float(curve.t_s[-1] - curve.t_s[0]),
+            "water_g": curve.water_g, "object_mass_g": curve.object_mass_g,
+            "final_released_g": float(curve.released_g[-1]),
+            "release": release_summary(curve.t_s, curve.released_g, curve.object_mass_g, str(run))}
 
 
 def _plot_curve(curve, path: Path) -> None:

@@ -10,7 +10,7 @@ from labapp.argtypes import nonnegative_int, positive_float, positive_int
 log = logging.getLogger(__name__)
 
 NAME = "analyze"
-HELP = "turn a run folder or image folder into a release curve (curve.csv, cells.csv, curve.png)"
+HELP = "turn a run folder or image folder into a release curve (curve.csv, cells.csv, summary.json, curve.png)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,6 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse, write the outputs, print a summary."""
+    import json
+
     from analysis import steady_state
     from labapp.jobs import analyse_run
 
@@ -52,5 +54,12 @@ def run(args: argparse.Namespace) -> int:
           f"{int((curve.n_rejected > 0).sum())} frames had cells rejected")
     print(f"final concentration {curve.conc_smooth_g_per_kg[-1]:.4f} g/kg, released "
           f"{curve.released_g[-1]:.4f} g in {curve.water_g:g} g water; steady state: {'yes' if done else 'no'}")
-    print(f"wrote {out / 'curve.csv'}, {out / 'cells.csv'}" + ("" if args.no_plot else f", {out / 'curve.png'}"))
+    release = json.loads((out / "summary.json").read_text())["release"]
+    if "error" in release:
+        print(f"release metrics: none ({release['error']})")
+    else:
+        print(f"MDT {release['mdt_s']:.0f} s, DE {release['de_pct']:.1f} % to {release['until_s']:.0f} s; "
+              f"best model fit {release['best_fit_text'] or 'none'}")
+    print(f"wrote {out / 'curve.csv'}, {out / 'cells.csv'}, {out / 'summary.json'}"
+          + ("" if args.no_plot else f", {out / 'curve.png'}"))
     return 0

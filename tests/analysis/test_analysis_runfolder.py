@@ -148,7 +148,10 @@ def test_cli_calibrate_then_analyze(tmp_path, capsys):
     assert (out / "curve.png").stat().st_size > 0
     with open(out / "cells.csv", newline="") as fh:
         assert sum(1 for _ in fh) == 1 + 12 * 100
-    assert "steady state: no" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "steady state: no" in text and "MDT " in text
+    release = json.loads((out / "summary.json").read_text())["release"]
+    assert release["mdt_s"] > 0 and release["best_fit"]["rank"] == 1
     short = tmp_path / "short"
     short.mkdir()
     shutil.copy(BENCH / "calibration" / "masses.csv", short / "masses.csv")
