@@ -210,14 +210,46 @@ class HeidolphHotplate:
 
     # -- link -----------------------------------------------------------------------------------------
 
-    def _open(self) -> None:
+    def identify(self) -> HotplateReading:
+        """Query the plate's readings and setpoints with read-only commands and close the port again.
+
+        Nothing that could change the plate's state is sent (no protocol switch, no connection check,
+        no setpoint, no switching off): the safe first contact with a port that may hold another device,
+        or a plate another program controls. ``heating``/``stirring`` are reported False (unknown).
+
+        Raises
+        ------
+        HotplateError
+            If the port cannot be opened or does not answer the queries as this table's plate does.
+        """
+        t = self.table
+        with self._lock:
+            self._open(startup=False)
+            try:
+                values = {key: self._query_number(r.query) for key, r in t.readings.items()}
+                values.update({key: self._query_number(sp.readback) for key, sp in t.setpoints.items()})
+            finally:
+                self._port.close()
+                self._port = None
+        probe = values["probe_c"]
+        return HotplateReading(plate_c=values["plate_c"], probe_c=None if probe >= NO_PROBE_C - 0.05 else probe,
+                               speed_rpm=values["speed_rpm"], setpoint_c=values["temperature"],
+                               setpoint_rpm=values["speed"], heating=False, stirring=False, t_unix_s=time.time())
+
+    def _query_number(self, query: str) -> float:
+        try:
+            return float(self._exchange_once(query))
+        except (HotplateError, ValueError) as exc:
+            raise HotplateError(f"{self.url} did not answer {query!r} as a {self.table.name} does: {exc}") from exc
+
+    def _open(self, startup: bool = True) -> None:
         try:
             self._port = serial.serial_for_url(self.url, baudrate=9600, bytesize=serial.SEVENBITS,
                                                parity=serial.PARITY_EVEN, stopbits=serial.STOPBITS_ONE,
                                                timeout=self.config.timeout_s, write_timeout=self.config.timeout_s)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise HotplateError(f"cannot open hotplate port {self.url}: {exc}") from exc
-        for line in self.table.startup:
+        for line in self.table.startup if startup else ():
             self._exchange_once(line)
 
     def _write(self, line: str) -> None:

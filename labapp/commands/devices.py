@@ -4,15 +4,17 @@ from __future__ import annotations
 import argparse
 import logging
 
+from labapp.argtypes import positive_float
+
 log = logging.getLogger(__name__)
 
 NAME = "devices"
-HELP = "list cameras and serial ports; --probe PORT asks a port for a Heidolph reply"
+HELP = "list cameras and serial ports; --probe PORT asks a port for a Heidolph reply (read-only queries)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--probe", metavar="PORT", help="serial port or URL to test for a Heidolph hotplate")
-    parser.add_argument("--deadline-s", type=float, default=20.0, help="deadline for camera detection, s")
+    parser.add_argument("--deadline-s", type=positive_float, default=20.0, help="deadline for camera detection, s")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,13 +45,10 @@ def run(args: argparse.Namespace) -> int:
     plate = HeidolphHotplate(args.probe, config=HotplateConfig(timeout_s=1.0, reconnect_attempts=1, retries=1),
                              keep_alive=False)
     try:
-        plate.connect()
-        r = plate.read()
+        r = plate.identify()        # read-only queries: nothing is switched or set on whatever answers
     except HotplateError as exc:
         print(f"probe {args.probe}: no Heidolph reply: {exc}")
         return 1
-    finally:
-        plate.close()
     probe = "no probe" if r.probe_c is None else f"{r.probe_c:.1f} C"
     print(f"probe {args.probe}: Heidolph reply: plate {r.plate_c:.1f} C, probe {probe}, "
           f"{r.speed_rpm:.0f} rpm, setpoints {r.setpoint_c:.1f} C / {r.setpoint_rpm:.0f} rpm")

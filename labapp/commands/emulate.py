@@ -5,24 +5,35 @@ import argparse
 import logging
 import time
 
+from labapp.argtypes import nonnegative_float, positive_float
+
 log = logging.getLogger(__name__)
 
 NAME = "emulate"
-HELP = "run a device emulator (prints its device path first; Ctrl-C ends it)"
+HELP = "run a device emulator (prints its device path first; Ctrl-C or SIGTERM ends it and removes it)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("device", choices=["heidolph"], help="device to emulate")
-    parser.add_argument("--speed", type=float, default=1.0, help="time acceleration of the thermal model")
-    parser.add_argument("--watchdog-s", type=float, default=10.0, help="silence before 'PC Err', s")
+    parser.add_argument("--speed", type=positive_float, default=1.0, help="time acceleration of the thermal model")
+    parser.add_argument("--watchdog-s", type=positive_float, default=10.0, help="silence before 'PC Err', s")
     parser.add_argument("--no-probe", action="store_true", help="no external probe (reports 999.9)")
     parser.add_argument("--seed", type=int, default=None, help="seed of the read-out noise")
-    parser.add_argument("--status-every-s", type=float, default=0.0,
+    parser.add_argument("--status-every-s", type=nonnegative_float, default=0.0,
                         help="print the plate state every this many seconds (0: never)")
 
 
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
 def run(args: argparse.Namespace) -> int:
+    """Start the emulator, print its device path, run until Ctrl-C or SIGTERM, then clean up."""
+    import signal
+
     from drivers.sim.heidolph_emulator import HeidolphEmulator
+
+    signal.signal(signal.SIGTERM, _interrupt)      # a service manager's stop cleans up like Ctrl-C
 
     emulator = HeidolphEmulator(speed=args.speed, watchdog_s=args.watchdog_s, probe_connected=not args.no_probe,
                                 seed=args.seed)
