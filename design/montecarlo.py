@@ -410,60 +410,89 @@ def _fraction_at(sorted_s: np.ndarray, s: np.ndarray) -> np.ndarray:
     return np.searchsorted(sorted_s, s, side="right") / sorted_s.size
 
 
-def tune_mc(objects: Sequence[tuple[np.ndarray, float, tuple[bool, ...] | None]],
-            measured: Sequence[tuple[np.ndarray, np.ndarray]], *,
-            ea_values: Sequence[float] = DEFAULT_EA_J_PER_MOL, a_values: Sequence[float] | None = None,
-            temp_k: float = BATH_TEMP_K, seeds: int | Sequence[int] = DEFAULT_SEEDS, refine: bool = True,
-            progress: Callable[[int, int], None] | None = None) -> McTuning:
-    """Grid search of (A, E_a) against measured release curves (section 5.1: 4 x 4 = 16 combinations).
+@dataclass(frozen=True, eq=False)
+class McUnitRuns:
+    """Monte Carlo runs at A = 1 of a set of objects, for every E_a of a tuning grid.
 
-    A only rescales time (see the module docstring), so each object is simulated once per E_a at A = 1
-    and every A of the grid is scored by rescaling. With ``a_values`` None, the A values for each E_a are
-    :data:`A_FACTORS` times the A that matches the median half-release time of the objects.
+    A run at A = 1 yields each voxel's dissolution time in units of 1/A; any A then follows by scaling
+    time (exact: the step is fixed in units of A dt). A is quoted at the median voxel size ``dx_ref_mm``
+    and scaled to each object's own (:meth:`MonteCarloParams.at_voxel_size`).
+
+    Attributes
+    ----------
+    ea_values : tuple of float, J/mol
+    dx_mm : (M,) ndarray of float, mm
+        Voxel size of each object.
+    temp_k : float, K
+    seeds : tuple of int
+    sorted_at : dict of float to list of list of ndarray
+        Per E_a, per object, per seed: the sorted dimensionless dissolution times A t of its voxels.
+    """
+
+    ea_values: tuple[float, ...]
+    dx_mm: np.ndarray
+    temp_k: float
+    seeds: tuple[int, ...]
+    sorted_at: dict = field(repr=False)
+
+    @property
+    def dx_ref_mm(self) -> float:
+        """The voxel size A is quoted at (the median of the objects'), mm."""
+        return float(np.median(self.dx_mm))
+
+    def fraction(self, ea_j_per_mol: float, k: int, a_per_s: float, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and spread (standard deviation over seeds) of object ``k``'s fraction dissolved at ``t_s``.
+
+        Parameters
+        ----------
+        ea_j_per_mol : float
+            One of ``ea_values``.
+        k : int
+            Object index.
+        a_per_s : float
+            A at ``dx_ref_mm``, 1/s.
+        t_s : (N,) ndarray of float, s
+
+        Returns
+        -------
+        mean, std : (N,) ndarray of float, fraction of the object's solid volume
+        """
+        scale = a_per_s * self.dx_ref_mm / self.dx_mm[k]
+        each = np.array([_fraction_at(s, np.asarray(t_s, float) * scale) for s in self.sorted_at[float(ea_j_per_mol)][k]])
+        return each.mean(axis=0), each.std(axis=0)
+
+
+def unit_runs(objects: Sequence[tuple[np.ndarray, float, tuple[bool, ...] | None]], *,
+              ea_values: Sequence[float] = DEFAULT_EA_J_PER_MOL, temp_k: float = BATH_TEMP_K,
+              seeds: int | Sequence[int] = DEFAULT_SEEDS,
+              progress: Callable[[int, int], None] | None = None) -> McUnitRuns:
+    """Simulate every object once per E_a and seed at A = 1 (the expensive part of :func:`tune_mc`).
 
     Parameters
     ----------
     objects : sequence of (rho, dx_mm, mirror)
         Density grids of the calibration objects (as for :func:`simulate_mc`).
-    measured : sequence of (t_s, fraction)
-        Each object's measured curve: times, s, since the drop, and the fraction of its weighed mass
-        released (0 .. 1).
     ea_values : sequence of float
         Activation energies, J/mol (default :data:`DEFAULT_EA_J_PER_MOL`).
-    a_values : sequence of float, optional
-        Pre-exponential factors, 1/s, at the median voxel size of ``objects``.
     temp_k : float
         Bath temperature, K.
     seeds : int or sequence of int
-        Runs averaged per object and E_a.
-    refine : bool
-        After the grid, refine A at the best E_a by a bounded 1-D search between its grid neighbours
-        (no further simulation).
+        Runs per object and E_a.
     progress : callable, optional
-        ``progress(done, total)`` after each simulated (object, E_a).
+        ``progress(done, total)`` after each (E_a, object).
 
     Returns
     -------
-    McTuning
+    McUnitRuns
     """
-    if len(objects) != len(measured) or not objects:
-        raise DesignError(f"give one measured curve per object: {len(objects)} objects, {len(measured)} curves")
-    from scipy.optimize import minimize_scalar
-
+    if not objects:
+        raise DesignError("give at least one object")
+    if not ea_values:
+        raise DesignError("give at least one activation energy")
     seed_list = tuple(range(int(seeds))) if isinstance(seeds, (int, np.integer)) else tuple(int(s) for s in seeds)
-    curves = []
-    for i, (t_s, fraction) in enumerate(measured):
-        t, f = np.asarray(t_s, float), np.asarray(fraction, float)
-        if t.ndim != 1 or t.shape != f.shape or t.size < 2 or not (np.all(np.isfinite(t)) and np.all(np.isfinite(f))):
-            raise DesignError(f"measured curve {i}: times and fractions must be finite 1-D arrays of equal length >= 2")
-        if not f.max() >= 0.5:
-            raise DesignError(f"measured curve {i} reaches only {f.max():.0%} of its mass; tuning needs at least 50 %")
-        curves.append((t, f))
     dxs = np.array([check_positive("dx_mm", dx) for _, dx, _ in objects])
-    dx_ref = float(np.median(dxs))
-    t_half = np.array([float(np.interp(0.5, np.maximum.accumulate(f), t)) for t, f in curves])
     total = len(ea_values) * len(objects)
-    runs: dict[float, list[list[np.ndarray]]] = {}
+    sorted_at = {}
     for e, ea in enumerate(ea_values):
         unit = MonteCarloParams(1.0, float(ea), temp_k)
         per_object = []
@@ -472,22 +501,68 @@ def tune_mc(objects: Sequence[tuple[np.ndarray, float, tuple[bool, ...] | None]]
                                for tt in (erosion_times(rho, unit, seed=s, mirror=mirror) for s in seed_list)])
             if progress is not None:
                 progress(e * len(objects) + k + 1, total)
-        runs[float(ea)] = per_object
+        sorted_at[float(ea)] = per_object
+    return McUnitRuns(tuple(float(e) for e in ea_values), dxs, float(temp_k), seed_list, sorted_at)
+
+
+def tune_mc(runs: McUnitRuns, measured: Sequence[tuple[np.ndarray, np.ndarray]], *,
+            a_values: Sequence[float] | None = None, refine: bool = True,
+            subset: Sequence[int] | None = None) -> McTuning:
+    """Grid search of (A, E_a) against measured release curves (section 5.1: 4 x 4 = 16 combinations).
+
+    Every A of the grid is scored by rescaling the runs at A = 1 (no further simulation). With
+    ``a_values`` None, the A values for each E_a are :data:`A_FACTORS` times the A that matches the
+    objects' median half-release time.
+
+    Parameters
+    ----------
+    runs : McUnitRuns
+        From :func:`unit_runs` on the calibration objects.
+    measured : sequence of (t_s, fraction)
+        Each object's measured curve: times, s, since the drop, and the fraction of its weighed mass
+        released (0 .. 1); one per object of ``runs``.
+    a_values : sequence of float, optional
+        Pre-exponential factors, 1/s, at ``runs.dx_ref_mm``.
+    refine : bool
+        After the grid, refine A at the best E_a by a bounded 1-D search between its grid neighbours.
+    subset : sequence of int, optional
+        Tune on these objects only (leave-one-out); default all.
+
+    Returns
+    -------
+    McTuning
+    """
+    from scipy.optimize import minimize_scalar
+
+    if len(measured) != len(runs.dx_mm):
+        raise DesignError(f"give one measured curve per object: {len(runs.dx_mm)} objects, {len(measured)} curves")
+    use = list(range(len(measured))) if subset is None else [int(i) for i in subset]
+    if not use:
+        raise DesignError("tuning needs at least one object")
+    curves = {}
+    for i in use:
+        t, f = (np.asarray(x, float) for x in measured[i])
+        if t.ndim != 1 or t.shape != f.shape or t.size < 2 or not (np.all(np.isfinite(t)) and np.all(np.isfinite(f))):
+            raise DesignError(f"measured curve {i}: times and fractions must be finite 1-D arrays of equal length >= 2")
+        if not f.max() >= 0.5:
+            raise DesignError(f"measured curve {i} reaches only {f.max():.0%} of its mass; tuning needs at least 50 %")
+        curves[i] = (t, f)
+    dx_ref = runs.dx_ref_mm
 
     def errors(ea: float, a: float) -> np.ndarray:
-        out = []
-        for (t, f), dx, seeded in zip(curves, dxs, runs[ea]):
-            scale = a * dx_ref / dx  # A at this object's voxel size
-            model = np.mean([_fraction_at(s, t * scale) for s in seeded], axis=0)
-            out.append(float(np.sqrt(np.mean((model - f) ** 2))))
-        return np.array(out)
+        return np.array([float(np.sqrt(np.mean((runs.fraction(ea, i, a, t)[0] - f) ** 2)))
+                         for i, (t, f) in curves.items()])
 
     grid = []
-    for ea in ea_values:
-        seeded_half = [np.median([s[s.size // 2] for s in seeded]) for seeded in runs[float(ea)]]
-        a_star = float(np.median(np.array(seeded_half) / t_half * dxs / dx_ref))
+    for ea in runs.ea_values:
+        ratios = []
+        for i, (t, f) in curves.items():
+            t_half = float(np.interp(0.5, np.maximum.accumulate(f), t))
+            s_half = np.median([s[s.size // 2] for s in runs.sorted_at[ea][i]])
+            ratios.append(s_half / t_half * runs.dx_mm[i] / dx_ref)
+        a_star = float(np.median(ratios))
         for a in (a_values if a_values is not None else [a_star * x for x in A_FACTORS]):
-            grid.append(McGridPoint(float(a), float(ea), float(errors(float(ea), float(a)).mean())))
+            grid.append(McGridPoint(float(a), ea, float(errors(ea, float(a)).mean())))
     best = min(grid, key=lambda g: g.rms)
     a_best = best.a_per_s
     if refine:
@@ -500,7 +575,8 @@ def tune_mc(objects: Sequence[tuple[np.ndarray, float, tuple[bool, ...] | None]]
         if sol.fun < best.rms:
             a_best = math.exp(float(sol.x))
     per_object = errors(best.ea_j_per_mol, a_best)
-    params = MonteCarloParams(a_best, best.ea_j_per_mol, temp_k, dx_ref)
+    params = MonteCarloParams(a_best, best.ea_j_per_mol, runs.temp_k, dx_ref)
     log.info("Monte Carlo tuning: A = %.4g 1/s, E_a = %.4g J/mol, RMS %.2f %% (grid best %.2f %%)", a_best,
              best.ea_j_per_mol, 100 * per_object.mean(), 100 * best.rms)
-    return McTuning(params, float(per_object.mean()), tuple(float(x) for x in per_object), tuple(grid), best, seed_list)
+    return McTuning(params, float(per_object.mean()), tuple(float(x) for x in per_object), tuple(grid), best,
+                    runs.seeds)

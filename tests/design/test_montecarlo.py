@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from design import DesignError
-from design.montecarlo import (GAS_CONSTANT, MonteCarloParams, erosion_times, simulate_mc, tune_mc)
+from design.montecarlo import GAS_CONSTANT, MonteCarloParams, erosion_times, simulate_mc, tune_mc, unit_runs
 from design.pipeline import input_grid
 
 
@@ -92,7 +92,7 @@ def test_tuned_on_the_analytic_sphere_it_stays_within_5_percent_rms():
     radius = (3 * (rho >= 0.5).sum() * dx ** 3 / (4 * math.pi)) ** (1 / 3)
     t = np.linspace(0, 3000.0, 301)
     fraction = 1 - np.clip(1 - t / 3000.0, 0, None) ** 3
-    tuning = tune_mc([(rho, dx, mirror)], [(t, fraction)], seeds=4)
+    tuning = tune_mc(unit_runs([(rho, dx, mirror)], seeds=4), [(t, fraction)])
     assert len(tuning.grid) == 16
     assert tuning.rms < 0.05
     assert tuning.rms <= tuning.grid_best.rms
@@ -114,3 +114,17 @@ def test_parameters_are_checked_and_rescaled_with_the_voxel_size():
     assert MonteCarloParams.from_dict(tuned.to_dict()) == tuned
     with pytest.raises(DesignError, match="need numbers"):
         MonteCarloParams.from_dict({"a_per_s": 1.0})
+
+
+def test_leave_one_out_tuning_ignores_the_left_out_curve(sphere):
+    rho, dx, mirror = sphere
+    runs = unit_runs([(rho, dx, mirror), (rho, dx, mirror)], ea_values=(5000.0,), seeds=2)
+    t = np.linspace(0, 3000.0, 101)
+    fraction = 1 - np.clip(1 - t / 3000.0, 0, None) ** 3
+    unusable = (t, 0.1 * fraction)  # never reaches half its mass: refused when used
+    alone = tune_mc(runs, [(t, fraction), unusable], subset=[0])
+    assert len(alone.per_object_rms) == 1 and len(alone.grid) == 4
+    with pytest.raises(DesignError, match="reaches only 10%"):
+        tune_mc(runs, [(t, fraction), unusable])
+    mean, spread = runs.fraction(5000.0, 0, alone.params.a_per_s, t)
+    assert mean[0] == 0 and mean[-1] == pytest.approx(1.0, abs=0.02) and spread.max() > 0
