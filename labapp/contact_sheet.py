@@ -40,7 +40,7 @@ def summary_row(folder: Path) -> dict:
         return {}
     row = {key: s.get(key) for key in ("status", "rel_rmse_density", "rel_rmse_binary", "pieces", "min_channel_mm",
                                        "print_mass_g", "iterations", "seconds", "overhang_fraction",
-                                       "rmse_g_per_kg")}
+                                       "rel_rmse_physical")}
     row["warn_channel_mm"] = s.get("config", {}).get("warn_channel_mm")
     curves = _curves(Path(folder))
     if curves is not None:

@@ -40,7 +40,7 @@ DONE_STATUSES = ("converged", "max_iter", "stalled")
 RUNS, FAILED, LOCKS = "runs", "failed", ".locks"
 STOP_POLL_S = 1.0
 """How often a running design asks the scheduler whether the sweep was stopped, s."""
-TABLE_COLUMNS = ("name", "status", "error", "rel_rmse_density", "rel_rmse_binary", "rmse_mm3", "rmse_g_per_kg",
+TABLE_COLUMNS = ("name", "status", "error", "rel_rmse_density", "rel_rmse_binary", "rmse_mm3", "rel_rmse_physical",
                  "pieces", "overhang_fraction", "min_channel_mm", "print_mass_g", "iterations", "seconds", "folder")
 """Columns of sweep.csv; the swept settings go between ``name`` and ``status``."""
 
@@ -112,12 +112,14 @@ def _stop_poller(event_name: str | None) -> Callable[[], bool] | None:
 
 
 def _design(combo: Combination, folder: Path, resume: bool, should_stop) -> str:
-    """Run or resume the combination's design (what `sfr design` runs); returns its status."""
-    from design.optimize import run_design
+    """Start or resume the combination's design through the job `sfr design` runs; returns its status."""
+    from labapp.jobs import design
+    from labapp.simcal import load_simcal
 
-    if combo.simcal is not None:
-        raise UsageError("simcal targets need the calibration loop, which this installation lacks")
-    return run_design(combo.config, folder, should_stop=should_stop, resume=resume).status
+    simcal = load_simcal(combo.simcal) if combo.simcal else None
+    result, _ = design(None if resume else combo.config, folder, resume=resume, simcal=simcal,
+                       should_stop=should_stop)
+    return result.status
 
 
 def run_combination(combo: Combination, sweep_dir: str, stop_event: str | None = None) -> dict:
@@ -140,6 +142,8 @@ def run_combination(combo: Combination, sweep_dir: str, stop_event: str | None =
         if state == "done":
             status = json.loads((folder / "summary.json").read_text())["status"]
             return {"name": combo.name, "status": status, "seconds": 0.0, "worker": where, "skipped": True}
+        if state == "new" and folder.is_dir() and any(folder.iterdir()):
+            _set_aside(folder, sweep_dir)
         _log_line(sweep_dir, f"start {combo.name} on {where} ({state})")
         try:
             status = _design(combo, folder, state == "resume", _stop_poller(stop_event))
@@ -150,6 +154,14 @@ def run_combination(combo: Combination, sweep_dir: str, stop_event: str | None =
         seconds = time.perf_counter() - t0
         _log_line(sweep_dir, f"finish {combo.name} on {where}: {status} in {seconds:.1f} s")
         return {"name": combo.name, "status": status, "seconds": seconds, "worker": where}
+
+
+def _set_aside(folder: Path, sweep_dir: Path) -> None:
+    """Move what a start killed before its ``config.json`` left behind to ``failed/``, so it can restart."""
+    aside = sweep_dir / FAILED / f"{folder.name}.aborted-{time.strftime('%Y%m%d-%H%M%S')}"
+    aside.parent.mkdir(exist_ok=True)
+    os.replace(folder, aside)
+    _log_line(sweep_dir, f"moved the unfinished start of {folder.name} to {aside.relative_to(sweep_dir)}")
 
 
 def _worker_name() -> str:
@@ -372,7 +384,7 @@ def table_row(spec: SweepSpec, combo: Combination, sweep_dir: Path, outcome: dic
     folder = sweep_dir / RUNS / combo.name
     row = {"name": combo.name, "folder": str(folder.relative_to(sweep_dir))}
     for key in spec.swept_keys:
-        value = combo.settings.get(key) if key == "preset" else getattr(combo.config, key)
+        value = getattr(combo.config, key)
         row[key] = "" if value is None else value
     row.update(summary_row(folder))
     if outcome is not None and outcome["status"] == "failed":

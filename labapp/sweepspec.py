@@ -15,7 +15,8 @@ preset = "paper:pill"
 ```
 
 Setting names are `design.problem.DesignConfig`'s fields. Each combination's settings are the top-level
-ones, overridden by its preset's (``preset = "paper:NAME"``, `design.presets`), overridden by its own.
+ones overridden by its own; a preset (``preset = "paper:NAME"``, `design.presets`) fills the
+hyperparameters neither gives, as `sfr design --preset` does.
 ``simcal`` (a simulation-to-bench calibration, as `sfr design --simcal` takes) is passed through with the
 target. Every combination is checked here, so that a bad value stops the sweep before any work.
 """
@@ -39,7 +40,7 @@ log = logging.getLogger(__name__)
 PRESET_KEY = "preset"
 SPEC_ONLY_KEYS = ("target", "simcal", "grid", "points")
 DESIGN_KEYS = tuple(f.name for f in fields(DesignConfig) if f.name != "target")
-SETTING_KEYS = (PRESET_KEY, *DESIGN_KEYS)
+SETTING_KEYS = (PRESET_KEY, *(k for k in DESIGN_KEYS if k != PRESET_KEY))
 _HINTS = typing.get_type_hints(DesignConfig)
 
 
@@ -67,10 +68,6 @@ class Combination:
     settings: dict
     config: DesignConfig
     simcal: str | None = None
-
-    @property
-    def preset(self) -> str | None:
-        return self.settings.get(PRESET_KEY)
 
 
 @dataclass(frozen=True)
@@ -122,6 +119,7 @@ def parse_spec(text: str, *, base_dir: str | Path = ".", source: str = "spec") -
     if simcal is not None and not isinstance(simcal, str):
         raise SpecError(f"{source}: 'simcal' must be a path string, got {simcal!r}")
     target, simcal = _resolve(target, base_dir), _resolve(simcal, base_dir) if simcal else None
+    _check_simcal(source, target, simcal)
     fixed = {k: v for k, v in data.items() if k in SETTING_KEYS}
     for key, value in fixed.items():
         _check_value(source, key, value)
@@ -142,6 +140,22 @@ def _resolve(value: str, base_dir: str | Path) -> str:
     """An existing relative path made absolute (the workers' working folder is not the spec's)."""
     candidate = Path(base_dir) / value
     return str(candidate.resolve()) if not Path(value).is_absolute() and candidate.exists() else value
+
+
+def _check_simcal(source: str, target: str, simcal: str | None) -> None:
+    """A measured (physical) target needs a readable simulation calibration."""
+    from labapp.simcal import SimCalError, load_simcal
+    from labapp.targets import is_physical
+
+    if simcal is None:
+        if is_physical(target):
+            raise SpecError(f"{source}: target {target} is a measured curve: add simcal = \"simcal.json\" "
+                            "(made by sfr calibrate-sim) to map it to simulation units")
+        return
+    try:
+        load_simcal(simcal)
+    except SimCalError as exc:
+        raise SpecError(f"{source}: simcal: {exc}") from exc
 
 
 def _grid(source: str, grid) -> list[dict]:
@@ -211,11 +225,7 @@ def combination_name(settings: dict) -> str:
 
 
 def _config(source: str, name: str, target: str, fixed: dict, own: dict) -> DesignConfig:
-    merged = {k: v for k, v in fixed.items() if k != PRESET_KEY}
-    preset = own.get(PRESET_KEY, fixed.get(PRESET_KEY))
-    if preset is not None:
-        merged.update(preset_settings(source, preset))
-    merged.update({k: v for k, v in own.items() if k != PRESET_KEY})
+    merged = {**fixed, **own}
     merged = {k: tuple(v) if isinstance(v, list) else v for k, v in merged.items()}
     try:
         return DesignConfig(target=target, **merged)
@@ -223,20 +233,10 @@ def _config(source: str, name: str, target: str, fixed: dict, own: dict) -> Desi
         raise SpecError(f"{source}: combination {name}: {exc}") from exc
 
 
-def preset_settings(source: str, name: str) -> dict:
-    """The design settings of a paper preset (``paper:NAME``, Tables 1-2) as DesignConfig fields."""
-    try:
-        from design import presets
-    except ImportError as exc:
-        raise SpecError(f"{source}: preset {name!r}: this installation has no design presets") from exc
-    try:
-        return dict(presets.preset_settings(name))
-    except (DesignError, KeyError, ValueError) as exc:
-        raise SpecError(f"{source}: preset {name!r}: {exc}") from exc
-
-
 def config_matches(config: DesignConfig, stored: dict) -> bool:
-    """Whether a run folder's stored ``config.json`` is this configuration."""
+    """Whether a run folder's stored ``config.json`` holds this configuration (the target aside: a run
+    optimises its own copy of a file target, `labapp.jobs.design`)."""
     import json
 
-    return json.loads(json.dumps(asdict(config))) == stored
+    mine = json.loads(json.dumps(asdict(config)))
+    return {k: v for k, v in mine.items() if k != "target"} == {k: v for k, v in stored.items() if k != "target"}

@@ -46,6 +46,27 @@ def test_bad_specs_name_the_key(text, match):
         parse_spec(text, source="s.toml")
 
 
+def test_presets_fill_what_the_spec_leaves_open():
+    spec = parse_spec(SMALL + 'beta = 5\n[grid]\npreset = ["paper:pill", "paper:design-4"]\n')
+    pill, design4 = (c.config for c in spec.combinations)
+    assert [c.name for c in spec.combinations] == ["preset=paper-pill", "preset=paper-design-4"]
+    assert (pill.w_binary, pill.radius_vox, pill.beta) == (20.0, 4.0, 5)  # Table 1, extruded; beta given
+    assert design4.w_binary == 10.0 and design4.height_fraction == pytest.approx(200 / 256)  # Table 2
+    assert spec.swept_keys == ("preset",)
+    with pytest.raises(SpecError, match="combination preset=paper-nope: unknown preset 'paper:nope'"):
+        parse_spec(SMALL + '[[points]]\npreset = "paper:nope"\n')
+
+
+def test_measured_targets_need_a_readable_simcal(tmp_path):
+    measured = tmp_path / "curve.csv"
+    measured.write_text("t_s,released_g\n0,0\n60,0.1\n")
+    with pytest.raises(SpecError, match="is a measured curve: add simcal"):
+        parse_spec(f'target = "{measured}"\n')
+    (tmp_path / "simcal.json").write_text("{}")
+    with pytest.raises(SpecError, match="simcal: .*simcal.json"):
+        parse_spec('target = "curve.csv"\nsimcal = "simcal.json"\n', base_dir=tmp_path)
+
+
 def test_a_missing_spec_file_is_named(tmp_path):
     with pytest.raises(SpecError, match="cannot read the sweep spec .*nope.toml"):
         load_spec(tmp_path / "nope.toml")
@@ -94,6 +115,17 @@ def test_stopped_designs_resume_from_their_checkpoint(tmp_path):
     assert result.rows[0]["status"] == "max_iter"
     assert history[:, 0].tolist() == list(range(1, 13))  # continued from evaluation 6, not restarted
     assert "(resume)" in (out / "sweep.log").read_text()
+
+
+def test_a_start_killed_before_its_config_is_set_aside(tmp_path):
+    spec = parse_spec(SMALL)
+    folder = tmp_path / "sweep" / "runs" / "default"
+    folder.mkdir(parents=True)
+    (tmp_path / "sweep" / "spec.toml").write_text(spec.text)
+    (folder / "target_source.json").write_text("{}")
+    assert run_sweep(spec, tmp_path / "sweep", contact_sheet=False).rows[0]["status"] == "max_iter"
+    [aside] = (tmp_path / "sweep" / "failed").glob("default.aborted-*")
+    assert (aside / "target_source.json").read_text() == "{}"
 
 
 def test_out_checks_before_any_work(tmp_path):
