@@ -35,7 +35,8 @@ from labapp.outpaths import ANALYSIS_SUBFOLDER, check_data_dir, check_out
 log = logging.getLogger(__name__)
 
 __all__ = ["AnalysisOutputs", "DESIGN_DEFAULTS", "SimulationOutputs", "TARGET_SOURCE", "analyse_run",
-           "calibrate_series", "design", "design_folder", "new_run", "resume_run", "simulate", "verify"]
+           "calibrate_series", "design", "design_folder", "new_run", "resume_run", "simulate", "simulation_grid",
+           "verify"]
 
 
 # -- analyse a run -------------------------------------------------------------------------------------
@@ -194,14 +195,46 @@ class SimulationOutputs:
     warnings: tuple[str, ...]
 
 
+def simulation_grid(source: str, *, resolution: int | None = None, voxel_size_mm: float | None = None,
+                    symmetry: str = "", units: str = "mm") -> tuple[Any, float, tuple[bool, ...], list[str]]:
+    """The density grid a simulation of ``source`` (mesh, ``sample:NAME`` or density array) runs on.
+
+    A mesh is scaled from ``units`` to mm, checked for an implausible size (warnings naming the likely
+    unit error) and its grid's memory estimated before anything is allocated.
+
+    Returns
+    -------
+    rho : ndarray of float in [0, 1]
+    dx_mm : float
+    mirror : tuple of bool
+    warnings : list of str
+    """
+    from design.meshio import DENSITY_SUFFIXES
+    from design.pipeline import DEFAULT_RESOLUTION, SAMPLE_PREFIX, input_grid, mesh_grid
+    from design.shapes import sample_shape
+    from labapp.meshunits import SIMULATE_BYTES_PER_VOXEL, check_memory, grid_shape, load_mesh_mm, size_warnings
+
+    if Path(source).suffix.lower() in DENSITY_SUFFIXES and not source.startswith(SAMPLE_PREFIX):
+        if units != "mm":
+            raise UsageError("--units applies to meshes; a density array's voxel size is in mm")
+        rho, dx, mirror = input_grid(source, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)
+        return rho, dx, mirror, []
+    mesh = (sample_shape(source[len(SAMPLE_PREFIX):]) if source.startswith(SAMPLE_PREFIX)
+            else load_mesh_mm(source, units))
+    dx = voxel_size_mm or float(mesh.extents.max()) / (resolution or DEFAULT_RESOLUTION)
+    warnings = size_warnings(mesh.extents, float(mesh.volume), dx, source)
+    for w in warnings:
+        log.warning("%s", w)
+    check_memory(grid_shape(mesh.extents, dx), SIMULATE_BYTES_PER_VOXEL, f"simulating {source}")
+    rho, dx, mirror = mesh_grid(mesh, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)
+    return rho, dx, mirror, warnings
+
+
 def simulate(source: str, out: str | Path, *, resolution: int | None = None, voxel_size_mm: float | None = None,
              symmetry: str = "", units: str = "mm",
              progress: Callable[[str], None] | None = None) -> SimulationOutputs:
     """Simulate the release of a mesh, ``sample:NAME`` or density array into ``out`` (release.csv,
-    summary.json, release.png).
-
-    A mesh is scaled from ``units`` to mm, checked for an implausible size (warnings naming the likely
-    unit error) and its grid's memory estimated before anything is allocated.
+    summary.json, release.png); the grid comes from :func:`simulation_grid`.
 
     Raises
     ------
@@ -215,29 +248,13 @@ def simulate(source: str, out: str | Path, *, resolution: int | None = None, vox
     import numpy as np
 
     from design import simulate as forward
-    from design.meshio import DENSITY_SUFFIXES
-    from design.pipeline import DEFAULT_RESOLUTION, SAMPLE_PREFIX, input_grid, mesh_grid
-    from design.shapes import sample_shape
-    from labapp.meshunits import SIMULATE_BYTES_PER_VOXEL, check_memory, grid_shape, load_mesh_mm, size_warnings
 
     say = progress or (lambda message: None)
     out = check_out(out, "simulation", [source])
     start = time.perf_counter()
-    warnings: list[str] = []
     say(f"[1/3] loading and voxelising {source} ...")
-    if Path(source).suffix.lower() in DENSITY_SUFFIXES and not source.startswith(SAMPLE_PREFIX):
-        if units != "mm":
-            raise UsageError("--units applies to meshes; a density array's voxel size is in mm")
-        rho, dx, mirror = input_grid(source, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)
-    else:
-        mesh = (sample_shape(source[len(SAMPLE_PREFIX):]) if source.startswith(SAMPLE_PREFIX)
-                else load_mesh_mm(source, units))
-        dx = voxel_size_mm or float(mesh.extents.max()) / (resolution or DEFAULT_RESOLUTION)
-        warnings = size_warnings(mesh.extents, float(mesh.volume), dx, source)
-        for w in warnings:
-            log.warning("%s", w)
-        check_memory(grid_shape(mesh.extents, dx), SIMULATE_BYTES_PER_VOXEL, f"simulating {source}")
-        rho, dx, mirror = mesh_grid(mesh, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)
+    rho, dx, mirror, warnings = simulation_grid(source, resolution=resolution, voxel_size_mm=voxel_size_mm,
+                                                symmetry=symmetry, units=units)
     say(f"[2/3] fast marching {rho.size:,} voxels of {dx:.4g} mm ({time.perf_counter() - start:.1f} s) ...")
     release = forward(rho, dx, mirror=mirror)
     seconds = time.perf_counter() - start
