@@ -41,6 +41,8 @@ KINDS: dict[str, tuple[str, tuple[tuple[str, ...], ...]]] = {
     "simulation": ("a simulation folder (sfr simulate)", (("release.csv",),)),
     "analysis": ("an analysis folder (sfr analyze)", (("curve.csv",), ("cells_cache.npz",))),
     "images": ("an image or calibration-series folder (input data)", (("frames.csv",), ("masses.csv",))),
+    "sweep": ("a design sweep folder (sfr sweep)", (("spec.toml", "runs"),)),
+    "batch-analysis": ("a batch analysis folder (sfr analyze RUN... --out)", (("batch_summary.csv",),)),
     "simcal": ("a simulation calibration folder (sfr calibrate-sim)", (("simcal.json",),)),
 }
 RECORD_KINDS = {"run": "an acquisition run folder (a record)", "calibration-series": "a calibration-series folder (a record)"}

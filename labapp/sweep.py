@@ -186,15 +186,14 @@ def prepare_sweep_dir(spec: SweepSpec, sweep_dir: str | Path) -> Path:
 
     Raises
     ------
+    labapp.outpaths.OutPathError
+        The folder is a file, holds something other than a sweep, or holds an input.
     SweepError
-        The folder is a file or holds something other than a sweep, or a combination's run folder
-        holds a design with other settings.
+        A combination's run folder holds a design with other settings.
     """
-    sweep_dir = Path(sweep_dir).resolve()
-    if sweep_dir.exists() and not sweep_dir.is_dir():
-        raise SweepError(f"--out {sweep_dir} is a file; choose a folder")
-    if sweep_dir.is_dir() and any(sweep_dir.iterdir()) and not (sweep_dir / "spec.toml").exists():
-        raise SweepError(f"--out {sweep_dir} holds other files and no sweep (no spec.toml); choose a new folder")
+    from labapp.outpaths import check_out
+
+    sweep_dir = check_out(sweep_dir, "sweep", [spec.target, spec.simcal])
     for combo in spec.combinations:
         stored = sweep_dir / RUNS / combo.name / "config.json"
         if stored.exists():

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from labapp.contact_sheet import printable, rank, top_view
+from labapp.outpaths import OutPathError
 from labapp.sweep import SweepError, folder_state, run_sweep
 from labapp.sweepspec import SpecError, combination_name, load_spec, parse_spec
 
@@ -131,11 +132,11 @@ def test_a_start_killed_before_its_config_is_set_aside(tmp_path):
 def test_out_checks_before_any_work(tmp_path):
     spec = parse_spec(SMALL)
     (tmp_path / "file").write_text("x")
-    with pytest.raises(SweepError, match="is a file"):
+    with pytest.raises(OutPathError, match="is a file"):
         run_sweep(spec, tmp_path / "file")
     (tmp_path / "other").mkdir()
     (tmp_path / "other" / "notes.txt").write_text("x")
-    with pytest.raises(SweepError, match="holds other files and no sweep"):
+    with pytest.raises(OutPathError, match="a folder with other files, not a sweep folder"):
         run_sweep(spec, tmp_path / "other")
     run_sweep(spec, tmp_path / "s", contact_sheet=False)
     with pytest.raises(SweepError, match="holds a design with other settings"):
