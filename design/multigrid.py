@@ -27,7 +27,7 @@ from design.errors import DesignError
 
 log = logging.getLogger(__name__)
 
-MAX_COARSE_NODES = 1500
+MAX_COARSE_NODES = 400
 """Coarsening stops at or below this many nodes; that level is solved directly."""
 PRE_SMOOTH = 1
 """Gauss-Seidel sweeps before (forward) and after (backward) the coarse correction."""

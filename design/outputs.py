@@ -60,6 +60,20 @@ def _rate_dev(target, curve_mm3: np.ndarray, vs_target: bool) -> float | None:
     return rate_deviation(tau, curve_mm3, window_from=c, reference_rate=ref)
 
 
+def _ico_summary(objective: DesignObjective, rho: np.ndarray, rows: np.ndarray, seconds: float) -> dict | None:
+    """The ICO term's value at the output density and its share of the run time (None without J_fab)."""
+    term = objective.space.fab_term
+    if term is None or not objective.w_fab > 0:
+        return None
+    value, _ = term(rho)
+    config = term.config
+    fab_seconds = float(rows[:, HISTORY_COLUMNS.index("fab_seconds")].sum())
+    return {"J_fab": value, "J_fab_start": term.reference, "w_fab": objective.w_fab, "layers": config.layers,
+            "coarsen": config.coarsen, "law": config.law, "poisson": config.poisson,
+            "pcg_iterations": term.last.iterations.tolist(), "fab_seconds": fab_seconds,
+            "fab_time_share": fab_seconds / seconds if seconds > 0 else None}
+
+
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
                   history: list[list[float]], config, *, status: str, session_seconds: float) -> DesignOutputs:
     """Extract, re-simulate, assess and write every output of a design run.
@@ -109,7 +123,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     _write_text(out_dir / "curves.csv", _csv(("tau_mm", "target_mm3", "density_mm3", "binary_mm3"), curves))
     rows = np.array(history, dtype=float).reshape(-1, len(HISTORY_COLUMNS))
     _write_text(out_dir / "history.csv", _csv(HISTORY_COLUMNS, rows))
-    _write_text(out_dir / "design.ini", prusa_profile(out_dir.name))
+    # NFC designs may overhang; ICO and extruded ones print without supports (section 3.6)
+    _write_text(out_dir / "design.ini", prusa_profile(out_dir.name, supports=space.name == "nfc"))
     achieved = (("density", density_curve), ("binary", binary_curve))
     iterations = len(history)
     seconds = float(history[-1][-1]) if history else 0.0
@@ -129,6 +144,10 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         "volume_mm3": facts.volume_mm3,
         "print_mass_g": facts.mass_g,
         "min_channel_mm": facts.min_channel_mm,
+        "overhang_fraction": facts.overhang_fraction,
+        "max_overhang_run_mm": facts.max_overhang_run_mm,
+        "preset": config.preset,
+        "ico": _ico_summary(objective, rho, rows, seconds),
         "iou_with_source": (centred_iou(problem.source_solid, solid)
                             if problem.source_solid is not None else None),
         "target_final_mm3": target.final_mm3,
@@ -145,7 +164,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     save_report(out_dir / "report.png", target.tau_mm, target.released_mm3, density_curve,
                 binary_curve, rho_full, solid,
                 f"{target.source} | {space.name} | rel. RMSE density {summary['rel_rmse_density']:.2%}, "
-                f"binary {summary['rel_rmse_binary']:.2%} | {iterations} it.")
+                f"binary {summary['rel_rmse_binary']:.2%} | overhang {facts.overhang_fraction:.1%} | {iterations} it."
+                + (f" | preset {config.preset}" if config.preset else ""))
     path = out_dir / "summary.json"
     _write_text(path, json.dumps(summary, indent=2))
     return DesignOutputs(path, summary)

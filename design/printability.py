@@ -1,9 +1,10 @@
-"""Printability facts of a designed solid: print mass, narrowest open channel, slicer profile.
+"""Printability facts of a designed solid: print mass, narrowest open channel, overhangs, slicer profile.
 
 The paper prints with AquaSys 120 on a Prusa i3 MK3s (section 4.1): measured print density
 1.32 g/cm^3, 100% concentric infill, 0.1 mm layers, 0.2 mm lines, 245/85 C. Its one large
 measured mismatch (Fig. 10) came from narrow internal channels that clogged as the material
-swelled, hence the channel check.
+swelled, hence the channel check. Overhangs are measured along the build direction +z (array
+axis 2, z = 0 on the build plate), the one the ICO space designs for (section 3.6).
 """
 from __future__ import annotations
 
@@ -33,12 +34,18 @@ class Printability:
     min_channel_mm : float or None
         Width of the narrowest passage leading from the outside into a wider void region;
         None when there is none narrower than the search limit.
+    overhang_fraction : float
+        Share of solid voxels with nothing below them (`overhangs`).
+    max_overhang_run_mm : float
+        Longest straight horizontal run of such voxels, mm.
     warnings : tuple of str
     """
 
     volume_mm3: float
     mass_g: float
     min_channel_mm: float | None
+    overhang_fraction: float
+    max_overhang_run_mm: float
     warnings: tuple[str, ...]
 
 
@@ -100,6 +107,53 @@ def narrowest_channel_mm(solid: np.ndarray, dx_mm: float, max_width_mm: float) -
     return None
 
 
+def overhangs(solid: np.ndarray) -> np.ndarray:
+    """Solid voxels printed over void: the voxel below and its four side neighbours are all void.
+
+    Parameters
+    ----------
+    solid : (X, Y, Z) ndarray of bool
+        The full solid, z (axis 2) the build direction; the plate below z = 0 counts as solid.
+
+    Returns
+    -------
+    (X, Y, Z) ndarray of bool
+    """
+    solid = np.asarray(solid, dtype=bool)
+    if solid.ndim != 3:
+        raise DesignError(f"need a 3D solid, got shape {solid.shape}")
+    below = np.zeros_like(solid)
+    below[:, :, 1:] = solid[:, :, :-1]
+    support = below.copy()
+    support[1:] |= below[:-1]
+    support[:-1] |= below[1:]
+    support[:, 1:] |= below[:, :-1]
+    support[:, :-1] |= below[:, 1:]
+    support[:, :, 0] = True  # the build plate
+    return solid & ~support
+
+
+def _longest_run(mask: np.ndarray, axis: int) -> int:
+    """Longest run of consecutive True values along ``axis``."""
+    m = np.moveaxis(mask, axis, -1).reshape(-1, mask.shape[axis]).astype(np.int8)
+    edges = np.diff(np.pad(m, ((0, 0), (1, 1))), axis=1)
+    _, starts = np.nonzero(edges == 1)
+    _, ends = np.nonzero(edges == -1)  # row-major order pairs each start with its end
+    return int((ends - starts).max()) if starts.size else 0
+
+
+def overhang_stats(solid: np.ndarray, dx_mm: float) -> tuple[float, float]:
+    """``(overhang_fraction, max_overhang_run_mm)`` of a voxel solid (`overhangs`).
+
+    The fraction is over solid voxels (0 for an empty solid); the run is the longest straight
+    line of overhang voxels along x or y within one layer, mm.
+    """
+    over = overhangs(solid)
+    count = int(np.count_nonzero(solid))
+    fraction = float(np.count_nonzero(over)) / count if count else 0.0
+    return fraction, float(max(_longest_run(over, 0), _longest_run(over, 1))) * dx_mm
+
+
 def assess(solid: np.ndarray, dx_mm: float, *, warn_channel_mm: float = 1.0,
            density_g_per_cm3: float = PRINT_DENSITY_G_PER_CM3) -> Printability:
     """Print mass and narrowest channel of a voxel solid, with warnings.
@@ -121,12 +175,14 @@ def assess(solid: np.ndarray, dx_mm: float, *, warn_channel_mm: float = 1.0,
     if channel is not None and channel < warn_channel_mm:
         warnings.append(f"narrowest open channel is {channel:.2f} mm, below {warn_channel_mm:g} mm: it may "
                         f"clog as the material swells (paper Fig. 10)")
-    return Printability(volume, print_mass_g(volume, density_g_per_cm3), channel, tuple(warnings))
+    fraction, run_mm = overhang_stats(solid, dx_mm)
+    return Printability(volume, print_mass_g(volume, density_g_per_cm3), channel, fraction, run_mm,
+                        tuple(warnings))
 
 
 PRUSA_SETTINGS: dict[str, str] = {
     # section 4.1: 0.2 mm nozzle, 0.2 mm lines, 0.1 mm layers, 100% concentric infill, 245/85 C,
-    # 200 mm/s, no supports (designs are support-free by construction or extruded)
+    # 200 mm/s; support material is set per design by `prusa_profile`
     "nozzle_diameter": "0.2",
     "layer_height": "0.1",
     "first_layer_height": "0.1",
@@ -156,9 +212,14 @@ PRUSA_SETTINGS: dict[str, str] = {
 }
 
 
-def prusa_profile(name: str = "shape-from-release") -> str:
-    """A PrusaSlicer .ini profile with the paper's print settings (section 4.1)."""
+def prusa_profile(name: str = "shape-from-release", supports: bool = False) -> str:
+    """A PrusaSlicer .ini profile with the paper's print settings (section 4.1).
+
+    ``supports`` turns support material on; ICO and extruded designs print without (section 3.6),
+    the build direction being the STL's +z.
+    """
     lines = [f"# PrusaSlicer profile {name}: print settings of Panetta et al. 2022, section 4.1",
-             "# load with File > Import > Import Config"]
-    lines += [f"{key} = {value}" for key, value in PRUSA_SETTINGS.items()]
+             "# load with File > Import > Import Config; the STL's +z is the build direction"]
+    settings = dict(PRUSA_SETTINGS, support_material="1" if supports else "0")
+    lines += [f"{key} = {value}" for key, value in settings.items()]
     return "\n".join(lines) + "\n"

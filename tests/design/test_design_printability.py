@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.printability import assess, narrowest_channel_mm, print_mass_g, prusa_profile
+from design.printability import assess, narrowest_channel_mm, overhang_stats, overhangs, print_mass_g, prusa_profile
 
 
 def _hollow_ball(hole_vox: int, n: int = 40) -> np.ndarray:
@@ -49,3 +49,29 @@ def test_prusa_profile_has_the_paper_settings():
     assert settings["layer_height"] == "0.1" and settings["extrusion_width"] == "0.2"
     assert settings["fill_density"] == "100%" and settings["fill_pattern"] == "concentric"
     assert settings["temperature"] == "245" and settings["bed_temperature"] == "85"
+
+
+def test_overhangs_of_hand_built_solids():
+    solid = np.zeros((7, 5, 6), dtype=bool)
+    solid[3, 2, :4] = True  # a post standing on the plate
+    solid[:, 2, 4] = True  # a 7-voxel beam across its top: 4 of its voxels reach past the post's neighbours
+    over = overhangs(solid)
+    assert sorted(np.argwhere(over)[:, 0].tolist()) == [0, 1, 5, 6] and over[:, :, :4].sum() == 0
+    fraction, run_mm = overhang_stats(solid, 0.5)
+    assert fraction == pytest.approx(4 / 11) and run_mm == pytest.approx(2 * 0.5)
+    stairs = np.zeros((6, 3, 6), dtype=bool)
+    for k in range(6):
+        stairs[k, 1, k] = True  # 45 degrees: each voxel rests on its side neighbour below
+    assert overhang_stats(stairs, 1.0) == (0.0, 0.0)
+    roof = np.zeros((6, 6, 3), dtype=bool)
+    roof[:, :, 2] = True  # a floating slab: everything overhangs, runs of 6 voxels
+    assert overhang_stats(roof, 0.25) == (1.0, pytest.approx(1.5))
+    assert overhang_stats(np.zeros((2, 2, 2), bool), 1.0) == (0.0, 0.0)
+    with pytest.raises(DesignError, match="3D solid"):
+        overhangs(np.zeros((3, 3), bool))
+
+
+def test_supports_follow_the_design_space():
+    on = dict(line.split(" = ") for line in prusa_profile(supports=True).splitlines() if not line.startswith("#"))
+    off = dict(line.split(" = ") for line in prusa_profile().splitlines() if not line.startswith("#"))
+    assert on["support_material"] == "1" and off["support_material"] == "0"
