@@ -133,6 +133,32 @@ def release_summary(t_s: np.ndarray, released_g: np.ndarray, mass_g: float | Non
             "best_fit_text": best.describe() if best else None, "fits": [fit_dict(f) for f in summary.fits]}
 
 
+def prediction_metrics(t_s: np.ndarray, reference_g: np.ndarray, predicted_g: np.ndarray,
+                       mass_g: float | None = None) -> dict:
+    """The release metrics a prediction carries: MDT, DE and model fits of the predicted curve and of its
+    reference (a target or a measurement), and f1/f2 of the prediction against the reference.
+
+    Parameters
+    ----------
+    t_s : (N,) ndarray of float, s
+    reference_g, predicted_g : (N,) ndarray of float, g
+    mass_g : float, optional
+        The reference's 100 % (default its final release).
+    """
+    from analysis import AnalysisError
+
+    out = {"predicted": release_summary(t_s, predicted_g, None, "prediction"),
+           "reference": release_summary(t_s, reference_g, mass_g, "reference")}
+    try:
+        sim = similarity(ReleaseProfile(t_s, reference_g, total=mass_g, label="reference"),
+                         ReleaseProfile(t_s, predicted_g, label="prediction"))
+    except AnalysisError as exc:
+        out["f2_error"] = str(exc)
+        return out
+    out.update({"f1": sim.f1, "f2": sim.f2, "f2_reason": sim.reason, "f2_points": sim.points_used})
+    return out
+
+
 def _read_group(paths: Sequence[str | Path], calibration, name: str) -> list[ReleaseProfile]:
     return [profile_of(read_physical_curve(p, calibration=calibration), f"{name}: {p}" if len(paths) > 1 else str(p))
             for p in paths]

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from labapp.compare import prediction_metrics
 from labapp.curvefiles import CURVE_FILES, PhysicalCurve
 from labapp.simcal import SimCalError, SimCalFile
 from labapp.storage import atomic_write
@@ -117,7 +118,8 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
     ``curves_physical.csv`` has ``t_s,target_released_g,design_released_g``: the measured target at its own
     times (or the simulated target mapped through the calibration), and the printable binary solid's
     predicted release (mass from ``g_per_mm3``). ``summary.json`` gains ``rel_rmse_physical`` (RMS of the
-    difference over the target's final grams), ``print_mass_g`` at the calibrated density and ``simcal``;
+    difference over the target's final grams), ``print_mass_g`` at the calibrated density, ``simcal`` and
+    ``release_metrics`` (MDT, DE and model fits of design and target, f2 of the design against the target);
     the simulation-units report is kept as ``report_simulation.png`` and ``report.png`` shows grams over
     hours.
 
@@ -157,6 +159,7 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
     summary["simcal"] = {"path": str(simcal.path), "model": cal.model, "seconds_per_mm": cal.seconds_per_mm,
                          "g_per_mm3": cal.g_per_mm3, "saturation_g_per_kg": cal.saturation_g_per_kg,
                          "water_g": water}
+    summary["release_metrics"] = prediction_metrics(t, target_g, design_g)
     atomic_write(design_dir / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
     report, kept = design_dir / "report.png", design_dir / "report_simulation.png"
     if report.exists() and not kept.exists():

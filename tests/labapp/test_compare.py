@@ -84,3 +84,24 @@ def test_a_reference_without_release_is_refused(tmp_path, capsys):
     b = _csv(tmp_path / "b.csv", [0, 60, 120], [0, 1, 2])
     assert main(["compare", a, b]) == 2
     assert "releases 0 g in total" in capsys.readouterr().err
+
+
+def test_a_designs_physical_prediction_carries_the_release_metrics(tmp_path):
+    from pathlib import Path
+
+    from analysis import SimCal
+    from labapp.simcal import SimCalFile
+    from labapp.targets import write_design_physical
+
+    tau = np.linspace(0, 2.0, 201)
+    target = 1000 * (1 - (1 - tau / 2.0) ** 3)       # a sphere-like target, mm^3
+    binary = 1000 * np.minimum(tau / 1.8, 1.0) ** 0.9  # the design's printed solid
+    np.savetxt(tmp_path / "curves.csv", np.column_stack([tau, target, binary]), delimiter=",",
+               header="tau_mm,target_mm3,binary_mm3", comments="")
+    (tmp_path / "summary.json").write_text("{}")
+    simcal = SimCalFile(SimCal("constant", 1500.0, 1.3e-3), 64, 0.3, 500.0, Path("simcal.json"))
+    summary = write_design_physical(tmp_path, simcal)
+    metrics = json.loads((tmp_path / "summary.json").read_text())["release_metrics"]
+    assert metrics == json.loads(json.dumps(summary["release_metrics"]))
+    assert metrics["predicted"]["mdt_s"] > 0 and metrics["reference"]["best_fit"]["rank"] == 1
+    assert metrics["f2_points"] >= 3 and 0 < metrics["f2"] < 100
