@@ -84,6 +84,25 @@ class SimCalFile:
                 f"{self.cal.g_per_mm3 * 1000:.4g} g/cm^3{sat}, resolution {self.resolution}")
 
 
+@dataclass(frozen=True)
+class SimCalRun:
+    """What :func:`calibrate_sim` made.
+
+    Attributes
+    ----------
+    doc : dict
+        The content of ``simcal.json``.
+    loo : tuple of analysis.LooShape
+        The chosen model's leave-one-out predictions, in set order.
+    path : Path
+        ``simcal.json``.
+    """
+
+    doc: dict
+    loo: tuple[LooShape, ...]
+    path: Path
+
+
 def read_set(path: str | Path) -> list[SetRow]:
     """Read a calibration set file: columns ``run,mesh,object_mass_g`` (and optionally ``water_g``), paths
     relative to the file.
@@ -158,7 +177,7 @@ def _loo_summary(loo: tuple[LooShape, ...], rows: list[SetRow]) -> list[dict]:
 
 def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out_dir: str | Path, *,
                   model: str = "auto", resolution: int = DEFAULT_RESOLUTION,
-                  max_offset_s: float = DEFAULT_MAX_OFFSET_S, progress: Progress | None = None) -> dict:
+                  max_offset_s: float = DEFAULT_MAX_OFFSET_S, progress: Progress | None = None) -> SimCalRun:
     """Calibrate the simulator against measured runs and write ``simcal.json``, ``loo.csv``, ``simcal.png``.
 
     Parameters
@@ -171,8 +190,8 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
     out_dir : str or Path
         Output folder; refused if it already holds a calibration.
     model : {'auto', 'constant', 'saturation'}
-        The model used for prediction; ``auto`` takes the one with the lower mean leave-one-out error
-        (both are always fitted and reported).
+        The model used for prediction; ``auto`` fits both and takes the one with the lower mean
+        leave-one-out error (both are reported); a named model is the only one fitted.
     resolution : int
         Voxels along each mesh's longest side.
     max_offset_s : float
@@ -182,8 +201,7 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
 
     Returns
     -------
-    dict
-        The content of ``simcal.json``.
+    SimCalRun
 
     Raises
     ------
@@ -230,12 +248,13 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         curves.append(curve)
         dxs.append(dx)
     fits, loos = {}, {}
-    for j, name in enumerate(MODELS):
-        say(0.6 + 0.35 * j / len(MODELS), f"fitting the {name} model and its leave-one-out predictions ...")
+    models = MODELS if model == "auto" else (model,)
+    for j, name in enumerate(models):
+        say(0.6 + 0.35 * j / len(models), f"fitting the {name} model and its leave-one-out predictions ...")
         fits[name] = fit_simcal(shapes, name, max_offset_s=max_offset_s)
         loos[name] = leave_one_out(shapes, name, max_offset_s=max_offset_s)
-    mean_loo = {m: float(np.mean([s.rel_rmse for s in loos[m]])) for m in MODELS}
-    chosen = min(MODELS, key=mean_loo.get) if model == "auto" else model
+    mean_loo = {m: float(np.mean([s.rel_rmse for s in loos[m]])) for m in models}
+    chosen = min(models, key=mean_loo.get)
     fit = fits[chosen]
     doc = {
         "format": FORMAT,
@@ -253,7 +272,7 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         "loo_rel_rmse_mean": mean_loo[chosen],
         "models": {m: {"seconds_per_mm": fits[m].cal.seconds_per_mm,
                        "saturation_g_per_kg": fits[m].cal.saturation_g_per_kg, "loss": fits[m].loss,
-                       "loo_rel_rmse_mean": mean_loo[m], "loo": _loo_summary(loos[m], rows)} for m in MODELS},
+                       "loo_rel_rmse_mean": mean_loo[m], "loo": _loo_summary(loos[m], rows)} for m in models},
         "shapes": [{"run": str(r.run), "mesh": str(r.mesh), "object_mass_g": s.mass_g, "water_g": s.water_g,
                     "volume_mm3": s.volume_mm3, "g_per_mm3": g, "offset_s": o, "loss": L,
                     "measured_until_s": float(s.t_s[-1]),
@@ -267,7 +286,7 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
     say(0.96, f"writing {out_dir} ...")
     atomic_write(out_dir / "simcal.json", (json.dumps(doc, indent=2) + "\n").encode())
     lines = ["run,mesh,model,rel_rmse,seconds_per_mm_without_it"]
-    for m in MODELS:
+    for m in models:
         lines += [f"{r.run},{r.mesh},{m},{s.rel_rmse:.6f},{s.cal.seconds_per_mm:.3f}" for s, r in zip(loos[m], rows)]
     atomic_write(out_dir / "loo.csv", ("\n".join(lines) + "\n").encode())
     plot_loo(loos[chosen], [f"{r.run.name}\n{r.mesh.name}" for r in rows], out_dir / "simcal.png",
@@ -275,7 +294,7 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
              f"{fit.cal.g_per_mm3 * 1000:.3f} g/cm^3)")
     say(1.0, f"{chosen} model: {fit.cal.seconds_per_mm:.1f} s/mm, mean leave-one-out error "
              f"{100 * mean_loo[chosen]:.2f}% of the weighed mass")
-    return doc
+    return SimCalRun(doc, loos[chosen], out_dir / "simcal.json")
 
 
 def _input_hashes(set_csv: Path, bench_calibration, rows: list[SetRow]) -> dict[str, str]:

@@ -35,10 +35,10 @@ def run(args: argparse.Namespace) -> int:
     """Calibrate, print the leave-one-out table and where the files are."""
     from labapp.simcal import calibrate_sim
 
-    doc = calibrate_sim(args.set_csv, args.calibration, args.out, model=args.model, resolution=args.resolution,
+    done = calibrate_sim(args.set_csv, args.calibration, args.out, model=args.model, resolution=args.resolution,
                         max_offset_s=args.max_offset_s,
                         progress=lambda f, m: print(f"[{100 * f:3.0f}%] {m}", file=sys.stderr, flush=True))
-    print_summary(doc)
+    print_summary(done.doc)
     out = Path(args.out)
     print(f"wrote {out / 'simcal.json'}, {out / 'loo.csv'}, {out / 'simcal.png'}")
     return 0
