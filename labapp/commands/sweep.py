@@ -30,7 +30,7 @@ def _fmt_eta(seconds: float | None) -> str:
     return f"ETA {seconds / 60:.1f} min" if seconds >= 60 else f"ETA {seconds:.0f} s"
 
 
-def _printer():
+def progress_printer():
     """Progress on stderr: one rewritten line on a terminal, else a line whenever the counts change."""
     tty, last = sys.stderr.isatty(), [None]
 
@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         link = dashboard_link(client)
         if link:
             print(f"Dask dashboard: {link}", file=sys.stderr)
-        result = run_sweep(spec, out, client, on_progress=_printer())
+        result = run_sweep(spec, out, client, on_progress=progress_printer())
     if sys.stderr.isatty():
         print(file=sys.stderr)
     for name in result.failed:
