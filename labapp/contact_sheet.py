@@ -48,11 +48,16 @@ def summary_row(folder: Path) -> dict:
     return {k: ("" if v is None else v) for k, v in row.items()}
 
 
+def _number(value) -> float | None:
+    """A table value (number, numeric text, or "" / None for none)."""
+    return None if value in ("", None) else float(value)
+
+
 def printable(row: dict) -> bool:
-    """One piece and no channel below the run's warning width."""
-    channel, limit = row.get("min_channel_mm"), row.get("warn_channel_mm")
-    narrow = channel not in ("", None) and limit not in ("", None) and float(channel) < float(limit)
-    return row.get("pieces") == 1 and not narrow
+    """One piece and no channel below the run's warning width (rows from summaries or sweep.csv)."""
+    channel, limit = _number(row.get("min_channel_mm")), _number(row.get("warn_channel_mm"))
+    narrow = channel is not None and limit is not None and channel < limit
+    return _number(row.get("pieces")) == 1 and not narrow
 
 
 def rank(rows: list[dict]) -> list[dict]:
@@ -60,8 +65,8 @@ def rank(rows: list[dict]) -> list[dict]:
     def key(row):
         status = row.get("status")
         group = 0 if status in FINISHED else 2 if status == "failed" else 1
-        error = row.get("rel_rmse_binary")
-        return group, not printable(row), float(error) if error not in ("", None) else math.inf
+        error = _number(row.get("rel_rmse_binary"))
+        return group, not printable(row), math.inf if error is None else error
     return sorted(rows, key=key)
 
 

@@ -23,6 +23,7 @@ target. Every combination is checked here, so that a bad value stops the sweep b
 from __future__ import annotations
 
 import itertools
+import json
 import logging
 import re
 import tomllib
@@ -136,6 +137,23 @@ def parse_spec(text: str, *, base_dir: str | Path = ".", source: str = "spec") -
     return SweepSpec(text, target, simcal, tuple(combos))
 
 
+def spec_text(target: str, fixed: dict, grid: dict[str, list], points: list[dict] = ()) -> str:
+    """Sweep-spec TOML for a target, fixed settings, grid lists and single points (what a GUI builds)."""
+    def value(v) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return json.dumps(v) if isinstance(v, str) else repr(v)
+
+    lines = [f"target = {value(target)}"] + [f"{k} = {value(v)}" for k, v in fixed.items()]
+    if grid:
+        lines += ["", "[grid]"] + [f"{k} = {value(list(v))}" for k, v in grid.items()]
+    for point in points:
+        lines += ["", "[[points]]"] + [f"{k} = {value(v)}" for k, v in point.items()]
+    return "\n".join(lines) + "\n"
+
+
 def _resolve(value: str, base_dir: str | Path) -> str:
     """An existing relative path made absolute (the workers' working folder is not the spec's)."""
     candidate = Path(base_dir) / value
@@ -236,7 +254,5 @@ def _config(source: str, name: str, target: str, fixed: dict, own: dict) -> Desi
 def config_matches(config: DesignConfig, stored: dict) -> bool:
     """Whether a run folder's stored ``config.json`` holds this configuration (the target aside: a run
     optimises its own copy of a file target, `labapp.jobs.design`)."""
-    import json
-
     mine = json.loads(json.dumps(asdict(config)))
     return {k: v for k, v in mine.items() if k != "target"} == {k: v for k, v in stored.items() if k != "target"}

@@ -8,7 +8,7 @@ import pytest
 from labapp.contact_sheet import printable, rank, top_view
 from labapp.outpaths import OutPathError
 from labapp.sweep import SweepError, folder_state, run_sweep
-from labapp.sweepspec import SpecError, combination_name, load_spec, parse_spec
+from labapp.sweepspec import SpecError, combination_name, load_spec, parse_spec, spec_text
 
 SMALL = 'target = "pill"\nspace = "extruded"\nresolution = 16\nmax_iter = 6\n'
 
@@ -66,6 +66,14 @@ def test_measured_targets_need_a_readable_simcal(tmp_path):
     (tmp_path / "simcal.json").write_text("{}")
     with pytest.raises(SpecError, match="simcal: .*simcal.json"):
         parse_spec('target = "curve.csv"\nsimcal = "simcal.json"\n', base_dir=tmp_path)
+
+
+def test_spec_text_round_trips():
+    text = spec_text('a "b".csv', {"space": "nfc", "resolution": 16, "allow_infeasible": True},
+                     {"w_binary": [10, 20.5]}, [{"preset": "paper:pill"}])
+    spec = parse_spec(text)
+    assert spec.target == 'a "b".csv' and spec.combinations[0].config.allow_infeasible
+    assert [c.name for c in spec.combinations] == ["w_binary=10", "w_binary=20.5", "preset=paper-pill"]
 
 
 def test_a_missing_spec_file_is_named(tmp_path):

@@ -1,0 +1,34 @@
+"""The design launcher's sweep panel: a small sweep on the local cluster, then its contact sheet."""
+import pytest
+
+from labapp.gui.sweep_panel import SweepPanel, parse_values
+
+
+def test_a_small_sweep_runs_and_its_contact_sheet_is_browsed(qtbot, tmp_path):
+    panel = SweepPanel(tmp_path, lambda: ("sphere", {"space": "nfc", "resolution": 16, "max_iter": 5}))
+    qtbot.addWidget(panel)
+    panel.w_binary.setText("10")
+    panel.radius.setText("2, 3")
+    panel.beta.setText("x")
+    panel.start()
+    assert "beta: expected numbers" in panel.status.text() and panel.task is None
+    panel.beta.setText("3")
+    panel.preset.setCurrentText("paper:sphere")
+    panel.workers.setValue(2)
+    panel.start()
+    qtbot.waitUntil(panel.sweep_button.isEnabled, timeout=90_000)
+    assert "3 designs, 0 failed" in panel.status.text(), panel.status.text()
+    items = [panel.designs.item(i).text() for i in range(panel.designs.count())]
+    assert items[0] == "contact sheet (ranked)" and len(items) == 4
+    assert {i.split(" ", 1)[1] for i in items[1:]} == {
+        "preset=paper-sphere", "beta=3,radius_vox=2,w_binary=10", "beta=3,radius_vox=3,w_binary=10"}
+    assert not panel.picture.pixmap().isNull()          # the contact sheet
+    panel.designs.setCurrentRow(1)
+    assert not panel.picture.pixmap().isNull()          # the best design's report.png
+    assert (panel.sweep_dir / "sweep.csv").is_file()
+
+
+def test_grid_fields_are_checked():
+    assert parse_values("1, 2.5;3", "w") == [1.0, 2.5, 3.0]
+    with pytest.raises(ValueError, match="radius: give at least one value"):
+        parse_values(" , ", "radius")
