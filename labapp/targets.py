@@ -240,3 +240,32 @@ def _read_measured(path: Path) -> PhysicalCurve:
     doc = json.loads(path.read_text())
     return PhysicalCurve(np.asarray(doc["t_s"], float), np.asarray(doc["released_g"], float),
                          doc.get("object_mass_g"), doc.get("water_g"), doc["source"])
+
+
+def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A mesh's predicted release in physical units: simulated at the calibration's resolution, mapped.
+
+    Parameters
+    ----------
+    mesh : str or Path
+        Mesh file (mm) or ``sample:NAME``.
+    simcal : SimCalFile
+    water_g : float, optional
+        Bath water, g (default: the calibration's).
+
+    Returns
+    -------
+    t_s, released_g : (Q,) ndarray of float
+    """
+    from design.errors import DesignError
+    from design.forward import simulate
+    from design.pipeline import input_grid
+
+    try:
+        rho, dx, mirror = input_grid(str(mesh), resolution=simcal.resolution)
+        release = simulate(rho, dx, mirror=mirror)
+    except DesignError as exc:
+        raise SimCalError(f"{mesh}: {exc}") from exc
+    water = water_g or simcal.water_g
+    t = physical_times(simcal, release.tau_mm, release.released_mm3, water)
+    return t, simcal.cal.to_physical(release.tau_mm, release.released_mm3, t, water)

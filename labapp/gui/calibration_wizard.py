@@ -1,11 +1,19 @@
-"""The calibration-series wizard: clear water, then add filament / enter mass / capture, repeat, fit, save."""
+"""The calibration wizard: the bench series (clear water, then add filament / enter mass / capture, repeat, fit,
+save) and the simulation step (measured runs + their meshes -> ``simcal.json``, made active)."""
 from __future__ import annotations
 
 import logging
+import time
+from collections.abc import Callable
+from pathlib import Path
 
 from PySide6.QtCore import Signal
-from PySide6.QtWidgets import (QDoubleSpinBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QPushButton,
-                               QVBoxLayout, QWidget)
+from PySide6.QtGui import QPixmap
+from PySide6.QtWidgets import (QDoubleSpinBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit,
+                               QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget)
+
+from labapp.gui.bridge import BackgroundTask
+from labapp.simcal import SET_COLUMNS, calibrate_sim
 
 log = logging.getLogger(__name__)
 
@@ -23,8 +31,9 @@ class CalibrationWizard(QWidget):
     mass_entered = Signal(float)
     finish_requested = Signal()
 
-    def __init__(self, simulate: bool, parent: QWidget | None = None) -> None:
+    def __init__(self, simulate: bool, data_dir: Path | None = None, parent: QWidget | None = None) -> None:
         super().__init__(parent)
+        self.simulation = SimulationStep(Path(data_dir) if data_dir is not None else Path.cwd())
         self.water = QDoubleSpinBox()
         self.water.setRange(1.0, 5000.0)
         self.water.setValue(500.0)
@@ -59,7 +68,7 @@ class CalibrationWizard(QWidget):
         layout.addLayout(row)
         layout.addWidget(self.step_label)
         layout.addWidget(self.result_label)
-        layout.addStretch(1)
+        layout.addWidget(self.simulation, 1)
         self.set_asking(False, "")
 
     def _capture(self) -> None:
@@ -75,3 +84,116 @@ class CalibrationWizard(QWidget):
     def show_result(self, text: str) -> None:
         """Show the outcome (calibration path or what went wrong)."""
         self.result_label.setText(text)
+
+
+class SimulationStep(QWidget):
+    """The simulation step (paper section 4.3): runs with their meshes and weighed masses in a table,
+    ``labapp.simcal.calibrate_sim`` in the background, the leave-one-out figure, and "Make active".
+
+    Emits ``simcal_activated(path)`` with the ``simcal.json`` the operator made active. ``bench_calibration``
+    is a callable giving the active bench calibration's path (None: each run's own).
+    """
+
+    simcal_activated = Signal(str)
+
+    def __init__(self, data_dir: Path, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.data_dir = Path(data_dir)
+        self.bench_calibration: Callable[[], str | None] = lambda: None
+        self.table = QTableWidget(0, len(SET_COLUMNS))
+        self.table.setHorizontalHeaderLabels(["run (folder or curve CSV)", "mesh", "weighed mass (g, empty: run's)"])
+        self.add_button, self.load_button = QPushButton("Add run + mesh..."), QPushButton("Load set CSV...")
+        self.calibrate_button, self.activate_button = QPushButton("Calibrate"), QPushButton("Make active")
+        self.add_button.clicked.connect(self._pick_row)
+        self.load_button.clicked.connect(self._pick_set)
+        self.calibrate_button.clicked.connect(self.calibrate)
+        self.activate_button.clicked.connect(self.activate)
+        self.activate_button.setEnabled(False)
+        self.result = QLabel("measured runs of differently shaped objects (4 or more), each with its mesh")
+        self.result.setWordWrap(True)
+        self.figure = QLabel("")
+        self.figure.setScaledContents(False)
+        self.path: Path | None = None
+        self.task: BackgroundTask | None = None
+        box = QGroupBox("simulation calibration (paper section 4.3): seconds per mm, grams per mm^3")
+        inner = QVBoxLayout(box)
+        inner.addWidget(self.table, 1)
+        row = QHBoxLayout()
+        for b in (self.add_button, self.load_button, self.calibrate_button, self.activate_button):
+            row.addWidget(b)
+        inner.addLayout(row)
+        inner.addWidget(self.result)
+        inner.addWidget(self.figure, 2)
+        QVBoxLayout(self).addWidget(box)
+
+    def add_row(self, run: str | Path, mesh: str | Path, mass_g: float | None = None) -> None:
+        """Append a run, its mesh and its weighed mass (None: the run's recorded mass)."""
+        r = self.table.rowCount()
+        self.table.insertRow(r)
+        for c, text in enumerate((str(run), str(mesh), "" if mass_g is None else f"{mass_g:g}")):
+            self.table.setItem(r, c, QTableWidgetItem(text))
+
+    def _pick_row(self) -> None:
+        run = QFileDialog.getExistingDirectory(self, "measured run", str(self.data_dir))
+        if not run:
+            return
+        mesh, _ = QFileDialog.getOpenFileName(self, "its mesh", str(self.data_dir), "meshes (*.stl *.obj *.ply *.off *.3mf)")
+        if mesh:
+            self.add_row(run, mesh)
+
+    def _pick_set(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "calibration set", str(self.data_dir), "CSV (*.csv)")
+        if path:
+            self.load_set(Path(path))
+
+    def load_set(self, path: Path) -> None:
+        """Fill the table from a ``run,mesh,object_mass_g`` file (paths made absolute)."""
+        from labapp.simcal import read_set
+
+        for row in read_set(path):
+            self.add_row(row.run.resolve(), row.mesh.resolve(), row.object_mass_g)
+
+    def write_set(self, path: Path) -> Path:
+        """The table as a set file (absolute paths)."""
+        lines = [",".join(SET_COLUMNS)]
+        for r in range(self.table.rowCount()):
+            cells = [(self.table.item(r, c).text().strip() if self.table.item(r, c) else "") for c in range(3)]
+            lines.append(",".join(str(Path(cells[i]).resolve()) if i < 2 else cells[i] for i in range(3)))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("\n".join(lines) + "\n")
+        return path
+
+    def calibrate(self) -> None:
+        """Run ``calibrate_sim`` on the table into a new folder under ``DATA/simcal`` (in the background)."""
+        if self.task is not None and self.task.running:
+            return
+        out = self.data_dir / "simcal" / time.strftime("%Y%m%d-%H%M%S")
+        set_csv = self.write_set(out.with_name(out.name + "_set.csv"))
+        bench = self.bench_calibration()
+
+        def work(progress):
+            return calibrate_sim(set_csv, bench, out, progress=lambda f, m: progress(m))
+        self.task = BackgroundTask(work, self)
+        self.task.progress.connect(self.result.setText)
+        self.task.finished.connect(self._finished)
+        self.task.failed.connect(lambda message: self.result.setText(f"calibration failed: {message}"))
+        self.task.start()
+        self.activate_button.setEnabled(False)
+        self.result.setText(f"calibrating into {out} ...")
+
+    def _finished(self, run) -> None:
+        doc = run.doc
+        self.path = run.path
+        lines = [f"{doc['model']} model: {doc['seconds_per_mm']:.1f} s/mm, {doc['g_per_mm3'] * 1000:.4f} g/cm^3; "
+                 "leave-one-out rel. RMSE " + ", ".join(f"{Path(r['mesh']).stem} {100 * r['rel_rmse']:.2f}%"
+                                                        for r in doc["loo"])]
+        lines += [f"{m}: mean {100 * v['loo_rel_rmse_mean']:.2f}%" for m, v in doc["models"].items()]
+        self.result.setText("; ".join(lines) + f" ({run.path})")
+        self.figure.setPixmap(QPixmap(str(run.path.with_name("simcal.png"))).scaledToWidth(700))
+        self.activate_button.setEnabled(True)
+
+    def activate(self) -> None:
+        """Make the last calibration the active one."""
+        if self.path is not None:
+            self.simcal_activated.emit(str(self.path))
+            self.result.setText(self.result.text() + " - now the active simulation calibration")

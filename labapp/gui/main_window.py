@@ -81,7 +81,7 @@ class MainWindow(QMainWindow):
 
         self.devices = DevicePanel(simulate)
         self.controls = RunControls(simulate)
-        self.wizard = CalibrationWizard(simulate)
+        self.wizard = CalibrationWizard(simulate, self.data_dir)
         self.browser = RunBrowser(self.data_dir)
         self.design = DesignLauncher(self.data_dir)
         self.live = LiveView()
@@ -122,6 +122,9 @@ class MainWindow(QMainWindow):
         self.wizard.mass_entered.connect(self.answer_mass)
         self.wizard.finish_requested.connect(self.finish_calibration)
         self.browser.resume_requested.connect(self.resume_run)
+        self.wizard.simulation.bench_calibration = lambda: self.controls.calibration.text().strip() or None
+        self.wizard.simulation.simcal_activated.connect(self.set_simcal)
+        self.browser.design_requested.connect(self.design_from_run)
         self.live.crop_changed.connect(self.on_crop)
         self.timer = QTimer(self)
         self.timer.timeout.connect(self.refresh)
@@ -295,6 +298,17 @@ class MainWindow(QMainWindow):
                 self.wizard.show_result(f"series ended ({data.get('outcome')}) without a calibration")
         self.on_message("info", f"{getattr(proc, 'name', 'procedure')} ended: {data.get('outcome')}")
         self.browser.refresh()
+
+    def set_simcal(self, path: str) -> None:
+        """Make a ``simcal.json`` the active simulation calibration of the design launcher and run browser."""
+        self.design.set_simcal(Path(path))
+        self.browser.simcal = self.design.simcal
+        self.on_message("info", f"active simulation calibration: {path}")
+
+    def design_from_run(self, path: str) -> None:
+        """The run browser asks for a design from a run: the launcher takes it as its target."""
+        self.design.source.setText(path)
+        self.tabs.setCurrentWidget(self.design)
 
     def on_crop(self, x: int, y: int, size: int) -> None:
         """The operator moved the crop."""

@@ -14,6 +14,7 @@ from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
 from labapp import jobs
 from labapp.errors import UsageError
 from labapp.gui.bridge import BackgroundTask
+from labapp.gui.overlay import PhysicalOverlay
 from labapp.gui.plots import PlotsPanel
 from labapp.outpaths import ANALYSIS_SUBFOLDER
 from labapp.storage import StorageError, finalise_run, read_run
@@ -39,6 +40,7 @@ class RunBrowser(QWidget):
     """
 
     resume_requested = Signal(str)
+    design_requested = Signal(str)
 
     def __init__(self, data_dir: Path, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -58,6 +60,18 @@ class RunBrowser(QWidget):
         self.info = QLabel("")
         self.info.setWordWrap(True)
         self.plots = PlotsPanel()
+        self.overlay = PhysicalOverlay()
+        self.simcal = None                     # the active simulation calibration (set by the main window)
+        self.mesh = QLineEdit("")
+        self.mesh.setPlaceholderText("mesh or sample:NAME to overlay as predicted through the active simulation "
+                                     "calibration")
+        overlay_buttons = QHBoxLayout()
+        for text, slot in (("Overlay selected runs", self.overlay_runs), ("Overlay prediction", self.overlay_prediction),
+                           ("Clear overlay", self.overlay.clear), ("Design from run", self._design)):
+            button = QPushButton(text)
+            button.clicked.connect(slot)
+            overlay_buttons.addWidget(button)
+        overlay_buttons.addWidget(self.mesh, 1)
         buttons = QHBoxLayout()
         self.refresh_button = QPushButton("Refresh")
         self.analyse_button = QPushButton("Reanalyse")
@@ -81,6 +95,8 @@ class RunBrowser(QWidget):
         layout.addLayout(settings)
         layout.addWidget(self.info)
         layout.addWidget(self.plots, 2)
+        layout.addLayout(overlay_buttons)
+        layout.addWidget(self.overlay, 2)
         self.task: BackgroundTask | None = None
         self.refresh()
 
@@ -164,6 +180,29 @@ class RunBrowser(QWidget):
         final = curve.conc_smooth_g_per_kg[-1] if len(curve.t_s) else math.nan
         self.info.setText(f"{len(curve.t_s)} frames analysed; final {final:.4f} g/kg = "
                           f"{final * curve.water_g / 1000:.4f} g released; {len(curve.warnings)} warnings")
+
+    def overlay_runs(self) -> None:
+        """Add every selected run to the physical overlay (grams over hours)."""
+        for path in [Path(item.data(0, 256)) for item in self.tree.selectedItems()]:
+            try:
+                self.overlay.add_run(path)
+            except UsageError as exc:
+                self.info.setText(str(exc))
+
+    def overlay_prediction(self) -> None:
+        """Add the mesh's predicted release through the active simulation calibration to the overlay."""
+        if self.simcal is None:
+            self.info.setText("no active simulation calibration: make one in the calibration wizard first")
+            return
+        try:
+            self.overlay.add_prediction(self.mesh.text().strip(), self.simcal)
+        except UsageError as exc:
+            self.info.setText(str(exc))
+
+    def _design(self) -> None:
+        path = self.selected_path()
+        if path is not None:
+            self.design_requested.emit(str(path))
 
     def _resume(self) -> None:
         path = self.selected_path()
