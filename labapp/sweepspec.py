@@ -137,8 +137,10 @@ def parse_spec(text: str, *, base_dir: str | Path = ".", source: str = "spec") -
     return SweepSpec(text, target, simcal, tuple(combos))
 
 
-def spec_text(target: str, fixed: dict, grid: dict[str, list], points: list[dict] = ()) -> str:
-    """Sweep-spec TOML for a target, fixed settings, grid lists and single points (what a GUI builds)."""
+def spec_text(target: str, fixed: dict, grid: dict[str, list], points: list[dict] = (),
+              simcal: str | None = None) -> str:
+    """Sweep-spec TOML for a target (with its simulation calibration), fixed settings, grid lists and single
+    points (what a GUI builds)."""
     def value(v) -> str:
         if isinstance(v, bool):
             return "true" if v else "false"
@@ -146,7 +148,8 @@ def spec_text(target: str, fixed: dict, grid: dict[str, list], points: list[dict
             return "[" + ", ".join(value(x) for x in v) + "]"
         return json.dumps(v) if isinstance(v, str) else repr(v)
 
-    lines = [f"target = {value(target)}"] + [f"{k} = {value(v)}" for k, v in fixed.items()]
+    lines = [f"target = {value(target)}"] + ([f"simcal = {value(simcal)}"] if simcal else [])
+    lines += [f"{k} = {value(v)}" for k, v in fixed.items()]
     if grid:
         lines += ["", "[grid]"] + [f"{k} = {value(list(v))}" for k, v in grid.items()]
     for point in points:

@@ -5,6 +5,9 @@ import argparse
 import logging
 import sys
 
+from labapp.argtypes import positive_int
+from labapp.meshunits import MM_PER_UNIT
+
 log = logging.getLogger(__name__)
 
 NAME = "design"
@@ -17,19 +20,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "measured curve in grams over seconds (a run folder, curve.csv or any t_s,released_g CSV; "
                         "needs --simcal)")
     parser.add_argument("--space", default="nfc", choices=("nfc", "extruded", "ico"),
-                        help="design space: nfc (free 3D), extruded (2D field over a height), ico (free 3D, "
-                             "printable without supports along +z: incremental compliance, section 3.6)")
-    parser.add_argument("--preset", metavar="paper:NAME",
-                        help="hyperparameters of the paper's Tables 1-2 (e.g. paper:pill, paper:design-4) for the "
-                             "options not given")
-    parser.add_argument("--w-fab", type=float, help="weight w_f of the ICO term (ico; default 100; J_fab is 1 "
-                        "at the start design)")
-    parser.add_argument("--layers", type=int, default=8, help="ICO partial designs L along +z (default 8)")
-    parser.add_argument("--ico-coarsen", type=int, default=2, metavar="VOX",
-                        help="design voxels per elasticity element edge of the ICO term (default 2)")
-    parser.add_argument("--stiffness-law", default="simp", choices=("simp", "ramp"),
-                        help="ICO stiffness interpolation: simp (p = 3, default) or ramp (q = 3)")
-    parser.add_argument("--resolution", type=int, default=64, help="voxels along the domain's longest side (even)")
+                        help="design space (ico: reserved, not available yet)")
+    parser.add_argument("--resolution", type=positive_int,
+                        help="voxels along the domain's longest side (even; default 64)")
+    parser.add_argument("--units", default="mm", choices=tuple(MM_PER_UNIT),
+                        help="units of a mesh target's coordinates (default mm); copied into the run scaled to mm")
     parser.add_argument("--domain-mm", type=float, nargs=3, metavar=("X", "Y", "Z"),
                         help="design domain size, mm (default: source bounding box plus margin, cubic for nfc)")
     parser.add_argument("--w-binary", type=float, help="weight of J_binary (default per space, Tables 1-2)")
@@ -55,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(0 = off; 3 simulations per evaluation)")
     parser.add_argument("--height", type=float, metavar="MM",
                         help="extrusion height, mm (default: the source's height, else the domain's)")
-    parser.add_argument("--max-iter", type=int, default=500, help="maximum objective evaluations (default 500)")
+    parser.add_argument("--max-iter", type=positive_int, help="maximum objective evaluations (default 500)")
     parser.add_argument("--bounds", default="cosine", choices=("cosine", "box"),
                         help="how L-BFGS keeps rho_hat in [0, 1] (default cosine)")
     parser.add_argument("--optimizer", help="lbfgs (default: lean L-BFGS, exact resume) or nlopt's LD_LBFGS, "
@@ -63,7 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warn-channel-mm", type=float, default=1.0, help="warn below this channel width, mm")
     parser.add_argument("--formats", nargs="*", default=[], choices=("3mf", "obj"), help="extra mesh formats")
     parser.add_argument("--allow-infeasible", action="store_true", help="optimise even if the target fails checks")
-    parser.add_argument("--resume", action="store_true", help="continue the stopped run in --out")
+    parser.add_argument("--resume", action="store_true", help="continue the stopped run in --out, on the copy of "
+                        "its target taken at the start (a warning if the original has changed since)")
     parser.add_argument("--simcal", metavar="SIMCAL.json",
                         help="simulation calibration (sfr calibrate-sim): maps a measured target to simulation "
                              "units and adds the design's predicted release in grams over seconds "
@@ -100,43 +96,39 @@ def _stored_max_iter(out: str) -> int:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from design.errors import DesignError
     from analysis import BenchCalibration
     from design.problem import DesignConfig
     from labapp.simcal import load_simcal
-    from labapp.targets import design_from_target
+    from labapp import jobs
+    from labapp.errors import UsageError
 
     try:
         if args.resume:
             config = None
         else:
             if not args.target:
-                print("sfr design: --target is required (unless --resume)", file=sys.stderr)
-                return 2
-            config = DesignConfig(target=args.target, space=args.space, resolution=args.resolution,
+                raise UsageError("--target is required (unless --resume)")
+            given = {k: v for k, v in (("resolution", args.resolution), ("max_iter", args.max_iter)) if v is not None}
+            config = DesignConfig(target=args.target, space=args.space, **given,
                                   domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
                                   height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
                                   radius_mm=args.radius_mm, allow_pieces=args.allow_pieces,
                                   w_connect=args.w_connect,
                                   beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate,
                                   rate_window_vox=args.rate_window, rate_span=tuple(args.rate_span),
-                                  robust_eta=args.robust_eta, preset=args.preset, w_fab=args.w_fab,
-                                  layers=args.layers, ico_coarsen=args.ico_coarsen,
-                                  stiffness_law=args.stiffness_law,
-                                  max_iter=args.max_iter, bounds=args.bounds,
+                                  robust_eta=args.robust_eta,
+                                  bounds=args.bounds,
                                   **({"optimizer": args.optimizer} if args.optimizer else {}),
                                   warn_channel_mm=args.warn_channel_mm, allow_infeasible=args.allow_infeasible,
                                   formats=tuple(args.formats))
         max_iter = config.max_iter if config else _stored_max_iter(args.out)
         simcal = load_simcal(args.simcal) if args.simcal else None
         bench = BenchCalibration.load(args.calibration) if args.calibration else None
-        result, physical = design_from_target(config, args.out, simcal=simcal, bench_calibration=bench,
-                                              on_iteration=_progress(max_iter), resume=args.resume)
-    except DesignError as exc:
-        print(f"\nsfr design: {exc}", file=sys.stderr)
-        return 1
+        result, physical = jobs.design(config, args.out, resume=args.resume, units=args.units, simcal=simcal,
+                                       bench_calibration=bench, on_iteration=_progress(max_iter))
+    finally:
+        print(file=sys.stderr)          # ends the progress line, also before an error's line
     s = physical or result.outputs.summary
-    print(file=sys.stderr)
     print(f"{result.status} after {result.iterations} evaluations ({s['seconds']:.1f} s, "
           f"{s['seconds_per_iteration'] or 0:.3f} s each)")
     print(f"rel. RMSE: density {s['rel_rmse_density']:.3%}, binary solid {s['rel_rmse_binary']:.3%}")
@@ -144,12 +136,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid {dev['binary']}")
     print(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
           f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}")
-    print(f"overhangs along +z: {s['overhang_fraction']:.1%} of the solid, longest run "
-          f"{s['max_overhang_run_mm']:.2f} mm" + (f"; preset {s['preset']}" if s.get("preset") else ""))
-    if s.get("ico"):
-        ico = s["ico"]
-        share = "-" if ico["fab_time_share"] is None else f"{ico['fab_time_share']:.0%}"
-        print(f"ICO J_fab {ico['J_fab']:.4g} of the start design's, {ico['layers']} layers, {share} of the time")
     if physical is not None:
         print(f"physical prediction ({s['simcal']['model']} model, {s['simcal']['seconds_per_mm']:.1f} s/mm): "
               f"rel. RMSE {s['rel_rmse_physical']:.3%} of the target's final grams (curves_physical.csv)")

@@ -15,6 +15,7 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, Q
                                QSpinBox, QVBoxLayout, QWidget)
 
 from labapp.gui.bridge import BackgroundTask
+from labapp.gui.sweep_panel import SweepPanel
 from labapp.storage import sanitize_name
 from labapp.simcal import SimCalFile, load_simcal
 from labapp.targets import design_from_target
@@ -124,6 +125,8 @@ class DesignLauncher(QWidget):
         plots.addWidget(self.slice_plot, 1)
         plots.addWidget(self.physical_plot, 2)
         layout.addLayout(plots, 1)
+        self.sweep = SweepPanel(self.data_dir, self.sweep_settings, self)
+        layout.addWidget(self.sweep, 1)
         self.task: BackgroundTask | None = None
         self._stop = threading.Event()
         self.out_dir: Path | None = None
@@ -135,6 +138,12 @@ class DesignLauncher(QWidget):
         self.simcal = None if path is None else load_simcal(path)
         self.status.setText(NO_SIMCAL if self.simcal is None else f"active simulation calibration: "
                             f"{self.simcal.describe()}")
+
+    def sweep_settings(self) -> tuple[str, dict, str | None]:
+        """The target, fixed design settings and simulation calibration a sweep starts from: this form's."""
+        fixed = {"space": self.space.currentText(), "resolution": self.resolution.value(),
+                 "max_iter": self.max_iter.value(), "allow_infeasible": self.allow_infeasible.isChecked()}
+        return self.source.text().strip(), fixed, None if self.simcal is None else str(self.simcal.path)
 
     def _pick_run(self) -> None:
         path = QFileDialog.getExistingDirectory(self, "measured run", str(self.data_dir))

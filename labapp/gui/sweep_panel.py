@@ -40,10 +40,11 @@ class SweepPanel(QGroupBox):
     data_dir : Path
         Sweeps go to ``data_dir/sweeps/<time>_<target>``.
     base_settings : callable
-        Returns the launcher's current target and fixed settings: ``(target, {"space": ..., ...})``.
+        Returns the launcher's current target, fixed settings and simulation calibration (path or None):
+        ``(target, {"space": ..., ...}, simcal)``.
     """
 
-    def __init__(self, data_dir: Path, base_settings: Callable[[], tuple[str, dict]],
+    def __init__(self, data_dir: Path, base_settings: Callable[[], tuple[str, dict, str | None]],
                  parent: QWidget | None = None) -> None:
         from design.presets import PRESET_NAMES
         from labapp.cluster import local_worker_count
@@ -98,14 +99,14 @@ class SweepPanel(QGroupBox):
         """The sweep spec of the fields (`labapp.sweepspec.SweepSpec`); raises ValueError naming a bad field."""
         from labapp.sweepspec import parse_spec, spec_text
 
-        target, fixed = self.base_settings()
+        target, fixed, simcal = self.base_settings()
         if not target:
             raise ValueError("choose a target first")
         grid = {"w_binary": parse_values(self.w_binary.text(), "w_binary"),
                 "radius_vox": parse_values(self.radius.text(), "radius"),
                 "beta": parse_values(self.beta.text(), "beta")}
         points = [{"preset": self.preset.currentText()}] if self.preset.currentIndex() > 0 else []
-        return parse_spec(spec_text(target, fixed, grid, points), source="sweep")
+        return parse_spec(spec_text(target, fixed, grid, points, simcal), source="sweep")
 
     def start(self) -> None:
         """Run the sweep on a local cluster in the background."""

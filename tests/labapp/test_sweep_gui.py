@@ -1,12 +1,20 @@
 """The design launcher's sweep panel: a small sweep on the local cluster, then its contact sheet."""
 import pytest
 
-from labapp.gui.sweep_panel import SweepPanel, parse_values
+from labapp.gui.design_launcher import DesignLauncher
+from labapp.gui.sweep_panel import parse_values
 
 
-def test_a_small_sweep_runs_and_its_contact_sheet_is_browsed(qtbot, tmp_path):
-    panel = SweepPanel(tmp_path, lambda: ("sphere", {"space": "nfc", "resolution": 16, "max_iter": 5}))
-    qtbot.addWidget(panel)
+def test_the_launcher_runs_a_small_sweep_and_browses_its_contact_sheet(qtbot, tmp_path):
+    launcher = DesignLauncher(tmp_path)
+    qtbot.addWidget(launcher)
+    launcher.source.setText("sphere")
+    launcher.space.setCurrentText("nfc")
+    launcher.resolution.setValue(16)
+    launcher.max_iter.setValue(5)
+    assert launcher.sweep_settings() == ("sphere", {"space": "nfc", "resolution": 16, "max_iter": 5,
+                                                    "allow_infeasible": True}, None)
+    panel = launcher.sweep
     panel.w_binary.setText("10")
     panel.radius.setText("2, 3")
     panel.beta.setText("x")
@@ -25,7 +33,7 @@ def test_a_small_sweep_runs_and_its_contact_sheet_is_browsed(qtbot, tmp_path):
     assert not panel.picture.pixmap().isNull()          # the contact sheet
     panel.designs.setCurrentRow(1)
     assert not panel.picture.pixmap().isNull()          # the best design's report.png
-    assert (panel.sweep_dir / "sweep.csv").is_file()
+    assert panel.sweep_dir.parent == tmp_path / "sweeps" and (panel.sweep_dir / "sweep.csv").is_file()
 
 
 def test_grid_fields_are_checked():
