@@ -20,7 +20,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "measured curve in grams over seconds (a run folder, curve.csv or any t_s,released_g CSV; "
                         "needs --simcal)")
     parser.add_argument("--space", default="nfc", choices=("nfc", "extruded", "ico"),
-                        help="design space (ico: reserved, not available yet)")
+                        help="design space: nfc (free 3D), extruded (2D field over a height), ico (free 3D, "
+                             "printable without supports along +z: incremental compliance, section 3.6)")
+    parser.add_argument("--preset", metavar="paper:NAME",
+                        help="hyperparameters of the paper's Tables 1-2 (e.g. paper:pill, paper:design-4) for the "
+                             "options not given")
+    parser.add_argument("--w-fab", type=float, help="weight w_f of the ICO term (ico; default 100; J_fab is 1 "
+                        "at the start design)")
+    parser.add_argument("--layers", type=int, default=8, help="ICO partial designs L along +z (default 8)")
+    parser.add_argument("--ico-coarsen", type=int, default=2, metavar="VOX",
+                        help="design voxels per elasticity element edge of the ICO term (default 2)")
+    parser.add_argument("--stiffness-law", default="simp", choices=("simp", "ramp"),
+                        help="ICO stiffness interpolation: simp (p = 3, default) or ramp (q = 3)")
     parser.add_argument("--resolution", type=positive_int,
                         help="voxels along the domain's longest side (even; default 64)")
     parser.add_argument("--units", default="mm", choices=tuple(MM_PER_UNIT),
@@ -33,8 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="smoothing radius, mm: the minimum feature size at any resolution (default 1)")
     parser.add_argument("--allow-pieces", action="store_true",
                         help="drop the connectivity penalty: the design may fall apart into pieces")
-    parser.add_argument("--w-connect", type=float, default=20.0,
-                        help="weight of the connectivity penalty (default 20)")
+    parser.add_argument("--w-connect", type=float,
+                        help="weight of the connectivity penalty J_conn (default: the same as w_binary's default)")
     parser.add_argument("--beta", type=float, help="projection steepness (default 3)")
     parser.add_argument("--beta-final", type=float,
                         help="beta continuation: raise beta to this over the run in 4 stages (default: fixed beta)")
@@ -113,10 +124,12 @@ def run(args: argparse.Namespace) -> int:
                                   domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
                                   height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
                                   radius_mm=args.radius_mm, allow_pieces=args.allow_pieces,
-                                  w_connect=args.w_connect,
+                                  **({} if args.w_connect is None else {"w_connect": args.w_connect}),
                                   beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate,
                                   rate_window_vox=args.rate_window, rate_span=tuple(args.rate_span),
-                                  robust_eta=args.robust_eta,
+                                  robust_eta=args.robust_eta, preset=args.preset, w_fab=args.w_fab,
+                                  layers=args.layers, ico_coarsen=args.ico_coarsen,
+                                  stiffness_law=args.stiffness_law,
                                   bounds=args.bounds,
                                   **({"optimizer": args.optimizer} if args.optimizer else {}),
                                   warn_channel_mm=args.warn_channel_mm, allow_infeasible=args.allow_infeasible,
@@ -136,6 +149,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid {dev['binary']}")
     print(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
           f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}")
+    print(f"overhangs along +z: {s['overhang_fraction']:.1%} of the solid, longest run "
+          f"{s['max_overhang_run_mm']:.2f} mm" + (f"; preset {s['preset']}" if s.get("preset") else ""))
+    if s.get("ico"):
+        ico = s["ico"]
+        share = "-" if ico["fab_time_share"] is None else f"{ico['fab_time_share']:.0%}"
+        print(f"ICO J_fab {ico['J_fab']:.4g} of the start design's, {ico['layers']} layers, {share} of the time")
     if physical is not None:
         print(f"physical prediction ({s['simcal']['model']} model, {s['simcal']['seconds_per_mm']:.1f} s/mm): "
               f"rel. RMSE {s['rel_rmse_physical']:.3%} of the target's final grams (curves_physical.csv)")
