@@ -1,5 +1,6 @@
-"""Design launcher: a measured run or a target CSV -> inverse design in the background -> target vs achieved,
-save the STL."""
+"""Design launcher: a measured run (through the active simulation calibration) or a target CSV -> inverse design
+in the background (iteration, fit, mid-slices) -> target vs achieved, in grams over hours when calibrated, save
+the STL."""
 from __future__ import annotations
 
 import csv
@@ -14,6 +15,7 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, Q
                                QSpinBox, QVBoxLayout, QWidget)
 
 from labapp.gui.bridge import BackgroundTask
+from labapp.gui.sweep_panel import SweepPanel
 from labapp.storage import sanitize_name
 from labapp.simcal import SimCalFile, load_simcal
 from labapp.targets import design_from_target
@@ -29,6 +31,25 @@ def read_curves(path: Path) -> dict[str, list[float]]:
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
     return {key: [float(r[key]) for r in rows] for key in (rows[0] if rows else {})}
+
+
+def mid_slice(x, k: int, every: int = 5):
+    """Every ``every`` iterations, the middle slice of the design variables, else None.
+
+    The optimiser reports its variables flat; a cube of n^3 (the nfc space) or a square of n^2 (an extruded
+    cross-section) is folded back, other shapes show no slice.
+    """
+    import numpy as np
+
+    x = np.asarray(x, dtype=float)
+    if k % every:
+        return None
+    if x.ndim == 1:
+        n3, n2 = round(x.size ** (1 / 3)), round(x.size ** 0.5)
+        x = x.reshape(n3, n3, n3) if n3 ** 3 == x.size else x.reshape(n2, n2) if n2 * n2 == x.size else x
+    if x.ndim < 2:
+        return None
+    return np.array(x[..., x.shape[-1] // 2] if x.ndim == 3 else x)
 
 
 class DesignLauncher(QWidget):
@@ -72,6 +93,17 @@ class DesignLauncher(QWidget):
         self.target_curve = self.plot.plot([], [], pen=pg.mkPen("g", width=2), name="target")
         self.achieved_curve = self.plot.plot([], [], pen=pg.mkPen("m", width=2, style=pg.QtCore.Qt.PenStyle.DashLine),
                                              name="achieved (binary design)")
+        self.slice_plot = pg.PlotWidget(title="mid-slice of the design variables")
+        self.slice_plot.setAspectLocked(True)
+        self.slice_image = pg.ImageItem()
+        self.slice_plot.addItem(self.slice_image)
+        self.physical_plot = pg.PlotWidget(title="predicted release over the measured target (g over h)")
+        self.physical_plot.setLabel("bottom", "time since drop (h)")
+        self.physical_plot.setLabel("left", "released (g)")
+        self.physical_plot.addLegend()
+        self.physical_target = self.physical_plot.plot([], [], pen=pg.mkPen("g", width=2), name="target")
+        self.physical_design = self.physical_plot.plot(
+            [], [], pen=pg.mkPen("m", width=2, style=pg.QtCore.Qt.PenStyle.DashLine), name="design (predicted)")
         form = QFormLayout()
         src = QHBoxLayout()
         src.addWidget(self.source, 1)
@@ -89,7 +121,13 @@ class DesignLauncher(QWidget):
         layout.addLayout(form)
         layout.addLayout(buttons)
         layout.addWidget(self.status)
-        layout.addWidget(self.plot, 1)
+        plots = QHBoxLayout()
+        plots.addWidget(self.plot, 2)
+        plots.addWidget(self.slice_plot, 1)
+        plots.addWidget(self.physical_plot, 2)
+        layout.addLayout(plots, 1)
+        self.sweep = SweepPanel(self.data_dir, self.sweep_settings, self)
+        layout.addWidget(self.sweep, 1)
         self.task: BackgroundTask | None = None
         self._stop = threading.Event()
         self.out_dir: Path | None = None
@@ -101,6 +139,12 @@ class DesignLauncher(QWidget):
         self.simcal = None if path is None else load_simcal(path)
         self.status.setText(NO_SIMCAL if self.simcal is None else f"active simulation calibration: "
                             f"{self.simcal.describe()}")
+
+    def sweep_settings(self) -> tuple[str, dict, str | None]:
+        """The target, fixed design settings and simulation calibration a sweep starts from: this form's."""
+        fixed = {"space": self.space.currentText(), "resolution": self.resolution.value(),
+                 "max_iter": self.max_iter.value(), "allow_infeasible": self.allow_infeasible.isChecked()}
+        return self.source.text().strip(), fixed, None if self.simcal is None else str(self.simcal.path)
 
     def _pick_run(self) -> None:
         path = QFileDialog.getExistingDirectory(self, "measured run", str(self.data_dir))
@@ -133,7 +177,7 @@ class DesignLauncher(QWidget):
             config = DesignConfig(target=str(source), space=space, resolution=resolution, max_iter=max_iter,
                                   allow_infeasible=allow)
             return design_from_target(config, out_dir / "design", simcal=simcal,
-                                      on_iteration=lambda k, x, terms: progress((k, float(terms.get("J", float("nan"))))),
+                                      on_iteration=lambda k, x, terms: progress((k, terms, mid_slice(x, k))),
                                       should_stop=self._stop.is_set)
         self.task = BackgroundTask(work, self)
         self.task.progress.connect(self._progress)
@@ -148,8 +192,12 @@ class DesignLauncher(QWidget):
         """Ask the optimiser to stop (the best design so far is still written)."""
         self._stop.set()
 
-    def _progress(self, k_j: tuple[int, float]) -> None:
-        self.status.setText(f"iteration {k_j[0]}: J = {k_j[1]:.5g}")
+    def _progress(self, update: tuple) -> None:
+        k, terms, image = update
+        self.status.setText(f"iteration {k}: J = {terms.get('J', float('nan')):.5g}, "
+                            f"fit {terms.get('J_fit', float('nan')):.4g}")
+        if image is not None:
+            self.slice_image.setImage(image, levels=(0.0, 1.0))
 
     def _finished(self, outcome) -> None:
         result, physical = outcome
@@ -159,12 +207,20 @@ class DesignLauncher(QWidget):
         self.target_curve.setData(curves["tau_mm"], curves["target_mm3"])
         self.achieved_curve.setData(curves["tau_mm"], curves["binary_mm3"])
         self.save_button.setEnabled((result.out_dir / "design.stl").is_file())
-        self.status.setText(f"design {result.status} after {result.iterations} evaluations (J = {result.best_value:.5g}) "
-                            f"in {result.out_dir}." + ("" if physical is None else
-                            f" Predicted release within {physical['rel_rmse_physical']:.2%} RMS of the target; "
-                            f"print mass {physical['print_mass_g']:.3f} g.")
-                            + f" Overhangs along +z: {result.outputs.summary['overhang_fraction']:.1%} of the solid, "
-                            f"longest run {result.outputs.summary['max_overhang_run_mm']:.2f} mm.")
+        summary = result.outputs.summary
+        text = (f"design {result.status} after {result.iterations} evaluations in {result.out_dir}. Overhangs "
+                f"along +z: {summary['overhang_fraction']:.1%} of the solid, longest run "
+                f"{summary['max_overhang_run_mm']:.2f} mm.")
+        if physical is not None:
+            rows = read_curves(result.out_dir / "curves_physical.csv")
+            hours = [t / 3600.0 for t in rows["t_s"]]
+            self.physical_target.setData(hours, rows["target_released_g"])
+            self.physical_design.setData(hours, rows["design_released_g"])
+            channel = physical.get("min_channel_mm")
+            text += (f" Predicted release within {physical['rel_rmse_physical']:.2%} RMS of the target; print mass "
+                     f"{physical['print_mass_g']:.3f} g; narrowest channel "
+                     f"{'none' if channel is None else format(channel, '.2f') + ' mm'}.")
+        self.status.setText(text)
 
     def _failed(self, message: str) -> None:
         self.start_button.setEnabled(True)
