@@ -119,7 +119,7 @@ class MonteCarloRelease:
     Attributes
     ----------
     t_s : (K,) ndarray of float, s
-        Common time grid, 0 to the last voxel's dissolution over all runs.
+        Common time grid (default 0 to the last voxel's dissolution over all runs).
     released_mm3 : (K,) ndarray of float, mm^3
         Mean cumulative released volume over the runs.
     released_std_mm3 : (K,) ndarray of float, mm^3
@@ -310,7 +310,7 @@ def erosion_times(rho: np.ndarray, params: MonteCarloParams, *, seed: int = 0, d
 
 def simulate_mc(rho: np.ndarray, dx_mm: float, params: MonteCarloParams, *, mirror: tuple[bool, ...] | None = None,
                 seeds: int | Sequence[int] = DEFAULT_SEEDS, dt_s: float | None = None,
-                samples: int = DEFAULT_STEPS + 1,
+                samples: int = DEFAULT_STEPS + 1, t_s: np.ndarray | None = None,
                 progress: Callable[[int, int], None] | None = None) -> MonteCarloRelease:
     """Average the release curves of several seeded Monte Carlo runs.
 
@@ -327,7 +327,9 @@ def simulate_mc(rho: np.ndarray, dx_mm: float, params: MonteCarloParams, *, mirr
     dt_s : float, optional
         Time step, s (default :func:`default_dt_s`).
     samples : int
-        Points of the common time grid (default 1001).
+        Points of the common time grid from 0 to the last dissolution (default 1001).
+    t_s : (K,) ndarray of float, optional
+        The common time grid itself, s (increasing; replaces ``samples``), e.g. to compare runs.
     progress : callable, optional
         ``progress(done, total)`` after every run.
 
@@ -354,8 +356,12 @@ def simulate_mc(rho: np.ndarray, dx_mm: float, params: MonteCarloParams, *, mirr
     solid_count = int(np.isfinite(times[0]).sum())
     if solid_count == 0:
         raise DesignError(f"no voxel at density >= {SOLID_LEVEL}: nothing to erode")
-    t_end = float(np.nanmax(times))
-    grid = np.linspace(0.0, t_end, int(samples))
+    if t_s is None:
+        grid = np.linspace(0.0, float(np.nanmax(times)), int(samples))
+    else:
+        grid = np.asarray(t_s, dtype=float)
+        if grid.ndim != 1 or grid.size < 2 or not np.all(np.isfinite(grid)) or np.any(np.diff(grid) <= 0):
+            raise DesignError("t_s must be a finite, strictly increasing 1-D array of at least 2 times")
     runs = np.array([np.searchsorted(np.sort(tt[np.isfinite(tt)]), grid, side="right") for tt in times]) * voxel
     return MonteCarloRelease(grid, runs.mean(axis=0), runs.std(axis=0), runs, solid_count * voxel, dt, seed_list,
                              params, times)

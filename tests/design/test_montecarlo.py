@@ -45,17 +45,20 @@ def test_a_seed_reproduces_a_run_and_another_seed_differs(sphere):
 def test_the_mean_curve_converges_as_seeds_are_added(sphere):
     rho, dx, _ = sphere
     params = MonteCarloParams(1.0, 5000.0)
-    reference = simulate_mc(rho, dx, params, seeds=range(100, 164), samples=201)
+    reference = simulate_mc(rho, dx, params, seeds=range(1000, 1256), samples=201)
     grid = reference.t_s
 
     def distance(n):
-        run = simulate_mc(rho, dx, params, seeds=range(n), samples=201)
-        mean = np.interp(grid, run.t_s, run.released_mm3)
-        return float(np.sqrt(np.mean((mean - reference.released_mm3) ** 2))) / reference.volume_mm3
+        """RMS distance of an n-seed mean to the 256-seed mean, averaged over 4 disjoint groups of seeds."""
+        out = []
+        for k in range(4):
+            run = simulate_mc(rho, dx, params, seeds=range(k * n, (k + 1) * n), t_s=grid)
+            out.append(np.sqrt(np.mean((run.released_mm3 - reference.released_mm3) ** 2)) / reference.volume_mm3)
+        return float(np.mean(out))
 
     d1, d4, d16 = distance(1), distance(4), distance(16)
-    assert d16 < d4 < d1
-    assert d16 < 0.6 * d1  # the standard error falls as 1/sqrt(n); the 64-seed reference has its own
+    # the standard error falls as 1/sqrt(n): 1/2 for 4 seeds, 1/4 for 16 (plus the reference's own 1/16)
+    assert d4 < 0.7 * d1 and d16 < 0.4 * d1 and d16 < d4
     assert reference.released_std_mm3.max() > 0
     assert reference.released_mm3[-1] == pytest.approx(reference.volume_mm3)
 
