@@ -320,8 +320,9 @@ def similarity(reference: ReleaseProfile, test: ReleaseProfile, *, times: Sequen
     if over.any():
         last = int(np.flatnonzero(over)[0])
         if last + 1 < pts.size:
-            notes.append(f"{pts.size - last - 1} point(s) after the first above {cutoff_pct:g} % "
-                         f"({'either' if rule == 'either' else 'both'} curve(s)) dropped")
+            which = "either curve" if rule == "either" else "both curves"
+            notes.append(f"{pts.size - last - 1} point(s) after the first point above {cutoff_pct:g} % in {which} "
+                         f"dropped")
         pts, ref_pct, test_pct = pts[:last + 1], ref_pct[:last + 1], test_pct[:last + 1]
     if not (100.0 * reference.at(span[1]) / total >= cutoff_pct):
         notes.append(f"the reference never reaches {cutoff_pct:g} % in the common span; "
