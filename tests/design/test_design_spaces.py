@@ -33,9 +33,11 @@ def test_unfold_builds_the_mirrored_object():
 
 def test_ico_is_a_quadrant_with_its_fabrication_term_and_unknown_names_fail():
     assert "ico" in SPACE_CHOICES and "ico" in available_spaces()
-    space = build_space("ico", SpaceRequest((8, 6, 10), 1.0))
-    assert space.grid_shape == (4, 3, 10) and space.mirror == (True, True, False) and space.fab_term is not None
+    space = build_space("ico", SpaceRequest((8, 6, 16), 1.0))
+    assert space.grid_shape == (4, 3, 16) and space.mirror == (True, True, False) and space.fab_term is not None
     assert build_space("nfc", SpaceRequest((8, 8, 8), 1.0)).fab_term is None
+    with pytest.raises(DesignError, match="8 layers need at least as many elasticity elements along z, got 5"):
+        build_space("ico", SpaceRequest((8, 6, 10), 1.0))  # 10 voxels, 2 per element
     with pytest.raises(DesignError, match="unknown design space"):
         build_space("lattice", SpaceRequest((8, 8, 8), 1.0))
     with pytest.raises(DesignError, match="already registered"):
