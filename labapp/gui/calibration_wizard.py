@@ -137,7 +137,8 @@ class SimulationStep(QWidget):
         run = QFileDialog.getExistingDirectory(self, "measured run", str(self.data_dir))
         if not run:
             return
-        mesh, _ = QFileDialog.getOpenFileName(self, "its mesh", str(self.data_dir), "meshes (*.stl *.obj *.ply *.off *.3mf)")
+        mesh, _ = QFileDialog.getOpenFileName(self, "its mesh", str(self.data_dir),
+                                              "meshes (*.stl *.obj *.ply *.off *.3mf)")
         if mesh:
             self.add_row(run, mesh)
 

@@ -33,7 +33,8 @@ def _tube(r_out, r_in, h):
     return tau, np.pi * ((r_out ** 2 - r_in ** 2) * h - ((r_out - tau) ** 2 - (r_in + tau) ** 2) * (h - 2 * tau))
 
 
-SHAPES = {"sphere": _sphere(6.8), "slab": _box(20.0, 12.0, 5.5), "rod": _cylinder(4.0, 28.0), "tube": _tube(9.0, 5.0, 14.0)}
+SHAPES = {"sphere": _sphere(6.8), "slab": _box(20.0, 12.0, 5.5), "rod": _cylinder(4.0, 28.0),
+          "tube": _tube(9.0, 5.0, 14.0)}
 TRUTH = SimCal("constant", 1450.0, 1.27e-3)
 
 

@@ -43,8 +43,8 @@ def _write_set(folder, releases, *, stop=None, shift=None, water=None, mass=None
     rows = ["run,mesh,object_mass_g"]
     for i, (shape, release) in enumerate(releases.items()):
         w = (water or {}).get(shape, 500.0)
-        t, grams, conc = _curve(release, i, stop_fraction=(stop or {}).get(shape), shift_s=(shift or {}).get(shape, 0.0),
-                                water_g=w)
+        t, grams, conc = _curve(release, i, stop_fraction=(stop or {}).get(shape),
+                                shift_s=(shift or {}).get(shape, 0.0), water_g=w)
         np.savetxt(folder / f"{shape}.csv", np.column_stack([t, conc, conc, grams]), delimiter=",", comments="",
                    header="t_s,conc_g_per_kg,conc_smooth_g_per_kg,released_g", fmt="%.6f")
         sample_shape(shape).export(folder / f"{shape}.stl")
