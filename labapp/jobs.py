@@ -383,7 +383,7 @@ def design(config, out: str | Path, *, resume: bool = False, units: str = "mm", 
 
     A new run records a file target's path and SHA-256 in ``target_source.json`` and optimises a copy in
     the run folder (a mesh scaled from ``units`` to mm), so ``--resume`` uses the target the run started
-    with; a changed original is reported through ``on_warning`` (and the log). A start that is rejected
+    with; a changed original is reported through ``on_warning`` (default: the log). A start that is rejected
     (invalid or infeasible target, bad settings, not enough memory) removes what it wrote, so a corrected
     rerun into the same ``out`` is not blocked. The optimisation itself, with a measured target and the
     physical prediction through ``simcal``, is ``labapp.targets.design_from_target``.
@@ -405,7 +405,7 @@ def design(config, out: str | Path, *, resume: bool = False, units: str = "mm", 
     from labapp.meshunits import DESIGN_BYTES_PER_VOXEL, check_memory
     from labapp.targets import design_from_target
 
-    warn = on_warning or (lambda message: None)
+    warn = on_warning or (lambda message: log.warning("%s", message))
     out = Path(out)
     run = dict(simcal=simcal, bench_calibration=bench_calibration, on_iteration=on_iteration,
                should_stop=should_stop)
@@ -413,7 +413,6 @@ def design(config, out: str | Path, *, resume: bool = False, units: str = "mm", 
         if not (out / "config.json").is_file():
             raise UsageError(f"{out} holds no design run to resume (no config.json); start one with --target")
         for w in _check_target_unchanged(out):
-            log.warning("%s", w)
             warn(w)
         return design_from_target(None, out, resume=True, **run)
     out = check_out(out, "design", [config.target], replace=False)

@@ -138,7 +138,8 @@ def run(args: argparse.Namespace) -> int:
         simcal = load_simcal(args.simcal) if args.simcal else None
         bench = BenchCalibration.load(args.calibration) if args.calibration else None
         result, physical = jobs.design(config, args.out, resume=args.resume, units=args.units, simcal=simcal,
-                                       bench_calibration=bench, on_iteration=_progress(max_iter))
+                                       bench_calibration=bench, on_iteration=_progress(max_iter),
+                                       on_warning=lambda message: print(f"\nwarning: {message}", file=sys.stderr))
     finally:
         print(file=sys.stderr)          # ends the progress line, also before an error's line
     s = physical or result.outputs.summary
