@@ -23,6 +23,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="mirror planes through the bounding-box centre on these axes, e.g. xyz: simulates "
                              "one half/quadrant/octant; the curve is still the full object's")
     parser.add_argument("--out", default="simulation", metavar="DIR", help="output folder (default ./simulation)")
+    parser.add_argument("--simcal", metavar="SIMCAL.json",
+                        help="simulation calibration (sfr calibrate-sim): also write release_physical.csv "
+                             "(t_s,released_g,conc_g_per_kg) and release_physical.png; simulates at its resolution")
+    parser.add_argument("--water-g", type=float, help="bath water for the physical curve, g (default: the "
+                        "calibration's)")
 
 
 def _progress(message: str) -> None:
@@ -60,6 +65,17 @@ def run(args: argparse.Namespace) -> int:
     from design import DesignError, simulate
     from design.pipeline import input_grid
 
+    from labapp.simcal import check_resolution, load_simcal
+    from labapp.targets import write_release_physical
+
+    simcal = None
+    if args.simcal:
+        simcal = load_simcal(args.simcal)
+        if args.voxel_size is not None:
+            print(f"sfr simulate: {args.simcal} holds for resolution {simcal.resolution}; drop --voxel-size",
+                  file=sys.stderr)
+            return 2
+        args.resolution = check_resolution(simcal, args.resolution)
     start = time.perf_counter()
     try:
         _progress(f"[1/3] loading and voxelising {args.input} ...")
@@ -90,6 +106,16 @@ def run(args: argparse.Namespace) -> int:
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     _save_plot(release.tau_mm, release.released_mm3, out / "release.png", args.input)
+    if simcal is not None:
+        physical = write_release_physical(release.tau_mm, release.released_mm3, simcal, out, args.water_g,
+                                          title=args.input)
+        grams = np.loadtxt(physical, delimiter=",", skiprows=1)
+        summary["physical"] = {"simcal": str(simcal.path), "model": simcal.cal.model,
+                               "mass_g": float(grams[-1, 1]), "duration_s": float(grams[-1, 0]),
+                               "water_g": args.water_g or simcal.water_g}
+        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        print(f"predicted: {grams[-1, 1]:.3f} g released over {grams[-1, 0] / 3600:.2f} h "
+              f"({simcal.describe()}) -> {physical}")
     print(f"volume {release.volume_mm3:.1f} mm^3, T = {release.total_time_mm:.3f} mm, {rho.size:,} voxels, "
           f"{seconds:.2f} s -> {out}")
     return 0
