@@ -7,7 +7,6 @@ import csv
 import logging
 import shutil
 import threading
-import time
 from pathlib import Path
 
 import pyqtgraph as pg
@@ -16,9 +15,9 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, Q
 
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.sweep_panel import SweepPanel
-from labapp.storage import sanitize_name
 from labapp.simcal import SimCalFile, load_simcal
-from labapp.targets import design_from_target
+from labapp.jobs import DESIGN_DEFAULTS, design_folder
+from labapp.jobs import design as design_job
 
 log = logging.getLogger(__name__)
 
@@ -65,19 +64,20 @@ class DesignLauncher(QWidget):
         run_button.clicked.connect(self._pick_run)
         csv_button.clicked.connect(self._pick_csv)
         self.space = QComboBox()
-        self.space.addItems(["extruded", "nfc", "ico"])
+        self.space.addItems(["nfc", "extruded", "ico"])
+        self.space.setCurrentText(DESIGN_DEFAULTS["space"])
         self.space.setToolTip("ico: free 3D design printable without supports along +z (incremental compliance)")
         self.resolution = QSpinBox()
         self.resolution.setRange(8, 256)
         self.resolution.setSingleStep(2)
-        self.resolution.setValue(32)
+        self.resolution.setValue(DESIGN_DEFAULTS["resolution"])
         self.max_iter = QSpinBox()
         self.max_iter.setRange(1, 5000)
-        self.max_iter.setValue(100)
+        self.max_iter.setValue(DESIGN_DEFAULTS["max_iter"])
         self.allow_infeasible = QCheckBox("optimise even if the feasibility check fails")
         self.allow_infeasible.setToolTip("measured curves are noisy near the end of a run; the check's report "
                                          "is kept as feasibility.txt in the design folder")
-        self.allow_infeasible.setChecked(True)
+        self.allow_infeasible.setChecked(DESIGN_DEFAULTS["allow_infeasible"])
         self.start_button, self.stop_button = QPushButton("Design"), QPushButton("Stop")
         self.save_button = QPushButton("Save STL...")
         self.start_button.clicked.connect(self.start)
@@ -164,7 +164,7 @@ class DesignLauncher(QWidget):
         if not source.exists():
             self.status.setText(f"{source} does not exist")
             return
-        self.out_dir = self.data_dir / "designs" / f"{time.strftime('%Y%m%d-%H%M%S')}_{sanitize_name(source.stem)}"
+        self.out_dir = design_folder(self.data_dir, source.stem)
         space, resolution, max_iter = self.space.currentText(), self.resolution.value(), self.max_iter.value()
         allow = self.allow_infeasible.isChecked()
         self._stop.clear()
@@ -173,12 +173,11 @@ class DesignLauncher(QWidget):
         simcal = self.simcal
 
         def work(progress):
-            out_dir.mkdir(parents=True)
             config = DesignConfig(target=str(source), space=space, resolution=resolution, max_iter=max_iter,
                                   allow_infeasible=allow)
-            return design_from_target(config, out_dir / "design", simcal=simcal,
-                                      on_iteration=lambda k, x, terms: progress((k, terms, mid_slice(x, k))),
-                                      should_stop=self._stop.is_set)
+            return design_job(config, out_dir, simcal=simcal,
+                              on_iteration=lambda k, x, terms: progress((k, terms, mid_slice(x, k))),
+                              should_stop=self._stop.is_set)
         self.task = BackgroundTask(work, self)
         self.task.progress.connect(self._progress)
         self.task.finished.connect(self._finished)
@@ -232,4 +231,4 @@ class DesignLauncher(QWidget):
             return
         path, _ = QFileDialog.getSaveFileName(self, "save STL", "design.stl", "STL (*.stl)")
         if path:
-            shutil.copyfile(self.out_dir / "design" / "design.stl", path)
+            shutil.copyfile(self.out_dir / "design.stl", path)

@@ -102,6 +102,7 @@ def test_calibration_wizard_reanalysis_and_design_launcher(qtbot, tmp_path):
         win.browser.reanalyse()
         qtbot.waitUntil(lambda: "frames analysed" in win.browser.info.text(), timeout=60_000)
         assert len(win.browser.plots.conc) == 4 and abs(win.browser.plots.conc[-1] - 3.0) < 0.1
+        assert {"curve.csv", "cells.csv", "curve.png"} <= {p.name for p in (series / "analysis").iterdir()}
 
         target = tmp_path / "target.csv"
         target.write_text("tau_mm,released_mm3\n0,0\n1,300\n2,500\n3,600\n")
