@@ -22,6 +22,7 @@ __all__ = ["MM_PER_UNIT", "check_memory", "grid_shape", "load_mesh_mm", "size_wa
 
 MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 PLAUSIBLE_VOLUME_MM3 = (1.0, 1e6)
+TYPICAL_VOLUME_MM3 = 3e3        # a pill-sized print; ranks the candidate units of an implausible mesh
 MIN_VOXELS_ACROSS = 4
 #: Peak bytes per voxel of one forward simulation (fast marching and adjoint work arrays), measured with
 #: tracemalloc on 48^3 and 96^3 grids (160 and 153 B), rounded up with the density grid itself.
@@ -54,11 +55,13 @@ def load_mesh_mm(path: str | Path, units: str = "mm"):
 
 
 def _likely_unit(volume_mm3: float) -> str:
+    """The units (of :data:`MM_PER_UNIT`) that would make ``volume_mm3`` plausible, most likely first."""
     lo, hi = PLAUSIBLE_VOLUME_MM3
-    for unit in ("in", "cm", "m"):
-        scaled = volume_mm3 * MM_PER_UNIT[unit] ** 3
-        if lo <= scaled <= hi:
-            return (f"it is probably in {unit}, not mm ({scaled:.3g} mm^3 if so): rerun with --units {unit}")
+    fits = sorted((abs(math.log10(volume_mm3 * MM_PER_UNIT[u] ** 3 / TYPICAL_VOLUME_MM3)), u)
+                  for u in ("in", "cm", "m") if lo <= volume_mm3 * MM_PER_UNIT[u] ** 3 <= hi) if volume_mm3 > 0 else []
+    if fits:
+        return "it is probably in " + " or ".join(
+            f"{u} ({volume_mm3 * MM_PER_UNIT[u] ** 3:.3g} mm^3 if so: --units {u})" for _, u in fits) + ", not mm"
     if volume_mm3 > hi:
         return "it was probably exported in micrometres or scaled up: check the export units and scale it to mm"
     return "check the units it was exported in (--units m|cm|mm|in)"
