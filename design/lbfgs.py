@@ -205,7 +205,7 @@ class Lbfgs:
             self.x, self.x_trial = self.x_trial, self.x
             self.g, self.g_trial = self.g_trial, self.g
             self.initialised = True
-            self.f_restart = f_trial if self.restarts == 0 else self.f_restart
+            self.f_restart = f_trial
             return self._begin_search()
         return self._search(f_trial)
 
@@ -353,20 +353,18 @@ class Lbfgs:
     # -- checkpoints ---------------------------------------------------------------------------
     def state(self) -> dict[str, np.ndarray]:
         """Everything `from_state` needs, as arrays (for ``np.savez``); pairs in ring order."""
-        k = self.count
-        out = {"x": self.x, "g": self.g, "d": self.d, "g_lo": self.g_lo,
-               "s": self.s[:k], "y": self.y[:k], "rho": self.rho[:k],
-               "scalars": np.array([float(getattr(self, name)) for name in _SCALARS]),
-               "settings": np.array([float(v) for v in asdict(self.settings).values()])}
-        return out
+        k = self.count  # the ring fills from slot 0, so the stored pairs are the first k slots
+        return {"x": self.x, "g": self.g, "d": self.d, "g_lo": self.g_lo,
+                "s": self.s[:k], "y": self.y[:k], "rho": self.rho[:k],
+                "scalars": np.array([float(getattr(self, name)) for name in _SCALARS]),
+                "settings": np.array([float(v) for v in asdict(self.settings).values()])}
 
     @classmethod
     def from_state(cls, state: dict[str, np.ndarray]) -> "Lbfgs":
         """The optimiser saved by `state`; its next trial point is the saved run's next one."""
-        names = list(asdict(LbfgsSettings()))
-        values = [float(v) for v in np.asarray(state["settings"])]
-        kinds = {k: type(v) for k, v in asdict(LbfgsSettings()).items()}
-        settings = LbfgsSettings(**{k: kinds[k](v) for k, v in zip(names, values)})
+        defaults = asdict(LbfgsSettings())
+        settings = LbfgsSettings(**{name: type(default)(value) for (name, default), value
+                                    in zip(defaults.items(), np.asarray(state["settings"]))})
         opt = cls(np.asarray(state["x"]), settings)
         for name, value in zip(_SCALARS, np.asarray(state["scalars"])):
             current = getattr(opt, name)
