@@ -89,12 +89,31 @@ def top_view(solid: np.ndarray, axis: int) -> np.ndarray:
     return np.where(solid.any(axis=-1), top, 0)
 
 
+def views(solid: np.ndarray, build_axis: int) -> np.ndarray:
+    """The top view (along the build axis) and a side view beside it, two voxels apart (0 = empty).
+
+    Parameters
+    ----------
+    solid : (X, Y, Z) ndarray of bool
+    build_axis : int
+
+    Returns
+    -------
+    (rows, cols) ndarray of int, voxels
+    """
+    side_axis = next(a for a in range(3) if a != build_axis and a != 0) if build_axis != 0 else 1
+    top, side = top_view(solid, build_axis), top_view(solid, side_axis)
+    if top.shape[0] != side.shape[0]:
+        return top
+    return np.concatenate([top, np.zeros((top.shape[0], 2), dtype=top.dtype), side], axis=1)
+
+
 def _picture(folder: Path) -> np.ndarray | None:
     from design.spaces import BUILD_AXIS
 
     try:
         with np.load(folder / "density.npz") as data:
-            return top_view(data["solid"].astype(bool), BUILD_AXIS)
+            return views(data["solid"].astype(bool), BUILD_AXIS)
     except (OSError, KeyError, ValueError):
         return None
 
@@ -121,7 +140,7 @@ def draw_contact_sheet(rows: list[dict], path: str | Path, sweep_dir: str | Path
     width_in, height_in = 5.0 * TILES_PER_ROW, 2.6 * n_rows
     dpi = min(90.0, MAX_PIXELS / max(width_in, height_in))
     fig, axes = plt.subplots(n_rows, 2 * TILES_PER_ROW, figsize=(width_in, height_in), dpi=dpi, squeeze=False,
-                             gridspec_kw={"width_ratios": [1.6, 1.0] * TILES_PER_ROW})
+                             gridspec_kw={"width_ratios": [1.4, 1.2] * TILES_PER_ROW})
     for ax in axes.ravel():
         ax.set_axis_off()
     for i, row in enumerate(rows):
@@ -139,7 +158,7 @@ def draw_contact_sheet(rows: list[dict], path: str | Path, sweep_dir: str | Path
             pic_ax.imshow(np.ma.masked_equal(picture, 0), cmap="viridis", origin="lower",
                           interpolation="nearest")
     fig.suptitle("sweep: target (green) vs binary design (magenta dashed), tau (mm) vs released (mm^3); "
-                 "top views coloured by height", fontsize=8)
+                 "top view | side view, coloured by height", fontsize=8)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.3 / height_in))
     tmp = path.with_suffix(".tmp.png")
     fig.savefig(tmp)

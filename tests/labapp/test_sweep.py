@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from labapp.contact_sheet import printable, rank, top_view
+from labapp.contact_sheet import printable, rank, top_view, views
 from labapp.outpaths import OutPathError
 from labapp.sweep import SweepError, folder_state, run_sweep
 from labapp.sweepspec import SpecError, combination_name, load_spec, parse_spec, spec_text
@@ -171,3 +171,6 @@ def test_top_view_is_the_height_of_the_top_voxel():
     solid[1, 2, 3] = True
     solid[1, 1, 1:3] = True
     assert top_view(solid, 2).tolist() == [[2, 0, 0], [0, 3, 4]]
+    both = views(solid, 2)  # top view, two empty columns, side view along y (depth 1..3)
+    assert both.shape == (2, 3 + 2 + 4) and both[:, 3:5].tolist() == [[0, 0], [0, 0]]
+    assert both[:, 5:].tolist() == [[1, 1, 0, 0], [0, 2, 2, 3]]
