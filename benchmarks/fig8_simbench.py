@@ -26,10 +26,7 @@ def record_set(out: Path, interval_s: float) -> tuple[Path, Path]:
     from labapp.simbench import Material, sample_release
 
     clock = SteppedClock()
-    _, cal_path = simulated_calibration(out / "calibration", clock)
-    from analysis import BenchCalibration
-
-    calibration = BenchCalibration.load(cal_path)
+    calibration, cal_path = simulated_calibration(out / "calibration", clock)
     material = Material.draw()
     (out / "meshes").mkdir(parents=True, exist_ok=True)
     rows = ["run,mesh,object_mass_g"]
@@ -55,13 +52,10 @@ def main() -> None:
     from labapp.evaluation import evaluate_models, markdown_table
 
     start = time.perf_counter()
-    set_csv = args.out / "set" / "calibration_set.csv"
-    if set_csv.is_file():
-        cal_path = args.out / "set" / "calibration" / "calibration.json"
-        cal_path = cal_path if cal_path.is_file() else next((args.out / "set" / "calibration").rglob("calibration.json"))
-    else:
-        print(f"recording the calibration set in {args.out / 'set'} ...", flush=True)
-        set_csv, cal_path = record_set(args.out / "set", args.interval)
+    if (args.out / "set").exists():
+        raise SystemExit(f"{args.out / 'set'} exists; choose a new --out")
+    print(f"recording the calibration set in {args.out / 'set'} ...", flush=True)
+    set_csv, cal_path = record_set(args.out / "set", args.interval)
     print(f"set ready ({time.perf_counter() - start:.0f} s); evaluating ...", flush=True)
     result = evaluate_models(set_csv, cal_path, args.out / "evaluation", resolution=args.resolution,
                              seeds=args.seeds, progress=lambda f, m: print(f"[{100 * f:3.0f}%] {m}", flush=True))
