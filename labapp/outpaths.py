@@ -44,6 +44,7 @@ KINDS: dict[str, tuple[str, tuple[tuple[str, ...], ...]]] = {
     "sweep": ("a design sweep folder (sfr sweep)", (("spec.toml", "runs"),)),
     "batch-analysis": ("a batch analysis folder (sfr analyze RUN... --out)", (("batch_summary.csv",),)),
     "simcal": ("a simulation calibration folder (sfr calibrate-sim)", (("simcal.json",),)),
+    "evaluation": ("a model evaluation folder (sfr evaluate)", (("evaluation.json",),)),
 }
 RECORD_KINDS = {"run": "an acquisition run folder (a record)", "calibration-series": "a calibration-series folder (a record)"}
 ANALYSIS_SUBFOLDER = "analysis"
