@@ -1,10 +1,11 @@
-"""The embedded simulator and optimizer (paper sections 3.1-3.6)."""
+"""The embedded simulator and optimizer (paper sections 3.1-3.6), and the Monte Carlo baseline (section 5.1)."""
 from design.concentration import Saturation, release_at_times, release_at_times_vjp, remap_time, remap_time_vjp
 from design.errors import DesignError
 from design.extract import density_mesh
 from design.filters import SmoothingFilter, project
 from design.forward import N_MIN, Release, release_gradient, simulate, total_time
 from design.meshio import load_density, load_mesh
+from design.montecarlo import MonteCarloParams, MonteCarloRelease, simulate_mc, tune_mc, unit_runs
 from design.objective import DesignObjective
 from design.optimize import DesignResult, run_design
 from design.pipeline import simulate_mesh
@@ -16,9 +17,10 @@ from design.spaces import SPACE_CHOICES, build_space, register_space
 from design.targets import Target, check_feasibility, constant_acceleration, target_from_csv, target_from_mesh
 from design.voxelize import voxelize
 
-__all__ = ["DesignConfig", "DesignError", "DesignObjective", "DesignResult", "N_MIN", "Release", "SAMPLE_SHAPES",
+__all__ = ["DesignConfig", "DesignError", "DesignObjective", "DesignResult", "MonteCarloParams", "MonteCarloRelease",
+           "N_MIN", "Release", "SAMPLE_SHAPES",
            "SPACE_CHOICES", "Saturation", "SmoothingFilter", "Target", "assess", "build_space", "check_feasibility",
            "constant_acceleration", "density_mesh", "load_density", "load_mesh", "project", "prusa_profile",
            "rate_deviation", "register_space", "release_at_times", "release_at_times_vjp", "release_gradient",
-           "remap_time", "remap_time_vjp", "run_design", "sample_shape", "simulate", "simulate_mesh",
-           "target_from_csv", "target_from_mesh", "total_time", "voxelize"]
+           "remap_time", "remap_time_vjp", "run_design", "sample_shape", "simulate", "simulate_mc", "simulate_mesh",
+           "target_from_csv", "target_from_mesh", "total_time", "tune_mc", "unit_runs", "voxelize"]
