@@ -28,7 +28,8 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from design.montecarlo import simulate_mc, tune_mc, unit_runs
+    from design.montecarlo import simulate_mc
+    from design.montecarlo_tuning import tune_mc, unit_runs
     from design.pipeline import input_grid
 
     t = np.linspace(0, T_END_S, 601)

@@ -5,7 +5,8 @@ from design.extract import density_mesh
 from design.filters import SmoothingFilter, project
 from design.forward import N_MIN, Release, release_gradient, simulate, total_time
 from design.meshio import load_density, load_mesh
-from design.montecarlo import MonteCarloParams, MonteCarloRelease, simulate_mc, tune_mc, unit_runs
+from design.montecarlo import MonteCarloParams, MonteCarloRelease, simulate_mc
+from design.montecarlo_tuning import tune_mc, unit_runs
 from design.objective import DesignObjective
 from design.optimize import DesignResult, run_design
 from design.pipeline import simulate_mesh

@@ -6,7 +6,7 @@
 - the forward model's leave-one-out prediction: :func:`labapp.simcal.calibrate_sim` fits the section 4.3
   calibration without the object and predicts it from its mesh and weighed mass;
 - the Monte Carlo model's leave-one-out prediction: (A, E_a) tuned on the other objects by the 16-point
-  grid search (:func:`design.montecarlo.tune_mc`), the object simulated with them, its released fraction
+  grid search (:func:`design.montecarlo_tuning.tune_mc`), the object simulated with them, its released fraction
   times its weighed mass;
 
 and scores both against the measured curve with f2 (measured as the reference, rules of
@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from analysis.profile import ReleaseProfile, similarity
-from design.montecarlo import DEFAULT_EA_J_PER_MOL, DEFAULT_SEEDS, tune_mc, unit_runs
+from design.montecarlo import DEFAULT_SEEDS
+from design.montecarlo_tuning import DEFAULT_EA_J_PER_MOL, tune_mc, unit_runs
 from labapp.mcsim import calibration_doc
 from labapp.outpaths import check_out
 from labapp.storage import atomic_write

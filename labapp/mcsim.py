@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from design.montecarlo import DEFAULT_SEEDS, MonteCarloParams, McTuning, simulate_mc
+from design.montecarlo import DEFAULT_SEEDS, MonteCarloParams, simulate_mc
+from design.montecarlo_tuning import McTuning
 from design.printability import PRINT_DENSITY_G_PER_CM3
 from labapp.errors import UsageError
 from labapp.outpaths import check_out

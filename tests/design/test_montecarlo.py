@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from design import DesignError
-from design.montecarlo import GAS_CONSTANT, MonteCarloParams, erosion_times, simulate_mc, tune_mc, unit_runs
+from design.montecarlo import GAS_CONSTANT, MonteCarloParams, erosion_times, simulate_mc
+from design.montecarlo_tuning import tune_mc, unit_runs
 from design.pipeline import input_grid
 
 
