@@ -124,7 +124,8 @@ def evaluate_models(set_csv: str | Path, bench_calibration: str | Path | None, o
     rows = read_set(set_csv)
     if len(rows) < 3:
         raise SimCalError(f"{set_csv}: {len(rows)} objects; a leave-one-out evaluation needs at least 3")
-    out_dir = check_out(out_dir, "evaluation", [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)])
+    out_dir = check_out(out_dir, "evaluation", [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)],
+                        replace=False)
     out_dir.mkdir(parents=True, exist_ok=True)
     say(0.0, "forward model: simulation calibration and its leave-one-out predictions ...")
     forward = calibrate_sim(set_csv, bench_calibration, out_dir / "simcal", resolution=resolution,
