@@ -253,7 +253,8 @@ def _time_points(reference: ReleaseProfile, test: ReleaseProfile, span: tuple[fl
     pct = 100.0 * reference.released / total
     reached = np.flatnonzero(pct >= cutoff_pct)
     t_cut = min(float(reference.t[reached[0]]) if reached.size else hi, hi)
-    step = _nice_step(t_cut - max(lo, 0.0), reference.time_unit)
+    start = max(lo, 0.0)
+    step = _nice_step((t_cut if t_cut > start else hi) - start, reference.time_unit)
     times = np.arange(1, int(math.floor(hi / step + 1e-9)) + 1) * step
     times = times[times >= lo]
     return times, (f"both curves interpolated linearly onto a regular grid every {step:g} {reference.time_unit} "
