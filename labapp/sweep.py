@@ -176,10 +176,24 @@ def _worker_name() -> str:
 
 # ----------------------------------------------------------------------------------------------- client side
 
-class _Todo(list):
-    """The combinations this session runs; ``total`` counts the whole sweep's."""
+@dataclass
+class _Session:
+    """This session's share of a sweep (``todo``; the rest of ``total`` was done before) and its outcomes."""
 
-    total: int = 0
+    total: int
+    todo: list[Combination]
+    dashboard: str | None = None
+    outcomes: dict[str, dict] = field(default_factory=dict)
+    t0: float = field(default_factory=time.perf_counter)
+
+    def progress(self, running: int) -> Progress:
+        """Counts over the whole sweep; the ETA is what remains (left and running) over this session's
+        throughput so far."""
+        done = len(self.outcomes)
+        failed = sum(o["status"] == "failed" for o in self.outcomes.values())
+        left = len(self.todo) - done - running
+        eta = (left + running) * (time.perf_counter() - self.t0) / done if done else None
+        return Progress(self.total - len(self.todo) + done, failed, running, left, eta, self.dashboard)
 
 
 def prepare_sweep_dir(spec: SweepSpec, sweep_dir: str | Path) -> Path:
@@ -241,73 +255,60 @@ def run_sweep(spec: SweepSpec, sweep_dir: str | Path, client=None, *,
         ``stopped`` is True after Ctrl-C (KeyboardInterrupt) or `should_stop`.
     """
     sweep_dir = prepare_sweep_dir(spec, sweep_dir)
-    outcomes: dict[str, dict] = {}
-    todo = _Todo(c for c in spec.combinations if folder_state(sweep_dir / RUNS / c.name) != "done")
-    todo.total = len(spec.combinations)
+    todo = [c for c in spec.combinations if folder_state(sweep_dir / RUNS / c.name) != "done"]
     log.info("sweep %s: %d combinations, %d to run", sweep_dir, len(spec.combinations), len(todo))
-    dashboard = None
+    session = _Session(len(spec.combinations), todo)
+    report = on_progress or (lambda p: None)
     if client is None:
-        stopped = _run_serial(todo, sweep_dir, outcomes, on_progress, should_stop)
+        stopped = _run_serial(session, sweep_dir, report, should_stop)
     else:
         from labapp.cluster import dashboard_link
 
-        dashboard = dashboard_link(client)
-        stopped = _run_dask(client, todo, sweep_dir, outcomes, on_progress, should_stop, dashboard)
-    return _finish(spec, sweep_dir, outcomes, stopped, contact_sheet, dashboard)
+        session.dashboard = dashboard_link(client)
+        stopped = _run_dask(client, session, sweep_dir, report, should_stop)
+    report(session.progress(0))
+    return _finish(spec, sweep_dir, session.outcomes, stopped, contact_sheet, session.dashboard)
 
 
-def _progress(todo: list, outcomes: dict, running: int, t0: float, dashboard: str | None = None) -> Progress:
-    """Counts over the sweep's combinations (``todo`` is this session's share, the rest were done
-    before); the ETA is what remains (left and running) over this session's throughput so far."""
-    failed = sum(o["status"] == "failed" for o in outcomes.values())
-    left = len(todo) - len(outcomes) - running
-    eta = (left + running) * (time.perf_counter() - t0) / len(outcomes) if outcomes else None
-    return Progress(todo.total - len(todo) + len(outcomes), failed, running, left, eta, dashboard)
-
-
-def _run_serial(todo, sweep_dir, outcomes, on_progress, should_stop) -> bool:
-    report, t0 = on_progress or (lambda p: None), time.perf_counter()
+def _run_serial(session: _Session, sweep_dir: Path, report, should_stop) -> bool:
     try:
-        for combo in todo:
+        for combo in session.todo:
             if should_stop is not None and should_stop():
                 return True
-            report(_progress(todo, outcomes, 1, t0))
-            outcomes[combo.name] = run_combination(combo, str(sweep_dir))
+            report(session.progress(1))
+            session.outcomes[combo.name] = run_combination(combo, str(sweep_dir))
     except KeyboardInterrupt:
         return True
-    report(_progress(todo, outcomes, 0, t0))
     return False
 
 
-def _run_dask(client, todo, sweep_dir, outcomes, on_progress, should_stop, dashboard) -> bool:
+def _run_dask(client, session: _Session, sweep_dir: Path, report, should_stop) -> bool:
     from distributed import Event, wait
 
     event_name = f"sfr-sweep-stop-{uuid.uuid4().hex}"
     stop_event = Event(event_name, client=client)
-    futures = {client.submit(run_combination, c, str(sweep_dir), event_name, key=f"design-{c.name}-{uuid.uuid4().hex[:8]}",
-                             pure=False): c for c in todo}
-    pending, t0 = set(futures), time.perf_counter()
-    report, stopped = on_progress or (lambda p: None), False
+    futures = {client.submit(run_combination, c, str(sweep_dir), event_name, pure=False,
+                             key=f"design-{c.name}-{uuid.uuid4().hex[:8]}"): c for c in session.todo}
+    pending = set(futures)
     try:
         while pending:
-            report(_progress(todo, outcomes, _running(client, pending), t0, dashboard))
+            report(session.progress(_running(client, pending)))
             try:
                 finished = wait(list(pending), timeout=STOP_POLL_S, return_when="FIRST_COMPLETED").done
             except TimeoutError:
                 finished = ()
             for fut in finished:
                 pending.discard(fut)
-                outcomes[futures[fut].name] = _outcome(fut, futures[fut])
+                session.outcomes[futures[fut].name] = _outcome(fut, futures[fut])
             if should_stop is not None and should_stop():
                 raise KeyboardInterrupt
     except KeyboardInterrupt:
-        stopped = True
-        _stop(client, stop_event, pending, futures, outcomes, sweep_dir)
-    report(_progress(todo, outcomes, 0, t0, dashboard))
-    return stopped
+        _stop(client, stop_event, pending, futures, session.outcomes)
+        return True
+    return False
 
 
-def _stop(client, stop_event, pending, futures, outcomes, sweep_dir) -> None:
+def _stop(client, stop_event, pending: set, futures: dict, outcomes: dict) -> None:
     """Ctrl-C: queued designs never start, running ones checkpoint and stop; a second Ctrl-C leaves at once."""
     from distributed import wait
 

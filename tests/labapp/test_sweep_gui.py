@@ -12,8 +12,9 @@ def test_the_launcher_runs_a_small_sweep_and_browses_its_contact_sheet(qtbot, tm
     launcher.space.setCurrentText("nfc")
     launcher.resolution.setValue(16)
     launcher.max_iter.setValue(5)
+    launcher.allow_infeasible.setChecked(False)
     assert launcher.sweep_settings() == ("sphere", {"space": "nfc", "resolution": 16, "max_iter": 5,
-                                                    "allow_infeasible": True}, None)
+                                                    "allow_infeasible": False}, None)
     panel = launcher.sweep
     panel.w_binary.setText("10")
     panel.radius.setText("2, 3")
