@@ -22,9 +22,9 @@ import numpy as np
 
 from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, SimCal, fit_simcal, leave_one_out
 from analysis.simcal import DEFAULT_MAX_OFFSET_S, MODELS
+from labapp.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
 from labapp.errors import UsageError
 from labapp.outpaths import check_out
-from labapp.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
 from labapp.storage import atomic_write, sha256_file
 
 log = logging.getLogger(__name__)
@@ -250,9 +250,12 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
     fits, loos = {}, {}
     models = MODELS if model == "auto" else (model,)
     for j, name in enumerate(models):
-        say(0.6 + 0.35 * j / len(models), f"fitting the {name} model and its leave-one-out predictions ...")
+        base, span = 0.6 + 0.35 * j / len(models), 0.35 / len(models)
+        say(base, f"fitting the {name} model to all {n} runs ...")
         fits[name] = fit_simcal(shapes, name, max_offset_s=max_offset_s)
-        loos[name] = leave_one_out(shapes, name, max_offset_s=max_offset_s)
+        loos[name] = leave_one_out(shapes, name, max_offset_s=max_offset_s,
+                                   progress=lambda done, total, name=name, base=base, span=span: say(
+                                       base + span * done / total, f"{name} model: left {done} of {total} out"))
     mean_loo = {m: float(np.mean([s.rel_rmse for s in loos[m]])) for m in models}
     chosen = min(models, key=mean_loo.get)
     fit = fits[chosen]
