@@ -9,11 +9,14 @@ from drivers.camera.base import Camera, CameraError, CameraSettings, Capture, Ca
 from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
 from labapp.engine import Engine
 from labapp.errors import LabError
+from labapp.events import Message, Reading, StateChanged
 from labapp.monitor import HotplateMonitor
 from labapp.storage import RunFolder
 
 log = logging.getLogger(__name__)
 _LEVELS = {"info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
+PUBLISHED = "published_as_event"
+"""Attribute set on log records that are also published as engine events."""
 
 
 class ProcedureError(LabError):
@@ -68,18 +71,19 @@ class BenchSession:
 
     def note(self, level: str, kind: str, message: str) -> None:
         """Record an event in ``events.log`` and publish it (``info``, ``warning`` or ``error``)."""
-        log.log(_LEVELS.get(level, logging.INFO), "%s: %s", kind, message)
+        # also published as a Message event: marked so that the GUI's log handler does not show it twice
+        log.log(_LEVELS.get(level, logging.INFO), "%s: %s", kind, message, extra={PUBLISHED: True})
         if level in ("warning", "error"):
             self.last_error = message
         if self.run is not None:
             self.run.event(level, kind, message, self.t_s())
         else:
             self._pending.append((level, kind, message))
-        self.engine.emit(level if level in ("info", "warning", "error") else "info", topic=kind, message=message)
+        self.engine.emit(Message(level if level in ("info", "warning", "error") else "info", message, topic=kind))
 
     def connect(self, setpoint_c: float | None, speed_rpm: float | None) -> None:
         """Connect and configure the camera; connect the hotplate, set it up and start heating."""
-        self.engine.emit("state", phase="connecting")
+        self.engine.emit(StateChanged("connecting"))
         self.bench.camera.connect()
         outcome = self.bench.camera.configure(self.bench.camera_settings)
         self.note("info", "camera", f"camera connected ({self.bench.description or type(self.bench.camera).__name__}); "
@@ -103,9 +107,8 @@ class BenchSession:
                   f"; setpoint {setpoint_c} C, {speed_rpm} rpm, heating on"))
 
     def _publish_reading(self, reading: HotplateReading) -> None:
-        self.engine.emit("reading", plate_c=reading.plate_c, probe_c=reading.probe_c, speed_rpm=reading.speed_rpm,
-                         setpoint_c=reading.setpoint_c, setpoint_rpm=reading.setpoint_rpm, heating=reading.heating,
-                         stirring=reading.stirring, t_s=self.t_s())
+        self.engine.emit(Reading(reading.plate_c, reading.probe_c, reading.speed_rpm, reading.setpoint_c,
+                                 reading.setpoint_rpm, reading.heating, reading.stirring, self.t_s()))
 
     def wait_stable(self, setpoint_c: float, tolerance_c: float, hold_s: float, timeout_s: float,
                     step_s: float) -> None:
@@ -118,7 +121,7 @@ class BenchSession:
         """
         if self.monitor is None:
             return
-        self.engine.emit("state", phase="heating", setpoint_c=setpoint_c)
+        self.engine.emit(StateChanged("heating", setpoint_c=setpoint_c))
         clock = self.engine.clock
         ok = self.monitor.wait_stable(setpoint_c, tolerance_c, hold_s, timeout_s, step_s, clock.now,
                                       lambda dt: clock.sleep(dt, self.engine.should_stop), self.engine.should_stop)

@@ -23,6 +23,7 @@ from analysis import BenchCalibration, CropGeometry, decode_image, fit_bench_cal
 from labapp.bench import Bench, BenchSession
 from labapp.engine import Engine
 from labapp.errors import UsageError
+from labapp.events import CalibrationLevel, StateChanged
 from labapp.storage import RunFolder, atomic_write, create_run
 
 log = logging.getLogger(__name__)
@@ -178,7 +179,7 @@ class CalibrationProcedure:
         cfg = self.config
         self.run = create_run(self.data_dir, cfg.name, dict(kind="calibration-series", config=dataclasses.asdict(cfg),
                                                            water_g=cfg.water_g, simulated=self.bench.simulated))
-        engine.emit("state", phase="opened", folder=str(self.run.path), resumed=False)
+        engine.emit(StateChanged("opened", folder=str(self.run.path)))
         self.session = BenchSession(self.bench, engine, self.run, keepalive_s=cfg.keepalive_s)
         self.session.t0_unix_s = engine.clock.now()
         self.session.connect(cfg.setpoint_c, cfg.speed_rpm)
@@ -189,7 +190,7 @@ class CalibrationProcedure:
         if cfg.setpoint_c is not None:
             session.wait_stable(cfg.setpoint_c, cfg.tolerance_c, cfg.hold_s, cfg.heat_timeout_s, cfg.stable_step_s)
         session.start_stirring()
-        engine.emit("state", phase="calibrating")
+        engine.emit(StateChanged("calibrating"))
         mass = 0.0
         auto = list(cfg.masses_g)
         while not engine.should_stop():
@@ -240,8 +241,8 @@ class CalibrationProcedure:
         rows = "file,added_mass_g\n" + "".join(f"{f},{m:.6f}\n" for f, m in self.masses)
         atomic_write(self.run.path / "masses.csv", rows.encode())
         conc = mass_g / (self.config.water_g / 1000.0)
-        engine.emit("frame", index=index, file=name, path=str(self.run.path / name), t_s=self.session.t_s(),
-                    added_mass_g=mass_g, conc_g_per_kg=conc, n_frames=len(self.masses))
+        engine.emit(CalibrationLevel(index, name, str(self.run.path / name), self.session.t_s(), mass_g, conc,
+                                     len(self.masses)))
         self.session.note("info", "level", f"{name}: {mass_g:g} g added, {conc:.4f} g/kg")
 
     def _fit(self) -> None:

@@ -28,7 +28,8 @@ from analysis import BenchCalibration, analyze_run, write_cells_csv, write_curve
 from drivers.sim import BenchScene
 from labapp.calseries import CalibrationProcedure, SeriesConfig
 from labapp.clock import SteppedClock
-from labapp.engine import Engine, Event
+from labapp.engine import Engine
+from labapp.events import EngineEvent, FrameStored
 from labapp.procedures import RunConfig, RunProcedure
 from labapp.simbench import SCENE, WATER_G, Material, SampleRelease, SimulatedBench, sample_release
 from labapp.storage import read_run, verify_run
@@ -93,12 +94,12 @@ def simulated_calibration(out_dir: Path, clock: SteppedClock | None = None,
     return BenchCalibration.load(proc.calibration_path), proc.calibration_path
 
 
-def _inject_faults(sim: SimulatedBench) -> Callable[[Event], None]:
+def _inject_faults(sim: SimulatedBench) -> Callable[[EngineEvent], None]:
     """A subscriber that injects one fault of each kind during the run (the event log must show them)."""
-    def on_event(event: Event) -> None:
-        if event.kind != "frame":
+    def on_event(event: EngineEvent) -> None:
+        if not isinstance(event, FrameStored):
             return
-        index = event.data["index"]
+        index = event.index
         if index == 60:
             sim.camera_busy(1)
         elif index == 120:
@@ -128,9 +129,9 @@ def simulated_run(clock: SteppedClock, calibration: BenchCalibration, release: S
         engine = Engine(clock)
         if faults:
             engine.subscribe(_inject_faults(sim))
-        engine.subscribe(lambda e: progress(f"  frame {e.data['index']:4d}  t={e.data['t_s'] / 60:6.1f} min  "
-                                            f"{e.data['conc_g_per_kg']:.3f} g/kg")
-                         if e.kind == "frame" and e.data["index"] % 100 == 0 else None)
+        engine.subscribe(lambda e: progress(f"  frame {e.index:4d}  t={e.t_s / 60:6.1f} min  "
+                                            f"{e.conc_g_per_kg:.3f} g/kg")
+                         if isinstance(e, FrameStored) and e.index % 100 == 0 else None)
         outcome = engine.run(proc)
     finally:
         sim.close()

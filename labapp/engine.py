@@ -1,38 +1,24 @@
 """The Qt-free acquisition engine: walks a procedure (startup / execute / shutdown) in a worker thread.
 
 Procedures check :meth:`Engine.should_stop`, wait through :attr:`Engine.clock`, ask the operator through
-:meth:`Engine.ask`, and publish :class:`Event` records; anything (the CLI status line, the GUI bridge, a
+:meth:`Engine.ask`, and publish typed records (:mod:`labapp.events`); anything (the CLI status line, the GUI bridge, a
 test) observes a run by registering a plain callable with :meth:`Engine.subscribe`. As in pymeasure's
 ``Procedure`` and bluesky's ``RunEngine.subscribe``.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
-import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from labapp.clock import Clock, WallClock
+from labapp.events import Done, EngineEvent, Message, Prompt, StateChanged
 
 log = logging.getLogger(__name__)
 
 OUTCOMES = ("complete", "stopped", "aborted", "failed")
-
-
-@dataclass(frozen=True)
-class Event:
-    """One published record.
-
-    ``kind`` is one of ``state`` (phase change, ``data['phase']``), ``frame`` (a stored frame), ``reading``
-    (a hotplate poll), ``prompt`` (the operator is asked something, ``data['prompt']``), ``info``,
-    ``warning``, ``error`` (``data['message']``), ``progress`` and ``done`` (``data['outcome']``).
-    """
-
-    kind: str
-    data: dict[str, Any] = field(default_factory=dict)
-    t_unix_s: float = field(default_factory=time.time)
 
 
 def _log_failure(what: str, exc: Exception) -> None:
@@ -72,7 +58,7 @@ class Engine:
 
     def __init__(self, clock: Clock | None = None) -> None:
         self.clock: Clock = clock or WallClock()
-        self._subscribers: list[Callable[[Event], None]] = []
+        self._subscribers: list[Callable[[EngineEvent], None]] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._stop_reason = ""
@@ -83,7 +69,7 @@ class Engine:
         self.error: BaseException | None = None
 
     # -- observers ---------------------------------------------------------------------------------------
-    def subscribe(self, fn: Callable[[Event], None]) -> Callable[[], None]:
+    def subscribe(self, fn: Callable[[EngineEvent], None]) -> Callable[[], None]:
         """Call ``fn(event)`` for every published event (from the worker thread); returns an unsubscriber."""
         with self._lock:
             self._subscribers.append(fn)
@@ -94,16 +80,17 @@ class Engine:
                     self._subscribers.remove(fn)
         return unsubscribe
 
-    def emit(self, kind: str, **data: Any) -> Event:
-        """Publish an event to every subscriber; a failing subscriber is logged, never fatal to the run."""
-        event = Event(kind, data, self.clock.now())
+    def emit(self, event: EngineEvent) -> EngineEvent:
+        """Stamp ``event`` with the engine's clock and publish it to every subscriber; a failing subscriber
+        is logged, never fatal to the run."""
+        event = dataclasses.replace(event, t_unix_s=self.clock.now())
         with self._lock:
             subscribers = list(self._subscribers)
         for fn in subscribers:
             try:
                 fn(event)
             except Exception:
-                log.exception("event subscriber %r failed on %s", fn, kind)
+                log.exception("event subscriber %r failed on %s", fn, type(event).__name__)
         return event
 
     # -- control -----------------------------------------------------------------------------------------
@@ -141,7 +128,7 @@ class Engine:
         """
         with self._answered:
             self._answers.pop(prompt, None)
-        self.emit("prompt", prompt=prompt, text=text, auto=auto is not None)
+        self.emit(Prompt(prompt, text, auto is not None))
         if auto is not None:
             return auto
         with self._answered:
@@ -167,7 +154,7 @@ class Engine:
 
     def _walk(self, procedure: Procedure) -> str:
         outcome = "complete"
-        self.emit("state", phase="starting", procedure=procedure.name)
+        self.emit(StateChanged("starting", procedure=procedure.name))
         try:
             procedure.startup(self)
             if not self.should_stop():
@@ -176,17 +163,17 @@ class Engine:
             _log_failure(f"{procedure.name} failed", exc)
             self.error = exc
             outcome = "failed"
-            self.emit("error", message=f"{type(exc).__name__}: {exc}", fatal=True)
+            self.emit(Message("error", f"{type(exc).__name__}: {exc}", topic=procedure.name, fatal=True))
         if outcome != "failed" and self.should_stop():
             outcome = "aborted" if self._stop_reason == "abort" else "stopped"
         try:
             procedure.shutdown(self, outcome)
         except Exception as exc:
             _log_failure(f"{procedure.name} shutdown failed", exc)
-            self.emit("error", message=f"shutdown: {type(exc).__name__}: {exc}", fatal=False)
+            self.emit(Message("error", f"shutdown: {type(exc).__name__}: {exc}", topic=procedure.name))
             self.error = self.error or exc
         self.outcome = outcome
-        self.emit("done", outcome=outcome, reason=self._stop_reason)
+        self.emit(Done(outcome, self._stop_reason))
         return outcome
 
     def start(self, procedure: Procedure) -> threading.Thread:

@@ -18,6 +18,7 @@ from typing import Any
 from analysis import BenchCalibration
 from labapp.bench import Bench, BenchSession, ProcedureError
 from labapp.engine import Engine
+from labapp.events import FrameStored, Preview, StateChanged
 from labapp.live import LiveAnalyzer, is_steady
 from labapp.storage import RunFolder, check_disk_space, create_run, free_bytes, open_run, read_run
 
@@ -147,7 +148,7 @@ class RunProcedure:
             self.run = create_run(self.data_dir, cfg.name, meta)
             if self.calibration is not None:
                 self.run.add_file("calibration.json", _calibration_bytes(self.calibration))
-        engine.emit("state", phase="opened", folder=str(self.run.path), resumed=self.resume_path is not None)
+        engine.emit(StateChanged("opened", folder=str(self.run.path), resumed=self.resume_path is not None))
         self.session.t0_unix_s = self.run.meta.get("t0_unix_s")
         self.session.attach(self.run)
         self.t_s = [f.t_s for f in self.run.frames]
@@ -165,7 +166,7 @@ class RunProcedure:
             session.start_stirring(cfg.speed_rpm)  # the reference shows the stirred bath
             if "reference.jpg" not in run.meta.get("files", {}):
                 self._capture_reference(engine)
-            engine.emit("state", phase="waiting-drop")
+            engine.emit(StateChanged("waiting-drop"))
             dropped = engine.ask("drop", "Drop the object into the beaker, then confirm.",
                                  auto=True if cfg.auto_drop else None)
             if not dropped or engine.should_stop():
@@ -212,7 +213,7 @@ class RunProcedure:
 
     def _acquire(self, engine: Engine) -> None:
         cfg, session, clock = self.config, self.session, engine.clock
-        engine.emit("state", phase="acquiring", t0_unix_s=session.t0_unix_s, folder=str(self.run.path))
+        engine.emit(StateChanged("acquiring", folder=str(self.run.path), t0_unix_s=session.t0_unix_s))
         slot = math.floor(max(session.t_s(), 0.0) / cfg.interval_s) + (1 if self.run.frames else 0)
         while not engine.should_stop():
             clock.sleep(session.t0_unix_s + slot * cfg.interval_s - clock.now(), engine.should_stop)
@@ -252,11 +253,11 @@ class RunProcedure:
                              "the frame is kept, the run goes on")
         self.t_s.append(t_s)
         self.conc.append(conc)
-        engine.emit("frame", index=index, file=name, path=str(run.path / name), t_s=t_s, t_unix_s=cap.t_unix_s,
-                    conc_g_per_kg=conc, uncertainty_g_per_kg=unc,
-                    released_g=conc * self.config.water_g / 1000.0 if not math.isnan(conc) else math.nan,
-                    plate_c=record.plate_c, probe_c=record.probe_c, speed_rpm=record.speed_rpm,
-                    n_frames=len(run.frames), last_error=session.last_error)
+        engine.emit(FrameStored(index, name, str(run.path / name), t_s, len(run.frames), capture_t_unix_s=cap.t_unix_s,
+                                conc_g_per_kg=conc, uncertainty_g_per_kg=unc,
+                                released_g=conc * self.config.water_g / 1000.0 if not math.isnan(conc) else math.nan,
+                                plate_c=record.plate_c, probe_c=record.probe_c, speed_rpm=record.speed_rpm,
+                                last_error=session.last_error))
         if index % 25 == 0 and free_bytes(run.path) < self.config.low_space_bytes:
             session.note("warning", "disk-space", f"disk space low: {free_bytes(run.path) / 1e9:.2f} GB free")
 
@@ -283,7 +284,7 @@ class PreviewProcedure:
         """One frame, one reading."""
         cap = self.session.capture()
         if cap is not None:
-            engine.emit("preview", data=cap.data, file=cap.file_name, t_unix_s=cap.t_unix_s)
+            engine.emit(Preview(cap.data, cap.file_name, cap.t_unix_s))
         if self.session.monitor is not None:
             self.session.monitor.poll()
 

@@ -5,7 +5,7 @@ import logging
 import math
 import threading
 
-from labapp.engine import Event
+from labapp.events import Done, EngineEvent, FrameStored, Message, Prompt, Reading, StateChanged
 
 log = logging.getLogger(__name__)
 
@@ -35,28 +35,27 @@ class RunStatus:
         self.warnings = 0
         self.outcome: str | None = None
 
-    def update(self, event: Event) -> None:
+    def update(self, event: EngineEvent) -> None:
         """Fold one event into the status."""
-        d = event.data
         with self._lock:
-            if event.kind == "state":
-                self.phase = d.get("phase", self.phase)
-                self.folder = d.get("folder", self.folder)
-            elif event.kind == "frame":
-                self.t_s, self.frames = d.get("t_s"), d.get("n_frames", self.frames)
-                conc = d.get("conc_g_per_kg")
-                self.conc = conc if conc is not None and not math.isnan(conc) else self.conc
-            elif event.kind == "reading":
-                self.plate_c, self.probe_c, self.speed_rpm = d["plate_c"], d["probe_c"], d["speed_rpm"]
-                if d.get("t_s") is not None:
-                    self.t_s = d["t_s"]
-            elif event.kind in ("warning", "error"):
-                self.warnings += 1
-                self.last_error = d.get("message", "")
-            elif event.kind == "prompt":
-                self.phase = f"waiting: {d.get('prompt')}"
-            elif event.kind == "done":
-                self.phase, self.outcome = f"done ({d.get('outcome')})", d.get("outcome")
+            match event:
+                case StateChanged():
+                    self.phase = event.phase
+                    self.folder = event.folder or self.folder
+                case FrameStored():
+                    self.t_s, self.frames = event.t_s, event.n_frames
+                    self.conc = self.conc if math.isnan(event.conc_g_per_kg) else event.conc_g_per_kg
+                case Reading():
+                    self.plate_c, self.probe_c, self.speed_rpm = event.plate_c, event.probe_c, event.speed_rpm
+                    if event.t_s is not None:
+                        self.t_s = event.t_s
+                case Message(level="warning" | "error"):
+                    self.warnings += 1
+                    self.last_error = event.message
+                case Prompt():
+                    self.phase = f"waiting: {event.prompt}"
+                case Done():
+                    self.phase, self.outcome = f"done ({event.outcome})", event.outcome
 
     def line(self, width: int = 160) -> str:
         """``[phase] t=H:MM:SS frames N conc C g/kg plate P C probe Q C S rpm | last error``."""

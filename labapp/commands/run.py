@@ -139,11 +139,12 @@ def _drive(proc, clock, bench, status) -> int:
     import signal
 
     from labapp.engine import Engine
+    from labapp.events import Prompt
 
     engine = Engine(clock)
     engine.subscribe(status.update)
-    engine.subscribe(lambda e: _write_line(f"\n>>> {e.data['text']} (press Enter)")
-                     if e.kind == "prompt" and not e.data.get("auto") else None)
+    engine.subscribe(lambda e: _write_line(f"\n>>> {e.text} (press Enter)")
+                     if isinstance(e, Prompt) and not e.auto else None)
     show = _status_printer(status)
     interrupts = []
 

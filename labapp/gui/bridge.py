@@ -14,17 +14,22 @@ from typing import Any
 
 from PySide6.QtCore import QObject, Signal
 
-from labapp.engine import Engine, Event
+from labapp.bench import PUBLISHED
+from labapp.engine import Engine
+from labapp.events import (CalibrationLevel, Done, EngineEvent, FrameStored, Message, Preview, Prompt, Reading,
+                           StateChanged)
 
 log = logging.getLogger(__name__)
 
 
 class EngineBridge(QObject):
-    """Re-emits every engine :class:`Event` as ``event`` and by kind as ``frame``/``preview``/``reading``/
-    ``state``/``message``/``prompt``/``done`` (each carrying the event's data dict)."""
+    """Re-emits every engine event as ``event`` and by type as ``frame`` (:class:`FrameStored`), ``level``
+    (:class:`CalibrationLevel`), ``preview``, ``reading``, ``state``, ``prompt``, ``done`` (each carrying the
+    typed event) and ``message(level, text)``."""
 
     event = Signal(object)
     frame = Signal(object)
+    level = Signal(object)
     preview = Signal(object)
     reading = Signal(object)
     state = Signal(object)
@@ -37,26 +42,61 @@ class EngineBridge(QObject):
         self.engine = engine
         self._unsubscribe = engine.subscribe(self._on_event)
 
-    def _on_event(self, ev: Event) -> None:
+    def _on_event(self, ev: EngineEvent) -> None:
         self.event.emit(ev)
-        if ev.kind == "frame":
-            self.frame.emit(ev.data)
-        elif ev.kind == "preview":
-            self.preview.emit(ev.data)
-        elif ev.kind == "reading":
-            self.reading.emit(ev.data)
-        elif ev.kind == "state":
-            self.state.emit(ev.data)
-        elif ev.kind in ("info", "warning", "error"):
-            self.message.emit(ev.kind, str(ev.data.get("message", "")))
-        elif ev.kind == "prompt":
-            self.prompt.emit(ev.data)
-        elif ev.kind == "done":
-            self.done.emit(ev.data)
+        match ev:
+            case FrameStored():
+                self.frame.emit(ev)
+            case CalibrationLevel():
+                self.level.emit(ev)
+            case Preview():
+                self.preview.emit(ev)
+            case Reading():
+                self.reading.emit(ev)
+            case StateChanged():
+                self.state.emit(ev)
+            case Message():
+                self.message.emit(ev.level, ev.message)
+            case Prompt():
+                self.prompt.emit(ev)
+            case Done():
+                self.done.emit(ev)
 
     def detach(self) -> None:
         """Stop listening to the engine."""
         self._unsubscribe()
+
+
+class LogBridge(QObject):
+    """Log records of ``loggers`` at ``level`` and above (driver reconnects and retries, engine warnings) as
+    the ``message(level, text)`` signal, delivered in the GUI thread; records also published as engine
+    events (``labapp.bench.PUBLISHED``) are skipped, they arrive through :class:`EngineBridge`."""
+
+    message = Signal(str, str)
+
+    def __init__(self, loggers: tuple[str, ...] = ("drivers", "labapp"), level: int = logging.WARNING,
+                 parent: QObject | None = None) -> None:
+        super().__init__(parent)
+        bridge = self
+
+        class _Handler(logging.Handler):
+            def emit(self, record: logging.LogRecord) -> None:
+                if getattr(record, PUBLISHED, False):
+                    return
+                try:
+                    bridge.message.emit(record.levelname.lower(), f"{record.name}: {record.getMessage()}")
+                except RuntimeError:            # the window is gone while a thread still logs
+                    pass
+
+        self.handler = _Handler(level)
+        self._loggers = [logging.getLogger(name) for name in loggers]
+        for lg in self._loggers:
+            lg.addHandler(self.handler)
+
+    def detach(self) -> None:
+        """Remove the handler from the loggers."""
+        for lg in self._loggers:
+            lg.removeHandler(self.handler)
 
 
 class BackgroundTask(QObject):

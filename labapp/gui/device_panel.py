@@ -8,6 +8,7 @@ from PySide6.QtWidgets import (QComboBox, QFormLayout, QGroupBox, QHBoxLayout, Q
 
 from drivers.camera.base import CameraSettings
 from labapp.devices import CAMERA_SPECS
+from labapp.events import Reading
 
 log = logging.getLogger(__name__)
 
@@ -85,13 +86,13 @@ class DevicePanel(QWidget):
             return edit.text().strip() or None
         return CameraSettings(val(self.aperture), val(self.shutter), val(self.iso), val(self.image_format))
 
-    def show_reading(self, data: dict) -> None:
-        """Slot: show one hotplate reading (an engine ``reading`` event's data)."""
+    def show_reading(self, reading: Reading) -> None:
+        """Slot: show one hotplate reading (an engine :class:`labapp.events.Reading`)."""
         def fmt(v: float | None, spec: str) -> str:
             return "no probe" if v is None else format(v, spec)
-        self.readouts["plate_c"].setText(fmt(data.get("plate_c"), ".1f"))
-        self.readouts["probe_c"].setText(fmt(data.get("probe_c"), ".1f"))
-        self.readouts["speed_rpm"].setText(fmt(data.get("speed_rpm"), ".0f"))
-        self.readouts["setpoint_c"].setText(fmt(data.get("setpoint_c"), ".1f"))
-        self.readouts["state"].setText(f"{'on' if data.get('heating') else 'off'} / "
-                                       f"{'on' if data.get('stirring') else 'off'}")
+        self.readouts["plate_c"].setText(fmt(reading.plate_c, ".1f"))
+        self.readouts["probe_c"].setText(fmt(reading.probe_c, ".1f"))
+        self.readouts["speed_rpm"].setText(fmt(reading.speed_rpm, ".0f"))
+        self.readouts["setpoint_c"].setText(fmt(reading.setpoint_c, ".1f"))
+        self.readouts["state"].setText(f"{'on' if reading.heating else 'off'} / "
+                                       f"{'on' if reading.stirring else 'off'}")

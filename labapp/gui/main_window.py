@@ -24,7 +24,8 @@ from labapp.devices import make_bench
 from labapp import jobs
 from labapp.engine import Engine
 from labapp.errors import UsageError
-from labapp.gui.bridge import EngineBridge
+from labapp.events import CalibrationLevel, Done, FrameStored, Preview, Prompt, StateChanged
+from labapp.gui.bridge import EngineBridge, LogBridge
 from labapp.gui.calibration_wizard import CalibrationWizard, parse_masses
 from labapp.gui.design_launcher import DesignLauncher
 from labapp.gui.device_panel import SIMULATED, DevicePanel
@@ -107,6 +108,9 @@ class MainWindow(QMainWindow):
         self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, log_dock)
 
         self.bridge.frame.connect(self.on_frame)
+        self.bridge.level.connect(self.on_level)
+        self.log_bridge = LogBridge(parent=self)          # driver reconnects/retries, engine warnings
+        self.log_bridge.message.connect(self.on_message)
         self.bridge.preview.connect(self.on_preview)
         self.bridge.reading.connect(self.devices.show_reading)
         self.bridge.state.connect(self.on_state)
@@ -250,42 +254,45 @@ class MainWindow(QMainWindow):
         self.engine.answer("added_mass_g", "")
 
     # -- slots for engine events --------------------------------------------------------------------------
-    def on_frame(self, data: dict) -> None:
-        """A frame was stored: plot it, remember it for the live view."""
-        self.latest_frame = data.get("path")
-        if "added_mass_g" not in data:
-            self.plots.add_frame(data["t_s"], data.get("conc_g_per_kg", float("nan")))
-            # the bath plot shows the reading logged with each frame: one time base with the release curve
-            self.plots.add_reading(data["t_s"], data.get("plate_c"), data.get("probe_c"), data.get("speed_rpm"))
+    def on_frame(self, frame: FrameStored) -> None:
+        """A run frame was stored: plot it, remember it for the live view."""
+        self.latest_frame = frame.path
+        self.plots.add_frame(frame.t_s, frame.conc_g_per_kg)
+        # the bath plot shows the reading logged with each frame: one time base with the release curve
+        self.plots.add_reading(frame.t_s, frame.plate_c, frame.probe_c, frame.speed_rpm)
 
-    def on_preview(self, data: dict) -> None:
+    def on_level(self, level: CalibrationLevel) -> None:
+        """A calibration-series frame was stored: show it in the live view."""
+        self.latest_frame = level.path
+
+    def on_preview(self, preview: Preview) -> None:
         """Show a preview frame."""
-        rgb = decode_preview(data=data["data"])
+        rgb = decode_preview(data=preview.data)
         if rgb is not None:
-            self.live.set_frame(rgb, f"preview {data.get('file', '')}")
+            self.live.set_frame(rgb, f"preview {preview.file}")
 
-    def on_state(self, data: dict) -> None:
+    def on_state(self, state: StateChanged) -> None:
         """Follow the procedure's phase."""
-        phase = data.get("phase", "")
-        self.controls.set_running(self.engine.running or phase != "done", waiting_drop=phase == "waiting-drop")
-        if phase == "opened":
-            self.on_message("info", f"run folder {data.get('folder')}")
+        self.controls.set_running(self.engine.running or state.phase != "done",
+                                  waiting_drop=state.phase == "waiting-drop")
+        if state.phase == "opened":
+            self.on_message("info", f"run folder {state.folder}")
 
-    def on_prompt(self, data: dict) -> None:
+    def on_prompt(self, prompt: Prompt) -> None:
         """The engine asks the operator something."""
-        if data.get("auto"):
+        if prompt.auto:
             return
-        if data.get("prompt") == "drop":
+        if prompt.prompt == "drop":
             self.controls.set_running(True, waiting_drop=True)
-            self.statusBar().showMessage(data.get("text", ""))
-        elif data.get("prompt") == "added_mass_g":
-            self.wizard.set_asking(True, data.get("text", ""))
+            self.statusBar().showMessage(prompt.text)
+        elif prompt.prompt == "added_mass_g":
+            self.wizard.set_asking(True, prompt.text)
 
     def on_message(self, level: str, message: str) -> None:
         """Append an event to the log pane."""
         self.messages.appendPlainText(f"{level.upper():7s} {message}")
 
-    def on_done(self, data: dict) -> None:
+    def on_done(self, done: Done) -> None:
         """A procedure ended."""
         self.controls.set_running(False)
         self.wizard.set_asking(False, "")
@@ -295,8 +302,8 @@ class MainWindow(QMainWindow):
                 self.controls.calibration.setText(str(proc.calibration_path))
                 self.wizard.show_result(f"calibration saved: {proc.calibration_path} (now the active calibration)")
             else:
-                self.wizard.show_result(f"series ended ({data.get('outcome')}) without a calibration")
-        self.on_message("info", f"{getattr(proc, 'name', 'procedure')} ended: {data.get('outcome')}")
+                self.wizard.show_result(f"series ended ({done.outcome}) without a calibration")
+        self.on_message("info", f"{getattr(proc, 'name', 'procedure')} ended: {done.outcome}")
         self.browser.refresh()
 
     def set_simcal(self, path: str) -> None:
@@ -339,6 +346,7 @@ class MainWindow(QMainWindow):
         """Release the simulated bench and the bridge (also used by tests)."""
         self.timer.stop()
         self.bridge.detach()
+        self.log_bridge.detach()
         if self.sim is not None:
             self.sim.close()
             self.sim = None

@@ -6,6 +6,7 @@ import pytest
 
 from labapp.clock import ScaledClock, SteppedClock, WallClock, make_clock
 from labapp.engine import Engine
+from labapp.events import Done, Message, Prompt
 
 
 class Counting:
@@ -29,7 +30,7 @@ class Counting:
                 return
             if k == self.fail_at:
                 raise RuntimeError("device gone")
-            engine.emit("progress", k=k)
+            engine.emit(Message("info", f"step {k}", topic="progress"))
             engine.clock.sleep(1.0, engine.should_stop)
 
     def shutdown(self, engine, outcome):
@@ -43,18 +44,20 @@ def test_a_procedure_runs_its_phases_and_publishes_events():
     proc = Counting(5)
     assert engine.run(proc) == "complete"
     assert proc.calls == ["startup", "execute", "shutdown:complete"]
-    assert [e.data["k"] for e in seen if e.kind == "progress"] == [0, 1, 2, 3, 4]
-    assert seen[-1].kind == "done" and seen[-1].data["outcome"] == "complete"
+    steps = [e for e in seen if isinstance(e, Message) and e.topic == "progress"]
+    assert [e.message for e in steps] == [f"step {k}" for k in range(5)]
+    assert [e.t_unix_s for e in steps] == [0.0, 1.0, 2.0, 3.0, 4.0]          # stamped with the engine's clock
+    assert seen[-1] == Done("complete", "", t_unix_s=5.0)
     assert engine.clock.now() == 5.0
     unsubscribe()
     engine.run(Counting(1))
-    assert seen[-1].kind == "done" and len([e for e in seen if e.kind == "progress"]) == 5
+    assert isinstance(seen[-1], Done) and len([e for e in seen if isinstance(e, Message)]) == 5
 
 
 def test_a_failure_is_published_and_shutdown_still_runs():
     engine = Engine(SteppedClock())
     errors = []
-    engine.subscribe(lambda e: errors.append(e.data["message"]) if e.kind == "error" else None)
+    engine.subscribe(lambda e: errors.append(e.message) if isinstance(e, Message) and e.level == "error" else None)
     proc = Counting(5, fail_at=2)
     assert engine.run(proc) == "failed"
     assert proc.calls[-1] == "shutdown:failed" and "device gone" in errors[0]
@@ -84,7 +87,7 @@ def test_stop_and_abort_from_another_thread():
 def test_the_operator_answers_a_prompt():
     engine = Engine(SteppedClock())
     prompts = threading.Event()
-    engine.subscribe(lambda e: prompts.set() if e.kind == "prompt" else None)
+    engine.subscribe(lambda e: prompts.set() if isinstance(e, Prompt) else None)
     proc = Counting(1, ask=True)
     engine.start(proc)
     assert prompts.wait(5)

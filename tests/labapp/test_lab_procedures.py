@@ -11,6 +11,7 @@ from labapp.bench import Bench
 from labapp.calseries import CalibrationProcedure, SeriesConfig
 from labapp.clock import SteppedClock
 from labapp.engine import Engine
+from labapp.events import FrameStored, Prompt, StateChanged
 from labapp.procedures import RunConfig, RunProcedure
 from labapp.storage import read_run, verify_run
 from tests.labapp.lab_fakes import SCENE, ModelHotplate, RenderCamera
@@ -52,19 +53,19 @@ def test_a_simulated_run_heats_drops_acquires_and_reads_the_concentration(tmp_pa
                        stable_step_s=30, keepalive_s=0.02, frame_bytes_estimate=100_000, low_space_bytes=0)
     engine = Engine(clock)
     frames, phases = [], []
-    engine.subscribe(lambda e: frames.append(e.data) if e.kind == "frame" else
-                     phases.append(e.data["phase"]) if e.kind == "state" else None)
+    engine.subscribe(lambda e: frames.append(e) if isinstance(e, FrameStored) else
+                     phases.append(e.phase) if isinstance(e, StateChanged) else None)
     proc = RunProcedure(config, bench, tmp_path, calibration)
     assert engine.run(proc) == "complete"
-    assert phases[:2] == ["starting", "opened"] and "heating" in phases and "acquiring" in phases
+    assert phases[:3] == ["starting", "connecting", "opened"] and "heating" in phases and "acquiring" in phases
     snap = read_run(proc.run.path)
     assert snap.status == "complete" and snap.meta["reference_file"] == "reference.jpg"
     assert len(snap.frames) == 51 and snap.frames[0].t_s == 0.0 and snap.frames[-1].t_s == 3000.0
     assert all(f.probe_c is not None and abs(f.probe_c - 70) < 0.6 for f in snap.frames)
     assert snap.frames[-1].speed_rpm == 150.0
     assert bench.hotplate.log[-2:] == ["heating off", "close"] and not bench.hotplate.heating
-    truth = np.array([_truth(t0)(t0[0] + f["t_s"]) for f in frames])
-    conc = np.array([f["conc_g_per_kg"] for f in frames])
+    truth = np.array([_truth(t0)(t0[0] + f.t_s) for f in frames])
+    conc = np.array([f.conc_g_per_kg for f in frames])
     assert np.sqrt(np.mean((conc - truth) ** 2)) < 0.02 * 3.5
     assert verify_run(proc.run.path).ok
     curve = analyze_run(proc.run.path, calibration)      # the offline analysis reads the same folder
@@ -92,7 +93,7 @@ def test_faults_are_logged_and_the_run_goes_on(tmp_path, calibration):
 def test_operator_stop_while_waiting_for_the_drop(tmp_path, calibration):
     clock = SteppedClock(start_s=4e9)
     engine = Engine(clock)
-    engine.subscribe(lambda e: engine.stop() if e.kind == "prompt" and e.data["prompt"] == "drop" else None)
+    engine.subscribe(lambda e: engine.stop() if isinstance(e, Prompt) and e.prompt == "drop" else None)
     proc = RunProcedure(RunConfig(stable_step_s=30, keepalive_s=0.02, frame_bytes_estimate=1000), _bench(clock, _truth([None])),
                         tmp_path, calibration)
     assert engine.run(proc) == "stopped"

@@ -6,6 +6,7 @@ from labapp.clock import SteppedClock
 from labapp.engine import Engine
 from labapp.procedures import RunConfig, RunProcedure
 from labapp.simbench import Material, SampleRelease, SimulatedBench, sample_release
+from labapp.events import FrameStored
 from labapp.storage import read_run, verify_run
 
 
@@ -56,9 +57,9 @@ def test_faults_during_a_simulated_run_are_logged_and_the_run_goes_on(tmp_path, 
         engine = Engine(clock)
 
         def inject(event):
-            if event.kind == "frame":
+            if isinstance(event, FrameStored):
                 {5: lambda: sim.camera_busy(1), 10: lambda: sim.corrupt_frames(1),
-                 15: lambda: sim.drop_hotplate_link(300.0)}.get(event.data["index"], lambda: None)()
+                 15: lambda: sim.drop_hotplate_link(300.0)}.get(event.index, lambda: None)()
         engine.subscribe(inject)
         assert engine.run(proc) == "complete"
     finally:
