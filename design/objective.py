@@ -33,12 +33,14 @@ from design.errors import DesignError
 from design.filters import SmoothingFilter, project, project_adjoint, project_inverse
 from design.fmm import MarchBuffers
 from design.forward import Release, release_gradient, simulate
+from design.printability import PRINT_DENSITY_G_PER_CM3
 from design.rate import rate_fit, rate_shape_fit, release_duration
+from design.shapes import PRINT_MASS_G
 from design.spaces import DesignSpace
 
 log = logging.getLogger(__name__)
 
-REFERENCE_MASS_MM3 = 1750.0 / 1.32
+REFERENCE_MASS_MM3 = PRINT_MASS_G * 1000.0 / PRINT_DENSITY_G_PER_CM3
 """Final release the objective is normalised to, mm^3 (1.75 g at 1.32 g/cm^3)."""
 
 
