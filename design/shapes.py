@@ -7,14 +7,13 @@ import numpy as np
 import trimesh
 
 from design.errors import DesignError
+from design.printability import PRINT_DENSITY_G_PER_CM3
 
 log = logging.getLogger(__name__)
 
 PRINT_MASS_G = 1.75
 """Mass of every sample print, g (the paper's forward-model shapes weigh ~1.75 g)."""
-PLA_DENSITY_G_PER_CM3 = 1.32
-"""Density of the printed material, g/cm^3."""
-VOLUME_MM3 = PRINT_MASS_G / PLA_DENSITY_G_PER_CM3 * 1000.0
+VOLUME_MM3 = PRINT_MASS_G / PRINT_DENSITY_G_PER_CM3 * 1000.0
 """Solid volume of every sample shape, mm^3 (about 1326)."""
 
 SAMPLE_SHAPES: tuple[str, ...] = ("sphere", "pill", "spinner_top", "csg", "polyhedron")
