@@ -43,7 +43,8 @@ from analysis.errors import AnalysisError
 log = logging.getLogger(__name__)
 
 MODELS = ("constant", "saturation")
-"""Calibration models: constant rate (eq. 12) and the concentration-dependent rate of Appendix B."""
+"""Calibration models: constant rate (Appendix A, eq. 11 with a constant bath) and the concentration-dependent
+rate of Appendix B."""
 DENSITY_RANGE_G_PER_CM3 = (0.8, 2.0)
 """Weighed mass / simulated volume outside this range means a wrong mesh, unit or mass."""
 MIN_RELEASE_FRACTION = 0.05
@@ -383,7 +384,7 @@ def _fit_prepared(prepared: Sequence[_Prepared], model: str, max_offset_s: float
         inv_csat, _ = _scan_then_refine(objective, np.linspace(0.0, top, 10), top * 1e-4)
         objective(inv_csat)
         s, offsets, losses = fits[inv_csat]
-        if inv_csat <= 0:   # the bounded search's best is the constant model: c_sat is then infinite
+        if inv_csat <= 0:   # the constant model fits best: a bath that never saturates (c_sat 1e6 x the bound)
             inv_csat = top * 1e-6
     cal = SimCal(model, s, g_per_mm3, 1.0 / inv_csat if model == "saturation" else None)
     return SimCalFit(cal, tuple(sh.g_per_mm3 for sh in shapes), tuple(offsets), tuple(losses))
