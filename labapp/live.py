@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis import BenchCalibration, estimate_concentration, read_cells, smooth_curve, steady_state
+from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
 
 log = logging.getLogger(__name__)
 
@@ -58,10 +59,11 @@ class LiveAnalyzer:
 
 
 def is_steady(t_s: list[float], conc: list[float], min_duration_s: float) -> bool:
-    """The analysis package's steady-state criterion on the Savitzky-Golay smoothed curve, applied only
+    """The analysis package's steady-state criterion on the Savitzky-Golay smoothed curve (the window the
+    live plot and ``sfr analyze`` use, ``analysis.curve.DEFAULT_WINDOW_S``), applied only
     after ``min_duration_s`` s of run (times in s, concentrations in g/kg, NaN frames ignored)."""
     pairs = [(t, c) for t, c in zip(t_s, conc) if not math.isnan(c)]
     if len(pairs) < 10 or pairs[-1][0] < min_duration_s:
         return False
     t, c = np.array(pairs).T
-    return bool(steady_state(t, smooth_curve(t, c)))
+    return bool(steady_state(t, smooth_curve(t, c, window_s=DEFAULT_WINDOW_S, order=DEFAULT_ORDER)))

@@ -14,6 +14,7 @@ from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from analysis import smooth_curve
+from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
 
 log = logging.getLogger(__name__)
 
@@ -21,10 +22,11 @@ REDRAW_MS = 100
 
 
 class PlotsPanel(QWidget):
-    """Live plots of one run. ``water_g`` sets the released-mass axis (g = g/kg x kg of water)."""
+    """Live plots of one run. ``water_g`` sets the released-mass axis (g = g/kg x kg of water). The smoothed
+    curve uses the analysis' Savitzky-Golay window and order, the curve the steady-state stop judges."""
 
     def __init__(self, parent: QWidget | None = None, water_g: float = 500.0,
-                 smooth_window_s: float = 600.0, smooth_order: int = 2) -> None:
+                 smooth_window_s: float = DEFAULT_WINDOW_S, smooth_order: int = DEFAULT_ORDER) -> None:
         super().__init__(parent)
         self.smooth_window_s, self.smooth_order = smooth_window_s, smooth_order
         self.t_s: list[float] = []

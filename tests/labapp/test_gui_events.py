@@ -37,3 +37,12 @@ def test_driver_warnings_reach_the_event_log(qtbot):
         assert seen == [("warning", "drivers.hotplate.heidolph: link lost on /dev/ttyUSB0; reconnect 1 of 3")]
     finally:
         bridge.detach()
+
+
+def test_live_plot_smooths_with_the_analysis_window(qtbot):
+    from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
+    from labapp.gui.plots import PlotsPanel
+
+    panel = PlotsPanel()
+    qtbot.addWidget(panel)
+    assert (panel.smooth_window_s, panel.smooth_order) == (DEFAULT_WINDOW_S, DEFAULT_ORDER)
