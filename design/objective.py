@@ -220,5 +220,5 @@ class DesignObjective:
 
 
 def rel_rmse(curve_mm3: np.ndarray, target_mm3: np.ndarray) -> float:
-    """RMS deviation over the tau grid divided by the target's final value (issue metric)."""
+    """RMS deviation over the tau grid divided by the target's final value (the accuracy metric)."""
     return float(np.sqrt(np.mean((np.asarray(curve_mm3) - target_mm3) ** 2)) / target_mm3[-1])

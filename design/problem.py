@@ -106,7 +106,7 @@ class DesignConfig:
         targets, 0 (eq. 4 as in the paper) otherwise.
     rate_span : (float, float)
         J_rate compares rates only between the times the target reaches these fractions of its
-        final release (`design.rate`); (0, 1) = the whole curve, as in session 1.
+        final release (`design.rate`); (0, 1) = the whole curve.
     robust_eta : float
         Threshold offset d of the robust formulation (`design.objective`): the designs projected at
         1/2 - d and 1/2 + d must release with the target's rate profile too; 0 = off (as in the

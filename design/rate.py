@@ -11,9 +11,9 @@ rate error e held over the release weighs like a relative cumulative error e in 
 in C, so its adjoint is the transposed difference operator applied to the weighted residual. The sum
 may be restricted to a span of k (`DesignObjective` uses the target's 5%-95% by default): where a
 target's rate jumps, at its start and end, no solid can follow within a voxel's ramp, and matching
-the jump there pulled the design's rate off within the release (session 2, docs/results.md).
+the jump there pulled the design's rate off within the release (docs/results.md).
 
-`rate_deviation` is the metric the issue's zero-order requirement is judged by (see
+`rate_deviation` is the metric a zero-order requirement is judged by (see
 docs/results.md): the largest relative deviation from the mean rate over the middle 80% of the
 release.
 """
