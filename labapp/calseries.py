@@ -143,15 +143,15 @@ class SeriesConfig:
 
     def __post_init__(self) -> None:
         if len(self.crop) != 3 or min(self.crop) < 0 or self.crop[2] < self.grid:
-            raise ValueError(f"SeriesConfig.crop must be (x, y, size) px with size >= grid, got {self.crop}")
+            raise UsageError(f"SeriesConfig.crop must be (x, y, size) px with size >= grid, got {self.crop}")
         if not self.water_g > 0:
-            raise ValueError(f"SeriesConfig.water_g must be > 0 g, got {self.water_g}")
+            raise UsageError(f"SeriesConfig.water_g must be > 0 g, got {self.water_g}")
         if any(b <= a for a, b in zip((0.0,) + self.masses_g, self.masses_g)):
-            raise ValueError(f"SeriesConfig.masses_g must be positive and increasing (cumulative), got {self.masses_g}")
+            raise UsageError(f"SeriesConfig.masses_g must be positive and increasing (cumulative), got {self.masses_g}")
         if self.reduce not in (1, 2, 4, 8):
-            raise ValueError(f"SeriesConfig.reduce must be 1, 2, 4 or 8, got {self.reduce}")
+            raise UsageError(f"SeriesConfig.reduce must be 1, 2, 4 or 8, got {self.reduce}")
         if self.settle_s < 0:
-            raise ValueError(f"SeriesConfig.settle_s must be >= 0 s, got {self.settle_s}")
+            raise UsageError(f"SeriesConfig.settle_s must be >= 0 s, got {self.settle_s}")
 
     def geometry(self) -> CropGeometry:
         """The crop geometry the calibration is fitted for."""

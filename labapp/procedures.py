@@ -18,6 +18,7 @@ from typing import Any
 from analysis import BenchCalibration
 from labapp.bench import Bench, BenchSession, ProcedureError
 from labapp.engine import Engine
+from labapp.errors import UsageError
 from labapp.events import FrameStored, Preview, StateChanged
 from labapp.live import LiveAnalyzer, is_steady
 from labapp.storage import RunFolder, check_disk_space, create_run, free_bytes, open_run, read_run
@@ -56,15 +57,15 @@ class RunConfig:
                     "keepalive_s", "frame_bytes_estimate")
         for key in positive:
             if not getattr(self, key) > 0:
-                raise ValueError(f"RunConfig.{key} must be > 0, got {getattr(self, key)}")
+                raise UsageError(f"RunConfig.{key} must be > 0, got {getattr(self, key)}")
         if not 0 <= self.setpoint_c <= 150:
-            raise ValueError(f"RunConfig.setpoint_c must be in [0, 150] C, got {self.setpoint_c}")
+            raise UsageError(f"RunConfig.setpoint_c must be in [0, 150] C, got {self.setpoint_c}")
         if not 0 <= self.speed_rpm <= 1400:
-            raise ValueError(f"RunConfig.speed_rpm must be in [0, 1400] rpm, got {self.speed_rpm}")
+            raise UsageError(f"RunConfig.speed_rpm must be in [0, 1400] rpm, got {self.speed_rpm}")
         if not self.tolerance_c > 0:
-            raise ValueError(f"RunConfig.tolerance_c must be > 0 C, got {self.tolerance_c}")
+            raise UsageError(f"RunConfig.tolerance_c must be > 0 C, got {self.tolerance_c}")
         if self.object_mass_g is not None and not self.object_mass_g > 0:
-            raise ValueError(f"RunConfig.object_mass_g must be > 0 g, got {self.object_mass_g}")
+            raise UsageError(f"RunConfig.object_mass_g must be > 0 g, got {self.object_mass_g}")
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:

@@ -24,12 +24,14 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from drivers.errors import DriverError
+
 log = logging.getLogger(__name__)
 
 __all__ = ["BenchScene", "Intrusion", "SceneError", "render_linear", "render_frame", "render_jpeg", "srgb_encode"]
 
 
-class SceneError(ValueError):
+class SceneError(DriverError, ValueError):
     """A bench scene parameter is out of range; the message names it and the allowed range."""
 
 
