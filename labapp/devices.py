@@ -7,6 +7,7 @@ from pathlib import Path
 
 from drivers.camera.base import CameraSettings
 from labapp.bench import Bench
+from labapp.errors import UsageError
 
 log = logging.getLogger(__name__)
 
@@ -18,7 +19,7 @@ def make_camera(spec: str, deadline_s: float = 30.0):
 
     Raises
     ------
-    ValueError
+    UsageError
         For a spec that names no known camera kind.
     """
     kind, _, rest = spec.partition(":")
@@ -31,9 +32,9 @@ def make_camera(spec: str, deadline_s: float = 30.0):
         from drivers.camera import FolderCamera
 
         if not rest:
-            raise ValueError("camera spec 'folder:' needs a path, e.g. folder:/media/card/DCIM")
+            raise UsageError("camera spec 'folder:' needs a path, e.g. folder:/media/card/DCIM")
         return FolderCamera(Path(rest))
-    raise ValueError(f"unknown camera {spec!r}; expected {CAMERA_SPECS}")
+    raise UsageError(f"unknown camera {spec!r}; expected {CAMERA_SPECS}")
 
 
 def make_hotplate(url: str | None):
