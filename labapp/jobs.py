@@ -10,6 +10,10 @@ design                        :func:`design`                              ``desi
 start a run                   :func:`new_run`                             ``run``
 resume an interrupted run     :func:`resume_run`                          ``run --resume``
 verify a folder               :func:`verify`                              ``verify``
+calibrate the simulation      :func:`calibrate_sim` (``labapp.simcal``)    ``calibrate-sim``
+sweep design settings         :func:`run_sweep` (``labapp.sweep``)          ``sweep``
+analyse many runs             :func:`analyse_many` (``labapp.batch``)       ``analyze RUN...``
+Monte Carlo simulation        :func:`simulate_mc_job` (``labapp.mcsim``)    ``simulate --model mc``
 ============================  ==========================================  ======================
 
 Each job checks its output path (:mod:`labapp.outpaths`) and its inputs before any work, raises
@@ -34,9 +38,9 @@ from labapp.outpaths import ANALYSIS_SUBFOLDER, check_data_dir, check_out
 
 log = logging.getLogger(__name__)
 
-__all__ = ["AnalysisOutputs", "DESIGN_DEFAULTS", "SimulationOutputs", "TARGET_SOURCE", "analyse_run",
-           "calibrate_series", "design", "design_folder", "new_run", "resume_run", "simulate", "simulation_grid",
-           "verify"]
+__all__ = ["AnalysisOutputs", "DESIGN_DEFAULTS", "SimulationOutputs", "TARGET_SOURCE", "analyse_many", "analyse_run",
+           "calibrate_series", "calibrate_sim", "design", "design_folder", "new_run", "resume_run", "run_sweep",
+           "simulate", "simulate_mc_job", "simulation_grid", "verify"]
 
 
 # -- analyse a run -------------------------------------------------------------------------------------
@@ -509,3 +513,10 @@ def verify(folder: str | Path):
     from labapp.storage import verify_run
 
     return verify_run(Path(folder))
+
+
+# -- jobs with modules of their own (imported last: they call the jobs above) ----------------------------
+from labapp.batch import analyse_many  # noqa: E402
+from labapp.mcsim import simulate_mc_job  # noqa: E402
+from labapp.simcal import calibrate_sim  # noqa: E402
+from labapp.sweep import run_sweep  # noqa: E402
