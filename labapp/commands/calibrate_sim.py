@@ -6,6 +6,8 @@ import logging
 import sys
 from pathlib import Path
 
+from labapp.argtypes import nonnegative_float, positive_int
+
 log = logging.getLogger(__name__)
 
 NAME = "calibrate-sim"
@@ -25,9 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default="auto", choices=("auto", "constant", "saturation"),
                         help="model used for prediction: constant rate, Appendix B's saturating bath, or auto "
                              "(the lower leave-one-out error; both are always reported)")
-    parser.add_argument("--resolution", type=int, default=DEFAULT_RESOLUTION,
+    parser.add_argument("--resolution", type=positive_int, default=DEFAULT_RESOLUTION,
                         help=f"voxels along each mesh's longest side (default {DEFAULT_RESOLUTION})")
-    parser.add_argument("--max-offset-s", type=float, default=DEFAULT_MAX_OFFSET_S,
+    parser.add_argument("--max-offset-s", type=nonnegative_float, default=DEFAULT_MAX_OFFSET_S,
                         help=f"bound on each run's drop-time offset, s (default {DEFAULT_MAX_OFFSET_S:g}; 0 = none)")
 
 

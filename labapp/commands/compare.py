@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import logging
 
-from labapp.argtypes import positive_float
+from labapp.argtypes import nonnegative_int, positive_float
 
 log = logging.getLogger(__name__)
 
@@ -27,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="f1/f2 time points, s (default: the sparser curve's samples, or a regular grid)")
     parser.add_argument("--rule", choices=("either", "both"), default="either",
                         help="the point after 85 %% is where either curve (EMA, default) or both (FDA) pass it")
-    parser.add_argument("--bootstrap", type=int, default=0, metavar="N",
+    parser.add_argument("--bootstrap", type=nonnegative_int, default=0, metavar="N",
                         help="with replicates: a 90 %% bootstrap interval of f2 from N samples (e.g. 10000)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
     parser.add_argument("--calibration", help="bench calibration JSON for run folders without calibration.json")

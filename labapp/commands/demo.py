@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import logging
 
+from labapp.argtypes import positive_float
+
 log = logging.getLogger(__name__)
 
 NAME = "demo"
@@ -17,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "sub-folder per demo session")
     parser.add_argument("--sample", default="pill", help="the further object, whose measured curve is the design "
                         "target (pill or polyhedron; sphere, spinner_top and csg are the calibration set)")
-    parser.add_argument("--interval", type=float, default=11.0, help="frame interval of the further object's run, s "
+    parser.add_argument("--interval", type=positive_float, default=11.0, help="frame interval of the further object's run, s "
                         "(default 11, the paper's)")
 
 

@@ -5,7 +5,7 @@ import argparse
 import logging
 import sys
 
-from labapp.argtypes import positive_int
+from labapp.argtypes import finite_float, nonnegative_float, positive_float, positive_int
 from labapp.meshunits import MM_PER_UNIT
 
 log = logging.getLogger(__name__)
@@ -25,10 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--preset", metavar="paper:NAME",
                         help="hyperparameters of the paper's Tables 1-2 (e.g. paper:pill, paper:design-4) for the "
                              "options not given")
-    parser.add_argument("--w-fab", type=float, help="weight w_f of the ICO term (ico; default 100; J_fab is 1 "
+    parser.add_argument("--w-fab", type=nonnegative_float, help="weight w_f of the ICO term (ico; default 100; J_fab is 1 "
                         "at the start design)")
-    parser.add_argument("--layers", type=int, default=8, help="ICO partial designs L along +z (default 8)")
-    parser.add_argument("--ico-coarsen", type=int, default=2, metavar="VOX",
+    parser.add_argument("--layers", type=positive_int, default=8, help="ICO partial designs L along +z (default 8)")
+    parser.add_argument("--ico-coarsen", type=positive_int, default=2, metavar="VOX",
                         help="design voxels per elasticity element edge of the ICO term (default 2)")
     parser.add_argument("--stiffness-law", default="simp", choices=("simp", "ramp"),
                         help="ICO stiffness interpolation: simp (p = 3, default) or ramp (q = 3)")
@@ -36,37 +36,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="voxels along the domain's longest side (even; default 64)")
     parser.add_argument("--units", default="mm", choices=tuple(MM_PER_UNIT),
                         help="units of a mesh target's coordinates (default mm); copied into the run scaled to mm")
-    parser.add_argument("--domain-mm", type=float, nargs=3, metavar=("X", "Y", "Z"),
+    parser.add_argument("--domain-mm", type=positive_float, nargs=3, metavar=("X", "Y", "Z"),
                         help="design domain size, mm (default: source bounding box plus margin, cubic for nfc)")
-    parser.add_argument("--w-binary", type=float, help="weight of J_binary (default per space, Tables 1-2)")
-    parser.add_argument("--radius", type=float, help="smoothing radius, voxels (default: --radius-mm)")
-    parser.add_argument("--radius-mm", type=float, metavar="MM",
+    parser.add_argument("--w-binary", type=nonnegative_float, help="weight of J_binary (default per space, Tables 1-2)")
+    parser.add_argument("--radius", type=positive_float, help="smoothing radius, voxels (default: --radius-mm)")
+    parser.add_argument("--radius-mm", type=positive_float, metavar="MM",
                         help="smoothing radius, mm: the minimum feature size at any resolution (default 1)")
     parser.add_argument("--allow-pieces", action="store_true",
                         help="drop the connectivity penalty: the design may fall apart into pieces")
-    parser.add_argument("--w-connect", type=float,
+    parser.add_argument("--w-connect", type=nonnegative_float,
                         help="weight of the connectivity penalty J_conn (default: the same as w_binary's default)")
-    parser.add_argument("--beta", type=float, help="projection steepness (default 3)")
-    parser.add_argument("--beta-final", type=float,
+    parser.add_argument("--beta", type=positive_float, help="projection steepness (default 3)")
+    parser.add_argument("--beta-final", type=positive_float,
                         help="beta continuation: raise beta to this over the run in 4 stages (default: fixed beta)")
-    parser.add_argument("--rate-window", type=float, default=1.0, metavar="VOX",
+    parser.add_argument("--rate-window", type=positive_float, default=1.0, metavar="VOX",
                         help="finite-difference span of the rate-fit term's rates, voxels (default 1)")
-    parser.add_argument("--w-rate", type=float,
+    parser.add_argument("--w-rate", type=nonnegative_float,
                         help="weight of the rate-fit term J_rate (default 1 for analytic targets, else 0)")
-    parser.add_argument("--rate-span", type=float, nargs=2, default=(0.05, 0.95), metavar=("LO", "HI"),
+    parser.add_argument("--rate-span", type=finite_float, nargs=2, default=(0.05, 0.95), metavar=("LO", "HI"),
                         help="J_rate compares rates between the times the target reaches these fractions of "
                              "its release (default 0.05 0.95; 0 1 = whole curve)")
-    parser.add_argument("--robust-eta", type=float, default=0.0, metavar="D",
+    parser.add_argument("--robust-eta", type=nonnegative_float, default=0.0, metavar="D",
                         help="robust formulation: fit the designs projected at 1/2 - D, 1/2, 1/2 + D "
                              "(0 = off; 3 simulations per evaluation)")
-    parser.add_argument("--height", type=float, metavar="MM",
+    parser.add_argument("--height", type=positive_float, metavar="MM",
                         help="extrusion height, mm (default: the source's height, else the domain's)")
     parser.add_argument("--max-iter", type=positive_int, help="maximum objective evaluations (default 500)")
     parser.add_argument("--bounds", default="cosine", choices=("cosine", "box"),
                         help="how L-BFGS keeps rho_hat in [0, 1] (default cosine)")
     parser.add_argument("--optimizer", help="lbfgs (default: lean L-BFGS, exact resume) or nlopt's LD_LBFGS, "
                         "LD_MMA, LD_CCSAQ (box bounds need one of these); checked by the design configuration")
-    parser.add_argument("--warn-channel-mm", type=float, default=1.0, help="warn below this channel width, mm")
+    parser.add_argument("--warn-channel-mm", type=nonnegative_float, default=1.0, help="warn below this channel width, mm")
     parser.add_argument("--formats", nargs="*", default=[], choices=("3mf", "obj"), help="extra mesh formats")
     parser.add_argument("--allow-infeasible", action="store_true", help="optimise even if the target fails checks")
     parser.add_argument("--resume", action="store_true", help="continue the stopped run in --out, on the copy of "

@@ -6,6 +6,8 @@ import argparse
 import logging
 import sys
 
+from labapp.argtypes import positive_int
+
 log = logging.getLogger(__name__)
 
 NAME = "sweep"
@@ -19,7 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                       "the others)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="tcp://HOST:PORT of a running Dask scheduler "
                                                                "(default: a local cluster on this machine)")
-    parser.add_argument("--workers", type=int, metavar="N",
+    parser.add_argument("--workers", type=positive_int, metavar="N",
                         help="local cluster: worker processes (default: one per core, as many as memory holds); "
                              "with --scheduler: wait for N workers before starting")
 
