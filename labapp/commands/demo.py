@@ -29,9 +29,10 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from labapp.demo import run_demo
+    from labapp.outpaths import check_data_dir
     from labapp.storage import sanitize_name
 
-    out = Path(args.out) / time.strftime(f"%Y%m%d-%H%M%S_{sanitize_name(args.sample)}")
+    out = check_data_dir(args.out) / time.strftime(f"%Y%m%d-%H%M%S_{sanitize_name(args.sample)}")
     print(f"sfr demo: measure -> calibrate -> design on the simulated bench, in {out}", flush=True)
     if not args.verbose:   # the injected faults are the point of the run's event log, not of the terminal
         logging.getLogger().setLevel(logging.ERROR)
