@@ -5,7 +5,7 @@ import argparse
 import logging
 import sys
 
-from labapp.argtypes import positive_float, positive_int
+from labapp.argtypes import nonnegative_float, positive_float, positive_int
 from labapp.meshunits import MM_PER_UNIT
 
 log = logging.getLogger(__name__)
@@ -34,16 +34,60 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(t_s,released_g,conc_g_per_kg) and release_physical.png; simulates at its resolution")
     parser.add_argument("--water-g", type=positive_float, help="bath water for the physical curve, g (default: the "
                         "calibration's)")
+    parser.add_argument("--model", choices=("forward", "mc"), default="forward",
+                        help="forward: the fast-marching model (default); mc: the kinetic Monte Carlo baseline "
+                             "(release.csv in seconds with the spread over seeds, release_physical.csv)")
+    parser.add_argument("--seeds", type=positive_int, default=4, help="--model mc: runs averaged (default 4)")
+    parser.add_argument("--mc-calibration", metavar="MC.json",
+                        help="--model mc: tuned (A, E_a) from sfr evaluate; without it --mc-a and --mc-ea")
+    parser.add_argument("--mc-a", type=positive_float, metavar="PER_S",
+                        help="--model mc without a calibration: pre-exponential factor A, 1/s (default 1: time "
+                             "in units of 1/A)")
+    parser.add_argument("--mc-ea", type=nonnegative_float, metavar="J_PER_MOL",
+                        help="--model mc without a calibration: activation energy per solid neighbour, J/mol "
+                             "(default 5000)")
 
 
 def _progress(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
+def _run_mc(args: argparse.Namespace) -> int:
+    """``--model mc``: the Monte Carlo job with a tuned calibration or explicit (A, E_a)."""
+    from design.montecarlo import MonteCarloParams
+    from labapp.errors import UsageError
+    from labapp.mcsim import McCalibration, load_mc_calibration, simulate_mc_job
+
+    if args.simcal:
+        raise UsageError("--simcal calibrates the forward model; the Monte Carlo model takes --mc-calibration")
+    if args.mc_calibration:
+        if args.mc_a is not None or args.mc_ea is not None:
+            raise UsageError("give either --mc-calibration or --mc-a/--mc-ea, not both")
+        calibration = load_mc_calibration(args.mc_calibration)
+        if args.resolution is None and args.voxel_size is None:
+            args.resolution = calibration.resolution
+    else:
+        calibration = McCalibration(MonteCarloParams(1.0 if args.mc_a is None else args.mc_a,
+                                                     5000.0 if args.mc_ea is None else args.mc_ea))
+        print("sfr simulate: no --mc-calibration: times are in units of 1/A; tune (A, E_a) with sfr evaluate",
+              file=sys.stderr)
+    result = simulate_mc_job(args.input, args.out, calibration, resolution=args.resolution,
+                             voxel_size_mm=args.voxel_size, symmetry=args.symmetry, units=args.units,
+                             seeds=args.seeds, water_g=args.water_g, progress=_progress)
+    s = result.summary
+    print(f"Monte Carlo: {s['physical']['mass_g']:.3f} g released over {s['physical']['duration_s'] / 3600:.2f} h, "
+          f"spread over {len(s['seeds'])} seeds up to {s['spread_max_g']:.4f} g ({calibration.describe()}), "
+          f"{s['seconds']:.2f} s -> {result.out}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     import json
 
     import numpy as np
+
+    if args.model == "mc":
+        return _run_mc(args)
 
     from labapp.jobs import simulate as simulate_job
     from labapp.simcal import check_resolution, load_simcal

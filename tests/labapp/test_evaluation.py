@@ -51,7 +51,9 @@ def test_evaluate_writes_the_fig8_table_picture_and_a_monte_carlo_calibration(ca
         assert (out / name).stat().st_size > 0, name
     mc = load_mc_calibration(out / "mc.json")
     assert mc.params.dx_mm > 0 and mc.g_per_mm3 == pytest.approx(G_PER_MM3, rel=0.05)
+    capsys.readouterr()
     assert main(["evaluate", str(calibration_set / "set.csv"), "--out", str(out)]) == 2  # never over its results
+    assert "already holds a model evaluation folder" in capsys.readouterr().err
 
 
 def test_simulate_mc_writes_the_forward_models_files(tmp_path):
@@ -65,3 +67,23 @@ def test_simulate_mc_writes_the_forward_models_files(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["model"] == "mc" and summary["seeds"] == [0, 1, 2]
     assert summary["physical"]["release"]["mdt_s"] > 0
+
+
+def test_sfr_simulate_model_mc_takes_a_calibration_and_refuses_the_forward_ones(tmp_path, capsys):
+    mc_json = tmp_path / "mc.json"
+    mc_json.write_text(json.dumps({"format": "sfr-mc-calibration/1", "a_per_s": 0.05, "ea_j_per_mol": 5000.0,
+                                   "temp_k": 343.15, "dx_mm": 1.0, "g_per_mm3": 1.3e-3, "water_g": 500.0,
+                                   "resolution": 12}))
+    out = tmp_path / "sim"
+    assert main(["simulate", "sample:sphere", "--model", "mc", "--mc-calibration", str(mc_json), "--seeds", "2",
+                 "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["grid_shape"] == [12, 12, 12] and summary["params"]["a_per_s"] != 0.05  # rescaled to its dx
+    assert "Monte Carlo:" in capsys.readouterr().out
+    assert main(["simulate", "sample:sphere", "--model", "mc", "--simcal", str(mc_json), "--out",
+                 str(tmp_path / "x")]) == 2
+    assert "--mc-calibration" in capsys.readouterr().err
+    mc_json.write_text(json.dumps({"format": "sfr-simcal/1"}))
+    assert main(["simulate", "sample:sphere", "--model", "mc", "--mc-calibration", str(mc_json), "--out",
+                 str(tmp_path / "y")]) == 2
+    assert "is not 'sfr-mc-calibration/1'" in capsys.readouterr().err
