@@ -1,4 +1,5 @@
-"""Run browser: past runs (interrupted ones too), reanalysis with other settings, resume, finalise, verify."""
+"""Run browser: past runs (interrupted ones too), reanalysis with other settings, resume, finalise, verify, and
+f2 between two runs or a run and its prediction."""
 from __future__ import annotations
 
 import logging
@@ -12,6 +13,7 @@ from PySide6.QtWidgets import (QDoubleSpinBox, QHBoxLayout, QLabel, QLineEdit, Q
 
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
 from labapp import jobs
+from labapp.compare import Comparison, compare_curves
 from labapp.errors import UsageError
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.overlay import PhysicalOverlay
@@ -34,7 +36,8 @@ def list_runs(data_dir: Path) -> list:
 
 
 class RunBrowser(QWidget):
-    """Lists runs under the data directory; the selected one can be reanalysed, resumed or finalised.
+    """Lists runs under the data directory; the selected one can be reanalysed, resumed or finalised, and
+    compared (f2) with a second selected run or with a prediction file.
 
     Emits ``resume_requested(path)`` (the main window resumes acquisition into that folder).
     """
@@ -47,6 +50,7 @@ class RunBrowser(QWidget):
         self.data_dir = Path(data_dir)
         self.tree = QTreeWidget()
         self.tree.setHeaderLabels(["run", "kind", "status", "frames", "created"])
+        self.tree.setSelectionMode(QTreeWidget.SelectionMode.ExtendedSelection)
         self.tree.itemSelectionChanged.connect(self._selected)
         self.window = QDoubleSpinBox()
         self.window.setRange(11.0, 7200.0)
@@ -57,6 +61,9 @@ class RunBrowser(QWidget):
         self.order.setValue(DEFAULT_ORDER)
         self.calibration = QLineEdit("")
         self.calibration.setPlaceholderText("calibration JSON (default: the run's own copy)")
+        self.prediction = QLineEdit("")
+        self.prediction.setPlaceholderText("prediction to compare the run with (release_physical.csv, "
+                                           "curves_physical.csv or any t_s,released_g CSV)")
         self.info = QLabel("")
         self.info.setWordWrap(True)
         self.plots = PlotsPanel()
@@ -78,9 +85,12 @@ class RunBrowser(QWidget):
         self.resume_button = QPushButton("Resume acquisition")
         self.finalise_button = QPushButton("Finalise")
         self.verify_button = QPushButton("Verify")
+        self.compare_button = QPushButton("f2")
+        self.compare_button.setToolTip("f2 (and f1, MDT, DE) of two selected runs, the first selected the "
+                                       "reference, or of the selected run and the prediction")
         for b, slot in ((self.refresh_button, self.refresh), (self.analyse_button, self.reanalyse),
                         (self.resume_button, self._resume), (self.finalise_button, self._finalise),
-                        (self.verify_button, self._verify)):
+                        (self.verify_button, self._verify), (self.compare_button, self.compare)):
             b.clicked.connect(slot)
             buttons.addWidget(b)
         settings = QHBoxLayout()
@@ -93,6 +103,7 @@ class RunBrowser(QWidget):
         layout.addWidget(self.tree, 1)
         layout.addLayout(buttons)
         layout.addLayout(settings)
+        layout.addWidget(self.prediction)
         layout.addWidget(self.info)
         layout.addWidget(self.plots, 2)
         layout.addLayout(overlay_buttons)
@@ -115,6 +126,10 @@ class RunBrowser(QWidget):
         """The selected run folder."""
         items = self.tree.selectedItems()
         return Path(items[0].data(0, 256)) if items else None
+
+    def selected_paths(self) -> list[Path]:
+        """The selected run folders, in the order they were selected."""
+        return [Path(item.data(0, 256)) for item in self.tree.selectedItems()]
 
     def select(self, path: Path) -> None:
         """Select the run at ``path`` (after :meth:`refresh`)."""
@@ -165,6 +180,35 @@ class RunBrowser(QWidget):
         self.task.finished.connect(self.show_curve)
         self.task.failed.connect(self.info.setText)
         self.task.start()
+
+    def compare(self) -> None:
+        """f2 between the two selected runs (the first selected is the reference), or between the selected
+        run (the reference) and the prediction file, through the job of ``sfr compare`` (in the background).
+        A run is read from its analysis (``RUN/analysis/curve.csv``) when it has one."""
+        paths = self.selected_paths()
+        prediction = self.prediction.text().strip()
+        if len(paths) == 2:
+            a, b = paths
+        elif len(paths) == 1 and prediction:
+            a, b = paths[0], Path(prediction)
+        else:
+            self.info.setText("f2: select two runs, or one run and give a prediction file")
+            return
+        if self.task is not None and self.task.running:
+            return
+        sources = [p / ANALYSIS_SUBFOLDER if (p / ANALYSIS_SUBFOLDER / "curve.csv").is_file() else p for p in (a, b)]
+        self.task = BackgroundTask(lambda progress: compare_curves(*sources), self)
+        self.task.finished.connect(self.show_comparison)
+        self.task.failed.connect(lambda message: self.info.setText(f"f2: {message}"))
+        self.task.start()
+
+    def show_comparison(self, result: Comparison) -> None:
+        """Slot: f1/f2, MDT and DE of a comparison in the info line."""
+        s = result.similarity
+        head = (f"f2 = {s.f2:.1f} ({'similar' if s.similar else 'not similar'}), f1 = {s.f1:.1f} on "
+                f"{s.points_used} points" if s.f2 is not None else f"f2 not reported: {s.reason}")
+        self.info.setText(f"{head}\nA {result.a.source}: MDT {result.a.mdt_s:.0f} s, DE {result.a.de_pct:.1f} %\n"
+                          f"B {result.b.source}: MDT {result.b.mdt_s:.0f} s, DE {result.b.de_pct:.1f} %")
 
     def _progress(self, done_total: tuple[int, int]) -> None:
         self.info.setText(f"analysing frame {done_total[0]} of {done_total[1]}")
