@@ -113,8 +113,8 @@ class GPhotoCamera:
                 raise CameraError(CLAIM_MESSAGE) from exc
             wanted = " ".join(x for x in (self.model, self.port) if x) or "any camera"
             if exc.code == MODEL_NOT_FOUND:
-                raise CameraError(f"no camera found on USB ({wanted}): is it switched on and not claimed by "
-                                  "another program?") from exc
+                raise CameraError(f"no camera found on USB ({wanted}; libgphoto2 error {exc.code}): is it "
+                                  "switched on and not claimed by another program?") from exc
             raise CameraError(f"cannot open {wanted} with libgphoto2: {exc}") from exc
         log.info("camera %s on %s", self.name, self.address)
         if self._settings is not None:

@@ -91,7 +91,8 @@ def test_a_hung_capture_is_missed_and_the_run_goes_on(served):
 
 
 def test_no_matching_camera_is_a_clear_error(served):
-    with pytest.raises(CameraError, match=r"cannot open Canon EOS with libgphoto2: .*-105"):
+    with pytest.raises(CameraError, match=r"no camera found on USB \(Canon EOS; libgphoto2 error -105\): is it "
+                                          r"switched on and not claimed by another program\?"):
         GPhotoCamera(model="Canon EOS", connect_deadline_s=20).connect()
 
 
