@@ -110,10 +110,13 @@ def narrowest_channel_mm(solid: np.ndarray, dx_mm: float, max_width_mm: float) -
 def overhangs(solid: np.ndarray) -> np.ndarray:
     """Solid voxels printed over void: the voxel below and its four side neighbours are all void.
 
+    The part is printed as it lies, resting on the plate: its lowest solid layer is on the plate
+    (which counts as solid), whatever empty layers the grid has below it.
+
     Parameters
     ----------
     solid : (X, Y, Z) ndarray of bool
-        The full solid, z (axis 2) the build direction; the plate below z = 0 counts as solid.
+        The full solid, z (axis 2) the build direction.
 
     Returns
     -------
@@ -129,7 +132,8 @@ def overhangs(solid: np.ndarray) -> np.ndarray:
     support[:-1] |= below[1:]
     support[:, 1:] |= below[:, :-1]
     support[:, :-1] |= below[:, 1:]
-    support[:, :, 0] = True  # the build plate
+    layers = np.flatnonzero(solid.any(axis=(0, 1)))
+    support[:, :, layers[0] if layers.size else 0] = True  # the build plate under the lowest layer
     return solid & ~support
 
 

@@ -325,6 +325,8 @@ def prepare(config: DesignConfig) -> Problem:
         size = np.asarray(config.domain_mm, float)
     elif mesh is not None:
         size = (hi - lo) + 2.0 * config.margin * float(np.max(hi - lo))
+        if config.space == "ico":  # the part stands on the build plate: no margin below it (section 3.6)
+            size[BUILD_AXIS] -= config.margin * float(np.max(hi - lo))
         if config.space == "nfc":
             size = np.full(3, size.max())
     elif analytic is None:  # a CSV curve: a cube whose horizon T holds the whole release
@@ -349,6 +351,8 @@ def prepare(config: DesignConfig) -> Problem:
     sim_full = tuple(sim_full)
     centre = 0.5 * (lo + hi) if mesh is not None else np.zeros(3)
     origin = centre - 0.5 * dx * np.asarray(sim_full, float)
+    if config.space == "ico" and mesh is not None:
+        origin[BUILD_AXIS] = lo[BUILD_AXIS]  # the source's base on the plate, z = 0 of the grid
     t_total = total_time(space.grid_shape, dx, space.mirror)
     domain_volume = float(np.prod(sim_full)) * dx ** 3
     source_solid = None

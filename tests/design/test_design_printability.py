@@ -63,9 +63,11 @@ def test_overhangs_of_hand_built_solids():
     for k in range(6):
         stairs[k, 1, k] = True  # 45 degrees: each voxel rests on its side neighbour below
     assert overhang_stats(stairs, 1.0) == (0.0, 0.0)
-    roof = np.zeros((6, 6, 3), dtype=bool)
-    roof[:, :, 2] = True  # a floating slab: everything overhangs, runs of 6 voxels
-    assert overhang_stats(roof, 0.25) == (1.0, pytest.approx(1.5))
+    roof = np.zeros((6, 6, 5), dtype=bool)
+    roof[:, :, 3] = True  # a slab lifted off the grid's floor rests on the plate as printed
+    assert overhang_stats(roof, 0.25) == (0.0, 0.0)
+    roof[0, 0, 1:3] = True  # on a corner post: all but the post's top and its two side neighbours overhang
+    assert overhang_stats(roof, 0.25) == (pytest.approx(33 / 38), pytest.approx(1.5))
     assert overhang_stats(np.zeros((2, 2, 2), bool), 1.0) == (0.0, 0.0)
     with pytest.raises(DesignError, match="3D solid"):
         overhangs(np.zeros((3, 3), bool))

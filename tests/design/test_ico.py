@@ -121,3 +121,12 @@ def test_presets_fill_unset_fields_and_name_themselves():
         DesignConfig(target="sphere", space="nfc", w_fab=5.0)
     with pytest.raises(DesignError, match="stiffness law"):
         DesignConfig(target="sphere", space="ico", stiffness_law="linear")
+
+
+def test_an_ico_domain_stands_the_source_on_the_plate():
+    from design.problem import prepare
+
+    problem = prepare(DesignConfig(target="pill", space="ico", resolution=24, layers=4))
+    layers = np.flatnonzero(problem.source_solid.any(axis=(0, 1)))
+    assert layers[0] == 0 and layers[-1] < problem.full_shape[2] - 2  # margin above only
+    assert problem.space.mirror == (True, True, False)
