@@ -40,7 +40,7 @@ BATH_TEMP_K = 343.15
 """Bath temperature of the measurements, 70 C (section 4.2), K."""
 DEFAULT_SEEDS = 4
 """Independent runs averaged by default."""
-KINK_PROBABILITY = 0.2
+KINK_PROBABILITY = 0.02
 """Default dt: a kink voxel (ndim solid neighbours, the site that unzips a surface step) dissolves with this
 probability per step."""
 SOLID_LEVEL = 0.5
