@@ -1,0 +1,145 @@
+"""Benchmark of the incremental-compliance term (section 3.6) against scikit-fmm's forward solve.
+
+Fields on an N^3 design grid: "void", the blurred random field of `bench_forward.void_field`
+(sigma N/32: many small solid islands, the hardest case for the elasticity solver), and "design",
+the same construction with sigma N/12 and 55% solid (larger, mostly connected members, closer to an
+optimised design). The ICO term sees the quadrant (N/2, N/2, N), mirror planes in x and y, z the
+build direction, L = 8 layers, the default coarsening (2 voxels per element edge), SIMP.
+For N = 64 and 128 and each field it reports, in the same process:
+  skfmm      skfmm.travel_time(order=1) on the padded N^3 grid (as bench_forward), best of R
+  ico cold   one J_fab + gradient (all L layers) from zero initial guesses
+  ico warm   one J_fab + gradient of a slightly changed design (an optimiser step: +-1% smooth
+             change of rho), warm-started from the previous solutions, as in every optimisation
+             iteration after the first
+  PCG iterations per layer, cold and warm
+and the peak resident memory of a separate process that runs the 128^3 evaluations. The coarsening
+error is measured at 64^3: J_fab normalised by the uniform start design, and the gradient's
+direction, at 2 and 4 voxels per element against the uncoarsened grid.
+
+Usage: python benchmarks/bench_ico.py [--quick] [--skip-coarsening]
+The last line is the headline: ico_over_skfmm_128 = <warm ICO time / skfmm time at 128^3, void field>.
+"""
+from __future__ import annotations
+
+import argparse
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from bench_forward import void_field
+
+
+def _quadrant(rho_full: np.ndarray) -> np.ndarray:
+    n = rho_full.shape[0]
+    return np.ascontiguousarray(rho_full[n // 2:, n // 2:, :])
+
+
+def _step(rho: np.ndarray, seed: int = 1) -> np.ndarray:
+    """A small smooth change of the design, like one optimiser step."""
+    noise = gaussian_filter(np.random.default_rng(seed).standard_normal(rho.shape), 3.0)
+    return np.clip(rho + 0.01 * noise / noise.std(), 0.0, 1.0)
+
+
+def design_field(n: int, seed: int = 0) -> np.ndarray:
+    """(n, n, n) density: blurred noise (sigma n/12), standardised, through a sigmoid of slope 8 at -0.3."""
+    g = gaussian_filter(np.random.default_rng(seed).standard_normal((n, n, n)), n / 12)
+    g = (g - g.mean()) / g.std()
+    return 1.0 / (1.0 + np.exp(-8.0 * (g + 0.3)))
+
+
+FIELDS = {"void": void_field, "design": design_field}
+
+
+def _ico_runs(n: int, field: str = "void"):
+    from design.ico import IcoConfig, IcoTerm
+
+    rho = _quadrant(FIELDS[field](n))
+    dx = 1.0 / n
+    term = IcoTerm(dx, IcoConfig())
+    t0 = time.perf_counter()
+    cold = term.evaluate(rho)
+    t_cold = time.perf_counter() - t0
+    moved = _step(rho)
+    t0 = time.perf_counter()
+    warm = term.evaluate(moved)
+    t_warm = time.perf_counter() - t0
+    return t_cold, t_warm, cold.iterations, warm.iterations
+
+
+def _peak_memory_child(n: int) -> None:
+    _ico_runs(n)
+    print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)  # kB -> MB on Linux
+
+
+def _coarsening_error(field: str, n: int = 64) -> None:
+    from design.ico import IcoConfig, incremental_compliance
+
+    rho = _quadrant(FIELDS[field](n))
+    start = np.full(rho.shape, float(rho.mean()))
+    dx = 1.0 / n
+    ref = None
+    print(f"coarsening error, {field} field at {n}^3 (quadrant {rho.shape}), J_fab / J_fab(uniform start) and "
+          f"gradient against 1 voxel per element:")
+    print(f"{'voxels/element':>15} {'J/J0':>9} {'rel. error':>10} {'grad cosine':>11} {'seconds':>8}")
+    for c in (1, 2, 4):
+        config = IcoConfig(coarsen=c, warm_start=False)
+        t0 = time.perf_counter()
+        j0 = incremental_compliance(start, dx, config)[0].value
+        res = incremental_compliance(rho, dx, config)[0]
+        seconds = time.perf_counter() - t0
+        ratio, grad = res.value / j0, res.grad / j0
+        if ref is None:
+            ref = (ratio, grad)
+        cosine = float(np.vdot(grad, ref[1]) / (np.linalg.norm(grad) * np.linalg.norm(ref[1])))
+        print(f"{c:>15} {ratio:>9.4f} {ratio / ref[0] - 1.0:>10.2%} {cosine:>11.4f} {seconds:>8.2f}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="one repeat of the skfmm timing")
+    parser.add_argument("--skip-coarsening", action="store_true", help="skip the coarsening-error table")
+    parser.add_argument("--peak-memory-child", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.peak_memory_child:
+        _peak_memory_child(args.peak_memory_child)
+        return
+
+    import skfmm
+
+    from design.forward import slowness
+
+    repeats = 1 if args.quick else 3
+    _ico_runs(16)  # load the compiled kernels outside the timings
+    if not args.skip_coarsening:
+        for field in FIELDS:
+            _coarsening_error(field)
+    ratio = {}
+    print(f"{'field':>6} {'N':>5} {'skfmm s':>8} {'ico cold s':>10} {'ico warm s':>10} {'cold/skfmm':>10} "
+          f"{'warm/skfmm':>10}  PCG iterations per layer (cold | warm)")
+    for field in ("design", "void"):
+        for n in (64, 128):
+            rho = FIELDS[field](n)
+            phi = np.pad(np.ones(rho.shape), 1)
+            speed = np.pad(1.0 / slowness(rho), 1, constant_values=1.0)
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                skfmm.travel_time(phi, speed, dx=1.0 / n, order=1)
+                times.append(time.perf_counter() - t0)
+            t_sk = min(times)
+            t_cold, t_warm, it_cold, it_warm = _ico_runs(n, field)
+            ratio[field, n] = t_warm / t_sk
+            print(f"{field:>6} {n:>5} {t_sk:>8.3f} {t_cold:>10.3f} {t_warm:>10.3f} {t_cold / t_sk:>10.2f} "
+                  f"{ratio[field, n]:>10.2f}  {' '.join(map(str, it_cold))} | {' '.join(map(str, it_warm))}")
+    out = subprocess.run([sys.executable, __file__, "--peak-memory-child", "128"], capture_output=True,
+                         text=True, check=True)
+    print(f"peak resident memory, ICO cold + warm evaluation at 128^3 (separate process): {float(out.stdout):.0f} MB")
+    print(f"ico_over_skfmm_128 = {ratio['void', 128]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
