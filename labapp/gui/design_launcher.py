@@ -64,7 +64,7 @@ class DesignLauncher(QWidget):
         run_button.clicked.connect(self._pick_run)
         csv_button.clicked.connect(self._pick_csv)
         self.space = QComboBox()
-        self.space.addItems(["nfc", "extruded", "ico"])
+        self.space.addItems(["extruded", "nfc", "ico"])
         self.space.setCurrentText(DESIGN_DEFAULTS["space"])
         self.space.setToolTip("ico: free 3D design printable without supports along +z (incremental compliance)")
         self.resolution = QSpinBox()
