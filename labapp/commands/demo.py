@@ -26,7 +26,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the session, printing progress; end with where the results are."""
     import time
-    from pathlib import Path
 
     from labapp.demo import run_demo
     from labapp.outpaths import check_data_dir

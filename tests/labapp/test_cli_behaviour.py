@@ -1,6 +1,5 @@
 """`sfr` as an operator meets it: the command list, --version, one error line with the documented exit
 codes, --debug for the traceback, output piped into head, `sfr lab` without a display."""
-import os
 import subprocess
 import sys
 

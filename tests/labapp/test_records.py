@@ -3,7 +3,6 @@
 `sfr design --resume` keeps the target the run started with; a rejected design start blocks nothing."""
 import hashlib
 import json
-import os
 import shutil
 from pathlib import Path
 
