@@ -89,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     if args.model == "mc":
         return _run_mc(args)
 
+    from labapp.compare import release_summary
     from labapp.jobs import simulate as simulate_job
     from labapp.simcal import check_resolution, load_simcal
     from labapp.targets import write_release_physical
@@ -111,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
         grams = np.loadtxt(physical, delimiter=",", skiprows=1)
         summary["physical"] = {"simcal": str(simcal.path), "model": simcal.cal.model,
                                "mass_g": float(grams[-1, 1]), "duration_s": float(grams[-1, 0]),
-                               "water_g": args.water_g or simcal.water_g}
+                               "water_g": args.water_g or simcal.water_g,
+                               "release": release_summary(grams[:, 0], grams[:, 1], None, "prediction")}
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         print(f"predicted: {grams[-1, 1]:.3f} g released over {grams[-1, 0] / 3600:.2f} h "
               f"({simcal.describe()}) -> {physical}")

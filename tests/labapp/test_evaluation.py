@@ -87,3 +87,16 @@ def test_sfr_simulate_model_mc_takes_a_calibration_and_refuses_the_forward_ones(
     assert main(["simulate", "sample:sphere", "--model", "mc", "--mc-calibration", str(mc_json), "--out",
                  str(tmp_path / "y")]) == 2
     assert "is not 'sfr-mc-calibration/1'" in capsys.readouterr().err
+
+
+def test_sfr_simulate_simcal_summary_carries_the_release_metrics(tmp_path):
+    from labapp.simcal import FORMAT, FORWARD_MODEL
+
+    simcal = tmp_path / "simcal.json"
+    simcal.write_text(json.dumps({"format": FORMAT, "forward_model": FORWARD_MODEL, "model": "constant",
+                                  "seconds_per_mm": SECONDS_PER_MM, "g_per_mm3": G_PER_MM3, "resolution": 12,
+                                  "voxel_size_mm": 1.0, "water_g": 500.0}))
+    out = tmp_path / "sim"
+    assert main(["simulate", "sample:sphere", "--simcal", str(simcal), "--out", str(out)]) == 0
+    release = json.loads((out / "summary.json").read_text())["physical"]["release"]
+    assert release["mdt_s"] > 0 and release["best_fit"]["rank"] == 1
