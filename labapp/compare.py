@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.errors import AnalysisError
 from analysis.profile import (F2Interval, ReleaseProfile, Similarity, bootstrap_f2, dissolution_efficiency,
                               mean_dissolution_time, mean_profile, similarity)
 from analysis.release_models import ModelFit, best_fit, fit_release_models
@@ -121,8 +122,6 @@ def release_summary(t_s: np.ndarray, released_g: np.ndarray, mass_g: float | Non
     label : str
         Named in error messages.
     """
-    from analysis import AnalysisError
-
     try:
         summary = summarize(ReleaseProfile(t_s, released_g, "s", "g", mass_g, label))
     except AnalysisError as exc:
@@ -145,8 +144,6 @@ def prediction_metrics(t_s: np.ndarray, reference_g: np.ndarray, predicted_g: np
     mass_g : float, optional
         The reference's 100 % (default its final release).
     """
-    from analysis import AnalysisError
-
     out = {"predicted": release_summary(t_s, predicted_g, None, "prediction"),
            "reference": release_summary(t_s, reference_g, mass_g, "reference")}
     try:
