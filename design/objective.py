@@ -1,7 +1,9 @@
 """The inverse-design objective of eq. (4) and its gradient with respect to the design variables.
 
-``J = J_fit + w_b J_binary + w_f J_fab + w_r J_rate`` with ``rho = project(smooth(rho_hat, r), beta)``;
-J_rate (`design.rate.rate_fit`) is an optional rate-fit term beyond the paper (w_r = 0 gives eq. 4).
+``J = J_fit + w_b J_binary + w_f J_fab + w_r J_rate + w_c J_conn`` with
+``rho = project(smooth(rho_hat, r), beta)``; J_rate (`design.rate.rate_fit`) is an optional rate-fit term
+beyond the paper (w_r = 0 gives eq. 4), and so is J_conn (`design.connectivity`), the penalty on material
+that does not connect to the design's symmetry centre (w_c = 0 allows pieces, as in the paper).
 
 The chain is: variables -> smoothing filter -> projection -> design-space map (replication for
 extruded designs) -> fast-marching release (eqs. 5-7) -> J; the gradient runs the chain backwards
@@ -29,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from design.connectivity import Connectivity
 from design.errors import DesignError
 from design.filters import SmoothingFilter, project, project_adjoint, project_inverse
 from design.fmm import MarchBuffers
@@ -43,6 +46,9 @@ log = logging.getLogger(__name__)
 REFERENCE_MASS_MM3 = PRINT_MASS_G * 1000.0 / PRINT_DENSITY_G_PER_CM3
 """Final release the objective is normalised to, mm^3 (1.75 g at 1.32 g/cm^3)."""
 
+START_OUTSIDE = 0.02
+"""Variable value outside a compact start region (`DesignObjective.uniform_start`)."""
+
 
 @dataclass(frozen=True)
 class Evaluation:
@@ -53,7 +59,7 @@ class Evaluation:
     value : float
         J of eq. (4) in the rescaled units.
     terms : dict of str to float
-        ``J_fit``, ``J_binary``, ``J_fab``, ``J_rate`` (unweighted) and ``grad_norm``.
+        ``J_fit``, ``J_binary``, ``J_fab``, ``J_rate``, ``J_conn`` (unweighted) and ``grad_norm``.
     grad : ndarray of float, variable shape
         dJ/d rho_hat.
     rho : ndarray of float, reduced grid shape
@@ -95,12 +101,17 @@ class DesignObjective:
     rate_span : (float, float)
         J_rate counts the rates between the times the target reaches these fractions of its final
         release (both ends of each lag inside); (0, 1) = the whole curve.
+    w_conn : float
+        Weight of the connectivity penalty J_conn (0 = off), evaluated on the nominal design.
+    conn_coarsen : int or None
+        Block edge of J_conn's distance grid, voxels; None = half the smoothing radius (at least 1).
     """
 
     def __init__(self, space: DesignSpace, target_mm3: np.ndarray, total_time_mm: float, *,
                  radius_vox: float, beta: float, w_binary: float, w_fab: float = 0.0, w_rate: float = 0.0,
                  rate_lag: int | None = None, robust_eta: float = 0.0,
-                 rate_span: tuple[float, float] = (0.0, 1.0)) -> None:
+                 rate_span: tuple[float, float] = (0.0, 1.0), w_conn: float = 0.0,
+                 conn_coarsen: int | None = None) -> None:
         target = np.asarray(target_mm3, dtype=float)
         if target.ndim != 1 or target.size < 3 or not target[-1] > 0:
             raise DesignError(f"target must be a 1D curve with >= 3 samples and a positive end, got {target.shape}")
@@ -113,6 +124,8 @@ class DesignObjective:
             raise DesignError("the robust formulation compares release rates: it needs w_rate > 0")
         if not 0.0 <= rate_span[0] < rate_span[1] <= 1.0:
             raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {rate_span}")
+        if w_conn < 0:
+            raise DesignError(f"w_conn must be >= 0, got {w_conn}")
         if w_fab > 0 and space.fab_term is None:
             raise DesignError(f"w_fab = {w_fab} but design space {space.name!r} has no fabrication term")
         self.space = space
@@ -139,33 +152,51 @@ class DesignObjective:
         self._buffers = [MarchBuffers(space.grid_shape) for _ in self.thresholds]  # reused by every evaluation
         if self.w_fab > 0:  # J_fab is divided by its value at the start design (design.ico)
             space.fab_term.normalise_at(self.density(self.uniform_start()))
+        self.w_conn = float(w_conn)
+        coarsen = max(1, int(radius_vox // 2)) if conn_coarsen is None else int(conn_coarsen)
+        self.connectivity = (Connectivity(space.var_shape, space.var_mirror, space.dx_mm, coarsen)
+                             if self.w_conn > 0 else None)
 
     def density(self, x: np.ndarray) -> np.ndarray:
         """The reduced simulation density ``rho`` of variables ``x`` (eq. 4 filter chain)."""
         return self.space.to_grid(project(self.filter.apply(x), self.beta))
 
-    def uniform_start(self) -> np.ndarray:
-        """Uniform variables whose filtered mass equals the target's final release (section 5.2).
+    def uniform_start(self, region: np.ndarray | None = None) -> np.ndarray:
+        """Uniform variables whose filtered mass is the target's final release (section 5.2).
 
         The normalised smoothing filter keeps a uniform field uniform, so the constant is the
         inverse projection of the required uniform density.
+
+        Parameters
+        ----------
+        region : ndarray of bool, variable shape, optional
+            Put the material only here (a compact start, `design.problem.start_region`); outside, the
+            variables get `START_OUTSIDE` so that the cosine bound map still has a gradient there.
+            The filter blurs the region's edge, so the start's mass is then close to, not exactly,
+            the target's. None = the whole domain.
         """
-        cells = float(np.prod(self.space.grid_shape)) * self.space.dx_mm ** 3 * self.space.multiplicity
-        rho = self.target_mm3[-1] / cells
+        space = self.space
+        per_var = float(np.prod(space.grid_shape)) / float(np.prod(space.var_shape))
+        cells = (float(np.prod(space.var_shape)) if region is None else float(np.count_nonzero(region))) * per_var
+        rho = self.target_mm3[-1] / (cells * space.dx_mm ** 3 * space.multiplicity)
         if rho >= 1.0:
-            raise DesignError(f"target releases {self.target_mm3[-1]:.4g} mm^3, more than the design domain "
-                              f"holds ({cells:.4g} mm^3)")
-        return np.full(self.space.var_shape, project_inverse(rho, self.beta))
+            where = "design domain" if region is None else "start region"
+            raise DesignError(f"target releases {self.target_mm3[-1]:.4g} mm^3, more than the {where} holds "
+                              f"({cells * space.dx_mm ** 3 * space.multiplicity:.4g} mm^3)")
+        if region is None:
+            return np.full(space.var_shape, project_inverse(rho, self.beta))
+        return np.where(region, project_inverse(rho, self.beta), START_OUTSIDE)
 
     def evaluate(self, x: np.ndarray) -> Evaluation:
         """J and dJ/dx at variables ``x`` (variable shape, values in [0, 1])."""
         space = self.space
         smoothed = self.filter.apply(x)
         share = 1.0 / len(self.thresholds)  # J_rate is the mean over the simulated designs
-        j_rate = j_bin = j_fab = fab_seconds = 0.0
+        j_rate = j_bin = j_fab = j_conn = fab_seconds = 0.0
         grad_var = np.zeros(space.var_shape)
         for eta, buffers in zip(self.thresholds, self._buffers):
-            rho = space.to_grid(project(smoothed, self.beta, eta))
+            rho_var = project(smoothed, self.beta, eta)
+            rho = space.to_grid(rho_var)
             release = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=self.total_time_mm,
                                dtau_mm=self.dtau_mm, buffers=buffers)
             if eta != 0.5:  # an eroded or dilated design of the robust formulation
@@ -187,11 +218,15 @@ class DesignObjective:
                 j_fab, g_fab = space.fab_term(rho)
                 fab_seconds = time.perf_counter() - t_fab
                 grad_rho += self.w_fab * g_fab
-            grad_var += project_adjoint(smoothed, self.beta, space.to_grid_adjoint(grad_rho), eta)
+            g_proj = space.to_grid_adjoint(grad_rho)
+            if self.connectivity is not None:  # one variable voxel stands for its whole extruded column
+                j_conn, g_conn = self.connectivity(rho_var, cell * rho.size / rho_var.size)
+                g_proj = g_proj + self.w_conn * g_conn
+            grad_var += project_adjoint(smoothed, self.beta, g_proj, eta)
         grad = self.filter.adjoint(grad_var)
-        value = j_fit + self.w_binary * j_bin + self.w_fab * j_fab + self.w_rate * j_rate
+        value = j_fit + self.w_binary * j_bin + self.w_fab * j_fab + self.w_rate * j_rate + self.w_conn * j_conn
         terms = {"J": value, "J_fit": j_fit, "J_binary": j_bin, "J_fab": float(j_fab), "J_rate": j_rate,
-                 "grad_norm": float(np.linalg.norm(grad)), "fab_seconds": fab_seconds}
+                 "J_conn": j_conn, "grad_norm": float(np.linalg.norm(grad)), "fab_seconds": fab_seconds}
         return Evaluation(value, terms, grad, nominal_rho, nominal_release)
 
     def _curve_terms(self, release: Release, rate_share: float) -> tuple[float, float, np.ndarray]:

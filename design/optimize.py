@@ -418,7 +418,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         history = [list(r) if len(r) == len(HISTORY_COLUMNS) else [*r[:5], 0.0, *r[5:]]
                    for r in saved["history"]]
         log.info("resuming %s at evaluation %d", out_dir, len(history))
-    x0 = saved["x"].reshape(problem.space.var_shape) if saved else objective.uniform_start()
+    x0 = saved["x"].reshape(problem.space.var_shape) if saved else objective.uniform_start(problem.start_region)
     run = _Run(objective, out_dir, config, len(history), history, on_iteration, should_stop)
     lbfgs_state = None
     if saved:

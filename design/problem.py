@@ -46,6 +46,8 @@ DEFAULT_RADIUS_MM = 1.0
 (dx ~ 0.26 mm), fixed in mm so that the minimum feature (about r, five 0.2 mm print lines, section
 4.1) does not shrink as the resolution grows."""
 W_CONNECT = 20.0
+START_FILL = 2.0 / 3.0
+"""Density of the compact start of an extruded design without a source shape (`start_region`)."""
 """Default weight of the connectivity penalty J_conn (`design.connectivity`), as w_b."""
 OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
 """`DesignConfig.optimizer` choices: `design.lbfgs` (default) and three nlopt algorithms."""
@@ -255,6 +257,8 @@ class Problem:
         The source mesh voxelised on the full design grid (for the recovery check).
     radius_vox : float
         Smoothing radius r on this grid, voxels (`DesignConfig.radius_vox` or its ``radius_mm``).
+    start_region : ndarray of bool or None
+        Where the start design holds material (`start_region`); None = the whole domain.
     """
 
     space: DesignSpace
@@ -265,6 +269,7 @@ class Problem:
     full_shape: tuple[int, int, int]
     source_solid: np.ndarray | None
     radius_vox: float
+    start_region: np.ndarray | None = None
 
 
 def _parse_analytic(spec: str) -> tuple[float, float, float] | None:
@@ -298,6 +303,57 @@ def _source_mesh(spec: str):
 
 def _even_ceil(x: float) -> int:
     return max(2, 2 * int(np.ceil(x / 2.0 - 1e-9)))
+
+
+def _curve_target(config: DesignConfig, analytic: tuple[float, float, float] | None, t_mm: float,
+                  box_volume_mm3: float, box_time_mm: float) -> Target:
+    """The CSV or analytic target on the tau grid up to ``t_mm``; analytic fractions of the domain box."""
+    if analytic is None:
+        return target_from_csv(config.target, t_mm, config.samples)
+    q, final, duration = analytic
+    if not 0 < final <= 1 or not 0 < duration <= 1:
+        raise DesignError(f"analytic final and duration are fractions in (0, 1], got {final}, {duration}")
+    if duration * box_time_mm > t_mm:
+        raise DesignError(f"the release lasts {duration * box_time_mm:.4g} mm but the design domain dissolves by "
+                          f"T = {t_mm:.4g} mm; raise the extrusion height to at least {2 * duration * box_time_mm:.4g} mm")
+    return constant_acceleration(t_mm, final * box_volume_mm3, duration * box_time_mm, q, config.samples)
+
+
+def extrusion_height_mm(target: Target, dx_mm: float) -> float:
+    """Default extrusion height for a target without a source shape, mm.
+
+    As tall as a cube of the target's volume (a compact dose form), but at least twice the release's
+    duration plus a voxel on each face: the top and bottom faces dissolve inwards at unit speed, so a
+    shorter extrusion would be gone before the target's release ends.
+    """
+    end = curve_end_mm(target.tau_mm, target.released_mm3)
+    return max(target.final_mm3 ** (1.0 / 3.0), 2.0 * end + 2.0 * dx_mm)
+
+
+def start_region(space: DesignSpace, target: Target, half_extent_mm: np.ndarray | None) -> np.ndarray | None:
+    """Where an extruded design starts with material (`DesignObjective.uniform_start`), or None (everywhere).
+
+    The source's footprint (its bounding box plus a voxel), or for a target without a source a centred
+    square holding the target's volume at density `START_FILL` over the extrusion height. Spreading the
+    start over the whole domain footprint, as for the other spaces, leaves an extruded design far
+    from the compact part and lets it split into one piece per quadrant (docs/results.md).
+
+    Returns
+    -------
+    ndarray of bool, variable shape, or None
+    """
+    if not space.extruded:
+        return None
+    dx = space.dx_mm
+    if half_extent_mm is None:
+        height_mm = space.grid_shape[BUILD_AXIS] * dx
+        side = np.sqrt(target.final_mm3 / (height_mm * START_FILL))
+        half = np.array([0.5 * side, 0.5 * side])
+    else:
+        half = np.array([half_extent_mm[ax] for ax in range(3) if ax != BUILD_AXIS]) + dx
+    axes = [(np.arange(n) + 0.5) * dx < h for n, h in zip(space.var_shape, half)]
+    region = np.logical_and.outer(*axes)
+    return region if region.any() and not region.all() else None
 
 
 def _radius_vox(config: DesignConfig, dx_mm: float) -> float:
@@ -337,10 +393,14 @@ def prepare(config: DesignConfig) -> Problem:
         size = np.full(3, DEFAULT_DOMAIN_MM)
     dx = float(size.max()) / config.resolution
     full = [_even_ceil(s / dx - 1e-9) for s in size]
+    # analytic fractions refer to the whole domain box, whatever the extrusion height
+    box_volume = float(np.prod(full)) * dx ** 3
+    box_time = total_time(tuple(n // 2 for n in full), dx, (True, True, True))
     height_vox = None
     if config.space == "extruded":
         height = config.height_mm or (config.height_fraction * float(size.max()) if config.height_fraction else None)
-        height = height or (float(hi[BUILD_AXIS] - lo[BUILD_AXIS]) if mesh is not None else None)
+        height = height or (float(hi[BUILD_AXIS] - lo[BUILD_AXIS]) if mesh is not None else extrusion_height_mm(
+            _curve_target(config, analytic, box_time, box_volume, box_time), dx))
         if height is not None:
             height_vox = max(1, int(round(height / dx)))
             full[BUILD_AXIS] = max(full[BUILD_AXIS], height_vox)
@@ -361,16 +421,13 @@ def prepare(config: DesignConfig) -> Problem:
         target = target_from_mesh(mesh, dx, t_total, f"mesh:{config.target}", config.samples, origin_mm=origin,
                                   shape=sim_full)
         source_solid = voxelize(mesh, dx, origin_mm=origin, shape=sim_full) > 0.5
-    elif analytic is not None:
-        q, final, duration = analytic
-        if not 0 < final <= 1 or not 0 < duration <= 1:
-            raise DesignError(f"analytic final and duration are fractions in (0, 1], got {final}, {duration}")
-        target = constant_acceleration(t_total, final * domain_volume, duration * t_total, q, config.samples)
     else:
-        target = target_from_csv(config.target, t_total, config.samples)
+        target = _curve_target(config, analytic, t_total, box_volume, box_time)
     ext = np.asarray(sim_full, float) * dx
     area = 2.0 * float(ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2])
     feasibility = check_feasibility(target, domain_volume, dx_mm=dx, domain_area_mm2=area)
     log.info("design grid %s (reduced %s), dx = %.4g mm, T = %.4g mm; %s", sim_full, space.grid_shape, dx,
              t_total, feasibility.text())
-    return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, _radius_vox(config, dx))
+    half_mm = 0.5 * (hi - lo) if mesh is not None else None
+    return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, _radius_vox(config, dx),
+                   start_region(space, target, half_mm))

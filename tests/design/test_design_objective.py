@@ -12,7 +12,7 @@ from design.rate import rate_fit, rate_shape_fit
 from design.spaces import SpaceRequest, build_space
 
 
-def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0, robust_eta=0.0, rate_span=(0.0, 1.0)):
+def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0, robust_eta=0.0, rate_span=(0.0, 1.0), w_conn=0.0):
     space = build_space(name, request)
     if fab is not None:
         space = replace(space, fab_term=fab)
@@ -20,7 +20,7 @@ def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0, robust_eta=0.0, r
     target = simulate(np.full(space.grid_shape, 0.4), space.dx_mm, mirror=space.mirror,
                       total_time_mm=big_t).released_mm3
     return DesignObjective(space, target, big_t, radius_vox=2.0, beta=3.0, w_binary=20.0, w_fab=w_fab,
-                           w_rate=w_rate, robust_eta=robust_eta, rate_span=rate_span)
+                           w_rate=w_rate, robust_eta=robust_eta, rate_span=rate_span, w_conn=w_conn)
 
 
 class _QuadraticFab:
@@ -36,18 +36,21 @@ class _QuadraticFab:
         return float(np.sum(rho ** 2)), 2.0 * rho
 
 
-@pytest.mark.parametrize("name, request_, fab, w_rate, robust_eta", [
-    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 0.0, 0.0),
-    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 0.0, 0.0),
-    ("nfc", SpaceRequest((10, 10, 10), 0.5), _QuadraticFab(), 0.0, 0.0),
-    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 3.0, 0.0),
-    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 3.0, 0.0),
-    ("nfc", SpaceRequest((12, 12, 12), 0.5), _QuadraticFab(), 3.0, 0.1),
+@pytest.mark.parametrize("name, request_, fab, w_rate, robust_eta, w_conn", [
+    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 0.0, 0.0, 0.0),
+    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 0.0, 0.0, 0.0),
+    ("nfc", SpaceRequest((10, 10, 10), 0.5), _QuadraticFab(), 0.0, 0.0, 0.0),
+    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 3.0, 0.0, 0.0),
+    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 3.0, 0.0, 0.0),
+    ("nfc", SpaceRequest((12, 12, 12), 0.5), _QuadraticFab(), 3.0, 0.1, 0.0),
+    ("nfc", SpaceRequest((12, 12, 12), 0.5), None, 0.0, 0.0, 30.0),
+    ("extruded", SpaceRequest((12, 10, 8), 0.5, 5), None, 0.0, 0.0, 30.0),
 ])
-def test_full_objective_gradient_matches_central_differences(name, request_, fab, w_rate, robust_eta):
+def test_full_objective_gradient_matches_central_differences(name, request_, fab, w_rate, robust_eta, w_conn):
     # the robust case also restricts J_rate to the target's 5%-95%
     objective = _objective(name, request_, w_fab=1.5 if fab else 0.0, fab=fab, w_rate=w_rate,
-                           robust_eta=robust_eta, rate_span=(0.05, 0.95) if robust_eta else (0.0, 1.0))
+                           robust_eta=robust_eta, rate_span=(0.05, 0.95) if robust_eta else (0.0, 1.0),
+                           w_conn=w_conn)
     rng = np.random.default_rng(4)
     x = rng.uniform(0.2, 0.8, objective.space.var_shape)
     ev = objective.evaluate(x)
@@ -127,3 +130,13 @@ def test_objective_simulates_on_the_targets_own_tau_step():
     objective = DesignObjective(space, target, big_t, radius_vox=2.0, beta=3.0, w_binary=1.0)
     ev = objective.evaluate(np.full(space.var_shape, 0.5))
     assert ev.release.released_mm3.size == 501 and np.isfinite(ev.value)
+
+
+def test_connectivity_term_is_the_weighted_penalty_of_the_nominal_design():
+    request = SpaceRequest((12, 10, 8), 0.5, 5)
+    plain = _objective("extruded", request)
+    connected = _objective("extruded", request, w_conn=30.0)
+    x = np.random.default_rng(3).uniform(0.2, 0.8, plain.space.var_shape)
+    a, b = plain.evaluate(x), connected.evaluate(x)
+    assert b.terms["J_conn"] > 0 and a.terms["J_conn"] == 0.0
+    assert b.value == pytest.approx(a.value + 30.0 * b.terms["J_conn"], rel=1e-12)

@@ -1,0 +1,98 @@
+"""Source shapes for the robustness evidence (docs/results.md, "Shapes nobody tuned for").
+
+Writes closed meshes in mm, each scaled to the sample shapes' volume (`design.shapes.VOLUME_MM3`),
+none of them shipped as a sample or used while the defaults were chosen:
+
+- ``stadium_tablet``: a stadium (rectangle with round ends) extruded, itself an extrusion;
+- ``disc_three_holes``: a disc with three through-holes on a circle, itself an extrusion;
+- ``hex_prism``: a hexagonal prism, itself an extrusion;
+- ``ellipsoid``: an ellipsoid with semi-axes 1 : 0.7 : 0.5;
+- ``frustum``: a truncated cone;
+- ``bow``: two square pyramids joined at their tips by a short square neck (a polyhedral bow).
+
+    python benchmarks/robust_sources.py OUT_DIR
+
+Last line: ``sources: <count>``.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from design.shapes import VOLUME_MM3
+
+EXTRUSIONS = ("stadium_tablet", "disc_three_holes", "hex_prism")
+"""The sources that are extrusions along z (the build axis), so the extruded space holds them."""
+
+
+def _stadium_tablet() -> trimesh.Trimesh:
+    box = trimesh.creation.box(extents=(2.0, 2.0, 1.2))
+    caps = [trimesh.creation.cylinder(radius=1.0, height=1.2, sections=48).apply_translation([x, 0, 0])
+            for x in (-1.0, 1.0)]
+    return trimesh.boolean.union([box, *caps], engine="manifold")
+
+
+def _disc_three_holes() -> trimesh.Trimesh:
+    disc = trimesh.creation.cylinder(radius=3.0, height=1.6, sections=64)
+    holes = [trimesh.creation.cylinder(radius=0.55, height=4.0, sections=32).apply_translation(
+        [1.6 * np.cos(a), 1.6 * np.sin(a), 0.0]) for a in np.deg2rad([90.0, 210.0, 330.0])]
+    return trimesh.boolean.difference([disc, *holes], engine="manifold")
+
+
+def _hex_prism() -> trimesh.Trimesh:
+    return trimesh.creation.cylinder(radius=1.0, height=1.3, sections=6)
+
+
+def _ellipsoid() -> trimesh.Trimesh:
+    mesh = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
+    mesh.apply_scale([1.0, 0.7, 0.5])
+    return mesh
+
+
+def _frustum() -> trimesh.Trimesh:
+    profile = np.array([[0.0, 0.0], [1.0, 0.0], [0.45, 1.2], [0.0, 1.2]])
+    return trimesh.creation.revolve(profile, sections=64)
+
+
+def _bow() -> trimesh.Trimesh:
+    pyramid = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0], [0, 0, 1.6]], dtype=float)
+    left = trimesh.convex.convex_hull(pyramid @ np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], dtype=float).T
+                                      - [0.15, 0, 0])
+    right = left.copy().apply_transform(trimesh.transformations.reflection_matrix([0, 0, 0], [1, 0, 0]))
+    right.invert()
+    right.fix_normals()
+    neck = trimesh.creation.box(extents=(2.2, 0.5, 0.5))
+    return trimesh.boolean.union([left, right, neck], engine="manifold")
+
+
+BUILDERS = {"stadium_tablet": _stadium_tablet, "disc_three_holes": _disc_three_holes, "hex_prism": _hex_prism,
+            "ellipsoid": _ellipsoid, "frustum": _frustum, "bow": _bow}
+
+
+def source(name: str) -> trimesh.Trimesh:
+    """A closed mesh centred at the origin with volume `VOLUME_MM3`, mm."""
+    mesh = BUILDERS[name]()
+    if not mesh.is_watertight:
+        raise RuntimeError(f"source {name} is not watertight")
+    mesh.apply_translation(-mesh.bounds.mean(axis=0))
+    mesh.apply_scale((VOLUME_MM3 / mesh.volume) ** (1.0 / 3.0))
+    return mesh
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("out_dir", type=Path)
+    args = parser.parse_args()
+    args.out_dir.mkdir(parents=True, exist_ok=True)
+    for name in BUILDERS:
+        mesh = source(name)
+        mesh.export(args.out_dir / f"{name}.stl")
+        print(f"{name}: {mesh.volume:.1f} mm^3, extents {np.round(mesh.extents, 2).tolist()} mm")
+    print(f"sources: {len(BUILDERS)}")
+
+
+if __name__ == "__main__":
+    main()
