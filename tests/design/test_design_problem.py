@@ -41,3 +41,33 @@ def test_mesh_target_is_the_source_voxelised_on_the_design_grid(target, space, r
     own = simulate(problem.source_solid.astype(float), problem.dx_mm, total_time_mm=problem.target.total_time_mm,
                    dtau_mm=problem.target.total_time_mm / (problem.target.tau_mm.size - 1)).released_mm3
     np.testing.assert_allclose(problem.target.released_mm3, own, rtol=0, atol=1e-9 * problem.target.final_mm3)
+
+
+def test_extruded_analytic_target_gets_a_compact_height_and_start():
+    problem = prepare(DesignConfig(target="zero-order:final=0.15,duration=0.2", space="extruded", resolution=24))
+    target, space = problem.target, problem.space
+    height_mm = space.grid_shape[2] * problem.dx_mm
+    end_mm = 0.2 * 10.0 - 0.5 * problem.dx_mm  # duration 0.2 of the 20 mm cube's horizon
+    # as tall as a cube of the target's volume, and at least twice the release's duration
+    assert height_mm == pytest.approx(max(target.final_mm3 ** (1 / 3), 2 * end_mm + 2 * problem.dx_mm),
+                                      abs=problem.dx_mm)
+    assert target.total_time_mm >= 0.2 * 9.0 and target.final_mm3 == pytest.approx(0.15 * 20.0 ** 3, rel=0.02)
+    region = problem.start_region
+    assert region is not None and region.shape == space.var_shape and region[0, 0] and not region[-1, -1]
+
+
+def test_extruded_mesh_start_covers_the_source_footprint_and_nfc_starts_everywhere():
+    problem = prepare(DesignConfig(target="pill", space="extruded", resolution=24))
+    region = problem.start_region
+    covered = problem.source_solid[problem.full_shape[0] // 2:, problem.full_shape[1] // 2:].any(axis=2)
+    assert np.all(region[covered]) and not region.all()
+    assert prepare(DesignConfig(target="pill", space="nfc", resolution=16)).start_region is None
+
+
+def test_radius_in_mm_gives_the_same_feature_size_at_every_resolution():
+    for resolution in (16, 32):
+        problem = prepare(DesignConfig(target="sphere", resolution=resolution, radius_mm=2.0))
+        assert problem.radius_vox * problem.dx_mm == pytest.approx(2.0)
+    assert prepare(DesignConfig(target="sphere", resolution=16, radius_vox=3.0)).radius_vox == 3.0
+    with pytest.raises(DesignError, match="not both"):
+        DesignConfig(target="sphere", radius_vox=3.0, radius_mm=1.0)
