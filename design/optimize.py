@@ -45,11 +45,12 @@ from design.errors import DesignError
 from design.lbfgs import CONVERGED, STALLED, Lbfgs, LbfgsSettings
 from design.objective import DesignObjective
 from design.outputs import HISTORY_COLUMNS, DesignOutputs, write_outputs
-from design.problem import DesignConfig, prepare
+from design.problem import DesignConfig, Problem, prepare
 
 log = logging.getLogger(__name__)
 
 IterationCallback = Callable[[int, np.ndarray, dict], None]
+StartDesign = Callable[[DesignObjective, Problem], np.ndarray]
 MAX_RESTARTS = 20
 """L-BFGS restarts from the best point after the optimiser ends early (module doc)."""
 RESTART_GAIN = 1e-3
@@ -357,7 +358,8 @@ def _stage(run: _Run, start: np.ndarray, stage_end: int) -> str:
 
 
 def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration: IterationCallback | None = None,
-               should_stop: Callable[[], bool] | None = None, resume: bool = False) -> DesignResult:
+               should_stop: Callable[[], bool] | None = None, resume: bool = False,
+               start: StartDesign | None = None) -> DesignResult:
     """Run (or resume) an inverse design in ``out_dir``.
 
     Parameters
@@ -374,6 +376,9 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     resume : bool
         Continue from ``checkpoint.npz``: exactly where the run stopped with the "lbfgs" optimiser;
         with nlopt's, from the last evaluated design with an empty memory.
+    start : callable, optional
+        ``start(objective, problem)`` returns the start variables of a new run (variable shape);
+        default the uniform start of section 5.2 (`DesignObjective.uniform_start`).
 
     Returns
     -------
@@ -418,7 +423,15 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         history = [list(r) if len(r) == len(HISTORY_COLUMNS) else [*r[:5], 0.0, *r[5:]]
                    for r in saved["history"]]
         log.info("resuming %s at evaluation %d", out_dir, len(history))
-    x0 = saved["x"].reshape(problem.space.var_shape) if saved else objective.uniform_start(problem.start_region)
+    if not saved and start is None and config.starts > 1:  # coarse-to-fine multi-start
+        from design.multistart import coarse_start
+        start = coarse_start(config, out_dir, on_iteration=on_iteration, should_stop=should_stop)
+    if saved:
+        x0 = saved["x"].reshape(problem.space.var_shape)
+    elif start is not None:
+        x0 = np.asarray(start(objective, problem), dtype=float).reshape(problem.space.var_shape)
+    else:
+        x0 = objective.uniform_start(problem.start_region)
     run = _Run(objective, out_dir, config, len(history), history, on_iteration, should_stop)
     lbfgs_state = None
     if saved:

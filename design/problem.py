@@ -90,6 +90,9 @@ class DesignConfig:
         Drop the connectivity penalty: the design may fall apart into pieces (as in the paper).
     w_connect : float
         Weight of the connectivity penalty J_conn (`design.connectivity`) unless ``allow_pieces``.
+    starts : int
+        Seeded starts run at half the resolution before the best is refined at full resolution
+        (`design.multistart`); 1 = a single run from the start design.
     w_fab : float or None
         Weight w_f of the space's fabrication term (ico only; None = preset or `SPACE_DEFAULTS`,
         0 for spaces without one).
@@ -152,6 +155,7 @@ class DesignConfig:
     radius_mm: float | None = None
     allow_pieces: bool = False
     w_connect: float = W_CONNECT
+    starts: int = 1
     beta: float | None = None
     w_fab: float | None = None
     layers: int = DEFAULT_LAYERS
@@ -217,6 +221,8 @@ class DesignConfig:
             raise DesignError(f"smoothing radius must be > 0 mm, got {self.radius_mm}")
         if not self.w_connect >= 0:
             raise DesignError(f"w_connect must be >= 0, got {self.w_connect}")
+        if not 1 <= self.starts <= 64:
+            raise DesignError(f"starts must be in [1, 64], got {self.starts}")
         if self.beta is not None and not 0 < self.beta <= 64:
             raise DesignError(f"beta must be in (0, 64], got {self.beta}")
         if self.beta_final is not None and not self.beta <= self.beta_final <= 64:
