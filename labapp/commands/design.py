@@ -46,6 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="drop the connectivity penalty: the design may fall apart into pieces")
     parser.add_argument("--w-connect", type=nonnegative_float,
                         help="weight of the connectivity penalty J_conn (default: the same as w_binary's default)")
+    parser.add_argument("--starts", type=positive_int, default=1,
+                        help="seeded starts at half the resolution, the best then refined at full resolution "
+                             "(default 1: a single run)")
     parser.add_argument("--beta", type=positive_float, help="projection steepness (default 3)")
     parser.add_argument("--beta-final", type=positive_float,
                         help="beta continuation: raise beta to this over the run in 4 stages (default: fixed beta)")
@@ -123,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
             config = DesignConfig(target=args.target, space=args.space, **given,
                                   domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
                                   height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
-                                  radius_mm=args.radius_mm, allow_pieces=args.allow_pieces,
+                                  radius_mm=args.radius_mm, allow_pieces=args.allow_pieces, starts=args.starts,
                                   **({} if args.w_connect is None else {"w_connect": args.w_connect}),
                                   beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate,
                                   rate_window_vox=args.rate_window, rate_span=tuple(args.rate_span),
