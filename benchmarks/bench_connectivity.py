@@ -1,0 +1,63 @@
+"""Seconds per objective evaluation with and without the connectivity penalty J_conn.
+
+nfc zero-order target in a 20 mm cube at resolution 256 (128^3 octant), at r = 4 voxels (distance
+grid in blocks of 2) and at the default 1 mm radius (blocks of 6): median of three
+`DesignObjective.evaluate` calls each way, and J_conn alone.
+
+    python benchmarks/bench_connectivity.py [--resolution 256]
+
+Last line: ``conn_share_default: <extra seconds / seconds without J_conn>``.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from design.objective import DesignObjective
+from design.problem import DesignConfig, prepare
+
+
+def seconds(objective: DesignObjective, x: np.ndarray, repeats: int = 3) -> float:
+    """Median wall time of `DesignObjective.evaluate` after one warm-up call, s."""
+    objective.evaluate(x)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        objective.evaluate(x)
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--resolution", type=int, default=256)
+    args = parser.parse_args()
+    config = DesignConfig(target="zero-order:final=0.15,duration=0.2", space="nfc", resolution=args.resolution,
+                          domain_mm=(20.0, 20.0, 20.0))
+    problem = prepare(config)
+    share = 0.0
+    for radius in (4.0, problem.radius_vox):
+        base = conn = alone = 0.0
+        for w_conn in (0.0, 20.0):
+            objective = DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
+                                        radius_vox=radius, beta=3.0, w_binary=20.0, w_rate=1.0, w_conn=w_conn)
+            x = objective.uniform_start() + np.random.default_rng(0).uniform(-0.05, 0.05, problem.space.var_shape)
+            s = seconds(objective, x)
+            if objective.connectivity is None:
+                base = s
+            else:
+                conn = s
+                rho = objective.density(x)
+                t0 = time.perf_counter()
+                objective.connectivity(rho, 1.0)
+                alone = time.perf_counter() - t0
+        print(f"r = {radius:.2f} voxels: evaluate {base:.3f} s without J_conn, {conn:.3f} s with; "
+              f"J_conn alone {alone:.4f} s ({alone / base:.1%})")
+        share = alone / base
+    print(f"conn_share_default: {share:.4f}")
+
+
+if __name__ == "__main__":
+    main()
