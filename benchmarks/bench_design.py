@@ -2,7 +2,8 @@
 
 For each reduced grid N^3 (nfc, octant symmetry: the full design is (2N)^3) this runs `sfr design`'s
 engine (`design.optimize.run_design`, default optimiser and checkpoints) on a zero-order target in a
-20 mm cube. After a warm-up (the L-BFGS memory fills; its step cost grows with the stored pairs), it
+20 mm cube, with the objective of eq. (4) plus J_rate as in earlier runs (r = 4 voxels, no
+connectivity term). After a warm-up (the L-BFGS memory fills; its step cost grows with the stored pairs), it
 alternates, for ``--rounds`` rounds, a block of design iterations (one checkpoint interval, so every
 block holds one checkpoint) with a block of first-order `skfmm.travel_time` solves of the design's
 current density on the same N^3 grid, from inside the run's progress callback. Each round's ratio
@@ -81,7 +82,7 @@ def bench(n_reduced: int, warmup: int, rounds: int, block: int, solves: int, opt
     """One grid size: per-round seconds per iteration, its breakdown, skfmm seconds and their ratio."""
     config = DesignConfig(target="zero-order:final=0.15,duration=0.2", space="nfc", resolution=2 * n_reduced,
                           domain_mm=(20.0, 20.0, 20.0), max_iter=warmup + rounds * block, checkpoint_every=block,
-                          optimizer=optimizer)
+                          optimizer=optimizer, radius_vox=4.0, allow_pieces=True)
     totals = dict.fromkeys(PARTS, 0.0)
     last: dict = {}
     marks: dict = {"out": None, "iter": 0.0, "n": 0, "parts": dict(totals)}
