@@ -80,11 +80,18 @@ def _from_manifest(folder: Path, warnings: list[str]) -> tuple[list[Path], np.nd
     if rows and not {"file", "t_s"} <= set(rows[0]):
         raise AnalysisError(f"{path} needs the columns file,t_s; it has {','.join(rows[0])}")
     files, times = [], []
+    listed: dict[str, int] = {}
     for line, row in enumerate(rows, start=2):
         try:
             t = float(row["t_s"])
         except (TypeError, ValueError):
             raise AnalysisError(f"{path} line {line}: t_s={row.get('t_s')!r} is not a number") from None
+        if not np.isfinite(t):
+            raise AnalysisError(f"{path} line {line}: t_s={row['t_s']!r}; expected a finite time in s")
+        if row["file"] in listed:
+            raise AnalysisError(f"{path} line {line}: {row['file']} is listed again (first on line "
+                                f"{listed[row['file']]}); list each frame once")
+        listed[row["file"]] = line
         if times and t <= times[-1]:
             raise AnalysisError(f"{path} line {line}: times are not increasing ({row['file']} at t_s={t:g} s "
                                 f"follows {files[-1].name} at t_s={times[-1]:g} s)")

@@ -97,3 +97,17 @@ def test_meaningless_numbers_on_the_command_line(argv, says, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert says in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("rows, message", [
+    ("frame_0000.jpg,0\nframe_0001.jpg,nan\n", r"line 3: t_s='nan'; expected a finite time in s"),
+    ("frame_0000.jpg,0\nframe_0000.jpg,20\n", r"line 3: frame_0000.jpg is listed again \(first on line 2\)"),
+])
+def test_frames_csv_nan_times_and_repeated_frames(tmp_path, rows, message):
+    from analysis.frames import read_frame_list
+
+    run = tmp_path / "run"
+    shutil.copytree(FIXTURES / "bench" / "run", run)
+    (run / "frames.csv").write_text("file,t_s\n" + rows)
+    with pytest.raises(AnalysisError, match=message):
+        read_frame_list(run)
