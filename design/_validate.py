@@ -23,7 +23,9 @@ def check_density(rho: object, source: str | None = None) -> np.ndarray:
     if arr.size == 0:
         raise DesignError(f"density{_where(source)} is empty (shape {arr.shape})")
     if not np.all(np.isfinite(arr)):
-        raise DesignError(f"density{_where(source)} has {int(np.sum(~np.isfinite(arr)))} non-finite values")
+        first = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+        raise DesignError(f"density{_where(source)} has {int(np.sum(~np.isfinite(arr)))} non-finite values, the "
+                          f"first at index {first} ({arr[first]}); expected finite values in [0, 1]")
     lo, hi = float(arr.min()), float(arr.max())
     if lo < 0.0 or hi > 1.0:
         raise DesignError(f"density{_where(source)} must lie in [0, 1], got range [{lo:g}, {hi:g}]")

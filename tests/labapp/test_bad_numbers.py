@@ -111,3 +111,11 @@ def test_frames_csv_nan_times_and_repeated_frames(tmp_path, rows, message):
     (run / "frames.csv").write_text("file,t_s\n" + rows)
     with pytest.raises(AnalysisError, match=message):
         read_frame_list(run)
+
+
+def test_density_array_nan_names_the_voxel(tmp_path, capsys):
+    rho = np.zeros((6, 6, 6))
+    rho[2, 3, 4] = np.nan
+    np.save(tmp_path / "rho.npy", rho)
+    assert main(["simulate", str(tmp_path / "rho.npy"), "--voxel-size", "0.5", "--out", str(tmp_path / "o")]) == 2
+    assert "first at index (2, 3, 4) (nan)" in capsys.readouterr().err and not (tmp_path / "o").exists()
