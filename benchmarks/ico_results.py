@@ -66,7 +66,7 @@ def main() -> None:
             ax.set_title(f"{s['target'].split(':', 1)[-1][:26]}\n{s['space']}: overhang {s['overhang_fraction']:.1%}",
                          fontsize=8)
             ax.axis("off")
-    fig.suptitle("side views (build direction up); red: columns holding overhanging voxels")
+    fig.suptitle("side views, build direction up; red: overhanging voxels (projected along y)", fontsize=9)
     fig.savefig(args.figure, dpi=110)
     print(f"pairs: {len(pairs)}")
 
