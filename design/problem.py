@@ -42,13 +42,14 @@ SPACE_DEFAULTS: dict[str, dict[str, float]] = {
 """The ICO w_f weighs J_fab normalised to 1 at the start design (`design.ico`); 1000 is measured in
 docs/results.md (ICO section); the paper's Table 1 values (50-200) come with its own normalisation."""
 DEFAULT_RADIUS_MM = 1.0
-"""Smoothing radius r when none is given, mm: the paper's r = 4 voxels at the 64-voxel sample grids
-(dx ~ 0.26 mm), fixed in mm so that the minimum feature (about r, five 0.2 mm print lines, section
-4.1) does not shrink as the resolution grows."""
-W_CONNECT = 20.0
+"""Smoothing radius r when none is given, mm: the paper's r = 4 voxels on the sample shapes at
+resolution 64 (dx 0.25-0.32 mm) are 1.0-1.3 mm; fixed in mm so that the minimum feature (about r, five
+0.2 mm print lines, section 4.1) does not shrink as the resolution grows."""
+W_CONNECT = 5.0
+"""Default weight of the connectivity penalty J_conn (`design.connectivity`); measured against 2 and
+20 on extruded designs (docs/results.md, "Shapes nobody tuned for")."""
 START_FILL = 2.0 / 3.0
 """Density of the compact start of an extruded design without a source shape (`start_region`)."""
-"""Default weight of the connectivity penalty J_conn (`design.connectivity`), as w_b."""
 OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
 """`DesignConfig.optimizer` choices: `design.lbfgs` (default) and three nlopt algorithms."""
 ANALYTIC_W_RATE = 1.0

@@ -45,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--allow-pieces", action="store_true",
                         help="drop the connectivity penalty: the design may fall apart into pieces")
     parser.add_argument("--w-connect", type=nonnegative_float,
-                        help="weight of the connectivity penalty J_conn (default: the same as w_binary's default)")
+                        help="weight of the connectivity penalty J_conn (default 5)")
     parser.add_argument("--starts", type=positive_int, default=1,
                         help="seeded starts at half the resolution, the best then refined at full resolution "
                              "(default 1: a single run)")
