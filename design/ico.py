@@ -179,7 +179,8 @@ def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = Ic
 class IcoTerm:
     """J_fab of section 3.6 as a design space's fabrication term, normalised by its start value.
 
-    Keeps each layer's solution for the next evaluation's warm start, and timing for reports.
+    Keeps each layer's solution for the next evaluation's warm start, and for reports the time
+    (``seconds``), the number of evaluations and the PCG iterations per layer summed over them.
 
     Parameters
     ----------
@@ -199,6 +200,8 @@ class IcoTerm:
         self.reference: float | None = None
         self.last: IcoResult | None = None
         self.seconds = 0.0
+        self.evaluations = 0
+        self.iterations = np.zeros(config.layers, dtype=int)
         self._warm: list[np.ndarray] | None = None
 
     def evaluate(self, rho: np.ndarray) -> IcoResult:
@@ -207,6 +210,8 @@ class IcoTerm:
         result, self._warm = incremental_compliance(rho, self.dx_mm, self.config, mirror=self.mirror, warm=warm)
         self.last = result
         self.seconds += result.seconds
+        self.evaluations += 1
+        self.iterations += result.iterations
         log.debug("ICO %.6g, PCG iterations %s, %.3f s", result.value, result.iterations.tolist(), result.seconds)
         return result
 

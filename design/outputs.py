@@ -70,7 +70,8 @@ def _ico_summary(objective: DesignObjective, rho: np.ndarray, rows: np.ndarray, 
     fab_seconds = float(rows[:, HISTORY_COLUMNS.index("fab_seconds")].sum())
     return {"J_fab": value, "J_fab_start": term.reference, "w_fab": objective.w_fab, "layers": config.layers,
             "coarsen": config.coarsen, "law": config.law, "poisson": config.poisson,
-            "pcg_iterations": term.last.iterations.tolist(), "fab_seconds": fab_seconds,
+            "pcg_iterations_mean": (term.iterations / max(term.evaluations, 1)).round(2).tolist(),
+            "fab_seconds": fab_seconds,
             "fab_time_share": fab_seconds / seconds if seconds > 0 else None}
 
 
