@@ -131,23 +131,24 @@ def _history(folder):
     return np.loadtxt(folder / "history.csv", delimiter=",", skiprows=1)[:, :-1]  # all but seconds
 
 
-@pytest.mark.parametrize("how", ["stop", "ctrl_c"])
-def test_a_resumed_design_run_repeats_the_uninterrupted_one_exactly(tmp_path, how):
+@pytest.mark.parametrize("how, at", [("stop", 8), ("stop", 12), ("ctrl_c", 8)])
+def test_a_resumed_design_run_repeats_the_uninterrupted_one_exactly(tmp_path, how, at):
     # beta continuation: 4 stages of 6 evaluations; the interruption falls inside the second stage
+    # (8) or at the end of the second, before the third has evaluated anything (12)
     config = DesignConfig(max_iter=24, beta_final=12.0, **SMALL)
     whole = run_design(config, tmp_path / "whole")
 
     def interrupt(k, x, terms):
-        if k == 8:
+        if k == at:
             raise KeyboardInterrupt
 
     if how == "stop":
         calls = []
-        first = run_design(config, tmp_path / "parts", should_stop=lambda: len(calls) >= 8,
+        first = run_design(config, tmp_path / "parts", should_stop=lambda: len(calls) >= at,
                            on_iteration=lambda k, x, terms: calls.append(k))
     else:
         first = run_design(config, tmp_path / "parts", on_iteration=interrupt)
-    assert first.iterations == 8 and first.status == ("stopped" if how == "stop" else "interrupted")
+    assert first.iterations == at and first.status == ("stopped" if how == "stop" else "interrupted")
     second = run_design(None, tmp_path / "parts", resume=True)
     assert second.iterations == whole.iterations == 24
     np.testing.assert_array_equal(_history(tmp_path / "parts"), _history(tmp_path / "whole"))
