@@ -327,8 +327,8 @@ def _stage_lbfgs(run: _Run, start: np.ndarray, stage_end: int, state: dict | Non
             if outcome in (CONVERGED, STALLED):  # decided before the checkpoint, which must hold it
                 if opt.restarts < MAX_RESTARTS and opt.f < opt.f_restart * (1.0 - RESTART_GAIN):
                     log.info("restarting L-BFGS from the best design (J = %.6g)", opt.f)
-                    opt.restart()
-                else:
+                    outcome = opt.restart()  # CONVERGED only where the gradient vanishes
+                if outcome in (CONVERGED, STALLED):
                     ended = "stalled" if outcome == STALLED else "converged"
                     run.lbfgs, run.stage = None, run.stage + 1
             run.report()

@@ -92,6 +92,22 @@ def test_two_loop_direction_equals_the_dense_bfgs_inverse_update():
     np.testing.assert_allclose(opt.d, -h @ opt.g, rtol=1e-10, atol=1e-12 * np.abs(d).max())
 
 
+def test_a_kink_stalls_the_line_search_and_restart_begins_steepest_descent_from_the_best_point():
+    def l1(x, grad):  # |x|_1: no step across the kink satisfies the curvature condition
+        grad[:] = np.sign(x)
+        return float(np.abs(x).sum())
+
+    opt, outcome, evals = Lbfgs(np.array([1.0, -2.0, 0.7])), SEARCH, 0
+    while outcome not in (CONVERGED, STALLED) and evals < 200:
+        outcome, evals = opt.tell(l1(opt.x_trial, opt.g_trial)), evals + 1
+    assert outcome == STALLED and opt.f < 0.1 * 3.7 and opt.count > 0
+    f_best = opt.f
+    assert opt.restart() == STEP and opt.restarts == 1 and opt.f_restart == f_best
+    assert opt.count == 0 and np.array_equal(opt.d, -opt.g)  # memory forgotten: steepest descent
+    # the first step moves no variable by more than first_step
+    assert np.max(np.abs(opt.x_trial - opt.x)) == pytest.approx(LbfgsSettings().first_step)
+
+
 def test_saved_state_resumes_bit_for_bit():
     x0 = np.tile([-1.2, 1.0], 4)
     uninterrupted, opt = [], Lbfgs(x0, LbfgsSettings(memory=3))
