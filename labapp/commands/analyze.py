@@ -11,7 +11,8 @@ from labapp.argtypes import nonnegative_int, positive_float, positive_int
 log = logging.getLogger(__name__)
 
 NAME = "analyze"
-HELP = "turn a run folder or image folder into a release curve (curve.csv, cells.csv, summary.json, curve.png)"
+HELP = ("turn a run folder or image folder into a release curve (curve.csv, cells.csv, summary.json, curve.png); "
+        "several runs: on Dask, one summary table")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
