@@ -277,6 +277,8 @@ def _run_serial(session: _Session, sweep_dir: Path, report, should_stop) -> bool
                 return True
             report(session.progress(1))
             session.outcomes[combo.name] = run_combination(combo, str(sweep_dir))
+            if session.outcomes[combo.name]["status"] == "interrupted":  # Ctrl-C, caught by the optimiser
+                return True
     except KeyboardInterrupt:
         return True
     return False
