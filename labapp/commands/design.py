@@ -19,18 +19,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "tau_mm,released_mm3 CSV, zero-order[:final=F,duration=D] / accel:q=Q[,final=F,duration=D], or a "
                         "measured curve in grams over seconds (a run folder, curve.csv or any t_s,released_g CSV; "
                         "needs --simcal)")
-    parser.add_argument("--space", default="nfc", choices=("nfc", "extruded", "ico"),
-                        help="design space: nfc (free 3D), extruded (2D field over a height), ico (free 3D, "
-                             "printable without supports along +z: incremental compliance, section 3.6)")
+    parser.add_argument("--space", choices=("nfc", "extruded", "ico"),
+                        help="design space: nfc (free 3D, the default), extruded (2D field over a height), ico (free "
+                             "3D, printable without supports along +z: incremental compliance, section 3.6)")
     parser.add_argument("--preset", metavar="paper:NAME",
                         help="hyperparameters of the paper's Tables 1-2 (e.g. paper:pill, paper:design-4) for the "
                              "options not given")
     parser.add_argument("--w-fab", type=nonnegative_float,
                         help="weight w_f of the ICO term (ico; default 1000; J_fab is 1 at the start design)")
-    parser.add_argument("--layers", type=positive_int, default=8, help="ICO partial designs L along +z (default 8)")
-    parser.add_argument("--ico-coarsen", type=positive_int, default=2, metavar="VOX",
+    parser.add_argument("--layers", type=positive_int, help="ICO partial designs L along +z (default 8)")
+    parser.add_argument("--ico-coarsen", type=positive_int, metavar="VOX",
                         help="design voxels per elasticity element edge of the ICO term (default 2)")
-    parser.add_argument("--stiffness-law", default="simp", choices=("simp", "ramp"),
+    parser.add_argument("--stiffness-law", choices=("simp", "ramp"),
                         help="ICO stiffness interpolation: simp (p = 3, default) or ramp (q = 3)")
     parser.add_argument("--resolution", type=positive_int,
                         help="voxels along the domain's longest side (even; default 64)")
@@ -46,30 +46,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="drop the connectivity penalty: the design may fall apart into pieces")
     parser.add_argument("--w-connect", type=nonnegative_float,
                         help="weight of the connectivity penalty J_conn (default 5)")
-    parser.add_argument("--starts", type=positive_int, default=1,
+    parser.add_argument("--starts", type=positive_int,
                         help="seeded starts at half the resolution, the best then refined at full resolution "
                              "(default 1: a single run)")
     parser.add_argument("--beta", type=positive_float, help="projection steepness (default 3)")
     parser.add_argument("--beta-final", type=positive_float,
                         help="beta continuation: raise beta to this over the run in 4 stages (default: fixed beta)")
-    parser.add_argument("--rate-window", type=positive_float, default=1.0, metavar="VOX",
+    parser.add_argument("--rate-window", type=positive_float, metavar="VOX",
                         help="finite-difference span of the rate-fit term's rates, voxels (default 1)")
     parser.add_argument("--w-rate", type=nonnegative_float,
                         help="weight of the rate-fit term J_rate (default 1 for analytic targets, else 0)")
-    parser.add_argument("--rate-span", type=finite_float, nargs=2, default=(0.05, 0.95), metavar=("LO", "HI"),
+    parser.add_argument("--rate-span", type=finite_float, nargs=2, metavar=("LO", "HI"),
                         help="J_rate compares rates between the times the target reaches these fractions of "
                              "its release (default 0.05 0.95; 0 1 = whole curve)")
-    parser.add_argument("--robust-eta", type=nonnegative_float, default=0.0, metavar="D",
+    parser.add_argument("--robust-eta", type=nonnegative_float, metavar="D",
                         help="robust formulation: fit the designs projected at 1/2 - D, 1/2, 1/2 + D "
                              "(0 = off; 3 simulations per evaluation)")
     parser.add_argument("--height", type=positive_float, metavar="MM",
                         help="extrusion height, mm (default: the source's height, else the domain's)")
     parser.add_argument("--max-iter", type=positive_int, help="maximum objective evaluations (default 500)")
-    parser.add_argument("--bounds", default="cosine", choices=("cosine", "box"),
+    parser.add_argument("--bounds", choices=("cosine", "box"),
                         help="how L-BFGS keeps rho_hat in [0, 1] (default cosine)")
     parser.add_argument("--optimizer", help="lbfgs (default: lean L-BFGS, exact resume) or nlopt's LD_LBFGS, "
                         "LD_MMA, LD_CCSAQ (box bounds need one of these); checked by the design configuration")
-    parser.add_argument("--warn-channel-mm", type=nonnegative_float, default=1.0, help="warn below this channel width, mm")
+    parser.add_argument("--warn-channel-mm", type=nonnegative_float, help="warn below this channel width, mm")
     parser.add_argument("--formats", nargs="*", default=[], choices=("3mf", "obj"), help="extra mesh formats")
     parser.add_argument("--allow-infeasible", action="store_true", help="optimise even if the target fails checks")
     parser.add_argument("--resume", action="store_true", help="continue the stopped run in --out, on the copy of "
@@ -122,20 +122,24 @@ def run(args: argparse.Namespace) -> int:
         else:
             if not args.target:
                 raise UsageError("--target is required (unless --resume)")
-            given = {k: v for k, v in (("resolution", args.resolution), ("max_iter", args.max_iter)) if v is not None}
-            config = DesignConfig(target=args.target, space=args.space, **given,
+            # options left out take DesignConfig's defaults, the ones the GUI starts from too
+            given = {k: v for k, v in (("space", args.space), ("resolution", args.resolution),
+                                       ("max_iter", args.max_iter), ("starts", args.starts),
+                                       ("rate_window_vox", args.rate_window),
+                                       ("rate_span", tuple(args.rate_span) if args.rate_span else None),
+                                       ("robust_eta", args.robust_eta), ("layers", args.layers),
+                                       ("ico_coarsen", args.ico_coarsen), ("stiffness_law", args.stiffness_law),
+                                       ("bounds", args.bounds), ("warn_channel_mm", args.warn_channel_mm))
+                     if v is not None}
+            config = DesignConfig(target=args.target, **given,
                                   domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
                                   height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
-                                  radius_mm=args.radius_mm, allow_pieces=args.allow_pieces, starts=args.starts,
+                                  radius_mm=args.radius_mm, allow_pieces=args.allow_pieces,
                                   **({} if args.w_connect is None else {"w_connect": args.w_connect}),
                                   beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate,
-                                  rate_window_vox=args.rate_window, rate_span=tuple(args.rate_span),
-                                  robust_eta=args.robust_eta, preset=args.preset, w_fab=args.w_fab,
-                                  layers=args.layers, ico_coarsen=args.ico_coarsen,
-                                  stiffness_law=args.stiffness_law,
-                                  bounds=args.bounds,
+                                  preset=args.preset, w_fab=args.w_fab,
                                   **({"optimizer": args.optimizer} if args.optimizer else {}),
-                                  warn_channel_mm=args.warn_channel_mm, allow_infeasible=args.allow_infeasible,
+                                  allow_infeasible=args.allow_infeasible,
                                   formats=tuple(args.formats))
         max_iter = config.max_iter if config else _stored_max_iter(args.out)
         simcal = load_simcal(args.simcal) if args.simcal else None
