@@ -46,3 +46,16 @@ def test_live_plot_smooths_with_the_analysis_window(qtbot):
     panel = PlotsPanel()
     qtbot.addWidget(panel)
     assert (panel.smooth_window_s, panel.smooth_order) == (DEFAULT_WINDOW_S, DEFAULT_ORDER)
+
+
+def test_design_launcher_starts_from_the_cli_defaults_and_layout(qtbot, tmp_path):
+    from design.problem import DesignConfig
+    from labapp.gui.design_launcher import DesignLauncher
+    from labapp.jobs import design_folder
+
+    launcher = DesignLauncher(tmp_path)
+    qtbot.addWidget(launcher)
+    cli = DesignConfig(target="sphere")                         # what `sfr design --target sphere` builds
+    assert (launcher.space.currentText(), launcher.resolution.value(), launcher.max_iter.value(),
+            launcher.allow_infeasible.isChecked()) == (cli.space, cli.resolution, cli.max_iter, cli.allow_infeasible)
+    assert design_folder(tmp_path, "my target").parent == tmp_path / "designs"
