@@ -422,18 +422,22 @@ def design(config, out: str | Path, *, resume: bool = False, units: str = "mm", 
     out = check_out(out, "design", [config.target], replace=False)
     existed = out.exists()
     before = set(out.iterdir()) if existed else set()
+    source = target = config.target
     try:
         n = config.resolution
         check_memory((n, n, n), DESIGN_BYTES_PER_VOXEL, f"designing at resolution {n}")
         out.mkdir(parents=True, exist_ok=True)
-        config = dataclasses.replace(config, target=_copy_target(config.target, out, units))
-        return design_from_target(config, out, **run)
-    except Exception:
-        if not (out / "checkpoint.npz").exists():   # rejected before the first checkpoint: leave no trace
-            for path in (set(out.iterdir()) - before) if out.exists() else ():
-                shutil.rmtree(path) if path.is_dir() else path.unlink()
-            if not existed and out.exists() and not any(out.iterdir()):
-                out.rmdir()
+        target = _copy_target(source, out, units)
+        return design_from_target(dataclasses.replace(config, target=target), out, **run)
+    except Exception as exc:
+        if (out / "checkpoint.npz").exists():
+            raise
+        for path in (set(out.iterdir()) - before) if out.exists() else ():   # rejected: leave no trace
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+        if not existed and out.exists() and not any(out.iterdir()):
+            out.rmdir()
+        if target != source and target in str(exc) and type(exc).__init__ is Exception.__init__:
+            raise type(exc)(str(exc).replace(target, source)) from exc   # name the operator's file, not the copy
         raise
 
 

@@ -159,7 +159,10 @@ def test_a_rejected_design_start_leaves_nothing_behind(tmp_path, capsys):
     assert "row 3, released_mm3" in capsys.readouterr().err
     assert not out.exists()
     out.mkdir()                                                   # an empty folder given by the operator stays
-    assert main(["design", "--target", "zero-order:duration=1000", *TINY, "--max-iter", "2",
-                 "--out", str(out)]) in (1, 2)                    # infeasible: far past the horizon
+    long = tmp_path / "long.csv"                                  # rejected after config.json was written
+    long.write_text("tau_mm,released_mm3\n0,0\n10,50\n50,100\n")
+    assert main(["design", "--target", str(long), *TINY, "--max-iter", "2", "--domain-mm", "10", "10", "10",
+                 "--out", str(out)]) == 2
+    assert f"{long}: the curve rises until tau = 50 mm" in capsys.readouterr().err
     assert out.is_dir() and not any(out.iterdir())
     assert main(["design", "--target", "sphere", *TINY, "--max-iter", "2", "--out", str(out)]) == 0
