@@ -76,6 +76,27 @@ def test_spec_text_round_trips():
     assert [c.name for c in spec.combinations] == ["w_binary=10", "w_binary=20.5", "preset=paper-pill"]
 
 
+def test_a_measured_target_goes_through_the_simulation_calibration(tmp_path):
+    from labapp.simcal import FORMAT, FORWARD_MODEL
+
+    (tmp_path / "simcal.json").write_text(json.dumps({
+        "format": FORMAT, "forward_model": FORWARD_MODEL, "model": "constant", "seconds_per_mm": 1500.0,
+        "g_per_mm3": 1.3e-3, "resolution": 16, "voxel_size_mm": 1.0, "water_g": 500.0}))
+    t_s = np.linspace(0.0, 6000.0, 60)                  # a 5 mm sphere dissolving at 1500 s/mm, in grams
+    depth = np.minimum(t_s / 1500.0, 5.0)
+    grams = 4 / 3 * np.pi * (5.0**3 - (5.0 - depth) ** 3) * 1.3e-3
+    (tmp_path / "measured.csv").write_text("t_s,released_g\n" + "".join(f"{t},{g}\n" for t, g in zip(t_s, grams)))
+    spec = parse_spec('target = "measured.csv"\nsimcal = "simcal.json"\nresolution = 16\nmax_iter = 6\n'
+                      'allow_infeasible = true\n[grid]\nw_binary = [10, 20]\n', base_dir=tmp_path)
+    rows = run_sweep(spec, tmp_path / "sweep", contact_sheet=False).rows
+    assert [r["status"] for r in rows] == ["max_iter", "max_iter"]
+    assert all(0 < r["rel_rmse_physical"] < 1 for r in rows)  # the prediction in grams against the measurement
+    assert (tmp_path / "sweep" / "runs" / "w_binary=10" / "curves_physical.csv").is_file()
+    again = run_sweep(spec, tmp_path / "sweep", contact_sheet=False)  # the stored target is the converted copy
+    assert [r["status"] for r in again.rows] == ["max_iter", "max_iter"]
+    assert (tmp_path / "sweep" / "sweep.log").read_text().count(" start ") == 2
+
+
 def test_a_missing_spec_file_is_named(tmp_path):
     with pytest.raises(SpecError, match="cannot read the sweep spec .*nope.toml"):
         load_spec(tmp_path / "nope.toml")
