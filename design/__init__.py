@@ -4,13 +4,15 @@ from design.errors import DesignError
 from design.extract import density_mesh
 from design.filters import SmoothingFilter, project
 from design.forward import N_MIN, Release, release_gradient, simulate, total_time
+from design.ico import IcoConfig, IcoTerm, incremental_compliance
 from design.meshio import load_density, load_mesh
 from design.montecarlo import MonteCarloParams, MonteCarloRelease, simulate_mc
 from design.montecarlo_tuning import tune_mc, unit_runs
 from design.objective import DesignObjective
 from design.optimize import DesignResult, run_design
 from design.pipeline import simulate_mesh
-from design.printability import assess, prusa_profile
+from design.presets import PRESET_NAMES, preset_values
+from design.printability import assess, overhang_stats, prusa_profile
 from design.problem import DesignConfig
 from design.rate import rate_deviation
 from design.shapes import SAMPLE_SHAPES, sample_shape
@@ -18,10 +20,11 @@ from design.spaces import SPACE_CHOICES, build_space, register_space
 from design.targets import Target, check_feasibility, constant_acceleration, target_from_csv, target_from_mesh
 from design.voxelize import voxelize
 
-__all__ = ["DesignConfig", "DesignError", "DesignObjective", "DesignResult", "MonteCarloParams", "MonteCarloRelease",
-           "N_MIN", "Release", "SAMPLE_SHAPES",
+__all__ = ["DesignConfig", "DesignError", "DesignObjective", "DesignResult", "IcoConfig", "IcoTerm",
+           "MonteCarloParams", "MonteCarloRelease", "N_MIN", "PRESET_NAMES", "Release", "SAMPLE_SHAPES",
            "SPACE_CHOICES", "Saturation", "SmoothingFilter", "Target", "assess", "build_space", "check_feasibility",
-           "constant_acceleration", "density_mesh", "load_density", "load_mesh", "project", "prusa_profile",
+           "constant_acceleration", "density_mesh", "incremental_compliance", "load_density", "load_mesh",
+           "overhang_stats", "preset_values", "project", "prusa_profile",
            "rate_deviation", "register_space", "release_at_times", "release_at_times_vjp", "release_gradient",
            "remap_time", "remap_time_vjp", "run_design", "sample_shape", "simulate", "simulate_mc", "simulate_mesh",
            "target_from_csv", "target_from_mesh", "total_time", "tune_mc", "unit_runs", "voxelize"]
