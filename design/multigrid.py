@@ -52,6 +52,10 @@ class Level:
         1 on free dofs, 0 on constrained ones.
     factors : tuple of 3 int or None
         Coarsening factor (1 or 2) per axis to the next level; None on the coarsest.
+    solve : callable or None
+        Direct solve ``r -> K^-1 r`` (constrained entries 0), on the coarsest level only.
+    work : ndarray
+        Output buffer of `apply`.
     """
 
     e_mod: np.ndarray
