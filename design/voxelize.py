@@ -24,6 +24,14 @@ from design.errors import DesignError
 
 log = logging.getLogger(__name__)
 
+RAY_OFFSET = (1e-7, 0.7e-7)
+"""Offset of every ray from its voxel centre, voxel edges. The side tests are evaluated in floating
+point: a mesh vertex within round-off (~1e-16 dx) of a ray, as marching-cubes vertices on the voxel
+centre lines are, can be put on different sides by different edges, and a ray then meets an odd number
+of triangles. Offset by this much, no vertex of a closed mesh built on the grid lies within round-off of
+a ray; the offset points the same way as the symbolic perturbation (+x, then +y), which still decides
+exact ties."""
+
 
 @njit(cache=True, nogil=True)
 def _side(px, py, ax, ay, bx, by):
@@ -58,9 +66,9 @@ def _crossings(vertices, faces, x0, y0, dx, nx, ny, count_only, counts, offsets,
         j_lo = max(int(np.ceil((min(ya, yb, yc) - y0) / dx - 0.5)) - 1, 0)
         j_hi = min(int(np.floor((max(ya, yb, yc) - y0) / dx - 0.5)) + 1, ny - 1)
         for i in range(i_lo, i_hi + 1):
-            px = x0 + (i + 0.5) * dx
+            px = x0 + (i + 0.5 + RAY_OFFSET[0]) * dx
             for j in range(j_lo, j_hi + 1):
-                py = y0 + (j + 0.5) * dx
+                py = y0 + (j + 0.5 + RAY_OFFSET[1]) * dx
                 inside = True
                 w = np.zeros(3)
                 for e in range(3):
@@ -79,8 +87,9 @@ def _crossings(vertices, faces, x0, y0, dx, nx, ny, count_only, counts, offsets,
                 if count_only:
                     counts[col] += 1
                 else:
-                    zs[offsets[col] + fill[col]] = (w[0] * vertices[ia, 2] + w[1] * vertices[ib, 2]
-                                                    + w[2] * vertices[ic, 2])
+                    # relative to vertex a, so that a horizontal face gives its z exactly
+                    za = vertices[ia, 2]
+                    zs[offsets[col] + fill[col]] = za + w[1] * (vertices[ib, 2] - za) + w[2] * (vertices[ic, 2] - za)
                     fill[col] += 1
 
 
