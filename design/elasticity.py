@@ -14,8 +14,10 @@ through the x = 0 (y = 0) nodes has the symmetry condition u_x = 0 (u_y = 0) the
 components free. Constrained dofs are carried as zeros: ``free`` is 1 on free dofs, 0 on
 constrained ones, and every operator here multiplies its result by it.
 
-Operators are matrix-free numba kernels (matvec, nodal block Gauss-Seidel sweeps, element
-energies); `assemble` builds the same matrix in scipy for direct solves.
+The operator is stored per node as a 27-point stencil of 3x3 blocks, assembled once per grid from
+the element matrices; numba kernels apply it, smooth with it (nodal block Gauss-Seidel) and
+compute element energies.
+`assemble` builds the same matrix in scipy for direct solves.
 """
 from __future__ import annotations
 
@@ -165,109 +167,138 @@ def _gather(u, k, j, i, ue):
 
 
 UNIFORM = np.zeros((0, 0, 0, 24, 24))
-"""The ``kel`` argument of the kernels when every element matrix is ``e_mod[e] * ke``."""
+"""The ``kel`` argument of `stencil` when every element matrix is ``e_mod[e] * ke``."""
 
 
 @numba.njit(cache=True)
-def apply_stiffness(e_mod, ke, kel, u, free, out):
-    """``out = free * (K u)``; ``u`` must be 0 on fixed dofs.
+def stencil(e_mod, ke, kel, free):
+    """The operator as a per-node 27-point stencil of 3x3 blocks, constraints applied.
 
     Element e's matrix is ``e_mod[e] * ke`` when ``kel`` is `UNIFORM`, else ``kel[e]``
     (nz, ny, nx, 24, 24) with ``e_mod`` ignored (Galerkin coarse levels, `design.multigrid`).
+
+    Returns
+    -------
+    s : (nz + 1, ny + 1, nx + 1, 27, 3, 3) ndarray of float
+        ``s[n, q]`` couples node n to its neighbour n + (dk, dj, di), q = 9 (dk + 1) + 3 (dj + 1) + di + 1;
+        rows and columns of constrained dofs are 0. 243 multiply-adds per node and product, against
+        576 per element element by element.
+    dinv : (nz + 1, ny + 1, nx + 1, 3, 3) ndarray of float
+        Inverse of each node's diagonal block on its free dofs, 0 on constrained ones.
     """
     nz, ny, nx = e_mod.shape
     general = kel.shape[0] > 0
-    out[:] = 0.0
-    ue = np.empty(24)
-    for k in range(nz):
-        for j in range(ny):
-            for i in range(nx):
-                e = 1.0 if general else e_mod[k, j, i]
-                m = kel[k, j, i] if general else ke
-                _gather(u, k, j, i, ue)
-                for a in range(8):
-                    kk, jj, ii = k + (a >> 2), j + ((a >> 1) & 1), i + (a & 1)
-                    for c in range(3):
-                        row = 3 * a + c
-                        s = 0.0
-                        for b in range(24):
-                            s += m[row, b] * ue[b]
-                        out[kk, jj, ii, c] += e * s
-    for k in range(nz + 1):
-        for j in range(ny + 1):
-            for i in range(nx + 1):
-                for c in range(3):
-                    out[k, j, i, c] *= free[k, j, i, c]
-
-
-@numba.njit(cache=True)
-def _node_update(e_mod, ke, kel, u, f, free, kn, jn, in_):
-    """One nodal block Gauss-Seidel update: solve the node's 3x3 diagonal block for its residual."""
-    nz, ny, nx = e_mod.shape
-    general = kel.shape[0] > 0
-    r = np.zeros(3)
-    blk = np.zeros((3, 3))
-    for c in range(3):
-        r[c] = f[kn, jn, in_, c]
-    for dk in range(2):
-        k = kn - dk
-        if k < 0 or k >= nz:
-            continue
-        for dj in range(2):
-            j = jn - dj
-            if j < 0 or j >= ny:
-                continue
-            for di in range(2):
-                i = in_ - di
-                if i < 0 or i >= nx:
-                    continue
-                e = 1.0 if general else e_mod[k, j, i]
-                m = kel[k, j, i] if general else ke
-                a = di + 2 * dj + 4 * dk  # local index of this node in element (k, j, i)
-                for b in range(8):
-                    kk, jj, ii = k + (b >> 2), j + ((b >> 1) & 1), i + (b & 1)
+    s = np.zeros((nz + 1, ny + 1, nx + 1, 27, 3, 3))
+    dinv = np.zeros((nz + 1, ny + 1, nx + 1, 3, 3))
+    blk = np.empty((3, 3))
+    for kn in range(nz + 1):
+        for jn in range(ny + 1):
+            for in_ in range(nx + 1):
+                for dk in range(2):  # the (up to 8) elements around the node
+                    k = kn - dk
+                    if k < 0 or k >= nz:
+                        continue
+                    for dj in range(2):
+                        j = jn - dj
+                        if j < 0 or j >= ny:
+                            continue
+                        for di in range(2):
+                            i = in_ - di
+                            if i < 0 or i >= nx:
+                                continue
+                            e = 1.0 if general else e_mod[k, j, i]
+                            m = kel[k, j, i] if general else ke
+                            a = di + 2 * dj + 4 * dk  # the node's local index in element (k, j, i)
+                            for b in range(8):
+                                q = 9 * ((b >> 2) - dk + 1) + 3 * (((b >> 1) & 1) - dj + 1) + (b & 1) - di + 1
+                                for c in range(3):
+                                    for cc in range(3):
+                                        s[kn, jn, in_, q, c, cc] += e * m[3 * a + c, 3 * b + cc]
+                for q in range(27):
+                    kk, jj, ii = kn + q // 9 - 1, jn + (q // 3) % 3 - 1, in_ + q % 3 - 1
+                    if kk < 0 or kk > nz or jj < 0 or jj > ny or ii < 0 or ii > nx:
+                        continue
                     for c in range(3):
                         for cc in range(3):
-                            r[c] -= e * m[3 * a + c, 3 * b + cc] * u[kk, jj, ii, cc]
+                            s[kn, jn, in_, q, c, cc] *= free[kn, jn, in_, c] * free[kk, jj, ii, cc]
                 for c in range(3):
                     for cc in range(3):
-                        blk[c, cc] += e * m[3 * a + c, 3 * a + cc]
-    for c in range(3):
-        if free[kn, jn, in_, c] == 0.0:
-            r[c] = 0.0
-            for cc in range(3):
-                blk[c, cc] = 0.0
-                blk[cc, c] = 0.0
-            blk[c, c] = 1.0
-    # 3x3 solve by Cramer's rule (the block is symmetric positive definite)
-    a00, a01, a02 = blk[0, 0], blk[0, 1], blk[0, 2]
-    a11, a12, a22 = blk[1, 1], blk[1, 2], blk[2, 2]
-    c00 = a11 * a22 - a12 * a12
-    c01 = a02 * a12 - a01 * a22
-    c02 = a01 * a12 - a02 * a11
-    c11 = a00 * a22 - a02 * a02
-    c12 = a01 * a02 - a00 * a12
-    c22 = a00 * a11 - a01 * a01
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    u[kn, jn, in_, 0] += (c00 * r[0] + c01 * r[1] + c02 * r[2]) / det
-    u[kn, jn, in_, 1] += (c01 * r[0] + c11 * r[1] + c12 * r[2]) / det
-    u[kn, jn, in_, 2] += (c02 * r[0] + c12 * r[1] + c22 * r[2]) / det
+                        blk[c, cc] = s[kn, jn, in_, 13, c, cc]
+                    if free[kn, jn, in_, c] == 0.0:
+                        blk[c, c] = 1.0
+                _inverse3(blk, dinv[kn, jn, in_])
+                for c in range(3):
+                    for cc in range(3):
+                        dinv[kn, jn, in_, c, cc] *= free[kn, jn, in_, c] * free[kn, jn, in_, cc]
+    return s, dinv
 
 
 @numba.njit(cache=True)
-def gauss_seidel(e_mod, ke, kel, u, f, free, forward):
+def _inverse3(a, out):
+    """Inverse of a symmetric positive definite 3x3 matrix by cofactors."""
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[1, 2]
+    c01 = a[0, 2] * a[1, 2] - a[0, 1] * a[2, 2]
+    c02 = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
+    c11 = a[0, 0] * a[2, 2] - a[0, 2] * a[0, 2]
+    c12 = a[0, 1] * a[0, 2] - a[0, 0] * a[1, 2]
+    c22 = a[0, 0] * a[1, 1] - a[0, 1] * a[0, 1]
+    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+    out[0, 0], out[0, 1], out[0, 2] = c00 / det, c01 / det, c02 / det
+    out[1, 0], out[1, 1], out[1, 2] = c01 / det, c11 / det, c12 / det
+    out[2, 0], out[2, 1], out[2, 2] = c02 / det, c12 / det, c22 / det
+
+
+@numba.njit(cache=True, inline="always")
+def _row(s, u, kn, jn, in_, r):
+    """``r -= (s u)`` at node (kn, jn, in_), over the neighbours inside the grid."""
+    nzn, nyn, nxn = u.shape[0], u.shape[1], u.shape[2]
+    i0, i1 = max(in_ - 1, 0), min(in_ + 2, nxn)
+    for kk in range(max(kn - 1, 0), min(kn + 2, nzn)):
+        for jj in range(max(jn - 1, 0), min(jn + 2, nyn)):
+            q0 = 9 * (kk - kn + 1) + 3 * (jj - jn + 1) + 1 - in_
+            for ii in range(i0, i1):
+                u0, u1, u2 = u[kk, jj, ii, 0], u[kk, jj, ii, 1], u[kk, jj, ii, 2]
+                m = s[kn, jn, in_, q0 + ii]
+                for c in range(3):
+                    r[c] -= m[c, 0] * u0 + m[c, 1] * u1 + m[c, 2] * u2
+
+
+@numba.njit(cache=True)
+def apply_stencil(s, u, out):
+    """``out = K u`` with the stencil of `stencil` (0 on constrained dofs)."""
+    nzn, nyn, nxn = u.shape[0], u.shape[1], u.shape[2]
+    r = np.empty(3)
+    for kn in range(nzn):
+        for jn in range(nyn):
+            for in_ in range(nxn):
+                r[:] = 0.0
+                _row(s, u, kn, jn, in_, r)
+                for c in range(3):
+                    out[kn, jn, in_, c] = -r[c]
+
+
+@numba.njit(cache=True)
+def gauss_seidel(s, dinv, u, f, forward):
     """One lexicographic nodal block Gauss-Seidel sweep on ``K u = f``, in place.
 
-    A forward sweep followed by a backward one is a symmetric smoother (needed inside PCG).
+    A forward sweep followed by a backward one is a symmetric smoother, as PCG needs. Serial on
+    purpose: a multicolour (8-colour) order that threads could share costs 3.4 times as much per
+    sweep on one core (strided passes over the stencil), more than two cores win back
+    (docs/benchmarks.md).
     """
-    nz, ny, nx = e_mod.shape
-    n = (nz + 1) * (ny + 1) * (nx + 1)
-    for t in range(n):
-        idx = t if forward else n - 1 - t
-        kn = idx // ((ny + 1) * (nx + 1))
-        rem = idx - kn * (ny + 1) * (nx + 1)
-        jn = rem // (nx + 1)
-        _node_update(e_mod, ke, kel, u, f, free, kn, jn, rem - jn * (nx + 1))
+    nzn, nyn, nxn = u.shape[0], u.shape[1], u.shape[2]
+    r = np.empty(3)
+    for a in range(nzn):
+        kn = a if forward else nzn - 1 - a
+        for b in range(nyn):
+            jn = b if forward else nyn - 1 - b
+            for c in range(nxn):
+                in_ = c if forward else nxn - 1 - c
+                r[0], r[1], r[2] = f[kn, jn, in_, 0], f[kn, jn, in_, 1], f[kn, jn, in_, 2]
+                _row(s, u, kn, jn, in_, r)
+                d = dinv[kn, jn, in_]
+                for cc in range(3):
+                    u[kn, jn, in_, cc] += d[cc, 0] * r[0] + d[cc, 1] * r[1] + d[cc, 2] * r[2]
 
 
 @numba.njit(cache=True)
@@ -300,7 +331,7 @@ def _element_dofs(shape: tuple[int, int, int]) -> np.ndarray:
 
 
 def assemble(e_mod: np.ndarray, ke: np.ndarray, kel: np.ndarray = UNIFORM) -> sp.csr_matrix:
-    """The global stiffness matrix, no constraints applied (element matrices as in `apply_stiffness`).
+    """The global stiffness matrix, no constraints applied (element matrices as in `stencil`).
 
     Returns
     -------

@@ -23,7 +23,7 @@ import numba
 import numpy as np
 import scipy.sparse.linalg as sla
 
-from design.elasticity import UNIFORM, apply_stiffness, assemble, free_mask, gauss_seidel, hex8_stiffness
+from design.elasticity import UNIFORM, apply_stencil, assemble, free_mask, gauss_seidel, hex8_stiffness, stencil
 from design.errors import DesignError
 
 log = logging.getLogger(__name__)
@@ -54,6 +54,8 @@ class Level:
         Coarsening factor (1 or 2) per axis to the next level; None on the coarsest.
     solve : callable or None
         Direct solve ``r -> K^-1 r`` (constrained entries 0), on the coarsest level only.
+    s, dinv : ndarrays
+        The operator's nodal stencil and inverse diagonal blocks (`design.elasticity.stencil`).
     work : ndarray
         Output buffer of `apply`.
     """
@@ -64,15 +66,22 @@ class Level:
     free: np.ndarray
     factors: tuple[int, int, int] | None = None
     solve: Callable[[np.ndarray], np.ndarray] | None = None
+    s: np.ndarray = field(init=False, repr=False)
+    dinv: np.ndarray = field(init=False, repr=False)
     work: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        self.s, self.dinv = stencil(self.e_mod, self.ke, self.kel, self.free)
         self.work = np.empty_like(self.free)
 
     def apply(self, u: np.ndarray) -> np.ndarray:
         """``free * (K u)`` into this level's work buffer (overwritten by the next call)."""
-        apply_stiffness(self.e_mod, self.ke, self.kel, u, self.free, self.work)
+        apply_stencil(self.s, u, self.work)
         return self.work
+
+    def smooth(self, u: np.ndarray, f: np.ndarray, forward: bool) -> None:
+        """One nodal block Gauss-Seidel sweep on ``K u = f``, in place (backward: colours reversed)."""
+        gauss_seidel(self.s, self.dinv, u, f, forward)
 
 
 def _child_prolongations(factors: tuple[int, int, int]) -> dict[tuple[int, int, int], np.ndarray]:
@@ -181,11 +190,11 @@ def v_cycle(levels: list[Level], r: np.ndarray, depth: int = 0) -> np.ndarray:
         return lev.solve(r)
     x = np.zeros_like(r)
     for _ in range(PRE_SMOOTH):
-        gauss_seidel(lev.e_mod, lev.ke, lev.kel, x, r, lev.free, True)
+        lev.smooth(x, r, True)
     rc = restrict(r - lev.apply(x), lev.factors) * levels[depth + 1].free
     x += prolong(v_cycle(levels, rc, depth + 1), lev.factors) * lev.free
     for _ in range(PRE_SMOOTH):
-        gauss_seidel(lev.e_mod, lev.ke, lev.kel, x, r, lev.free, False)
+        lev.smooth(x, r, False)
     return x
 
 
