@@ -32,8 +32,9 @@ MAX_COARSE_NODES = 400
 """Coarsening stops at or below this many nodes; that level is solved directly."""
 PRE_SMOOTH = 1
 """Gauss-Seidel sweeps before (forward) and after (backward) the coarse correction."""
-PCG_TOL = 1e-5
-"""Relative residual ``|f - K u| / |f|`` at which PCG stops."""
+PCG_TOL = 3e-4
+"""Relative residual ``|f - K u| / |f|`` at which PCG stops. J_fab stays within 2e-6 and its
+gradient within 4e-5 (largest entry) of a 1e-10 solve (`benchmarks/bench_ico.py`, 64^3)."""
 
 
 @dataclass
