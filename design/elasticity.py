@@ -158,7 +158,7 @@ def self_weight_adjoint(u: np.ndarray, shape: tuple[int, int, int], volume: floa
     return -acc * (volume / 8.0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _gather(u, k, j, i, ue):
     for a in range(8):
         kk, jj, ii = k + (a >> 2), j + ((a >> 1) & 1), i + (a & 1)
@@ -170,7 +170,7 @@ UNIFORM = np.zeros((0, 0, 0, 24, 24))
 """The ``kel`` argument of `stencil` when every element matrix is ``e_mod[e] * ke``."""
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def stencil(e_mod, ke, kel, free):
     """The operator as a per-node 27-point stencil of 3x3 blocks, constraints applied.
 
@@ -233,7 +233,7 @@ def stencil(e_mod, ke, kel, free):
     return s, dinv
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _inverse3(a, out):
     """Inverse of a symmetric positive definite 3x3 matrix by cofactors."""
     c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[1, 2]
@@ -263,7 +263,7 @@ def _row(s, u, kn, jn, in_, r):
                     r[c] -= m[c, 0] * u0 + m[c, 1] * u1 + m[c, 2] * u2
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def apply_stencil(s, u, out):
     """``out = K u`` with the stencil of `stencil` (0 on constrained dofs)."""
     nzn, nyn, nxn = u.shape[0], u.shape[1], u.shape[2]
@@ -277,7 +277,7 @@ def apply_stencil(s, u, out):
                     out[kn, jn, in_, c] = -r[c]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def gauss_seidel(s, dinv, u, f, forward):
     """One lexicographic nodal block Gauss-Seidel sweep on ``K u = f``, in place.
 
@@ -301,7 +301,7 @@ def gauss_seidel(s, dinv, u, f, forward):
                     u[kn, jn, in_, cc] += d[cc, 0] * r[0] + d[cc, 1] * r[1] + d[cc, 2] * r[2]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def element_energy(ke, u, out):
     """``out[e] = u_e^T Ke u_e`` for every element (twice the strain energy at unit modulus)."""
     nz, ny, nx = out.shape

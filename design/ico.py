@@ -18,7 +18,9 @@ design, so J_fab = 1 there at every resolution and domain size and w_f keeps its
 from __future__ import annotations
 
 import logging
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -129,7 +131,9 @@ def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = Ic
     mirror : (bool, bool)
         Mirror planes at the index-0 faces of x and y.
     warm : list of ndarrays, optional
-        Per-layer solutions of a previous call on the same grid (initial guesses).
+        Per-layer solutions of a previous call on the same grid (initial guesses). With them the
+        layers are independent and solved concurrently, one thread per core; without them in
+        sequence, each from the solution of the layer below.
 
     Returns
     -------
@@ -147,26 +151,35 @@ def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = Ic
     h = (c * dx_mm,) * 3
     volume = h[0] ** 3
     tops = layer_tops(e_mod.shape[0], config.layers)
+    forces = [self_weight(load[:top], volume) for top in tops]
+
+    def solve(l: int, u0: np.ndarray | None) -> tuple[np.ndarray, int, np.ndarray]:
+        """Partial design l: displacements, PCG iterations, element energies at unit modulus."""
+        levels = hierarchy(e_mod[:tops[l]], h, config.poisson, *mirror)
+        u, its = pcg(levels, forces[l], u0, config.tol)
+        energy = np.empty((tops[l],) + e_mod.shape[1:])
+        element_energy(levels[0].ke, u, energy)
+        return u, its, energy
+
+    if warm is not None and [w.shape for w in warm] == [f.shape for f in forces]:
+        # independent solves: one thread per core, largest partial design first (the kernels release the GIL)
+        order = list(range(len(tops)))[::-1]
+        with ThreadPoolExecutor(min(len(tops), os.cpu_count() or 1)) as pool:
+            done = dict(zip(order, pool.map(solve, order, [warm[l] for l in order])))
+        results = [done[l] for l in range(len(tops))]
+    else:
+        results = []
+        for l, top in enumerate(tops):
+            prev = results[-1][0] if results else None  # the layer below, its top row continued upward
+            u0 = None if prev is None else np.concatenate([prev, np.repeat(prev[-1:], top + 1 - prev.shape[0], axis=0)])
+            results.append(solve(l, u0))
     g_load, g_e = np.zeros_like(load), np.zeros_like(e_mod)
-    compliances, iterations, solutions = np.zeros(len(tops)), np.zeros(len(tops), dtype=int), []
-    energy = np.empty_like(e_mod)
-    prev: np.ndarray | None = None
-    for l, top in enumerate(tops):
-        levels = hierarchy(e_mod[:top], h, config.poisson, *mirror)
-        f = self_weight(load[:top], volume)
-        if warm is not None and l < len(warm) and warm[l].shape == f.shape:
-            u0 = warm[l]
-        elif prev is not None:  # the layer below, its top row continued upward
-            u0 = np.concatenate([prev, np.repeat(prev[-1:], top + 1 - prev.shape[0], axis=0)])
-        else:
-            u0 = None
-        u, iterations[l] = pcg(levels, f, u0, config.tol)
-        compliances[l] = float(np.vdot(f, u))
+    compliances, iterations = np.zeros(len(tops)), np.zeros(len(tops), dtype=int)
+    for l, (top, (u, its, energy)) in enumerate(zip(tops, results)):  # summed in layer order: deterministic
+        compliances[l], iterations[l] = float(np.vdot(forces[l], u)), its
         g_load[:top] += self_weight_adjoint(u, load[:top].shape, volume)
-        element_energy(levels[0].ke, u, energy[:top])
-        g_e[:top] -= 0.5 * energy[:top]
-        solutions.append(u)
-        prev = u
+        g_e[:top] -= 0.5 * energy
+    solutions = [u for u, _, _ in results]
     L = len(tops)
     value = compliances.sum() / (2.0 * L)
     # chain to voxels: d(block mean)/d voxel = 1/c^3

@@ -199,7 +199,7 @@ def v_cycle(levels: list[Level], r: np.ndarray, depth: int = 0) -> np.ndarray:
     return x
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _dot(a, b):
     """Plain serial dot product of two arrays of the same shape (BLAS threads spin on a shared machine)."""
     a, b = a.ravel(), b.ravel()

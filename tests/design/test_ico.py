@@ -79,6 +79,21 @@ def test_warm_start_reuses_the_previous_solutions_and_normalises():
         IcoTerm(0.5).normalise_at(np.zeros((4, 4, 16)))
 
 
+def test_threaded_warm_evaluation_matches_the_sequential_cold_one():
+    """Warm-started layers are solved concurrently (one thread per core); cold ones in sequence, each
+    from the layer below. Both reach the same solution, and the threaded one is reproducible."""
+    rng = np.random.default_rng(7)
+    rho = rng.uniform(0.0, 1.0, (12, 12, 16))
+    config = IcoConfig(layers=4, coarsen=1, tol=1e-10)
+    _, solutions = incremental_compliance(rho, 0.5, config)
+    moved = 0.98 * rho + 0.01
+    cold = incremental_compliance(moved, 0.5, config)[0]
+    warm = [incremental_compliance(moved, 0.5, config, warm=solutions)[0] for _ in range(2)]
+    assert warm[0].value == pytest.approx(cold.value, rel=1e-8) and np.all(warm[0].iterations > 0)
+    assert np.abs(warm[0].grad - cold.grad).max() <= 1e-7 * np.abs(cold.grad).max()
+    assert warm[0].value == warm[1].value and np.array_equal(warm[0].grad, warm[1].grad)
+
+
 def test_ico_space_and_objective_gradient_with_robust_and_rate_terms():
     request = SpaceRequest((8, 8, 16), 0.5, ico=IcoConfig(layers=4, coarsen=2, tol=1e-11))
     space = build_space("ico", request)
