@@ -7,10 +7,11 @@ optimised design). The ICO term sees the quadrant (N/2, N/2, N), mirror planes i
 build direction, L = 8 layers, the default coarsening (2 voxels per element edge), SIMP.
 For N = 64 and 128 and each field it reports, in the same process:
   skfmm      skfmm.travel_time(order=1) on the padded N^3 grid (as bench_forward), best of R
-  ico cold   one J_fab + gradient (all L layers) from zero initial guesses
+  ico cold   one J_fab + gradient (all L layers) without previous solutions: the layers in
+             sequence, each from the solution of the layer below (the first evaluation of a run)
   ico warm   one J_fab + gradient of a slightly changed design (an optimiser step: +-1% smooth
-             change of rho), warm-started from the previous solutions, as in every optimisation
-             iteration after the first
+             change of rho), warm-started from the previous solutions, the layers solved
+             concurrently on all cores, as in every optimisation iteration after the first
   PCG iterations per layer, cold and warm
 and the peak resident memory of a separate process that runs the 128^3 evaluations. The coarsening
 error is measured at 64^3: J_fab normalised by the uniform start design, and the gradient's
