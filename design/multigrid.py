@@ -85,19 +85,57 @@ class Level:
         gauss_seidel(self.s, self.dinv, u, f, forward)
 
 
-def _child_prolongations(factors: tuple[int, int, int]) -> dict[tuple[int, int, int], np.ndarray]:
-    """24 x 24 maps from a coarse element's dofs to each child element's dofs, by child offset (z, y, x)."""
+def _child_weights(factors: tuple[int, int, int]) -> np.ndarray:
+    """(fz, fy, fx, 8, 8) trilinear weights from a coarse element's nodes (columns) to each child's (rows).
+
+    Child ``(oz, oy, ox)``'s prolongation of dofs is ``kron(w[oz, oy, ox], eye(3))``; local node
+    index ``4 dk + 2 dj + di``.
+    """
     def weights(f: int, o: int) -> np.ndarray:  # (fine local node d, coarse local node b)
         t = (o + np.arange(2)) / f
         return np.stack([1.0 - t, t], axis=1)
-    out = {}
+    w = np.empty(tuple(factors) + (8, 8))
     for oz in range(factors[0]):
         for oy in range(factors[1]):
             for ox in range(factors[2]):
                 wz, wy, wx = weights(factors[0], oz), weights(factors[1], oy), weights(factors[2], ox)
-                w = np.einsum("kK,jJ,iI->kjiKJI", wz, wy, wx).reshape(8, 8)  # local index 4 dk + 2 dj + di
-                out[(oz, oy, ox)] = np.kron(w, np.eye(3))
-    return out
+                w[oz, oy, ox] = np.einsum("kK,jJ,iI->kjiKJI", wz, wy, wx).reshape(8, 8)
+    return w
+
+
+@numba.njit(cache=True, nogil=True)
+def _galerkin_general(kel, w, out):
+    """``out[E] = sum_children P_c^T kel[child] P_c`` with P_c = kron(w_c, I3), skipping zero weights."""
+    fz, fy, fx = w.shape[0], w.shape[1], w.shape[2]
+    nzc, nyc, nxc = out.shape[0], out.shape[1], out.shape[2]
+    t = np.empty((8, 8, 3, 3))
+    for kc in range(nzc):
+        for jc in range(nyc):
+            for ic in range(nxc):
+                res = out[kc, jc, ic]
+                res[:] = 0.0
+                for oz in range(fz):
+                    for oy in range(fy):
+                        for ox in range(fx):
+                            child = kel[kc * fz + oz, jc * fy + oy, ic * fx + ox]
+                            wc = w[oz, oy, ox]
+                            t[:] = 0.0  # t[a, B] = sum_a' K[a, a'] w[a', B] (3 x 3 blocks)
+                            for a in range(8):
+                                for a2 in range(8):
+                                    for b2 in range(8):
+                                        wv = wc[a2, b2]
+                                        if wv != 0.0:
+                                            for x in range(3):
+                                                for y in range(3):
+                                                    t[a, b2, x, y] += child[3 * a + x, 3 * a2 + y] * wv
+                            for a in range(8):
+                                for b in range(8):
+                                    wv = wc[a, b]
+                                    if wv != 0.0:
+                                        for b2 in range(8):
+                                            for x in range(3):
+                                                for y in range(3):
+                                                    res[3 * b + x, 3 * b2 + y] += wv * t[a, b2, x, y]
 
 
 def _galerkin(level: "Level", factors: tuple[int, int, int]) -> np.ndarray:
@@ -105,12 +143,15 @@ def _galerkin(level: "Level", factors: tuple[int, int, int]) -> np.ndarray:
     nz, ny, nx = level.e_mod.shape
     fz, fy, fx = factors
     kel = np.zeros((nz // fz, ny // fy, nx // fx, 24, 24))
-    for (oz, oy, ox), p in _child_prolongations(factors).items():
-        sub = (slice(oz, None, fz), slice(oy, None, fy), slice(ox, None, fx))
-        if level.kel.shape[0]:
-            kel += p.T @ level.kel[sub] @ p
-        else:
-            kel += level.e_mod[sub][..., None, None] * (p.T @ level.ke @ p)
+    w = _child_weights(factors)
+    if level.kel.shape[0]:
+        _galerkin_general(level.kel, w, kel)
+        return kel
+    for oz in range(fz):
+        for oy in range(fy):
+            for ox in range(fx):
+                p = np.kron(w[oz, oy, ox], np.eye(3))
+                kel += level.e_mod[oz::fz, oy::fy, ox::fx][..., None, None] * (p.T @ level.ke @ p)
     return kel
 
 
