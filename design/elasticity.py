@@ -171,25 +171,24 @@ UNIFORM = np.zeros((0, 0, 0, 24, 24))
 
 
 @numba.njit(cache=True, nogil=True)
-def stencil(e_mod, ke, kel, free):
-    """The operator as a per-node 27-point stencil of 3x3 blocks, constraints applied.
+def stencil(e_mod, ke, kel, free, s, dinv):
+    """The operator as a per-node 27-point stencil of 3x3 blocks, constraints applied, into ``s``, ``dinv``.
 
     Element e's matrix is ``e_mod[e] * ke`` when ``kel`` is `UNIFORM`, else ``kel[e]``
     (nz, ny, nx, 24, 24) with ``e_mod`` ignored (Galerkin coarse levels, `design.multigrid`).
 
-    Returns
-    -------
-    s : (nz + 1, ny + 1, nx + 1, 27, 3, 3) ndarray of float
+    Parameters
+    ----------
+    s : (nz + 1, ny + 1, nx + 1, 27, 3, 3) ndarray of float, overwritten
         ``s[n, q]`` couples node n to its neighbour n + (dk, dj, di), q = 9 (dk + 1) + 3 (dj + 1) + di + 1;
         rows and columns of constrained dofs are 0. 243 multiply-adds per node and product, against
         576 per element element by element.
-    dinv : (nz + 1, ny + 1, nx + 1, 3, 3) ndarray of float
+    dinv : (nz + 1, ny + 1, nx + 1, 3, 3) ndarray of float, overwritten
         Inverse of each node's diagonal block on its free dofs, 0 on constrained ones.
     """
     nz, ny, nx = e_mod.shape
     general = kel.shape[0] > 0
-    s = np.zeros((nz + 1, ny + 1, nx + 1, 27, 3, 3))
-    dinv = np.zeros((nz + 1, ny + 1, nx + 1, 3, 3))
+    s[:] = 0.0
     blk = np.empty((3, 3))
     for kn in range(nz + 1):
         for jn in range(ny + 1):
@@ -230,7 +229,6 @@ def stencil(e_mod, ke, kel, free):
                 for c in range(3):
                     for cc in range(3):
                         dinv[kn, jn, in_, c, cc] *= free[kn, jn, in_, c] * free[kn, jn, in_, cc]
-    return s, dinv
 
 
 @numba.njit(cache=True, nogil=True)

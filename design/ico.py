@@ -28,7 +28,7 @@ import numpy as np
 from design.elasticity import E_MIN_RATIO, LAWS, POISSON_RATIO, element_energy, modulus, self_weight, \
     self_weight_adjoint
 from design.errors import DesignError
-from design.multigrid import PCG_TOL, hierarchy, pcg
+from design.multigrid import PCG_TOL, Scratch, hierarchy, pcg
 
 log = logging.getLogger(__name__)
 
@@ -153,26 +153,35 @@ def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = Ic
     tops = layer_tops(e_mod.shape[0], config.layers)
     forces = [self_weight(load[:top], volume) for top in tops]
 
-    def solve(l: int, u0: np.ndarray | None) -> tuple[np.ndarray, int, np.ndarray]:
+    def solve(l: int, u0: np.ndarray | None, scratch: Scratch) -> tuple[np.ndarray, int, np.ndarray]:
         """Partial design l: displacements, PCG iterations, element energies at unit modulus."""
-        levels = hierarchy(e_mod[:tops[l]], h, config.poisson, *mirror)
+        levels = hierarchy(e_mod[:tops[l]], h, config.poisson, *mirror, scratch=scratch)
         u, its = pcg(levels, forces[l], u0, config.tol)
         energy = np.empty((tops[l],) + e_mod.shape[1:])
         element_energy(levels[0].ke, u, energy)
         return u, its, energy
 
+    results = []
     if warm is not None and [w.shape for w in warm] == [f.shape for f in forces]:
-        # independent solves: one thread per core, largest partial design first (the kernels release the GIL)
-        order = list(range(len(tops)))[::-1]
-        with ThreadPoolExecutor(min(len(tops), os.cpu_count() or 1)) as pool:
-            done = dict(zip(order, pool.map(solve, order, [warm[l] for l in order])))
+        # independent solves: one thread per core, each with its share of the layers, largest first
+        # (the kernels release the GIL)
+        queues: list[list[int]] = [[] for _ in range(min(len(tops), os.cpu_count() or 1))]
+        for l in np.argsort(tops, kind="stable")[::-1]:
+            min(queues, key=lambda q: sum(tops[i] for i in q)).append(int(l))
+
+        def run(queue: list[int]) -> list[tuple[int, tuple]]:
+            scratch = Scratch()
+            return [(l, solve(l, warm[l], scratch)) for l in queue]
+
+        with ThreadPoolExecutor(len(queues)) as pool:
+            done = dict(pair for part in pool.map(run, queues) for pair in part)
         results = [done[l] for l in range(len(tops))]
     else:
-        results = []
+        scratch = Scratch()
         for l, top in enumerate(tops):
             prev = results[-1][0] if results else None  # the layer below, its top row continued upward
             u0 = None if prev is None else np.concatenate([prev, np.repeat(prev[-1:], top + 1 - prev.shape[0], axis=0)])
-            results.append(solve(l, u0))
+            results.append(solve(l, u0, scratch))
     g_load, g_e = np.zeros_like(load), np.zeros_like(e_mod)
     compliances, iterations = np.zeros(len(tops)), np.zeros(len(tops), dtype=int)
     for l, (top, (u, its, energy)) in enumerate(zip(tops, results)):  # summed in layer order: deterministic
