@@ -247,12 +247,15 @@ def _inverse3(a, out):
 
 
 @numba.njit(cache=True, inline="always")
-def _row(s, u, kn, jn, in_, r):
-    """``r -= (s u)`` at node (kn, jn, in_), over the neighbours inside the grid."""
+def _row(s, u, kn, jn, in_, r, other_lines):
+    """``r -= (s u)`` at node (kn, jn, in_), over the neighbours inside the grid; with ``other_lines``
+    only those off the node's own x line."""
     nzn, nyn, nxn = u.shape[0], u.shape[1], u.shape[2]
     i0, i1 = max(in_ - 1, 0), min(in_ + 2, nxn)
     for kk in range(max(kn - 1, 0), min(kn + 2, nzn)):
         for jj in range(max(jn - 1, 0), min(jn + 2, nyn)):
+            if other_lines and kk == kn and jj == jn:
+                continue
             q0 = 9 * (kk - kn + 1) + 3 * (jj - jn + 1) + 1 - in_
             for ii in range(i0, i1):
                 u0, u1, u2 = u[kk, jj, ii, 0], u[kk, jj, ii, 1], u[kk, jj, ii, 2]
@@ -270,7 +273,7 @@ def apply_stencil(s, u, out):
         for jn in range(nyn):
             for in_ in range(nxn):
                 r[:] = 0.0
-                _row(s, u, kn, jn, in_, r)
+                _row(s, u, kn, jn, in_, r, False)
                 for c in range(3):
                     out[kn, jn, in_, c] = -r[c]
 
@@ -279,24 +282,31 @@ def apply_stencil(s, u, out):
 def gauss_seidel(s, dinv, u, f, forward):
     """One lexicographic nodal block Gauss-Seidel sweep on ``K u = f``, in place.
 
-    A forward sweep followed by a backward one is a symmetric smoother, as PCG needs. Serial on
-    purpose: a multicolour (8-colour) order that threads could share costs 3.4 times as much per
-    sweep on one core (strided passes over the stencil), more than two cores win back
-    (docs/benchmarks.md).
+    A forward sweep followed by a backward one is a symmetric smoother, as PCG needs. Each x line
+    first gathers, in ascending memory order, its couplings to the other lines (fixed while the line
+    is updated), then updates its nodes in the sweep's direction: a backward sweep reading the
+    stencil in descending order ran 3.5 times slower. Serial on purpose: a multicolour order that
+    threads could share costs 3.4 times as much per sweep (strided passes over the stencil).
     """
     nzn, nyn, nxn = u.shape[0], u.shape[1], u.shape[2]
-    r = np.empty(3)
-    for a in range(nzn):
-        kn = a if forward else nzn - 1 - a
-        for b in range(nyn):
-            jn = b if forward else nyn - 1 - b
-            for c in range(nxn):
-                in_ = c if forward else nxn - 1 - c
+    rest = np.empty((nxn, 3))
+    step = 1 if forward else -1
+    for kn in range(0 if forward else nzn - 1, nzn if forward else -1, step):
+        for jn in range(0 if forward else nyn - 1, nyn if forward else -1, step):
+            for in_ in range(nxn):
+                r = rest[in_]
                 r[0], r[1], r[2] = f[kn, jn, in_, 0], f[kn, jn, in_, 1], f[kn, jn, in_, 2]
-                _row(s, u, kn, jn, in_, r)
+                _row(s, u, kn, jn, in_, r, True)
+            for in_ in range(0 if forward else nxn - 1, nxn if forward else -1, step):
+                r = rest[in_]
+                for ii in range(max(in_ - 1, 0), min(in_ + 2, nxn)):  # the line's own couplings
+                    u0, u1, u2 = u[kn, jn, ii, 0], u[kn, jn, ii, 1], u[kn, jn, ii, 2]
+                    m = s[kn, jn, in_, 13 + ii - in_]
+                    for c in range(3):
+                        r[c] -= m[c, 0] * u0 + m[c, 1] * u1 + m[c, 2] * u2
                 d = dinv[kn, jn, in_]
-                for cc in range(3):
-                    u[kn, jn, in_, cc] += d[cc, 0] * r[0] + d[cc, 1] * r[1] + d[cc, 2] * r[2]
+                for c in range(3):
+                    u[kn, jn, in_, c] += d[c, 0] * r[0] + d[c, 1] * r[1] + d[c, 2] * r[2]
 
 
 @numba.njit(cache=True, nogil=True)
