@@ -118,7 +118,8 @@ def _blocks(a: np.ndarray, c: int) -> np.ndarray:
 
 def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = IcoConfig(), *,
                            mirror: tuple[bool, bool] = (True, True),
-                           warm: list[np.ndarray] | None = None) -> tuple[IcoResult, list[np.ndarray]]:
+                           warm: list[np.ndarray] | None = None,
+                           scratch: list[Scratch] | None = None) -> tuple[IcoResult, list[np.ndarray]]:
     """J_fab and its gradient for a reduced density grid.
 
     Parameters
@@ -134,6 +135,8 @@ def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = Ic
         Per-layer solutions of a previous call on the same grid (initial guesses). With them the
         layers are independent and solved concurrently, one thread per core; without them in
         sequence, each from the solution of the layer below.
+    scratch : list of Scratch, optional
+        Memory for the solver, one per thread, kept from earlier calls (fresh memory costs page faults).
 
     Returns
     -------
@@ -152,6 +155,7 @@ def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = Ic
     volume = h[0] ** 3
     tops = layer_tops(e_mod.shape[0], config.layers)
     forces = [self_weight(load[:top], volume) for top in tops]
+    memories = list(scratch or []) + [Scratch() for _ in range(len(tops) - len(scratch or []))]
 
     def solve(l: int, u0: np.ndarray | None, scratch: Scratch) -> tuple[np.ndarray, int, np.ndarray]:
         """Partial design l: displacements, PCG iterations, element energies at unit modulus."""
@@ -169,19 +173,17 @@ def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = Ic
         for l in np.argsort(tops, kind="stable")[::-1]:
             min(queues, key=lambda q: sum(tops[i] for i in q)).append(int(l))
 
-        def run(queue: list[int]) -> list[tuple[int, tuple]]:
-            scratch = Scratch()
-            return [(l, solve(l, warm[l], scratch)) for l in queue]
+        def run(queue: list[int], memory: Scratch) -> list[tuple[int, tuple]]:
+            return [(l, solve(l, warm[l], memory)) for l in queue]
 
         with ThreadPoolExecutor(len(queues)) as pool:
-            done = dict(pair for part in pool.map(run, queues) for pair in part)
+            done = dict(pair for part in pool.map(run, queues, memories[:len(queues)]) for pair in part)
         results = [done[l] for l in range(len(tops))]
     else:
-        scratch = Scratch()
         for l, top in enumerate(tops):
             prev = results[-1][0] if results else None  # the layer below, its top row continued upward
             u0 = None if prev is None else np.concatenate([prev, np.repeat(prev[-1:], top + 1 - prev.shape[0], axis=0)])
-            results.append(solve(l, u0, scratch))
+            results.append(solve(l, u0, memories[0]))
     g_load, g_e = np.zeros_like(load), np.zeros_like(e_mod)
     compliances, iterations = np.zeros(len(tops)), np.zeros(len(tops), dtype=int)
     for l, (top, (u, its, energy)) in enumerate(zip(tops, results)):  # summed in layer order: deterministic
@@ -225,11 +227,13 @@ class IcoTerm:
         self.evaluations = 0
         self.iterations = np.zeros(config.layers, dtype=int)
         self._warm: list[np.ndarray] | None = None
+        self._scratch = [Scratch() for _ in range(min(config.layers, os.cpu_count() or 1))]
 
     def evaluate(self, rho: np.ndarray) -> IcoResult:
         """Unnormalised J_fab and gradient; updates the warm-start solutions and the timing."""
         warm = self._warm if self.config.warm_start else None
-        result, self._warm = incremental_compliance(rho, self.dx_mm, self.config, mirror=self.mirror, warm=warm)
+        result, self._warm = incremental_compliance(rho, self.dx_mm, self.config, mirror=self.mirror, warm=warm,
+                                                    scratch=self._scratch)
         self.last = result
         self.seconds += result.seconds
         self.evaluations += 1
