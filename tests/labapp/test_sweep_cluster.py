@@ -115,7 +115,7 @@ def folder_not_done(folder: Path) -> bool:
 @pytest.mark.timeout(120)
 def test_ctrl_c_checkpoints_running_designs(tmp_path):
     spec, out = tmp_path / "spec.toml", tmp_path / "sweep"
-    spec.write_text(SPEC.replace("resolution = 32", "resolution = 40").replace(f"max_iter = {MAX_ITER}", "max_iter = 400"))
+    spec.write_text(SPEC.replace("resolution = 32", "resolution = 48").replace(f"max_iter = {MAX_ITER}", "max_iter = 2000"))
     cmd = ["-m", "labapp.cli", "sweep", str(spec), "--out", str(out), "--workers", "2"]
     # a terminal's Ctrl-C: SIGINT to the whole process group (the command and its local workers)
     sweep = _spawn(cmd, start_new_session=True)
@@ -129,9 +129,11 @@ def test_ctrl_c_checkpoints_running_designs(tmp_path):
     assert sweep.returncode == 130, err.decode()[-2000:]
     assert "rerun the same command to resume" in err.decode()
     statuses = {p.parent.name: json.loads(p.read_text())["status"] for p in out.glob("runs/*/summary.json")}
-    assert sorted(statuses.values()) == ["stopped", "stopped"], statuses  # the queued two never started
-    for name in statuses:
+    assert len(statuses) == 2, statuses  # the queued two never started
+    # the running two stop with a checkpoint (one may have ended on its own just before: L-BFGS can stall)
+    assert "stopped" in statuses.values() and set(statuses.values()) <= {"stopped", *DONE_STATUSES}, statuses
+    for name, status in statuses.items():
         with np.load(out / "runs" / name / "checkpoint.npz") as ckpt:
-            assert 0 < len(ckpt["history"]) < 400
+            assert 0 < len(ckpt["history"]) < 2000
     rows = (out / "sweep.csv").read_text()
-    assert rows.count(",stopped,") == 2 and rows.count(",not started,") == 2
+    assert rows.count(",stopped,") == list(statuses.values()).count("stopped") and rows.count(",not started,") == 2
