@@ -228,6 +228,22 @@ def read_run(path: Path) -> RunSnapshot:
     return RunSnapshot(path, meta, frames, torn)
 
 
+UNRECORDED_DIR = ".unrecorded"
+"""Hidden subfolder where reopening a run keeps frames written but not recorded before a crash."""
+_FRAME_NAME = re.compile(r"frame_\d{6}\.[A-Za-z0-9]+")
+
+
+def unrecorded_frames(snapshot: RunSnapshot) -> list[str]:
+    """Frame files of an unfinished run that its manifests do not list: a crash between a frame's atomic
+    write and its ``frames.csv`` row (or its ``run.json`` entry) leaves at most one such frame and its
+    companion files."""
+    if snapshot.status not in ("interrupted", "running"):
+        return []
+    listed = {f.file for f in snapshot.frames} | set(snapshot.meta.get("files", {}))
+    return sorted(p.name for p in snapshot.path.iterdir()
+                  if p.is_file() and _FRAME_NAME.fullmatch(p.name) and p.name not in listed)
+
+
 class RunFolder:
     """A run folder open for writing by this process. Make with :func:`create_run` or :func:`open_run`."""
 
@@ -248,6 +264,12 @@ class RunFolder:
         self._events = open(self.path / EVENTS_LOG, "a")
         if snapshot.torn_bytes:
             self.event("warning", "torn-row", f"dropped {snapshot.torn_bytes} bytes of a half-written row")
+        for name in unrecorded_frames(snapshot):
+            aside = self.path / UNRECORDED_DIR
+            aside.mkdir(exist_ok=True)
+            os.replace(self.path / name, aside / name)
+            self.event("warning", "unrecorded-frame", f"{name} was written but not recorded before the process "
+                       f"stopped; kept aside as {UNRECORDED_DIR}/{name}")
 
     @property
     def status(self) -> str:
@@ -506,9 +528,12 @@ def _verify_record(path: Path) -> VerifyReport:
         own.add(MASSES_CSV)
         problems += _check_masses(path, seen, required=True)
     unlisted = [p.name for p in _entries(snap.path) if p.name not in seen and p.name not in own]
+    pending = unrecorded_frames(snap)
+    notes = [f"{name} was written just before the process stopped and never recorded; resuming or finalising "
+             f"the run keeps it aside in {UNRECORDED_DIR}/" for name in pending]
     label = "calibration-series record" if kind == "calibration-series" else "acquisition run record"
     return VerifyReport(snap.path, label, snap.status, len(snap.frames), missing, mismatched, duplicates, unlisted,
-                        list(snap.meta.get("gaps", [])), snap.torn_bytes, problems)
+                        list(snap.meta.get("gaps", [])), snap.torn_bytes, problems, notes)
 
 
 def _check_masses(path: Path, listed: set[str] | None, required: bool) -> list[str]:

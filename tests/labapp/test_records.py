@@ -166,3 +166,20 @@ def test_a_rejected_design_start_leaves_nothing_behind(tmp_path, capsys):
     assert f"{long}: the curve rises until tau = 50 mm" in capsys.readouterr().err
     assert out.is_dir() and not any(out.iterdir())
     assert main(["design", "--target", "sphere", *TINY, "--max-iter", "2", "--out", str(out)]) == 0
+
+
+def test_a_frame_written_but_not_recorded_before_a_crash_is_kept_aside_on_reopen(tmp_path):
+    # the crash window between a frame's atomic rename and its frames.csv row leaves one unlisted frame
+    from labapp.storage import UNRECORDED_DIR, open_run
+    folder = _run(tmp_path, frames=3)
+    (folder / "frame_000003.jpg").write_bytes(b"x" * 50)
+    report = verify_run(folder)
+    assert not report.ok and report.unlisted == ["frame_000003.jpg"]
+    assert any("never recorded" in n for n in report.notes)
+    run = open_run(folder)
+    run.add_frame("frame_000003.jpg", b"y" * 50, t_s=33.0, t_unix_s=1e9 + 33)   # the name is free again
+    run.finish("stopped")
+    run.close()
+    assert (folder / UNRECORDED_DIR / "frame_000003.jpg").read_bytes() == b"x" * 50   # nothing lost
+    assert "kept aside" in (folder / "events.log").read_text()
+    assert verify_run(folder).ok
