@@ -14,17 +14,10 @@ import signal
 from typing import Iterator
 
 from labapp.errors import LabError
+from labapp.meshunits import BASE_MEMORY_BYTES, design_memory_bytes
 
 log = logging.getLogger(__name__)
 
-BASE_MEMORY_GB = 0.25
-"""Resident memory of a worker before its first design: interpreter, numpy, numba kernels, GB."""
-MEMORY_PER_VOXEL_GB = (2.37 - BASE_MEMORY_GB) / 128**3
-"""Peak memory of a design per simulated voxel, GB: 2.37 GB at a 128^3 simulated grid
-(docs/benchmarks.md, inverse design, output writing included)."""
-MIRRORS = {"nfc": 8, "extruded": 4, "ico": 4}
-"""How many mirror copies of the simulated grid make the full domain, per design space: nfc mirrors all
-three axes, the printable spaces only the two build-plate axes (section 5.2)."""
 CONNECT_TIMEOUT_S = 20.0
 
 
@@ -34,8 +27,7 @@ class ClusterError(LabError):
 
 def design_memory_gb(resolution: int, space: str = "nfc") -> float:
     """Peak memory of one design of `resolution` voxels along its longest side, GB (cubic domain bound)."""
-    voxels = resolution**3 / MIRRORS.get(space, 1)
-    return BASE_MEMORY_GB + MEMORY_PER_VOXEL_GB * voxels
+    return design_memory_bytes(resolution, space) / 1e9
 
 
 def local_worker_count(task_memory_gb: float, *, cores: int | None = None, memory_gb: float | None = None) -> int:
@@ -51,7 +43,7 @@ def local_worker_count(task_memory_gb: float, *, cores: int | None = None, memor
 
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, *, workers: int | None = None,
-                task_memory_gb: float = BASE_MEMORY_GB) -> Iterator["distributed.Client"]:  # noqa: F821
+                task_memory_gb: float = BASE_MEMORY_BYTES / 1e9) -> Iterator["distributed.Client"]:  # noqa: F821
     """A `distributed.Client` on `scheduler`, or on a new `LocalCluster` closed on exit.
 
     Parameters

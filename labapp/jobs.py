@@ -406,7 +406,7 @@ def design(config, out: str | Path, *, resume: bool = False, units: str = "mm", 
     design.DesignError
         For an invalid configuration or target, an infeasible target, or a resume mismatch.
     """
-    from labapp.meshunits import DESIGN_BYTES_PER_VOXEL, check_memory
+    from labapp.meshunits import design_memory_bytes, require_memory
     from labapp.targets import design_from_target
 
     warn = on_warning or (lambda message: log.warning("%s", message))
@@ -425,7 +425,7 @@ def design(config, out: str | Path, *, resume: bool = False, units: str = "mm", 
     source = target = config.target
     try:
         n = config.resolution
-        check_memory((n, n, n), DESIGN_BYTES_PER_VOXEL, f"designing at resolution {n}")
+        require_memory(design_memory_bytes(n, config.space), f"designing at resolution {n} ({config.space})")
         out.mkdir(parents=True, exist_ok=True)
         target = _copy_target(source, out, units)
         return design_from_target(dataclasses.replace(config, target=target), out, **run)

@@ -18,7 +18,7 @@ from labapp.errors import UsageError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MM_PER_UNIT", "check_memory", "grid_shape", "load_mesh_mm", "size_warnings"]
+__all__ = ["MM_PER_UNIT", "check_memory", "design_memory_bytes", "grid_shape", "require_memory", "load_mesh_mm", "size_warnings"]
 
 MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 PLAUSIBLE_VOLUME_MM3 = (1.0, 1e6)
@@ -27,10 +27,14 @@ MIN_VOXELS_ACROSS = 4
 #: Peak bytes per voxel of one forward simulation (fast marching and adjoint work arrays), measured with
 #: tracemalloc on 48^3 and 96^3 grids (160 and 153 B), rounded up with the density grid itself.
 SIMULATE_BYTES_PER_VOXEL = 200
-#: Peak bytes per voxel (of the full domain, resolution^3) of a design run: tracemalloc measured 171 B
-#: (nfc, 48^3) and 222 B (nfc, 48^3, robust formulation: three simulations); doubled for the spaces with
-#: more state (ico's elasticity solves) and for the outputs.
-DESIGN_BYTES_PER_VOXEL = 450
+BASE_MEMORY_BYTES = 250_000_000
+"""Resident memory of a process before its first design: interpreter, numpy, numba kernels, bytes."""
+DESIGN_BYTES_PER_SIMULATED_VOXEL = (2.37e9 - BASE_MEMORY_BYTES) / 128**3
+"""Peak memory of a design per simulated voxel, bytes: 2.37 GB at a 128^3 simulated grid
+(docs/benchmarks.md, inverse design, output writing included)."""
+MIRRORS = {"nfc": 8, "extruded": 4, "ico": 4}
+"""How many mirror copies of the simulated grid make the full domain, per design space: nfc mirrors all
+three axes, the printable spaces only the two build-plate axes (section 5.2)."""
 MEMORY_FRACTION = 0.8
 
 
@@ -98,7 +102,13 @@ def grid_shape(extents_mm: np.ndarray, dx_mm: float) -> tuple[int, ...]:
     return tuple(int(math.ceil(float(e) / dx_mm)) + 2 for e in extents_mm)
 
 
-def check_memory(shape: tuple[int, ...], bytes_per_voxel: int, what: str) -> int:
+def design_memory_bytes(resolution: int, space: str = "nfc") -> int:
+    """Peak memory of one design of ``resolution`` voxels along its longest side, bytes (cubic domain bound)."""
+    voxels = resolution**3 / MIRRORS.get(space, 1)
+    return int(BASE_MEMORY_BYTES + DESIGN_BYTES_PER_SIMULATED_VOXEL * voxels)
+
+
+def check_memory(shape: tuple[int, ...], bytes_per_voxel: float, what: str) -> int:
     """Refuse a grid that would not fit in the memory available now; returns the estimate in bytes.
 
     Raises
@@ -107,10 +117,20 @@ def check_memory(shape: tuple[int, ...], bytes_per_voxel: int, what: str) -> int
         With the estimate and the memory available.
     """
     need = int(np.prod(np.array(shape, dtype=float)) * bytes_per_voxel)
+    return require_memory(need, f"{what}: a grid of {' x '.join(map(str, shape))} voxels")
+
+
+def require_memory(need: int, what: str) -> int:
+    """Refuse ``need`` bytes when they exceed the memory usable now; returns ``need``.
+
+    Raises
+    ------
+    UsageError
+        Naming ``what``, the estimate and the memory available.
+    """
     have = int(psutil.virtual_memory().available * MEMORY_FRACTION)
-    log.debug("%s: grid %s needs ~%.2f GiB (%.2f GiB usable)", what, shape, need / 2**30, have / 2**30)
+    log.debug("%s needs ~%.2f GiB (%.2f GiB usable)", what, need / 2**30, have / 2**30)
     if need > have:
-        raise UsageError(f"{what}: a grid of {' x '.join(map(str, shape))} voxels needs about {need / 2**30:.1f} GiB, "
-                         f"only {have / 2**30:.1f} GiB of memory is available; lower --resolution "
-                         f"(or check the mesh units)")
+        raise UsageError(f"{what} needs about {need / 2**30:.1f} GiB, only {have / 2**30:.1f} GiB of memory is "
+                         f"available; lower --resolution (or check the mesh units)")
     return need
