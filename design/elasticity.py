@@ -182,7 +182,7 @@ def stencil(e_mod, ke, kel, free, s, dinv):
     s : (nz + 1, ny + 1, nx + 1, 27, 3, 3) ndarray of float, overwritten
         ``s[n, q]`` couples node n to its neighbour n + (dk, dj, di), q = 9 (dk + 1) + 3 (dj + 1) + di + 1;
         rows and columns of constrained dofs are 0. 243 multiply-adds per node and product, against
-        576 per element element by element.
+        576 per element when applied element by element.
     dinv : (nz + 1, ny + 1, nx + 1, 3, 3) ndarray of float, overwritten
         Inverse of each node's diagonal block on its free dofs, 0 on constrained ones.
     """
