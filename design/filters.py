@@ -7,6 +7,7 @@ back to the design variables ``rho_hat``.
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,6 +16,16 @@ from scipy import fft as sfft
 from design.errors import DesignError
 
 log = logging.getLogger(__name__)
+
+
+def fft_workers() -> int:
+    """Threads for the smoothing FFTs: ``OMP_NUM_THREADS`` when the process is granted a count (a Dask
+    worker's nanny sets it to 1, so that side-by-side designs do not oversubscribe the cores), else all
+    cores (-1, scipy.fft's convention)."""
+    try:
+        return max(1, int(os.environ["OMP_NUM_THREADS"]))
+    except (KeyError, ValueError):
+        return -1
 
 
 def cone_kernel(radius_vox: float, ndim: int) -> np.ndarray:
@@ -110,7 +121,9 @@ class SmoothingFilter:
         object.__setattr__(self, "_weights", self._valid(_pad(np.ones(self.shape), half, self.mirror)))
 
     def _conv(self, x: np.ndarray) -> np.ndarray:
-        return sfft.irfftn(sfft.rfftn(x, self._fshape, workers=-1) * self._kernel_hat, self._fshape, workers=-1)
+        workers = fft_workers()
+        return sfft.irfftn(sfft.rfftn(x, self._fshape, workers=workers) * self._kernel_hat, self._fshape,
+                           workers=workers)
 
     def _valid(self, padded: np.ndarray) -> np.ndarray:
         """'valid' convolution of a padded field, back on the original grid."""

@@ -84,3 +84,14 @@ def test_smoothing_guards():
         SmoothingFilter((8, 8, 8), 2.0, (False,) * 2)
     with pytest.raises(DesignError, match="exceeds the grid"):
         SmoothingFilter((2, 8, 8), 5.0, (True, False, False))
+
+
+def test_fft_threads_follow_omp_num_threads(monkeypatch):
+    # a Dask worker's nanny sets OMP_NUM_THREADS=1: side-by-side designs then use one FFT thread each
+    from design.filters import fft_workers
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    assert fft_workers() == 1
+    monkeypatch.setenv("OMP_NUM_THREADS", "not a number")
+    assert fft_workers() == -1
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    assert fft_workers() == -1
