@@ -19,6 +19,10 @@ from labapp.meshunits import BASE_MEMORY_BYTES, design_memory_bytes
 log = logging.getLogger(__name__)
 
 CONNECT_TIMEOUT_S = 20.0
+WORKER_ENVIRON = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+"""Environment of local workers: one BLAS/OpenMP thread each, as Dask's default, but without its
+``MALLOC_TRIM_THRESHOLD_``: setting that fixes glibc's mmap threshold, so every large array a design
+allocates becomes a fresh mapping with its page faults (one design took 15.3 s instead of 8.6 s)."""
 
 
 class ClusterError(LabError):
@@ -61,6 +65,7 @@ def dask_client(scheduler: str | None = None, *, workers: int | None = None,
     ClusterError
         The scheduler does not answer within `CONNECT_TIMEOUT_S`, or `workers` < 1.
     """
+    import dask
     from distributed import Client, LocalCluster
 
     logging.getLogger("distributed").setLevel(max(logging.WARNING, logging.getLogger().level))
@@ -84,8 +89,9 @@ def dask_client(scheduler: str | None = None, *, workers: int | None = None,
     # process group, and only this process should decide how running tasks stop
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if _main_thread() else None
     try:
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit="auto",
-                               dashboard_address=":8787", silence_logs=logging.ERROR)
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENVIRON}):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit="auto",
+                                   dashboard_address=":8787", silence_logs=logging.ERROR)
     except Exception as exc:  # noqa: BLE001 -- any start-up failure is reported the same way
         raise ClusterError(f"cannot start a local Dask cluster of {n} workers: {exc}") from exc
     finally:

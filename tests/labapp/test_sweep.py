@@ -195,3 +195,13 @@ def test_top_view_is_the_height_of_the_top_voxel():
     both = views(solid, 2)  # top view, two empty columns, side view along y (depth 1..3)
     assert both.shape == (2, 3 + 2 + 4) and both[:, 3:5].tolist() == [[0, 0], [0, 0]]
     assert both[:, 5:].tolist() == [[1, 1, 0, 0], [0, 2, 2, 3]]
+
+
+def test_local_workers_get_one_blas_thread_and_glibcs_own_malloc_thresholds():
+    import os
+
+    from labapp.cluster import dask_client
+    with dask_client(workers=1) as client:
+        env = next(iter(client.run(lambda: dict(os.environ)).values()))
+    assert env["OMP_NUM_THREADS"] == env["OPENBLAS_NUM_THREADS"] == "1"
+    assert "MALLOC_TRIM_THRESHOLD_" not in env     # a fixed threshold made every design ~1.8x slower
