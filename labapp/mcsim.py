@@ -31,6 +31,7 @@ from labapp.errors import UsageError
 from labapp.outpaths import check_out
 from labapp.simbench import WATER_G
 from labapp.storage import atomic_write
+from labapp.targets import plot_physical
 
 log = logging.getLogger(__name__)
 
@@ -169,26 +170,8 @@ def simulate_mc_job(source: str, out: str | Path, calibration: McCalibration, *,
                "physical": {"mass_g": float(grams[-1]), "duration_s": float(release.t_s[-1]), "water_g": water,
                             "release": release_summary(release.t_s, grams, None, "Monte Carlo mean")}}
     atomic_write(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
-    _plot(release.t_s, grams, spread_g, out / "release.png", f"{source}: {calibration.describe()}")
+    plot_physical(out / "release.png", [(release.t_s, grams, "Monte Carlo mean", "C2-")],
+                  f"{source}: {calibration.describe()}",
+                  band=(release.t_s, grams - 2 * spread_g, grams + 2 * spread_g,
+                        "+-2 standard deviations over the seeds"))
     return McSimulationOutputs(release, summary, out, tuple(warnings))
-
-
-def _plot(t_s: np.ndarray, grams: np.ndarray, spread_g: np.ndarray, path: Path, title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
-    hours = t_s / 3600.0
-    ax.fill_between(hours, grams - 2 * spread_g, grams + 2 * spread_g, color="C2", alpha=0.25,
-                    label="+-2 standard deviations over the seeds")
-    ax.plot(hours, grams, color="C2", lw=1.8, label="Monte Carlo mean")
-    ax.set_xlabel("time since drop (h)")
-    ax.set_ylabel("released (g)")
-    ax.grid(alpha=0.3)
-    ax.legend(loc="lower right")
-    ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)

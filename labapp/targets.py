@@ -88,18 +88,24 @@ def write_release_physical(tau_mm: np.ndarray, released_mm3: np.ndarray, simcal:
                                                      for a, b in zip(t, grams))
     path = Path(out_dir) / "release_physical.csv"
     atomic_write(path, rows.encode())
-    _plot_physical(path.with_suffix(".png"), [(t, grams, "predicted release", "-")],
+    plot_physical(path.with_suffix(".png"), [(t, grams, "predicted release", "-")],
                    f"predicted release {title}\n{simcal.describe()}")
     return path
 
 
-def _plot_physical(path: Path, series: list[tuple[np.ndarray, np.ndarray, str, str]], title: str) -> None:
+def plot_physical(path: Path, series: list[tuple[np.ndarray, np.ndarray, str, str]], title: str,
+                  band: tuple[np.ndarray, np.ndarray, np.ndarray, str] | None = None) -> None:
+    """Draw released grams over hours: ``series`` of (t_s, g, label, line style), and an optional shaded
+    ``band`` (t_s, low g, high g, label)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
+    if band is not None:
+        t, low, high, label = band
+        ax.fill_between(np.asarray(t) / 3600.0, low, high, color="C2", alpha=0.25, label=label)
     for t, g, label, style in series:
         ax.plot(np.asarray(t) / 3600.0, g, style, lw=1.8, label=label)
     ax.set_xlabel("time since drop (h)")
@@ -166,7 +172,7 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
         os.replace(report, kept)
     label = "measured target" if target is not None else "target"
     channel = summary.get("min_channel_mm")
-    _plot_physical(report, [(t, target_g, label, "-"), (t, design_g, "design (printed solid, predicted)", "--")],
+    plot_physical(report, [(t, target_g, label, "-"), (t, design_g, "design (printed solid, predicted)", "--")],
                    f"rel. RMSE {100 * summary['rel_rmse_physical']:.2f}% of final, print mass "
                    f"{summary['print_mass_g']:.3f} g, narrowest channel "
                    f"{'none' if channel is None else format(channel, '.2f') + ' mm'}\n{simcal.describe()}")
