@@ -1,24 +1,27 @@
 """A sweep of 8 small designs on the local Dask cluster against the same 8 one after another in one process.
 
-Both runs go through `labapp.sweep.run_sweep` on the same spec (a 2 x 2 x 2 grid of w_binary, radius and
-beta on the pill target, nfc, resolution 80, 300 evaluations; ``--quick``: resolution 24, 40
-evaluations), into separate folders, in the same invocation: first in this process (``client=None``,
-after a warm-up design that loads the compiled kernels, as a long-lived process would have them), then on
-a `LocalCluster` sized by `labapp.cluster` (one single-threaded worker per core here). The cluster's wall
-time includes starting it and warming its workers up the same way (imports, compiled kernels); it is
-also given without that start-up.
+Both go through `labapp.sweep.run_sweep` on the same spec (a 2 x 2 x 2 grid of w_binary, radius and
+beta on the pill target, nfc, resolution 48, 300 evaluations; ``--quick``: resolution 24, 40 evaluations,
+one round), into fresh folders. A `LocalCluster` sized by `labapp.cluster` (one single-threaded worker
+per core here) is started and warmed up (imports, compiled kernels), as this process is by a warm-up
+design. Then ``--rounds`` rounds (default 3) each run the sweep serially (``client=None``) and then on
+the running cluster, so that a change in the shared machine's load shows in one round, not in one side.
 
-Overhead per task, set against a design's own time (its mean wall time in the serial run): Dask's
-round trip (the mean time of `NOOP_TASKS` empty tasks, submitted at once and gathered), and the
-workers' idle time (workers x wall on the running cluster less the designs' task seconds, per task:
-scheduling, the imbalance at the end). The designs' own slowdown on the cluster (two of them sharing
-the cores, caches and memory bus, and any other load) is printed beside them, with the load average.
+Resolution 48 keeps a design's working set (a few MB) in this machine's caches: at resolution 80 two
+designs side by side each run 1.13 x slower than alone, as two plain processes do (the memory bus),
+which caps any scheduler at about 1.7 on 2 cores; ``--resolution 80`` shows it.
 
-    python benchmarks/bench_sweep.py [--quick] [--workers N]
+Overhead per task, set against a design's own time: Dask's round trip (the mean time of `NOOP_TASKS`
+empty tasks, submitted at once and gathered), and the workers' idle time (workers x wall on the
+cluster less the designs' task seconds, per task: scheduling, the imbalance at the end). The designs'
+own slowdown on the cluster (task seconds on the cluster over the same in the serial run) and the
+load average before each round are printed beside them.
 
-Last line: ``sweep_speedup = X``: serial wall / wall on the running, warmed-up cluster (both sides with
-their kernels loaded; a cluster serves many sweeps). The figure with the cluster's start-up and warm-up
-is printed above it.
+    python benchmarks/bench_sweep.py [--quick] [--workers N] [--resolution R] [--rounds K]
+
+Last line: ``sweep_speedup = X``, the median over rounds of serial wall / wall on the running,
+warmed-up cluster (both sides with their kernels loaded; a cluster serves many sweeps). The first
+round's figure with the cluster's start-up and warm-up is printed above it.
 """
 from __future__ import annotations
 
@@ -26,7 +29,14 @@ import argparse
 import os
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
+
+from labapp.sweep import run_sweep
+from labapp.sweepspec import parse_spec
+
+RESOLUTION, MAX_ITER, ROUNDS = 48, 300, 3
+"""The benchmark's designs (small: their working set stays in cache) and its serial/cluster rounds."""
 
 NOOP_TASKS = 200
 """Empty tasks timed on the cluster: Dask's own cost per task (submit, schedule, run, gather)."""
@@ -42,9 +52,6 @@ beta = [3.0, 5.0]
 
 
 def _warm_up(folder: Path) -> None:
-    from labapp.sweep import run_sweep
-    from labapp.sweepspec import parse_spec
-
     run_sweep(parse_spec(SPEC.format(resolution=16, max_iter=3).split("[grid]")[0]), folder, contact_sheet=False)
 
 
@@ -60,57 +67,75 @@ def _noop(i: int) -> int:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="resolution 24, 40 evaluations")
+    parser.add_argument("--quick", action="store_true", help="resolution 24, 40 evaluations, one round")
     parser.add_argument("--workers", type=int, help="local cluster workers (default: sized to the machine)")
+    parser.add_argument("--resolution", type=int, help=f"design resolution (default {RESOLUTION})")
+    parser.add_argument("--rounds", type=int, default=ROUNDS, help=f"serial/cluster rounds (default {ROUNDS})")
     args = parser.parse_args()
 
     from labapp.cluster import dask_client, design_memory_gb
-    from labapp.sweep import run_sweep
-    from labapp.sweepspec import parse_spec
 
-    resolution, max_iter = (24, 40) if args.quick else (80, 300)
+    resolution, max_iter, rounds = (24, 40, 1) if args.quick else (RESOLUTION, MAX_ITER, args.rounds)
+    resolution = args.resolution or resolution
     spec = parse_spec(SPEC.format(resolution=resolution, max_iter=max_iter))
     n = len(spec.combinations)
-    loads = [os.getloadavg()[0]]
-    print(f"{n} designs: pill, nfc, resolution {resolution}, {max_iter} evaluations")
+    print(f"{n} designs: pill, nfc, resolution {resolution}, {max_iter} evaluations; {rounds} rounds")
     with tempfile.TemporaryDirectory(prefix="bench_sweep_") as tmp:
         tmp = Path(tmp)
         _warm_up(tmp / "warm")
         t0 = time.perf_counter()
-        serial = run_sweep(spec, tmp / "serial", contact_sheet=False)
-        serial_s = time.perf_counter() - t0
-        loads.append(os.getloadavg()[0])
-        own = [float(r["seconds"]) for r in serial.rows]
-        t0 = time.perf_counter()
         with dask_client(workers=args.workers, task_memory_gb=design_memory_gb(resolution)) as client:
             workers = len(client.scheduler_info()["workers"])
             client.run(_warm_up_worker, str(tmp / "warm-workers"))  # imports and kernels, as in this process
-            t1 = time.perf_counter()
-            parallel = run_sweep(spec, tmp / "cluster", client, contact_sheet=False)
-            t2 = time.perf_counter()
-            task_s = _task_seconds(tmp / "cluster")
+            start_s = time.perf_counter() - t0
+            results = [_round(spec, tmp / f"round{k}", client) for k in range(rounds)]
             t3 = time.perf_counter()
             client.gather(client.map(_noop, range(NOOP_TASKS)))
             noop_s = (time.perf_counter() - t3) / NOOP_TASKS
-        loads.append(os.getloadavg()[0])
-        cluster_s, running_s, start_s = t2 - t0, t2 - t1, t1 - t0
-    statuses = sorted({r["status"] for r in serial.rows + parallel.rows})
-    same = [r["iterations"] for r in serial.rows] == [r["iterations"] for r in parallel.rows]
-    idle = (workers * running_s - sum(task_s)) / n
-    per_design = serial_s / n
-    print(f"statuses {statuses}; same evaluations per design in both runs: {same}")
-    print(f"1-min load average: {loads[0]:.2f} before, {loads[1]:.2f} after the serial run, {loads[2]:.2f} after "
-          f"the cluster run (2 cores; anything above the run's own 1 or 2 is other work)")
-    print(f"serial, one process: {serial_s:.1f} s ({per_design:.2f} s per design; optimisation alone "
-          f"{sum(own) / n:.2f} s)")
-    print(f"local cluster, {workers} workers: {cluster_s:.1f} s with start-up ({start_s:.1f} s), "
-          f"{running_s:.1f} s on the running cluster")
-    print(f"per task on the cluster: the design {sum(task_s) / n:.2f} s ({sum(task_s) / n / per_design:.2f} x "
-          f"its serial time: two designs share the cores and memory), Dask's round trip {noop_s * 1e3:.1f} ms "
-          f"({noop_s / per_design:.3%} of a design), workers idle or waiting {idle:.2f} s per task "
-          f"({idle / per_design:.1%})")
-    print(f"speedup counting the cluster's start-up and warm-up: {serial_s / cluster_s:.2f}")
-    print(f"sweep_speedup = {serial_s / running_s:.2f}")
+    print(f"local cluster of {workers} workers started and warmed up in {start_s:.1f} s")
+    print("round | load before | serial s (per design) | cluster s | design on cluster / serial | idle per task "
+          "| speedup")
+    for k, r in enumerate(results):
+        idle = (workers * r.cluster_s - sum(r.task_s)) / n
+        print(f"{k + 1} | {r.load:.2f} | {r.serial_s:.1f} ({r.serial_s / n:.2f}) | {r.cluster_s:.1f} | "
+              f"{sum(r.task_s) / sum(r.serial_task_s):.2f} | {idle:.2f} s ({idle * n / r.serial_s:.1%}) | "
+              f"{r.serial_s / r.cluster_s:.2f}")
+    statuses = sorted({s for r in results for s in r.statuses})
+    print(f"statuses {statuses}; same evaluations per design in every run: {all(r.same for r in results)}")
+    print(f"Dask's round trip {noop_s * 1e3:.1f} ms ({noop_s * n / results[0].serial_s:.3%} of a design)")
+    speedups = sorted(r.serial_s / r.cluster_s for r in results)
+    median = speedups[len(speedups) // 2]
+    first = results[0]
+    print(f"speedup of the first round counting the cluster's start-up and warm-up: "
+          f"{first.serial_s / (first.cluster_s + start_s):.2f}")
+    print(f"speedups {', '.join(f'{x:.2f}' for x in speedups)} (spread {speedups[-1] - speedups[0]:.2f})")
+    print(f"sweep_speedup = {median:.2f}")
+
+
+@dataclass
+class _Round:
+    """One serial sweep and the same sweep on the cluster, s."""
+
+    serial_s: float
+    cluster_s: float
+    serial_task_s: list
+    task_s: list
+    statuses: set
+    same: bool
+    load: float
+
+
+def _round(spec, folder: Path, client) -> _Round:
+    """The sweep one after another in this process, then on the running cluster, into fresh folders."""
+    load = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    serial = run_sweep(spec, folder / "serial", contact_sheet=False)
+    t1 = time.perf_counter()
+    parallel = run_sweep(spec, folder / "cluster", client, contact_sheet=False)
+    t2 = time.perf_counter()
+    return _Round(t1 - t0, t2 - t1, _task_seconds(folder / "serial"), _task_seconds(folder / "cluster"),
+                  {r["status"] for r in serial.rows + parallel.rows},
+                  [r["iterations"] for r in serial.rows] == [r["iterations"] for r in parallel.rows], load)
 
 
 def _task_seconds(sweep_dir: Path) -> list[float]:

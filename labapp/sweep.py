@@ -153,7 +153,7 @@ def run_combination(combo: Combination, sweep_dir: str, stop_event: str | None =
             return {"name": combo.name, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
                     "traceback": traceback.format_exc(), "seconds": time.perf_counter() - t0, "worker": where}
         seconds = time.perf_counter() - t0
-        _log_line(sweep_dir, f"finish {combo.name} on {where}: {status} in {seconds:.1f} s")
+        _log_line(sweep_dir, f"finish {combo.name} on {where}: {status} in {seconds:.2f} s")
         return {"name": combo.name, "status": status, "seconds": seconds, "worker": where}
 
 
@@ -284,13 +284,20 @@ def _run_serial(session: _Session, sweep_dir: Path, report, should_stop) -> bool
     return False
 
 
+def expected_work(combo: Combination) -> int:
+    """A combination's expected cost, voxels x evaluations: Dask starts the costliest first, so that
+    the sweep does not end with one long design running alone (longest-processing-time order)."""
+    return combo.config.resolution ** 3 * combo.config.max_iter
+
+
 def _run_dask(client, session: _Session, sweep_dir: Path, report, should_stop) -> bool:
     from distributed import Event, wait
 
     event_name = f"sfr-sweep-stop-{uuid.uuid4().hex}"
     stop_event = Event(event_name, client=client)
-    futures = {client.submit(run_combination, c, str(sweep_dir), event_name, pure=False,
-                             key=f"design-{c.name}-{uuid.uuid4().hex[:8]}"): c for c in session.todo}
+    order = sorted(session.todo, key=expected_work, reverse=True)
+    futures = {client.submit(run_combination, c, str(sweep_dir), event_name, pure=False, priority=expected_work(c),
+                             key=f"design-{c.name}-{uuid.uuid4().hex[:8]}"): c for c in order}
     pending = set(futures)
     try:
         while pending:

@@ -205,3 +205,18 @@ def test_local_workers_get_one_blas_thread_and_glibcs_own_malloc_thresholds():
         env = next(iter(client.run(lambda: dict(os.environ)).values()))
     assert env["OMP_NUM_THREADS"] == env["OPENBLAS_NUM_THREADS"] == "1"
     assert "MALLOC_TRIM_THRESHOLD_" not in env     # a fixed threshold made every design ~1.8x slower
+
+
+def test_the_cluster_starts_the_costliest_designs_first(tmp_path):
+    from distributed import Client, LocalCluster
+
+    from labapp.sweep import expected_work
+
+    spec = parse_spec(SMALL + "[grid]\nresolution = [16, 24]\nmax_iter = [3, 6]\n")
+    assert [expected_work(c) for c in spec.combinations] == [16**3 * 3, 16**3 * 6, 24**3 * 3, 24**3 * 6]
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        run_sweep(spec, tmp_path / "sweep", client, contact_sheet=False)
+    starts = [line.split(" start ")[1].split(" on ")[0]
+              for line in (tmp_path / "sweep" / "sweep.log").read_text().splitlines() if " start " in line]
+    assert starts == [c.name for c in sorted(spec.combinations, key=expected_work, reverse=True)]
