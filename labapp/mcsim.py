@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,6 +32,9 @@ from labapp.outpaths import check_out
 from labapp.simbench import WATER_G
 from labapp.storage import atomic_write
 from labapp.targets import plot_physical
+
+if TYPE_CHECKING:
+    from labapp.jobs import SimulationOutputs
 
 log = logging.getLogger(__name__)
 
@@ -107,20 +110,10 @@ def load_mc_calibration(path: str | Path) -> McCalibration:
     return McCalibration(params, g, water, resolution, path)
 
 
-@dataclass(frozen=True)
-class McSimulationOutputs:
-    """What :func:`simulate_mc_job` wrote."""
-
-    release: Any
-    summary: dict[str, Any]
-    out: Path
-    warnings: tuple[str, ...]
-
-
 def simulate_mc_job(source: str, out: str | Path, calibration: McCalibration, *, resolution: int | None = None,
                     voxel_size_mm: float | None = None, symmetry: str = "", units: str = "mm",
                     seeds: int = DEFAULT_SEEDS, water_g: float | None = None,
-                    progress: Callable[[str], None] | None = None) -> McSimulationOutputs:
+                    progress: Callable[[str], None] | None = None) -> SimulationOutputs:
     """Simulate a mesh, ``sample:NAME`` or density array with the Monte Carlo model into ``out``.
 
     Parameters
@@ -174,4 +167,6 @@ def simulate_mc_job(source: str, out: str | Path, calibration: McCalibration, *,
                   f"{source}: {calibration.describe()}",
                   band=(release.t_s, grams - 2 * spread_g, grams + 2 * spread_g,
                         "+-2 standard deviations over the seeds"))
-    return McSimulationOutputs(release, summary, out, tuple(warnings))
+    from labapp.jobs import SimulationOutputs  # labapp.jobs imports this module
+
+    return SimulationOutputs(release, summary, out, tuple(warnings))
