@@ -1,21 +1,23 @@
-"""One printable piece: a penalty on material that is reachable from the design's main body only through void.
+"""One printable piece: a penalty on material that is reachable from the part's core or main body only through void.
 
-The main body is the heaviest face-connected component of the material (density >= `BODY_DENSITY`)
-that touches every mirror plane of the symmetric design: its mirror copies join into one piece, and a
-connected symmetric part must touch each of its mirror planes (a piece that misses a plane has its
-copy on the other side of it). While no component qualifies (the grey start design, a part still
-forming), the core stands in for the body: the voxel where all mirror planes meet (index 0 of every
-mirrored axis, the middle of the others).
+The distance is measured from the part's core, the voxel where all mirror planes meet (index 0 of every
+mirrored axis, the middle of the others), as long as the core lies in the part's main body or no body
+has formed yet (the grey start design). The main body is the heaviest face-connected component of the
+material (density >= `BODY_DENSITY`) that touches every mirror plane of the symmetric design: its
+mirror copies join into one piece, and a connected symmetric part must touch each of its mirror planes
+(a piece that misses a plane has its copy on the other side of it). When the core is not in the main
+body (a part hollow at the centre, or a piece at the centre apart from the body), the body itself is
+the seed.
 
-A geodesic distance d from the body (or the core) is solved by the same fast marching as the release
+A geodesic distance d from the core (or the body) is solved by the same fast marching as the release
 (eq. 5, `design.fmm`) with the slowness
 
     s(rho) = 1 + (S_void - 1) (1 - rho)^2,
 
 1 in solid and S_void in void, so a path through material is as long as it is, and a path that crosses
-a void gap pays S_void - 1 extra per voxel of the gap. The body's own voxels are seeds (d = 0). The
-excess ``e`` measures how much a voxel's best path detours or crosses void: ``e = d`` from the body,
-``e = d - d0`` from the core, with ``d0`` the distance when every voxel is solid. A voxel counts as
+a void gap pays S_void - 1 extra per voxel of the gap; a seeding body's own voxels have d = 0. The
+excess ``e`` measures how much a voxel's best path detours or crosses void: ``e = d - d0`` from the
+core, with ``d0`` the distance when every voxel is solid, and ``e = d`` from the body. A voxel counts as
 unreachable when its excess exceeds the allowance ``a = ALLOWANCE d0 + MARGIN_VOX dx`` (winding but
 solid paths are free); S_void is chosen so that a single void voxel on the way exceeds the largest
 allowance. The penalty is
@@ -23,14 +25,16 @@ allowance. The penalty is
     J_conn = sum_i rho_i^2 h(e_i / a_i) dx^3 m,    h(t) = (t - 1)_+^2 / (1 + (t - 1)_+^2),
 
 bounded by the solid volume (h < 1), zero for a design whose material all connects to the body, and
-smooth (C1) while the body stays the same set of voxels. Its gradient is exact: the chain runs through
-the fast-marching adjoint (eqs. 9-10); the body is a fixed set of seeds for the derivative (its voxels'
+smooth (C1) while the seeds stay the same. Its gradient is exact: the chain runs through the
+fast-marching adjoint (eqs. 9-10); a seeding body is a fixed set for the derivative (its voxels'
 slowness does not depend on rho).
 
-Seeding from the body rather than from the core alone matters for parts that are hollow at the centre
-(a zero-order shell, an extruded ring): measured from an empty core, all their material would count as
-floating, and the penalty would act as a uniform pressure on the mass. A floating piece inside a hollow
-body (a ball in a shell), or one that touches a mirror plane away from the body, is still penalised.
+Why both seeds. Measured from an empty core, all the material of a part hollow at the centre (a
+zero-order shell, an extruded tube) would count as floating, and the penalty would act as a uniform
+pressure on the mass; the body seeds those. Measured from the body alone, nothing would hold the
+centre of a compact part solid, and extruded designs then open grey, later hollow, centres (a
+through-hole at the centre ends the release early). A piece at the centre inside a hollow body (a ball
+in a shell), or one that touches a mirror plane away from the body, is penalised either way.
 
 Cost. The distance is solved on the density averaged over blocks of ``coarsen^D`` voxels (a
 geodesic needs no more detail than the smoothing filter leaves: bridges are at least a filter radius
@@ -120,6 +124,7 @@ class Connectivity:
         self._flips = flips
         # core in the flipped grid: high corner on mirrored axes, middle of the others
         self._core = tuple(n - 1 if m else n // 2 for n, m in zip(self.coarse_shape, self.mirror))
+        self._core_unflipped = tuple(0 if m else n // 2 for n, m in zip(self.coarse_shape, self.mirror))
         gated = tuple(n + 1 for n in self.coarse_shape)
         self._buffers = MarchBuffers(gated)
         self._inner = tuple(slice(0, n) for n in self.coarse_shape)
@@ -168,6 +173,11 @@ class Connectivity:
         mass = ndimage.sum_labels(rho_coarse, labels, ids)
         return labels == ids[np.argmax(np.where(touching, mass, -1.0))]
 
+    def seed_body(self, rho_coarse: np.ndarray) -> np.ndarray | None:
+        """The main body when it seeds the distance (the core is not in it), else None (the core seeds it)."""
+        body = self.main_body(rho_coarse)
+        return None if body is None or body[self._core_unflipped] else body
+
     def slowness(self, rho_coarse: np.ndarray) -> np.ndarray:
         """Geodesic slowness s(rho) of the module doc."""
         return 1.0 + (self.s_void - 1.0) * (1.0 - rho_coarse) ** 2
@@ -189,7 +199,7 @@ class Connectivity:
         """
         c = self.coarsen
         rc = _pool(rho, c)
-        body = self.main_body(rc)
+        body = self.seed_body(rc)
         d, marching = self._distance(self.slowness(rc), gate=self._gate, body=body)
         t = (d - (0.0 if body is not None else self._d0)) / self._allow
         over = np.maximum(t - 1.0, 0.0)
@@ -210,4 +220,4 @@ class Connectivity:
     def distance(self, rho: np.ndarray) -> np.ndarray:
         """Geodesic distance of every coarse voxel from the main body (else the core), mm (for reports and tests)."""
         rc = _pool(rho, self.coarsen)
-        return self._distance(self.slowness(rc), gate=self._gate, body=self.main_body(rc))[0]
+        return self._distance(self.slowness(rc), gate=self._gate, body=self.seed_body(rc))[0]

@@ -70,19 +70,26 @@ def test_a_part_hollow_at_the_centre_is_one_piece_and_what_floats_inside_it_is_n
 
 
 @pytest.mark.parametrize("shape, mirror, coarsen, seeds", [
-    ((14, 12), (True, True), 1, "body"), ((12, 10, 8), (True, True, False), 2, "body"),
-    ((10, 10, 10), (True, True, True), 1, "body"), ((14, 12), (True, True), 1, "core"),
-    ((10, 10, 10), (True, True, True), 1, "core")])
+    ((14, 12), (True, True), 1, "core"), ((12, 10, 8), (True, True, False), 2, "core"),
+    ((10, 10, 10), (True, True, True), 1, "core"), ((14, 12), (True, True), 1, "grey"),
+    ((10, 10, 10), (True, True, True), 1, "grey"), ((14, 12), (True, True), 1, "body"),
+    ((12, 10, 8), (True, True, False), 2, "body"), ((10, 10, 10), (True, True, True), 1, "body")])
 def test_gradient_matches_central_differences(shape, mirror, coarsen, seeds):
     rng = np.random.default_rng(7)
     grids = _grid(shape)
-    rho = np.clip(0.15 + 0.7 * (sum(g ** 2 for g in grids) < 20) + rng.uniform(-0.1, 0.1, shape), 0, 1)
+    centred = [g - (0 if m else n / 2) for g, m, n in zip(grids, mirror, shape)]
+    r2 = sum(g ** 2 for g in centred)
+    rho = np.clip(0.15 + 0.7 * (r2 < 20) + rng.uniform(-0.1, 0.1, shape), 0, 1)
     far = tuple(slice(n - 3, n - 1) for n in shape)
     rho[far] = 0.9  # a floating blob, so that the penalty and its geodesic chain are active
-    if seeds == "core":  # no material dense enough for a body yet (a grey design): distances from the core
+    if seeds == "grey":  # no material dense enough for a body yet: distances from the core
         rho *= 0.52
+    if seeds == "body":  # hollow at the centre: distances from the body
+        rho[r2 < 2 * coarsen ** 2] = 0.05
     conn = Connectivity(shape, mirror, 0.3, coarsen=coarsen)
-    assert (conn.main_body(_pool(rho, coarsen)) is None) == (seeds == "core")
+    rc = _pool(rho, coarsen)
+    assert (conn.main_body(rc) is None) == (seeds == "grey")
+    assert (conn.seed_body(rc) is not None) == (seeds == "body")
     value, grad = conn(rho, 2.0)
     assert value > 0
     scale = np.abs(grad).max()
