@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from design.deflation import island_deflation
 from design.elasticity import E_MIN_RATIO, LAWS, POISSON_RATIO, element_energy, modulus, self_weight, \
     self_weight_adjoint
 from design.errors import DesignError
@@ -58,6 +59,8 @@ class IcoConfig:
         PCG relative residual.
     warm_start : bool
         Start each layer's solve from its solution at the previous evaluation.
+    deflate : bool
+        Deflate the near-rigid modes of floating solid islands in PCG (`design.deflation`).
     """
 
     layers: int = DEFAULT_LAYERS
@@ -67,6 +70,7 @@ class IcoConfig:
     e_min: float = E_MIN_RATIO
     tol: float = PCG_TOL
     warm_start: bool = True
+    deflate: bool = True
 
     def __post_init__(self) -> None:
         if not 1 <= self.layers <= 256 or not 1 <= self.coarsen <= 8:
@@ -160,7 +164,9 @@ def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = Ic
     def solve(l: int, u0: np.ndarray | None, scratch: Scratch) -> tuple[np.ndarray, int, np.ndarray]:
         """Partial design l: displacements, PCG iterations, element energies at unit modulus."""
         levels = hierarchy(e_mod[:tops[l]], h, config.poisson, *mirror, scratch=scratch)
-        u, its = pcg(levels, forces[l], u0, config.tol)
+        fine = levels[0]
+        deflation = island_deflation(fine.e_mod, h, fine.s, fine.free) if config.deflate else None
+        u, its = pcg(levels, forces[l], u0, config.tol, deflation=deflation)
         energy = np.empty((tops[l],) + e_mod.shape[1:])
         element_energy(levels[0].ke, u, energy)
         return u, its, energy

@@ -1,4 +1,4 @@
-"""Conjugate gradients preconditioned by one geometric multigrid V-cycle (`design.elasticity` grids).
+"""Conjugate gradients preconditioned by one geometric multigrid cycle (`design.elasticity` grids).
 
 Hierarchy. Each coarser level halves every axis whose element count is even (an odd axis is kept,
 so slabs of any height coarsen), until the grid has at most `MAX_COARSE_NODES` nodes or no axis
@@ -10,8 +10,16 @@ each). Averaging the SIMP moduli instead (rediscretisation) lets the PCG iterati
 the grid on high-contrast designs (10, 16, 26 iterations at 32, 64, 128 elements tall); Galerkin
 operators keep it flat. The coarsest level is factorised (scipy sparse LU) and solved directly.
 
-V-cycle. `PRE_SMOOTH` forward nodal block Gauss-Seidel sweeps, coarse correction, then as many
-backward sweeps: the cycle is a symmetric operator, as PCG needs.
+Cycle. On each level forward nodal block Gauss-Seidel sweeps (`SWEEPS` on the finest level,
+`COARSE_SWEEPS` on coarser ones), the coarse correction, then as many backward sweeps. The coarse
+correction is `CYCLE_INDEX` cycles of the next level (a W-cycle for 2), the direct solve on the
+coarsest. Every part is symmetric, so the cycle is a symmetric operator, as PCG needs. On
+high-contrast designs a V-cycle with one sweep lets the PCG iteration count grow with the grid
+(cold, summed over 8 layers, on `benchmarks/bench_ico.py`'s void field: 173 at 64^3, 293 at
+128^3): the Galerkin operators of the deeper levels of the finer grid carry the contrast with
+less accuracy, and a two-grid cycle with an exact solve on the second level needs only 108 at
+128^3. The W-cycle and the extra coarse sweeps, which cost little since coarse levels are small,
+close most of that gap (docs/benchmarks.md).
 """
 from __future__ import annotations
 
@@ -23,6 +31,7 @@ import numba
 import numpy as np
 import scipy.sparse.linalg as sla
 
+from design.deflation import Deflation
 from design.elasticity import UNIFORM, apply_stencil, assemble, free_mask, gauss_seidel, hex8_stiffness, stencil
 from design.errors import DesignError
 
@@ -30,8 +39,12 @@ log = logging.getLogger(__name__)
 
 MAX_COARSE_NODES = 400
 """Coarsening stops at or below this many nodes; that level is solved directly."""
-PRE_SMOOTH = 1
-"""Gauss-Seidel sweeps before (forward) and after (backward) the coarse correction."""
+SWEEPS = 1
+"""Gauss-Seidel sweeps before (forward) and after (backward) the coarse correction, finest level."""
+COARSE_SWEEPS = 2
+"""The same on coarser levels."""
+CYCLE_INDEX = 2
+"""Cycles of the next level per coarse correction (1: V-cycle, 2: W-cycle)."""
 PCG_TOL = 3e-4
 """Relative residual ``|f - K u| / |f|`` at which PCG stops. J_fab stays within 2e-6 and its
 gradient within 4e-5 (largest entry) of a 1e-10 solve (`benchmarks/bench_ico.py`, 64^3)."""
@@ -261,17 +274,22 @@ def restrict(xf: np.ndarray, factors: tuple[int, int, int]) -> np.ndarray:
     return x
 
 
-def v_cycle(levels: list[Level], r: np.ndarray, depth: int = 0) -> np.ndarray:
-    """Approximate ``K^-1 r`` by one V-cycle from level ``depth`` (zero initial guess)."""
+def cycle(levels: list[Level], r: np.ndarray, depth: int = 0) -> np.ndarray:
+    """Approximate ``K^-1 r`` by one multigrid cycle from level ``depth`` (zero initial guess)."""
     lev = levels[depth]
     if lev.solve is not None:
         return lev.solve(r)
+    sweeps = SWEEPS if depth == 0 else COARSE_SWEEPS
     x = np.zeros_like(r)
-    for _ in range(PRE_SMOOTH):
+    for _ in range(sweeps):
         lev.smooth(x, r, True)
     rc = restrict(r - lev.apply(x), lev.factors) * levels[depth + 1].free
-    x += prolong(v_cycle(levels, rc, depth + 1), lev.factors) * lev.free
-    for _ in range(PRE_SMOOTH):
+    xc = cycle(levels, rc, depth + 1)
+    if levels[depth + 1].solve is None:  # the coarsest level's solve is exact: once is enough
+        for _ in range(CYCLE_INDEX - 1):
+            xc += cycle(levels, rc - levels[depth + 1].apply(xc), depth + 1)
+    x += prolong(xc, lev.factors) * lev.free
+    for _ in range(sweeps):
         lev.smooth(x, r, False)
     return x
 
@@ -287,8 +305,10 @@ def _dot(a, b):
 
 
 def pcg(levels: list[Level], f: np.ndarray, u0: np.ndarray | None = None, tol: float = PCG_TOL,
-        max_iter: int = 500) -> tuple[np.ndarray, int]:
-    """Solve ``K u = f`` on the finest level by V-cycle preconditioned conjugate gradients.
+        max_iter: int = 500, deflation: Deflation | None = None) -> tuple[np.ndarray, int]:
+    """Solve ``K u = f`` on the finest level by multigrid-preconditioned conjugate gradients.
+
+    With ``deflation`` the cycle is balanced by its coarse space (`design.deflation.Deflation.precondition`).
 
     Parameters
     ----------
@@ -301,6 +321,8 @@ def pcg(levels: list[Level], f: np.ndarray, u0: np.ndarray | None = None, tol: f
     tol : float
         Relative residual to reach.
     max_iter : int
+    deflation : Deflation, optional
+        Near-null modes to deflate (`design.deflation.island_deflation`).
 
     Returns
     -------
@@ -320,8 +342,11 @@ def pcg(levels: list[Level], f: np.ndarray, u0: np.ndarray | None = None, tol: f
     u = np.zeros_like(f) if u0 is None else u0 * fine.free
     if norm_f == 0.0:
         return np.zeros_like(f), 0
+    def precondition(r: np.ndarray) -> np.ndarray:
+        return cycle(levels, r) if deflation is None else deflation.precondition(r, lambda x: cycle(levels, x))
+
     r = f - fine.apply(u)
-    z = v_cycle(levels, r)
+    z = precondition(r)
     p = z.copy()
     rz = _dot(r, z)
     for it in range(max_iter + 1):
@@ -333,7 +358,7 @@ def pcg(levels: list[Level], f: np.ndarray, u0: np.ndarray | None = None, tol: f
         alpha = rz / _dot(p, q)
         u += alpha * p
         r -= alpha * q
-        z = v_cycle(levels, r)
+        z = precondition(r)
         rz_new = _dot(r, z)
         p *= rz_new / rz
         p += z
