@@ -19,7 +19,9 @@ high-contrast designs a V-cycle with one sweep lets the PCG iteration count grow
 128^3): the Galerkin operators of the deeper levels of the finer grid carry the contrast with
 less accuracy, and a two-grid cycle with an exact solve on the second level needs only 108 at
 128^3. The W-cycle and the extra coarse sweeps, which cost little since coarse levels are small,
-close most of that gap (docs/benchmarks.md).
+close most of that gap: with `design.deflation`, 133 at 64^3 and 145 at 128^3 (docs/benchmarks.md).
+A K-cycle (two coarse cycles combined by CG steps, a nonlinear preconditioner) needed 137 and 138
+there, but 5 times as many as the W-cycle on a small grid with an island that deflation misses.
 """
 from __future__ import annotations
 
