@@ -13,12 +13,14 @@ For N = 64 and 128 and each field it reports, in the same process:
              change of rho), warm-started from the previous solutions, the layers solved
              concurrently on all cores, as in every optimisation iteration after the first
   PCG iterations per layer, cold and warm
-and the peak resident memory of a separate process that runs the 128^3 evaluations. The coarsening
+the PCG iteration counts of the solver variants (previous V-cycle; W-cycle; W-cycle with island
+deflation, the default), and the peak resident memory of a separate process that runs the 128^3
+evaluations. The coarsening
 error is measured at 64^3: J_fab normalised by the uniform start design, and the gradient's
 direction, at 2 and 4 voxels per element against the uncoarsened grid; so is the PCG tolerance's:
 J_fab and its gradient of a warm-started evaluation against a 1e-10 solve.
 
-Usage: python benchmarks/bench_ico.py [--quick] [--skip-coarsening]
+Usage: python benchmarks/bench_ico.py [--quick] [--skip-coarsening] [--skip-solvers]
 The last line is the headline: ico_over_skfmm_128 = <warm ICO time / skfmm time at 128^3, void field>.
 """
 from __future__ import annotations
@@ -28,6 +30,7 @@ import resource
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 
 import numpy as np
 from scipy.ndimage import gaussian_filter
@@ -56,12 +59,29 @@ def design_field(n: int, seed: int = 0) -> np.ndarray:
 FIELDS = {"void": void_field, "design": design_field}
 
 
-def _ico_runs(n: int, field: str = "void"):
+SOLVERS = {"V-cycle": (1, 1, False), "W-cycle": (2, 2, False), "W + deflation": (2, 2, True)}
+"""Solver variants: (cycle index, coarse-level sweeps, island deflation); the last is the default."""
+
+
+@contextmanager
+def _solver(name: str):
+    """Run the ICO term with one of `SOLVERS` (the multigrid module's constants, restored after)."""
+    import design.multigrid as mg
+
+    saved = mg.CYCLE_INDEX, mg.COARSE_SWEEPS
+    mg.CYCLE_INDEX, mg.COARSE_SWEEPS, deflate = SOLVERS[name]
+    try:
+        yield deflate
+    finally:
+        mg.CYCLE_INDEX, mg.COARSE_SWEEPS = saved
+
+
+def _ico_runs(n: int, field: str = "void", deflate: bool = True):
     from design.ico import IcoConfig, IcoTerm
 
     rho = _quadrant(FIELDS[field](n))
     dx = 1.0 / n
-    term = IcoTerm(dx, IcoConfig())
+    term = IcoTerm(dx, IcoConfig(deflate=deflate))
     t0 = time.perf_counter()
     cold = term.evaluate(rho)
     t_cold = time.perf_counter() - t0
@@ -118,10 +138,23 @@ def _tolerance_error(n: int = 64) -> None:
                   f"{np.abs(err).max() / np.abs(ref.grad).max():>14.1e} {res.iterations.sum():>10}")
 
 
+def _solver_iterations() -> None:
+    """PCG iterations per layer, cold and warm, of every solver variant at both sizes."""
+    print("PCG iterations per layer by solver (cold | warm; sums in brackets):")
+    for field in FIELDS:
+        for name in SOLVERS:
+            with _solver(name) as deflate:
+                for n in (64, 128):
+                    _, _, cold, warm = _ico_runs(n, field, deflate)
+                    print(f"{field:>6} {name:>14} {n:>4}  {' '.join(map(str, cold))} [{cold.sum()}] | "
+                          f"{' '.join(map(str, warm))} [{warm.sum()}]", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="one repeat of the skfmm timing")
     parser.add_argument("--skip-coarsening", action="store_true", help="skip the coarsening- and tolerance-error tables")
+    parser.add_argument("--skip-solvers", action="store_true", help="skip the solver variants' iteration table")
     parser.add_argument("--peak-memory-child", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.peak_memory_child:
@@ -138,6 +171,8 @@ def main() -> None:
         for field in FIELDS:
             _coarsening_error(field)
         _tolerance_error()
+    if not args.skip_solvers:
+        _solver_iterations()
     ratio = {}
     print(f"{'field':>6} {'N':>5} {'skfmm s':>8} {'ico cold s':>10} {'ico warm s':>10} {'cold/skfmm':>10} "
           f"{'warm/skfmm':>10}  PCG iterations per layer (cold | warm)")

@@ -21,7 +21,7 @@ less accuracy, and a two-grid cycle with an exact solve on the second level need
 128^3. The W-cycle and the extra coarse sweeps, which cost little since coarse levels are small,
 close most of that gap: with `design.deflation`, 133 at 64^3 and 145 at 128^3 (docs/benchmarks.md).
 A K-cycle (two coarse cycles combined by CG steps, a nonlinear preconditioner) needed 137 and 138
-there, but 5 times as many as the W-cycle on a small grid with an island that deflation misses.
+there, but 5 times as many as the W-cycle on a small grid with floating islands and no deflation.
 """
 from __future__ import annotations
 
