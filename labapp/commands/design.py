@@ -26,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="hyperparameters of the paper's Tables 1-2 (e.g. paper:pill, paper:design-4) for the "
                              "options not given")
     parser.add_argument("--w-fab", type=nonnegative_float,
-                        help="weight w_f of the ICO term (ico; default 1000; J_fab is 1 at the start design)")
+                        help="weight w_f of the ICO term (ico; default 3000; J_fab is 1 at the start design)")
     parser.add_argument("--layers", type=positive_int, help="ICO partial designs L along +z (default 8)")
     parser.add_argument("--ico-coarsen", type=positive_int, metavar="VOX",
                         help="design voxels per elasticity element edge of the ICO term (default 2)")
