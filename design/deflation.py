@@ -2,17 +2,18 @@
 
 A solid island that reaches the build plate only through void (E_min = 1e-4 E0, section 3.6) moves
 almost as a rigid body: its six rigid-body modes have energies of order E_min, far below the rest
-of the spectrum. Geometric coarse grids cannot represent them when the island is smaller than a
-coarse cell, so multigrid-preconditioned CG needs more iterations the more islands a design has.
-Deflation removes them: with Z the rigid-body modes of every island (6 columns per island, each
-supported on the island's nodes) and the small Galerkin matrix E = Z^T K Z, CG runs on the
-complement of span(Z) and E^-1 handles span(Z) exactly (the deflated CG of Saad, Yeung, Erhel and
-Guyomarc'h, SIAM J. Sci. Comput. 21, 2000, with the rigid-body deflation space that Jönsthövel,
-van Gijzen, Vuik et al. use for high-contrast composites, SIAM J. Sci. Comput. 2013).
+of the spectrum, and geometric coarse grids cannot represent them when the island is smaller than
+a coarse cell. With Z the rigid-body modes of every island (6 columns per island, supported on the
+island's nodes) and the small Galerkin matrix E = Z^T K Z, the balancing preconditioner
+``P^T M P + Z E^-1 Z^T`` (P = I - K Z E^-1 Z^T, M the multigrid cycle) solves span(Z) exactly and
+leaves the rest to M (rigid-body deflation spaces for high-contrast composites: Jönsthövel, van
+Gijzen, Vuik et al., SIAM J. Sci. Comput. 35, 2013; the balancing form: Tang, Nabben, Vuik and
+Erlangga, J. Sci. Comput. 39, 2009).
 
-Islands are the 26-connected components of stiff elements (modulus >= `ISLAND_MODULUS` E0) that
-contain no element of the bottom row (on the plate). Components that touch each other through a
-node are one component, so every node belongs to at most one island.
+Islands are the face-connected components of stiff elements (modulus >= `ISLAND_MODULUS` E0) that
+contain no element of the bottom row (on the plate). Elements that share only an edge or a corner
+are hinged, not bonded, so they are separate islands; such a shared node carries the modes of
+every island at it with a partition-of-unity weight (`rigid_modes`).
 """
 from __future__ import annotations
 
