@@ -49,7 +49,7 @@ class LbfgsSettings:
     memory : int
         Correction pairs m kept (memory 2 m N doubles).
     c1, c2 : float
-        Wolfe constants, ``0 < c1 < c2 < 1`` (sufficient decrease, curvature).
+        Strong Wolfe constants, ``0 < c1 < c2 < 1`` (sufficient decrease, curvature).
     max_search_evals : int
         Evaluations one line search may use before it is declared stalled.
     first_step : float
@@ -58,9 +58,6 @@ class LbfgsSettings:
     ftol_rel, xtol_rel : float
         Convergence when an accepted step changes f by at most ``ftol_rel |f|`` or x by at most
         ``xtol_rel |x|`` (Euclidean norms); 0 disables.
-    weak_wolfe : bool
-        Accept a step by the weak curvature condition ``g(x + a d)^T d >= c2 g^T d`` instead of
-        the strong ``|g(x + a d)^T d| <= c2 |g^T d|``.
     """
 
     memory: int = 10
@@ -70,7 +67,6 @@ class LbfgsSettings:
     first_step: float = 0.5
     ftol_rel: float = 0.0
     xtol_rel: float = 0.0
-    weak_wolfe: bool = False
 
     def __post_init__(self) -> None:
         if not 1 <= self.memory <= 1000:
@@ -268,16 +264,11 @@ class Lbfgs:
         self.x_trial += self.x
 
     def _search(self, ft: float) -> str:
-        """One step of the line search: strong Wolfe (Nocedal and Wright, algorithms 3.5 and 3.6)
-        or weak Wolfe (`LbfgsSettings.weak_wolfe`)."""
+        """One step of the strong-Wolfe line search (Nocedal and Wright, algorithms 3.5 and 3.6)."""
         cfg = self.settings
         a, dg = self.stp, _dot(self.g_trial, self.d) if math.isfinite(ft) else math.nan
         self.nevals += 1
         armijo = math.isfinite(ft) and ft <= self.f0 + cfg.c1 * a * self.dg0
-        if cfg.weak_wolfe:
-            if armijo and dg >= cfg.c2 * self.dg0:
-                return self._accept(ft)
-            return self._search_weak(a, ft, dg, armijo)
         if armijo and abs(dg) <= -cfg.c2 * self.dg0:
             return self._accept(ft)
         if not self.bracketed:
@@ -288,38 +279,19 @@ class Lbfgs:
                 self._set_lo(a, ft, dg)
                 self.bracketed = True
             else:  # still descending: extrapolate
-                return self._extrapolate(a, ft, dg)
+                lo = (self.a_lo, self.f_lo, self.dg_lo)
+                self._set_lo(a, ft, dg)
+                step = a - lo[0]
+                c = _cubic_min(*lo, a, ft, dg)
+                self.stp = c if a + 1.1 * step <= c <= a + 4.0 * step else a + 4.0 * step
+                return self._next_trial()
         elif not armijo or ft >= self.f_lo:
             self.a_hi, self.f_hi, self.dg_hi = a, ft, dg
         else:
             if dg * (self.a_hi - self.a_lo) >= 0.0:
                 self.a_hi, self.f_hi, self.dg_hi = self.a_lo, self.f_lo, self.dg_lo
             self._set_lo(a, ft, dg)
-        return self._zoom()
-
-    def _search_weak(self, a: float, ft: float, dg: float, armijo: bool) -> str:
-        """Weak Wolfe: the step grows while it decreases f enough but f still falls steeply
-        (``g^T d < c2 g0^T d``), and shrinks when f does not decrease enough; the bracket [lo, hi]
-        always has lo below hi."""
-        if armijo and not self.bracketed:
-            return self._extrapolate(a, ft, dg)
-        if armijo:
-            self._set_lo(a, ft, dg)
-        else:
-            self._set_hi(a, ft, dg)
-        return self._zoom()
-
-    def _extrapolate(self, a: float, ft: float, dg: float) -> str:
-        """A longer step: the cubic's minimiser if it lies 1.1-4 times as far, else 4 times as far."""
-        lo = (self.a_lo, self.f_lo, self.dg_lo)
-        self._set_lo(a, ft, dg)
-        step = a - lo[0]
-        c = _cubic_min(*lo, a, ft, dg)
-        self.stp = c if a + 1.1 * step <= c <= a + 4.0 * step else a + 4.0 * step
-        return self._next_trial()
-
-    def _zoom(self) -> str:
-        """A safeguarded cubic step strictly inside the bracket."""
+        # zoom: a safeguarded cubic step strictly inside the bracket
         lo, hi = min(self.a_lo, self.a_hi), max(self.a_lo, self.a_hi)
         width = hi - lo
         if width <= 1e-12 * hi:
