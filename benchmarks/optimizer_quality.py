@@ -4,8 +4,9 @@ For every target (the shipped sample shapes in the nfc and extruded spaces, and 
 curve) this runs `design.optimize.run_design` once per optimiser and start with the same
 configuration and ``--max-iter`` evaluations, keeping each run folder under ``--out``, and prints
 one markdown row: evaluations used, best J, rel. RMSE of the density's and of the binary solid's
-release curve (the fit judged), the binary solid's rate deviation for the zero-order target, and
-seconds per evaluation.
+release curve (the fit judged), the binary solid's final release against the target's (its mass
+error, which sets most of the binary fit's differences), the binary solid's rate deviation for the
+zero-order target, and seconds per evaluation.
 
     python benchmarks/optimizer_quality.py --out runs/quality [--resolution 64] [--max-iter 300]
         [--optimizers LD_LBFGS lbfgs] [--seeds 0] [--targets ...] [--spaces nfc extruded]
@@ -13,7 +14,7 @@ seconds per evaluation.
 Starts: the uniform start of section 5.2, and with ``--seeds K`` also K starts perturbed by
 multiplicative noise of `PERTURBATION` (seeds 1..K). Both optimisers are local and the objective
 is piecewise smooth and non-convex, so one start decides little: a 2% perturbation of the start
-moves the binary fit of one optimiser by up to a percentage point. With seeds, a row gives the
+moves the binary fit of one optimiser by up to several percentage points (docs/benchmarks.md). With seeds, a row gives the
 median over the starts and the range, and the verdict compares medians.
 
 "same" means the binary fits differ by at most `SAME_PCT` percentage points. Last line:
@@ -59,9 +60,11 @@ def run_one(target: str, space: str, optimizer: str, seed: int, args: argparse.N
     result = run_design(config, folder, start=perturbed_start(seed) if seed else None)
     s = json.loads((folder / "summary.json").read_text())
     dev = (s.get("rate_dev_mid80") or {}).get("binary")
+    curves = np.loadtxt(folder / "curves.csv", delimiter=",", skiprows=1)
+    target_mm3, binary_mm3 = curves[-1, 1], curves[-1, 3]
     return {"evals": result.iterations, "J": result.best_value, "density": s["rel_rmse_density"],
-            "binary": s["rel_rmse_binary"], "rate_dev": dev if dev is not None else float("nan"),
-            "per_eval": s.get("seconds_per_iteration") or 0.0}
+            "binary": s["rel_rmse_binary"], "mass": binary_mm3 / target_mm3 - 1.0,
+            "rate_dev": dev if dev is not None else float("nan"), "per_eval": s.get("seconds_per_iteration") or 0.0}
 
 
 def _cell(runs: list[dict], key: str, fmt: str) -> str:
@@ -69,7 +72,7 @@ def _cell(runs: list[dict], key: str, fmt: str) -> str:
     values = [r[key] for r in runs]
     if len(values) == 1:
         return format(values[0], fmt)
-    return f"{format(statistics.median(values), fmt)} ({format(min(values), fmt)}-{format(max(values), fmt)})"
+    return f"{format(statistics.median(values), fmt)} ({format(min(values), fmt)} to {format(max(values), fmt)})"
 
 
 def main() -> None:
@@ -89,10 +92,12 @@ def main() -> None:
         parser.error(f"{args.out} exists; choose a new folder (runs are never overwritten)")
     args.out.mkdir(parents=True)
     old, new = args.optimizers
-    starts = f"median (range) of {args.seeds + 1} starts: " if args.seeds else ""
-    print(f"{starts}| target | space | evals {old} / {new} | best J {old} / {new} | rel. RMSE density | "
-          f"rel. RMSE binary {old} / {new} | rate dev. binary | s/eval | new vs old |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    if args.seeds:
+        print(f"median (range) over {args.seeds + 1} starts\n")
+    print(f"| target | space | evals {old} / {new} | best J {old} / {new} | rel. RMSE density | "
+          f"rel. RMSE binary {old} / {new} | binary solid's final mass error | rate dev. binary | s/eval | "
+          f"new vs old |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     compared = not_worse = 0
     t0 = time.perf_counter()
     for target in args.targets:
@@ -101,7 +106,7 @@ def main() -> None:
             try:
                 a, b = ([run_one(target, space, o, seed, args) for seed in range(args.seeds + 1)] for o in (old, new))
             except DesignError as exc:  # e.g. a target infeasible on a coarse grid
-                print(f"| {name} | {space} | not run: {str(exc).splitlines()[0]} |||||||", flush=True)
+                print(f"| {name} | {space} | not run: {str(exc).splitlines()[0]} ||||||||", flush=True)
                 continue
             median_a, median_b = (statistics.median(r["binary"] for r in runs) for runs in (a, b))
             diff_pct = 100.0 * (median_b - median_a)
@@ -109,10 +114,11 @@ def main() -> None:
             compared += 1
             not_worse += verdict != "worse"
             dev = f"{_cell(a, 'rate_dev', '.1%')} / {_cell(b, 'rate_dev', '.1%')}" if target == ZERO_ORDER else "-"
-            print(f"| {name} | {space} | {_cell(a, 'evals', 'd')} / {_cell(b, 'evals', 'd')} | "
+            print(f"| {name} | {space} | {_cell(a, 'evals', '.0f')} / {_cell(b, 'evals', '.0f')} | "
                   f"{_cell(a, 'J', '.5g')} / {_cell(b, 'J', '.5g')} | "
                   f"{_cell(a, 'density', '.3%')} / {_cell(b, 'density', '.3%')} | "
-                  f"{_cell(a, 'binary', '.3%')} / {_cell(b, 'binary', '.3%')} | {dev} | "
+                  f"{_cell(a, 'binary', '.3%')} / {_cell(b, 'binary', '.3%')} | "
+                  f"{_cell(a, 'mass', '+.2%')} / {_cell(b, 'mass', '+.2%')} | {dev} | "
                   f"{_cell(a, 'per_eval', '.3f')} / {_cell(b, 'per_eval', '.3f')} | {verdict} |", flush=True)
     print(f"wall time {time.perf_counter() - t0:.0f} s")
     print(f"not_worse: {not_worse}/{compared}")
