@@ -2,7 +2,7 @@
 
 nfc zero-order target in a 20 mm cube at resolution 256 (128^3 octant), at r = 4 voxels (distance
 grid in blocks of 2) and at the default 1 mm radius (blocks of 6), at a hollow ball (a shell from 4 to 7
-mm around the empty centre, so the distances run from its main body) with small noise: median of three
+mm around the empty centre) with small noise: median of three
 `DesignObjective.evaluate` calls each way, and of J_conn alone.
 
     python benchmarks/bench_connectivity.py [--resolution 256]
