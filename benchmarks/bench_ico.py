@@ -1,7 +1,8 @@
 """Benchmark of the incremental-compliance term (section 3.6) against scikit-fmm's forward solve.
 
 Fields on an N^3 design grid: "void", the blurred random field of `bench_forward.void_field`
-(sigma N/32: many small solid islands, the hardest case for the elasticity solver), and "design",
+(sigma N/32: a network of members one or two elements thick, some floating or hinged, the hardest
+case for the elasticity solver), and "design",
 the same construction with sigma N/12 and 55% solid (larger, mostly connected members, closer to an
 optimised design). The ICO term sees the quadrant (N/2, N/2, N), mirror planes in x and y, z the
 build direction, L = 8 layers, the default coarsening (2 voxels per element edge), SIMP.
@@ -13,10 +14,9 @@ For N = 64 and 128 and each field it reports, in the same process:
              change of rho), warm-started from the previous solutions, the layers solved
              concurrently on all cores, as in every optimisation iteration after the first
   PCG iterations per layer, cold and warm
-the PCG iteration counts of the solver variants (previous V-cycle; W-cycle; W-cycle with island
-deflation, the default), and the peak resident memory of a separate process that runs the 128^3
-evaluations. The coarsening
-error is measured at 64^3: J_fab normalised by the uniform start design, and the gradient's
+the PCG iteration counts of the solver variants at both sizes (V-cycle; W-cycle; W-cycle with
+island deflation, the default), and the peak resident memory of a separate process that runs the
+128^3 evaluations. The coarsening error is measured at 64^3: J_fab normalised by the uniform start design, and the gradient's
 direction, at 2 and 4 voxels per element against the uncoarsened grid; so is the PCG tolerance's:
 J_fab and its gradient of a warm-started evaluation against a 1e-10 solve.
 
