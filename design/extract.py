@@ -19,6 +19,14 @@ from design.voxelize import voxelize
 
 log = logging.getLogger(__name__)
 
+LEVEL_GAP = 1e-3
+"""Densities within this of the iso-level are moved this far from it, each on its own side, and the
+contour is drawn half this above the level. Marching cubes puts a vertex on the grid point of a value
+at the level, and resolves a face whose bilinear centre value equals the level (a solid-void
+checkerboard: voxels touching along an edge only) differently in its two cells; either leaves the
+surface open. Drawn above the level, such voxels stay apart, as `count_pieces` counts them. The
+surface moves by at most this fraction of a voxel per unit density step."""
+
 
 def density_mesh(rho_full: np.ndarray, dx_mm: float, origin_mm: np.ndarray, level: float = 0.5) -> trimesh.Trimesh:
     """Watertight triangle mesh of ``rho >= level``, mm.
@@ -42,7 +50,9 @@ def density_mesh(rho_full: np.ndarray, dx_mm: float, origin_mm: np.ndarray, leve
     if rho_full.ndim != 3 or not np.any(rho_full >= level):
         raise DesignError(f"no density reaches {level} on the {rho_full.shape} grid: nothing to extract")
     padded = np.pad(np.asarray(rho_full, dtype=float), 1)  # zero layer closes every surface
-    verts, faces, _, _ = marching_cubes(padded, level=level, spacing=(dx_mm,) * 3)
+    near = np.abs(padded - level) < LEVEL_GAP
+    padded[near] = np.where(padded[near] >= level, level + LEVEL_GAP, level - LEVEL_GAP)
+    verts, faces, _, _ = marching_cubes(padded, level=level + LEVEL_GAP / 2, spacing=(dx_mm,) * 3)
     # padded index p sits at origin + (p - 1/2) dx
     verts = verts + np.asarray(origin_mm, float) - 0.5 * dx_mm
     mesh = trimesh.Trimesh(vertices=verts, faces=faces, process=True)
