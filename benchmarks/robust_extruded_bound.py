@@ -27,7 +27,8 @@ from scipy.optimize import minimize
 
 from design.forward import simulate
 from design.objective import rel_rmse
-from design.problem import DesignConfig, _source_mesh, prepare
+from design.problem import DesignConfig, prepare
+from design.shapes import sample_shape
 from design.spaces import BUILD_AXIS
 
 PIECES = 100
@@ -95,7 +96,7 @@ def main() -> None:
           f"target {target[-1]:.1f} mm^3")
     curves = [("the simulated source (the design's target)", target)]
     if args.target == "sphere":
-        lo, hi = _source_mesh(args.target).bounds
+        lo, hi = sample_shape(args.target).bounds
         radius = 0.5 * float(hi[0] - lo[0])
         curves.append((f"a continuum sphere, R = {radius:.4g} mm",
                        4.0 / 3.0 * np.pi * (radius ** 3 - np.clip(radius - tau, 0.0, None) ** 3)))
