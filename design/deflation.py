@@ -214,8 +214,8 @@ class Deflation:
         return y + (self.z @ (mu - nu)).reshape(r.shape)
 
 
-def island_deflation(e_mod: np.ndarray, h: tuple[float, float, float], s: np.ndarray, free: np.ndarray,
-                     threshold: float = ISLAND_MODULUS, faces_only: bool = True) -> Deflation | None:
+def island_deflation(e_mod: np.ndarray, h: tuple[float, float, float], s: np.ndarray, free: np.ndarray
+                     ) -> Deflation | None:
     """The deflation space of the floating islands of a grid, or None if it has none.
 
     Parameters
@@ -228,10 +228,8 @@ def island_deflation(e_mod: np.ndarray, h: tuple[float, float, float], s: np.nda
         The grid's operator as a nodal stencil, constraints applied (`design.elasticity.stencil`).
     free : (nz + 1, ny + 1, nx + 1, 3) ndarray of float
         1 on free dofs, 0 on constrained ones.
-    threshold, faces_only
-        Passed to `floating_islands`.
     """
-    labels, m = floating_islands(e_mod, threshold, faces_only)
+    labels, m = floating_islands(e_mod)
     if m == 0:
         return None
     nodes, islands = _node_pairs(labels)
