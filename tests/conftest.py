@@ -1,5 +1,8 @@
 """Shared test set-up: headless Qt everywhere, numba kernels compiled once before the workers start."""
+import gc
 import os
+
+import pytest
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 os.environ.setdefault("MPLBACKEND", "Agg")
@@ -18,3 +21,20 @@ def pytest_configure(config):
     for symmetry in ("", "xyz"):
         release = simulate_mesh(sample_shape("sphere"), resolution=8, symmetry=symmetry)
         release_gradient(release, np.ones_like(release.released_mm3))
+
+
+@pytest.fixture(autouse=True)
+def _qt_garbage_in_the_gui_thread(request):
+    """In Qt tests, Python's cyclic garbage collector runs only here, in the GUI thread, as the
+    application's `labapp.gui.app.gui_thread_garbage_collector` arranges: a Qt object collected on
+    another thread (a Dask or background-task thread) can deadlock PySide in its destructor."""
+    if "qtbot" not in request.fixturenames:
+        yield
+        return
+    gc.collect()
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.enable()
+        gc.collect()

@@ -1,16 +1,30 @@
 """Start the bench GUI: the QApplication and the main window (``sfr lab`` calls :func:`launch`)."""
 from __future__ import annotations
 
+import gc
 import logging
 import sys
 from pathlib import Path
 
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QApplication
+from pyqtgraph.util.garbage_collector import GarbageCollector
 
 from labapp.gui.main_window import MainWindow
 
 log = logging.getLogger(__name__)
+
+GC_INTERVAL_S = 1.0
+"""How often the GUI thread runs Python's cyclic garbage collector, s."""
+
+
+def gui_thread_garbage_collector() -> GarbageCollector:
+    """Run Python's cyclic garbage collector only in the GUI thread, on a timer (keep the returned object).
+
+    Left automatic, it runs in whichever thread allocates at that moment (a device, Dask or background
+    task thread), and a Qt object it collects there can deadlock PySide in its destructor.
+    """
+    return GarbageCollector(interval=GC_INTERVAL_S)
 
 
 def launch(data_dir: Path, simulate: bool, speed: float | None, sample: str, calibration: str | None,
@@ -21,6 +35,7 @@ def launch(data_dir: Path, simulate: bool, speed: float | None, sample: str, cal
     window after that many seconds, saving ``screenshot`` (PNG) first (scripted, offscreen sessions).
     """
     app = QApplication.instance() or QApplication(sys.argv[:1])
+    collector = gui_thread_garbage_collector()
     window = MainWindow(Path(data_dir), simulate=simulate, speed=speed, sample=sample)
     window.resize(1500, 950)
     if calibration:
@@ -41,4 +56,6 @@ def launch(data_dir: Path, simulate: bool, speed: float | None, sample: str, cal
         QTimer.singleShot(int(quit_after_s * 1000), finish)
     code = app.exec()
     window.shutdown()
+    collector.timer.stop()
+    gc.enable()
     return code
