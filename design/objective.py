@@ -14,7 +14,7 @@ Robust formulation (optional, beyond the paper; after Wang, Lazarov and Sigmund 
 are simulated too, and J_rate becomes the mean of the nominal design's J_rate and the two others'
 J_shape (`design.rate.rate_shape_fit`: the target's rate profile at their own level, since they
 hold less and more material than the target). J_fit, J_binary and J_fab stay on the nominal design.
-A design whose release relies on thin grey layers (which the rho = 1/2 contour deletes or fills)
+A design whose release relies on thin grey layers (which the printed solid's contour deletes or fills)
 then pays for it, because those layers vanish in the eroded design. Three simulations per evaluation;
 needs w_r > 0.
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from design.extract import centred_iou, count_pieces, density_mesh, revoxelize
+from design.extract import centred_iou, count_pieces, density_mesh, mass_preserving_level, revoxelize
 from design.forward import simulate
 from design.objective import DesignObjective, rel_rmse
 from design.printability import assess, prusa_profile
@@ -100,15 +100,17 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
                              dtau_mm=dtau_mm).released_mm3
     rho_full = space.unfold(rho)
     warnings: list[str] = []
-    if np.any(rho_full >= 0.5):
-        mesh = density_mesh(rho_full, space.dx_mm, problem.origin_mm)
+    level = mass_preserving_level(rho_full)
+    if np.any(rho_full >= level):
+        mesh = density_mesh(rho_full, space.dx_mm, problem.origin_mm, level=level)
         mesh.export(out_dir / "design.stl")
         for fmt in config.formats:
             mesh.export(out_dir / f"design.{fmt}")
         solid = revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape)
     else:  # a run stopped very early may still be grey everywhere
         solid = np.zeros(problem.full_shape, dtype=bool)
-        warnings.append("no density reaches 1/2 yet: no solid extracted (design.stl not written)")
+        warnings.append(f"no density reaches the extraction level {level:.3f} yet: no solid extracted "
+                        "(design.stl not written)")
     half = tuple(slice(n // 2 if m else 0, None) for n, m in zip(solid.shape, space.mirror))
     binary_curve = simulate(solid[half].astype(float), space.dx_mm, mirror=space.mirror,
                             total_time_mm=target.total_time_mm, dtau_mm=dtau_mm).released_mm3
@@ -142,6 +144,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         "seconds_per_iteration": seconds / iterations if iterations else None,
         "session_seconds": session_seconds,
         "pieces": pieces,
+        "extraction_level": level,
         "volume_mm3": facts.volume_mm3,
         "print_mass_g": facts.mass_g,
         "min_channel_mm": facts.min_channel_mm,

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.extract import centred_iou, count_pieces, density_mesh, revoxelize
+from design.extract import LEVEL_RANGE, centred_iou, count_pieces, density_mesh, mass_preserving_level, revoxelize
 
 
 def _ball_density(n=20, radius=6.0):
@@ -66,3 +66,28 @@ def test_a_binary_density_with_edge_contacts_gives_a_closed_solid(seed):
     mesh = density_mesh(rho, 0.25, np.zeros(3))
     assert mesh.is_watertight and mesh.volume > 0
     assert np.array_equal(revoxelize(mesh, 0.25, np.zeros(3), rho.shape), rho >= 0.5)
+
+
+def test_mass_preserving_level_keeps_the_densitys_mass():
+    # a ball with a linear boundary ramp: the 1/2 cut of a curved grey layer holds less than the density
+    rho = _ball_density(n=24, radius=7.0)
+    level = mass_preserving_level(rho)
+    solid = rho >= level
+    assert abs(int(solid.sum()) - rho.sum()) <= 0.5 + np.count_nonzero(rho == level)
+    assert abs(int((rho >= 0.5).sum()) - rho.sum()) > 10  # the paper's cut differs here
+    mesh = density_mesh(rho, 0.5, np.zeros(3), level=level)
+    assert np.array_equal(revoxelize(mesh, 0.5, np.zeros(3), rho.shape), solid)
+
+
+def test_mass_preserving_level_of_a_binary_density_keeps_it():
+    rho = np.zeros((8, 8, 8))
+    rho[2:6, 2:6, 2:5] = 1.0
+    level = mass_preserving_level(rho)
+    assert 0.4 <= level <= 0.6 and np.array_equal(rho >= level, rho == 1.0)
+
+
+@pytest.mark.parametrize("grey, expected", [(0.2, LEVEL_RANGE[0]), (0.8, LEVEL_RANGE[1])])
+def test_mass_preserving_level_stays_within_its_range(grey, expected):
+    # a uniformly grey density would need a cut near its own value, far from 1/2
+    rho = grey + 0.01 * np.random.default_rng(0).uniform(-1.0, 1.0, (10, 10, 10))
+    assert mass_preserving_level(rho) == expected

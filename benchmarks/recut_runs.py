@@ -1,0 +1,66 @@
+"""Binary fit of finished design runs cut at rho = 1/2 and at the mass-preserving level (docs/results.md).
+
+Reads each run folder's ``density.npz`` and ``curves.csv`` (nothing is written into the folders),
+thresholds the full density at 1/2 (the paper's cut) and at `design.extract.mass_preserving_level`
+(the level `sfr design` extracts at), simulates both solids as `design.outputs` does, and prints one
+markdown row per run: binary rel. RMSE, pieces and, for a target with a zero-order middle, the rate
+deviation over the solid's middle 80% (`design.rate.rate_deviation`).
+
+    python benchmarks/recut_runs.py RUN_FOLDER [RUN_FOLDER ...]
+
+Thresholding equals re-voxelising the contour mesh at the same level
+(tests/design/test_design_extract.py), so the 1/2 column reproduces a run's own ``rel_rmse_binary``
+when the run was cut at 1/2.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from design.extract import count_pieces, mass_preserving_level
+from design.forward import simulate
+from design.objective import rel_rmse
+from design.rate import rate_deviation
+
+
+def binary_curve(solid: np.ndarray, mirror: tuple[bool, ...], dx_mm: float, tau_mm: np.ndarray) -> np.ndarray:
+    """Released volume of a full solid at ``tau_mm`` (simulated on its reduced grid), mm^3."""
+    half = tuple(slice(n // 2 if m else 0, None) for n, m in zip(solid.shape, mirror))
+    return simulate(solid[half].astype(float), dx_mm, mirror=mirror, total_time_mm=float(tau_mm[-1]),
+                    dtau_mm=float(tau_mm[1] - tau_mm[0])).released_mm3
+
+
+def recut(folder: Path) -> dict:
+    """Binary fit, pieces and rate deviation of one run at both levels."""
+    data = np.load(folder / "density.npz")
+    curves = np.loadtxt(folder / "curves.csv", delimiter=",", skiprows=1)
+    tau, target = curves[:, 0], curves[:, 1]
+    rho_full, dx, mirror = data["rho_full"], float(data["dx_mm"]), tuple(bool(m) for m in data["mirror"])
+    row = {"run": str(folder), "summary_binary": json.loads((folder / "summary.json").read_text())["rel_rmse_binary"]}
+    for name, level in (("half", 0.5), ("mass", mass_preserving_level(rho_full))):
+        solid = rho_full >= level
+        curve = binary_curve(solid, mirror, dx, tau)
+        row[name] = {"level": level, "binary": rel_rmse(curve, target), "pieces": count_pieces(solid),
+                     "mass_error": curve[-1] / target[-1] - 1.0,
+                     "rate_dev": rate_deviation(tau, curve) if curve[-1] > curve[0] else float("nan")}
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+", type=Path, help="run folders written by `sfr design`")
+    args = parser.parse_args()
+    print("| run | binary fit at 1/2 | pieces | rate dev. | level | binary fit at the level | pieces | rate dev. |")
+    print("|---|---|---|---|---|---|---|---|")
+    for folder in args.runs:
+        r = recut(folder)
+        h, m = r["half"], r["mass"]
+        print(f"| {folder} | {h['binary']:.2%} | {h['pieces']} | {h['rate_dev']:.1%} | {m['level']:.3f} | "
+              f"{m['binary']:.2%} | {m['pieces']} | {m['rate_dev']:.1%} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
