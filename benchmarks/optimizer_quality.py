@@ -10,6 +10,7 @@ zero-order target, and seconds per evaluation.
 
     python benchmarks/optimizer_quality.py --out runs/quality [--resolution 64] [--max-iter 300]
         [--optimizers LD_LBFGS lbfgs] [--seeds 0] [--targets ...] [--spaces nfc extruded]
+        [--product-defaults]
 
 Starts: the uniform start of section 5.2, and with ``--seeds K`` also K starts perturbed by
 multiplicative noise of `PERTURBATION` (seeds 1..K). Both optimisers are local and the objective
@@ -54,8 +55,12 @@ def perturbed_start(seed: int):
 
 def run_one(target: str, space: str, optimizer: str, seed: int, args: argparse.Namespace) -> dict:
     """One design run (seed 0: the uniform start); its summary's headline numbers."""
-    config = DesignConfig(target=target, space=space, resolution=args.resolution, max_iter=args.max_iter,
-                          optimizer=optimizer, radius_vox=args.radius_vox, allow_pieces=True)
+    if args.product_defaults:  # `sfr design`'s own: 1 mm radius, one piece
+        config = DesignConfig(target=target, space=space, resolution=args.resolution, max_iter=args.max_iter,
+                              optimizer=optimizer)
+    else:
+        config = DesignConfig(target=target, space=space, resolution=args.resolution, max_iter=args.max_iter,
+                              optimizer=optimizer, radius_vox=args.radius_vox, allow_pieces=True)
     folder = args.out / f"{target.split(':')[0]}_{space}_{optimizer}" / f"seed{seed}"
     result = run_design(config, folder, start=perturbed_start(seed) if seed else None)
     s = json.loads((folder / "summary.json").read_text())
@@ -81,6 +86,9 @@ def main() -> None:
     parser.add_argument("--resolution", type=int, default=64)
     parser.add_argument("--max-iter", type=int, default=300)
     parser.add_argument("--radius-vox", type=float, default=4.0, help="smoothing radius, voxels (paper: 4)")
+    parser.add_argument("--product-defaults", action="store_true",
+                        help="`sfr design`'s defaults (radius in mm, connectivity term) instead of the paper's "
+                             "r = 4 voxels with pieces allowed")
     parser.add_argument("--optimizers", nargs=2, default=["LD_LBFGS", "lbfgs"], metavar=("OLD", "NEW"))
     parser.add_argument("--seeds", type=int, default=0, help="perturbed starts besides the uniform one")
     parser.add_argument("--targets", nargs="*", default=[*SAMPLE_SHAPES, ZERO_ORDER])
