@@ -18,6 +18,19 @@ def _disc_and_blob(n=20):
     return disc, blob
 
 
+def _check_gradient(conn, rho, grad, picks, h=1e-6):
+    """Central differences of J_conn at the entries ``picks`` against ``grad``."""
+    scale = np.abs(grad).max()
+    for idx in picks:
+        up, down = rho.copy(), rho.copy()
+        up[idx] += h
+        down[idx] -= h
+        fd = (conn(up, 2.0)[0] - conn(down, 2.0)[0]) / (2 * h)
+        # J ~ 10-100: round-off of the difference ~1e-14 / h ~ 1e-8; the marcher's upwind choices are
+        # locally constant, so the discrete map is smooth at a generic point
+        assert abs(grad[idx] - fd) <= 1e-6 * scale, (idx, grad[idx], fd)
+
+
 def test_connected_design_is_free_and_a_floating_piece_costs_its_volume():
     disc, blob = _disc_and_blob()
     conn = Connectivity(disc.shape, (True, True), 0.5)
@@ -62,17 +75,7 @@ def test_gradient_matches_central_differences(shape, mirror, coarsen):
     conn = Connectivity(shape, mirror, 0.3, coarsen=coarsen)
     value, grad = conn(rho, 2.0)
     assert value > 0
-    scale = np.abs(grad).max()
-    for _ in range(12):
-        idx = tuple(int(rng.integers(0, n)) for n in shape)
-        h = 1e-6
-        up, down = rho.copy(), rho.copy()
-        up[idx] += h
-        down[idx] -= h
-        fd = (conn(up, 2.0)[0] - conn(down, 2.0)[0]) / (2 * h)
-        # J ~ 10-100: round-off of the difference ~1e-14 / h ~ 1e-8; the marcher's upwind choices are
-        # locally constant, so the discrete map is smooth at a generic point
-        assert abs(grad[idx] - fd) <= 1e-6 * scale, (idx, grad[idx], fd)
+    _check_gradient(conn, rho, grad, [tuple(int(rng.integers(0, n)) for n in shape) for _ in range(12)])
 
 
 def test_guards():
@@ -128,13 +131,6 @@ def test_gradient_matches_central_differences_with_seeds_on_the_axis_lines(shape
     conn = Connectivity(shape, mirror, 0.3, coarsen=coarsen)
     value, grad = conn(rho, 2.0)
     assert len(conn._gated_seeds(np.flip(_pool(rho, coarsen), conn._flips))) > 1 and value > 0
-    scale = np.abs(grad).max()
     picks = [tuple(int(rng.integers(0, n)) for n in shape) for _ in range(10)]
     picks += [tuple(int(v) for v in np.unravel_index(int(np.argmax(np.abs(grad))), shape))]
-    for idx in picks:
-        h = 1e-6
-        up, down = rho.copy(), rho.copy()
-        up[idx] += h
-        down[idx] -= h
-        fd = (conn(up, 2.0)[0] - conn(down, 2.0)[0]) / (2 * h)
-        assert abs(grad[idx] - fd) <= 1e-6 * scale, (idx, grad[idx], fd)
+    _check_gradient(conn, rho, grad, picks)
