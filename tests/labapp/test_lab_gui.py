@@ -24,7 +24,7 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration):
         assert win.live.image.image is not None and win.devices.readouts["plate_c"].text() != "-"
 
         win.controls.calibration.setText(str(cal_path))
-        win.controls.max_hours.setValue(2.0)
+        win.controls.max_hours.setValue(6.0)  # 108 s at 200x: frames come late, not too few, on a loaded machine
         win.controls.stop_on_steady.setChecked(False)
         win.controls.start_button.click()
         try:
@@ -33,7 +33,7 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration):
             raise AssertionError(win.messages.toPlainText() + "\n" + win.status.line()) from None
         assert win.status.phase.startswith("waiting")
         win.controls.drop_button.click()
-        qtbot.waitUntil(lambda: len(win.plots.t_s) >= 25, timeout=120_000)
+        qtbot.waitUntil(lambda: len(win.plots.t_s) >= 25, timeout=240_000)
         win.controls.stop_button.click()
         qtbot.waitUntil(lambda: not win.engine.running, timeout=60_000)
         assert win.engine.outcome == "stopped"
