@@ -1,7 +1,7 @@
 """The embedded simulator and optimizer (paper sections 3.1-3.6), and the Monte Carlo baseline (section 5.1)."""
 from design.concentration import Saturation, release_at_times, release_at_times_vjp, remap_time, remap_time_vjp
 from design.errors import DesignError
-from design.extract import density_mesh
+from design.extract import density_mesh, mass_preserving_level
 from design.filters import SmoothingFilter, project
 from design.forward import N_MIN, Release, release_gradient, simulate, total_time
 from design.ico import IcoConfig, IcoTerm, incremental_compliance
@@ -24,7 +24,7 @@ __all__ = ["DesignConfig", "DesignError", "DesignObjective", "DesignResult", "Ic
            "MonteCarloParams", "MonteCarloRelease", "N_MIN", "PRESET_NAMES", "Release", "SAMPLE_SHAPES",
            "SPACE_CHOICES", "Saturation", "SmoothingFilter", "Target", "assess", "build_space", "check_feasibility",
            "constant_acceleration", "density_mesh", "incremental_compliance", "load_density", "load_mesh",
-           "overhang_stats", "preset_values", "project", "prusa_profile",
+           "mass_preserving_level", "overhang_stats", "preset_values", "project", "prusa_profile",
            "rate_deviation", "register_space", "release_at_times", "release_at_times_vjp", "release_gradient",
            "remap_time", "remap_time_vjp", "run_design", "sample_shape", "simulate", "simulate_mc", "simulate_mesh",
            "target_from_csv", "target_from_mesh", "total_time", "tune_mc", "unit_runs", "voxelize"]
