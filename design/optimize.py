@@ -109,6 +109,8 @@ def _load_config(out_dir: Path) -> DesignConfig:
     data.setdefault("rate_span", (0.0, 1.0))  # runs stored before the option compared the whole curve
     data.setdefault("optimizer", "LD_LBFGS")  # and were optimised with nlopt's L-BFGS
     data.setdefault("allow_pieces", True)  # runs stored without the option had no connectivity term
+    if data.get("beta_final") is None:  # stored resolved: None always meant a fixed beta
+        data["beta_final"] = data.get("beta")
     return DesignConfig(**data)
 
 

@@ -57,8 +57,8 @@ def preset_values(preset: str, space: str) -> dict[str, float]:
     Returns
     -------
     dict
-        ``w_binary``, ``radius_vox``, ``beta`` and, for ico ``w_fab``, for extruded
-        ``height_fraction``.
+        ``w_binary``, ``radius_vox``, ``beta``, ``beta_final`` (= beta: the paper's fixed projection)
+        and, for ico ``w_fab``, for extruded ``height_fraction``.
 
     Raises
     ------
@@ -71,12 +71,12 @@ def preset_values(preset: str, space: str) -> dict[str, float]:
     ico, extruded = PRESETS[name]
     if space in ("ico", "nfc"):
         w_b, w_f, r, beta = ico
-        values = {"w_binary": float(w_b), "radius_vox": float(r), "beta": float(beta)}
+        values = {"w_binary": float(w_b), "radius_vox": float(r), "beta": float(beta), "beta_final": float(beta)}
         if space == "ico":
             values["w_fab"] = float(w_f)
         return values
     if space == "extruded":
         w_b, h, r, beta = extruded
-        return {"w_binary": float(w_b), "radius_vox": float(r), "beta": float(beta),
+        return {"w_binary": float(w_b), "radius_vox": float(r), "beta": float(beta), "beta_final": float(beta),
                 "height_fraction": h / PAPER_RESOLUTION}
     raise DesignError(f"presets cover the spaces nfc, extruded and ico, got {space!r}")

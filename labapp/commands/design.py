@@ -51,7 +51,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default 1: a single run)")
     parser.add_argument("--beta", type=positive_float, help="projection steepness (default 3)")
     parser.add_argument("--beta-final", type=positive_float,
-                        help="beta continuation: raise beta to this over the run in 4 stages (default: fixed beta)")
+                        help="beta continuation: raise beta to this over the run in 4 stages (default 12 for nfc "
+                             "and extruded, fixed for ico; equal to --beta: fixed)")
     parser.add_argument("--rate-window", type=positive_float, metavar="VOX",
                         help="finite-difference span of the rate-fit term's rates, voxels (default 1)")
     parser.add_argument("--w-rate", type=nonnegative_float,

@@ -68,3 +68,21 @@ def test_configuration_guards(tmp_path):
         run_design(None, tmp_path / "nothing", resume=True)
     with pytest.raises(DesignError, match="infeasible"):
         run_design(DesignConfig(target="zero-order:final=0.5,duration=1.0", resolution=16), tmp_path / "bad")
+
+
+def test_beta_continuation_defaults_and_stored_fixed_runs(tmp_path):
+    assert DesignConfig(target="sphere", space="nfc").beta_final == 12.0
+    assert DesignConfig(target="sphere", space="extruded").beta_final == 12.0
+    assert DesignConfig(target="sphere", space="nfc", beta=20.0).beta_final == 20.0  # never below beta
+    assert DesignConfig(target="sphere", space="ico").beta_final is None  # fixed
+    preset = DesignConfig(target="pill", space="extruded", preset="paper:pill")
+    assert preset.beta_final == preset.beta  # the paper's fixed projection
+    # a run stored before the default (beta_final null meant a fixed beta) resumes with a fixed beta
+    config = DesignConfig(max_iter=6, **SMALL)
+    run_design(config, tmp_path, should_stop=lambda: True)
+    stored = json.loads((tmp_path / "config.json").read_text())
+    stored["beta_final"] = None
+    (tmp_path / "config.json").write_text(json.dumps(stored))
+    run_design(None, tmp_path, resume=True)
+    resumed = json.loads((tmp_path / "summary.json").read_text())["config"]
+    assert resumed["beta_final"] == resumed["beta"]
