@@ -54,7 +54,8 @@ class LbfgsSettings:
         Evaluations one line search may use before it is declared stalled.
     first_step : float
         Largest change of any variable on a step without curvature pairs (the first, and after
-        `Lbfgs.restart`), in the variables' units.
+        `Lbfgs.restart`), in the variables' units. 2 rad, measured against 0.5 with beta
+        continuation, where every stage starts afresh (docs/benchmarks.md).
     ftol_rel, xtol_rel : float
         Convergence when an accepted step changes f by at most ``ftol_rel |f|`` or x by at most
         ``xtol_rel |x|`` (Euclidean norms); 0 disables.
@@ -64,7 +65,7 @@ class LbfgsSettings:
     c1: float = 1e-4
     c2: float = 0.9
     max_search_evals: int = 20
-    first_step: float = 0.5
+    first_step: float = 2.0
     ftol_rel: float = 0.0
     xtol_rel: float = 0.0
 
