@@ -37,8 +37,9 @@ surface moves by at most this fraction of a voxel per unit density step."""
 
 
 LEVEL_RANGE = (0.4, 0.6)
-"""Bounds of the extraction level. Optimised designs need 0.44-0.50 (docs/results.md); a density
-grey enough to need a level outside this range is not a design any single cut stands for."""
+"""Bounds of the extraction level. Optimised designs measured 0.44-0.60 at resolution 64 and
+0.47-0.55 at 128 (docs/results.md); a density grey enough to need a level outside this range is not
+a design any single cut stands for."""
 
 
 def mass_preserving_level(rho_full: np.ndarray) -> float:

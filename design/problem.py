@@ -43,7 +43,8 @@ SPACE_DEFAULTS: dict[str, dict[str, float]] = {
 docs/results.md (ICO section); the paper's Table 1 values (50-200) come with its own normalisation.
 NFC and extruded designs raise beta from 3 to 12 over the run: at a fixed beta 3, holes and columns
 narrower than the smoothing radius stay grey, the density's release fits while the printed solid's
-does not (docs/results.md, "Beta continuation"); a ``beta_final`` equal to ``beta`` keeps it fixed."""
+does not (docs/results.md, "Beta continuation by default"); a ``beta_final`` equal to ``beta`` keeps
+it fixed."""
 DEFAULT_RADIUS_MM = 1.0
 """Smoothing radius r when none is given, mm: the paper's r = 4 voxels on the sample shapes at
 resolution 64 (dx 0.25-0.32 mm) are 1.0-1.3 mm; fixed in mm so that the minimum feature (about r, five
