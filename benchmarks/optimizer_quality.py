@@ -55,12 +55,9 @@ def perturbed_start(seed: int):
 
 def run_one(target: str, space: str, optimizer: str, seed: int, args: argparse.Namespace) -> dict:
     """One design run (seed 0: the uniform start); its summary's headline numbers."""
-    if args.product_defaults:  # `sfr design`'s own: 1 mm radius, one piece
-        config = DesignConfig(target=target, space=space, resolution=args.resolution, max_iter=args.max_iter,
-                              optimizer=optimizer)
-    else:
-        config = DesignConfig(target=target, space=space, resolution=args.resolution, max_iter=args.max_iter,
-                              optimizer=optimizer, radius_vox=args.radius_vox, allow_pieces=True)
+    paper = {} if args.product_defaults else {"radius_vox": args.radius_vox, "allow_pieces": True}
+    config = DesignConfig(target=target, space=space, resolution=args.resolution, max_iter=args.max_iter,
+                          optimizer=optimizer, **paper)
     folder = args.out / f"{target.split(':')[0]}_{space}_{optimizer}" / f"seed{seed}"
     result = run_design(config, folder, start=perturbed_start(seed) if seed else None)
     s = json.loads((folder / "summary.json").read_text())

@@ -2,7 +2,7 @@
 
 Reads each run folder's ``density.npz`` and ``curves.csv`` (nothing is written into the folders),
 thresholds the full density at 1/2 (the paper's cut) and at `design.extract.mass_preserving_level`
-(the level `sfr design` extracts at), simulates both solids as `design.outputs` does, and prints one
+(the level `sfr design` extracts at), simulates both solids with `design.outputs.solid_release`, and prints one
 markdown row per run: binary rel. RMSE, pieces and, for a target with a zero-order middle, the rate
 deviation over the solid's middle 80% (`design.rate.rate_deviation`).
 
@@ -15,22 +15,14 @@ when the run was cut at 1/2.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 from design.extract import count_pieces, mass_preserving_level
-from design.forward import simulate
 from design.objective import rel_rmse
+from design.outputs import solid_release
 from design.rate import rate_deviation
-
-
-def binary_curve(solid: np.ndarray, mirror: tuple[bool, ...], dx_mm: float, tau_mm: np.ndarray) -> np.ndarray:
-    """Released volume of a full solid at ``tau_mm`` (simulated on its reduced grid), mm^3."""
-    half = tuple(slice(n // 2 if m else 0, None) for n, m in zip(solid.shape, mirror))
-    return simulate(solid[half].astype(float), dx_mm, mirror=mirror, total_time_mm=float(tau_mm[-1]),
-                    dtau_mm=float(tau_mm[1] - tau_mm[0])).released_mm3
 
 
 def recut(folder: Path) -> dict:
@@ -39,12 +31,11 @@ def recut(folder: Path) -> dict:
     curves = np.loadtxt(folder / "curves.csv", delimiter=",", skiprows=1)
     tau, target = curves[:, 0], curves[:, 1]
     rho_full, dx, mirror = data["rho_full"], float(data["dx_mm"]), tuple(bool(m) for m in data["mirror"])
-    row = {"run": str(folder), "summary_binary": json.loads((folder / "summary.json").read_text())["rel_rmse_binary"]}
+    row = {}
     for name, level in (("half", 0.5), ("mass", mass_preserving_level(rho_full))):
         solid = rho_full >= level
-        curve = binary_curve(solid, mirror, dx, tau)
+        curve = solid_release(solid, dx, mirror, float(tau[-1]), float(tau[1] - tau[0]))
         row[name] = {"level": level, "binary": rel_rmse(curve, target), "pieces": count_pieces(solid),
-                     "mass_error": curve[-1] / target[-1] - 1.0,
                      "rate_dev": rate_deviation(tau, curve) if curve[-1] > curve[0] else float("nan")}
     return row
 

@@ -75,6 +75,14 @@ def _ico_summary(objective: DesignObjective, rho: np.ndarray, rows: np.ndarray, 
             "fab_time_share": fab_seconds / seconds if seconds > 0 else None}
 
 
+def solid_release(solid: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], total_time_mm: float,
+                  dtau_mm: float) -> np.ndarray:
+    """Released volume of a full (unfolded) binary solid, simulated on its reduced grid, mm^3 per tau sample."""
+    half = tuple(slice(n // 2 if m else 0, None) for n, m in zip(solid.shape, mirror))
+    return simulate(solid[half].astype(float), dx_mm, mirror=tuple(mirror), total_time_mm=total_time_mm,
+                    dtau_mm=dtau_mm).released_mm3
+
+
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
                   history: list[list[float]], config, *, status: str, session_seconds: float) -> DesignOutputs:
     """Extract, re-simulate, assess and write every output of a design run.
@@ -111,9 +119,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         solid = np.zeros(problem.full_shape, dtype=bool)
         warnings.append(f"no density reaches the extraction level {level:.3f} yet: no solid extracted "
                         "(design.stl not written)")
-    half = tuple(slice(n // 2 if m else 0, None) for n, m in zip(solid.shape, space.mirror))
-    binary_curve = simulate(solid[half].astype(float), space.dx_mm, mirror=space.mirror,
-                            total_time_mm=target.total_time_mm, dtau_mm=dtau_mm).released_mm3
+    binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm)
     pieces = count_pieces(solid)
     if pieces > 1:
         warnings.append(f"the solid has {pieces} separate pieces")
