@@ -7,7 +7,9 @@ section 5.2 (or a checkpoint), minimises eq. (4), checkpoints every few evaluati
 
 Optimisers (`DesignConfig.optimizer`): "lbfgs" (default), the lean L-BFGS of `design.lbfgs`, whose
 step costs a small fraction of an evaluation and whose whole state goes into every checkpoint, so a
-resumed run repeats the uninterrupted one evaluation for evaluation; or nlopt's "LD_LBFGS",
+resumed run repeats the uninterrupted one evaluation for evaluation (with its default line search,
+`DesignConfig.line_search` "luksan", it evaluates the designs nlopt's LD_LBFGS evaluates, measured in
+docs/benchmarks.md, at a fraction of its cost per step); or nlopt's "LD_LBFGS",
 "LD_MMA", "LD_CCSAQ", whose internal state is not accessible: their resumes restart with an empty
 memory from the last evaluated design.
 
@@ -57,14 +59,6 @@ RESTART_GAIN = 1e-3
 """Relative decrease of J a session must achieve for another restart to be tried."""
 BETA_STAGES = 4
 """Stages of the beta continuation (`DesignConfig.beta_final`)."""
-WOLFE_C2 = 0.5
-"""Curvature constant of the "lbfgs" line search (strong Wolfe). Measured on the twelve sample and
-zero-order designs at 64 voxels, 300 evaluations, three starts each (docs/benchmarks.md, "Design
-quality"): with 0.5 the median J is within 0.2% of nlopt's LD_LBFGS or lower in 9 of 12 designs and
-the binary fit the same or better in 9 of 12; the weak Wolfe rule of nlopt's own line search (c2 0.8
-or 0.9) gave a worse median binary fit than nlopt's in five of eight differing designs, against three."""
-
-
 @dataclass(frozen=True)
 class DesignResult:
     """What a design run returns.
@@ -109,6 +103,7 @@ def _load_config(out_dir: Path) -> DesignConfig:
     data.setdefault("rate_span", (0.0, 1.0))  # runs stored before the option compared the whole curve
     data.setdefault("optimizer", "LD_LBFGS")  # and were optimised with nlopt's L-BFGS
     data.setdefault("allow_pieces", True)  # runs stored without the option had no connectivity term
+    data.setdefault("line_search", "strong-wolfe")  # the "lbfgs" optimiser's only rule before the option
     if data.get("beta_final") is None:  # stored resolved: None always meant a fixed beta
         data["beta_final"] = data.get("beta")
     return DesignConfig(**data)
@@ -313,13 +308,16 @@ def beta_stages(config: DesignConfig) -> list[tuple[float, int]]:
 
 def _stage_lbfgs(run: _Run, start: np.ndarray, stage_end: int, state: dict | None) -> str:
     """`design.lbfgs` from ``start`` (or from a checkpointed ``state``) until evaluation
-    ``stage_end``, restarting after early ends (module doc)."""
+    ``stage_end``; after an early end a new session starts at the best design so far, as `_stage`
+    restarts nlopt (module doc), its count and the best J it began with kept in the optimiser's state."""
     cfg = run.config
+    settings = LbfgsSettings(memory=cfg.lbfgs_memory, ftol_rel=cfg.ftol_rel, xtol_rel=cfg.xtol_rel,
+                             line_search=cfg.line_search)
     if state is not None:
         opt = Lbfgs.from_state(state)
     else:
-        opt = Lbfgs(run.from_x(start), LbfgsSettings(memory=cfg.lbfgs_memory, c2=WOLFE_C2, ftol_rel=cfg.ftol_rel,
-                                                     xtol_rel=cfg.xtol_rel))
+        opt = Lbfgs(run.from_x(start), settings)
+        opt.f_restart = run.best_value
     run.lbfgs, run.stage_end = opt, stage_end
     try:
         while True:
@@ -329,10 +327,12 @@ def _stage_lbfgs(run: _Run, start: np.ndarray, stage_end: int, state: dict | Non
             outcome = opt.tell(run.evaluate(opt.x_trial, opt.g_trial))
             ended = None
             if outcome in (CONVERGED, STALLED):  # decided before the checkpoint, which must hold it
-                if opt.restarts < MAX_RESTARTS and opt.f < opt.f_restart * (1.0 - RESTART_GAIN):
-                    log.info("restarting L-BFGS from the best design (J = %.6g)", opt.f)
-                    outcome = opt.restart()  # CONVERGED only where the gradient vanishes
-                if outcome in (CONVERGED, STALLED):
+                if opt.restarts < MAX_RESTARTS and run.best_value < opt.f_restart * (1.0 - RESTART_GAIN):
+                    log.info("restarting L-BFGS from the best design (J = %.6g)", run.best_value)
+                    sessions, opt = opt.restarts + 1, Lbfgs(run.from_x(run.best_x), settings)
+                    opt.restarts, opt.f_restart = sessions, run.best_value
+                    run.lbfgs = opt
+                else:
                     ended = "stalled" if outcome == STALLED else "converged"
                     run.lbfgs, run.stage = None, run.stage + 1
             run.report()

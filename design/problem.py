@@ -15,6 +15,7 @@ import numpy as np
 
 from design.errors import DesignError
 from design.ico import DEFAULT_COARSEN, DEFAULT_LAYERS, IcoConfig
+from design.lbfgs import LINE_SEARCHES
 from design.forward import total_time
 from design.meshio import load_mesh
 from design.presets import preset_values
@@ -132,6 +133,9 @@ class DesignConfig:
         iteration limit and a stalled line search end a run).
     lbfgs_memory : int
         L-BFGS correction pairs m (memory O(m N)).
+    line_search : str
+        The "lbfgs" optimiser's line-search rule, one of `design.lbfgs.LINE_SEARCHES`: "luksan"
+        (default; nlopt LD_LBFGS's rule) or "strong-wolfe".
     bounds : str
         "cosine" (rho_hat = (1 - cos z) / 2, unconstrained L-BFGS) or "box" (nlopt box bounds, not
         with the "lbfgs" optimiser); see `design.optimize`.
@@ -177,6 +181,7 @@ class DesignConfig:
     ftol_rel: float = 0.0
     xtol_rel: float = 0.0
     lbfgs_memory: int = 10
+    line_search: str = LINE_SEARCHES[0]
     bounds: str = "cosine"
     checkpoint_every: int = 10
     margin: float = 0.25
@@ -243,6 +248,8 @@ class DesignConfig:
             raise DesignError(f"bounds must be 'cosine' or 'box', got {self.bounds!r}")
         if self.optimizer not in OPTIMIZERS:
             raise DesignError(f"optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
+        if self.line_search not in LINE_SEARCHES:
+            raise DesignError(f"line_search must be one of {LINE_SEARCHES}, got {self.line_search!r}")
         if self.optimizer == "lbfgs" and self.bounds != "cosine":
             raise DesignError("the 'lbfgs' optimiser is unconstrained: it needs bounds='cosine' (box bounds: "
                               "choose an nlopt optimizer)")

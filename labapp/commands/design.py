@@ -70,6 +70,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="how L-BFGS keeps rho_hat in [0, 1] (default cosine)")
     parser.add_argument("--optimizer", help="lbfgs (default: lean L-BFGS, exact resume) or nlopt's LD_LBFGS, "
                         "LD_MMA, LD_CCSAQ (box bounds need one of these); checked by the design configuration")
+    parser.add_argument("--line-search", help="the lbfgs optimiser's line search: luksan (default; the rule of "
+                        "nlopt's LD_LBFGS) or strong-wolfe; checked by the design configuration")
     parser.add_argument("--warn-channel-mm", type=nonnegative_float, help="warn below this channel width, mm")
     parser.add_argument("--formats", nargs="*", default=[], choices=("3mf", "obj"), help="extra mesh formats")
     parser.add_argument("--allow-infeasible", action="store_true", help="optimise even if the target fails checks")
@@ -130,7 +132,8 @@ def run(args: argparse.Namespace) -> int:
                                        ("rate_span", tuple(args.rate_span) if args.rate_span else None),
                                        ("robust_eta", args.robust_eta), ("layers", args.layers),
                                        ("ico_coarsen", args.ico_coarsen), ("stiffness_law", args.stiffness_law),
-                                       ("bounds", args.bounds), ("warn_channel_mm", args.warn_channel_mm))
+                                       ("bounds", args.bounds), ("line_search", args.line_search),
+                                       ("warn_channel_mm", args.warn_channel_mm))
                      if v is not None}
             config = DesignConfig(target=args.target, **given,
                                   domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
