@@ -6,7 +6,8 @@ configuration and ``--max-iter`` evaluations, keeping each run folder under ``--
 one markdown row: evaluations used, best J, rel. RMSE of the density's and of the binary solid's
 release curve (the fit judged), the binary solid's final release against the target's (its mass
 error, which sets most of the binary fit's differences), the binary solid's rate deviation for the
-zero-order target, and seconds per evaluation.
+zero-order target, seconds per evaluation, and the first evaluation at which the two optimisers'
+J histories differ ("none": identical through the shorter history).
 
     python benchmarks/optimizer_quality.py --out runs/quality [--resolution 64] [--max-iter 300]
         [--optimizers LD_LBFGS lbfgs] [--seeds 0] [--targets ...] [--spaces nfc extruded]
@@ -64,9 +65,17 @@ def run_one(target: str, space: str, optimizer: str, seed: int, args: argparse.N
     dev = (s.get("rate_dev_mid80") or {}).get("binary")
     curves = np.loadtxt(folder / "curves.csv", delimiter=",", skiprows=1)
     target_mm3, binary_mm3 = curves[-1, 1], curves[-1, 3]
-    return {"evals": result.iterations, "J": result.best_value, "density": s["rel_rmse_density"],
+    history = np.loadtxt(folder / "history.csv", delimiter=",", skiprows=1, ndmin=2)[:, 1]
+    return {"evals": result.iterations, "J": result.best_value, "J_history": history, "density": s["rel_rmse_density"],
             "binary": s["rel_rmse_binary"], "mass": binary_mm3 / target_mm3 - 1.0,
             "rate_dev": dev if dev is not None else float("nan"), "per_eval": s.get("seconds_per_iteration") or 0.0}
+
+
+def first_difference(a: np.ndarray, b: np.ndarray) -> int | None:
+    """1-based evaluation at which two J histories first differ; None if equal through the shorter."""
+    n = min(a.size, b.size)
+    differ = np.flatnonzero(a[:n] != b[:n])
+    return int(differ[0]) + 1 if differ.size else None
 
 
 def _cell(runs: list[dict], key: str, fmt: str) -> str:
@@ -101,8 +110,8 @@ def main() -> None:
         print(f"median (range) over {args.seeds + 1} starts\n")
     print(f"| target | space | evals {old} / {new} | best J {old} / {new} | rel. RMSE density | "
           f"rel. RMSE binary {old} / {new} | binary solid's final mass error | rate dev. binary | s/eval | "
-          f"new vs old |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          f"first differing evaluation | new vs old |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     compared = not_worse = 0
     t0 = time.perf_counter()
     for target in args.targets:
@@ -119,12 +128,14 @@ def main() -> None:
             compared += 1
             not_worse += verdict != "worse"
             dev = f"{_cell(a, 'rate_dev', '.1%')} / {_cell(b, 'rate_dev', '.1%')}" if target == ZERO_ORDER else "-"
+            firsts = [first_difference(ra["J_history"], rb["J_history"]) for ra, rb in zip(a, b)]
+            first = ", ".join("none" if f is None else str(f) for f in firsts)
             print(f"| {name} | {space} | {_cell(a, 'evals', '.0f')} / {_cell(b, 'evals', '.0f')} | "
                   f"{_cell(a, 'J', '.5g')} / {_cell(b, 'J', '.5g')} | "
                   f"{_cell(a, 'density', '.3%')} / {_cell(b, 'density', '.3%')} | "
                   f"{_cell(a, 'binary', '.3%')} / {_cell(b, 'binary', '.3%')} | "
                   f"{_cell(a, 'mass', '+.2%')} / {_cell(b, 'mass', '+.2%')} | {dev} | "
-                  f"{_cell(a, 'per_eval', '.3f')} / {_cell(b, 'per_eval', '.3f')} | {verdict} |", flush=True)
+                  f"{_cell(a, 'per_eval', '.3f')} / {_cell(b, 'per_eval', '.3f')} | {first} | {verdict} |", flush=True)
     print(f"wall time {time.perf_counter() - t0:.0f} s")
     print(f"not_worse: {not_worse}/{compared}")
 
