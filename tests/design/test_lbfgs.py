@@ -280,6 +280,22 @@ def test_a_resumed_design_run_repeats_the_uninterrupted_one_exactly(tmp_path, ho
             np.testing.assert_array_equal(a[name], b[name])
 
 
+@pytest.mark.parametrize("at", [128, 130])
+def test_a_run_resumed_around_a_restarted_session_repeats_the_uninterrupted_one(tmp_path, at, caplog):
+    # one beta stage of 150 evaluations: the line search fails after evaluation 128 and a new
+    # session starts at the best design; stop on it (128) or two evaluations into it (130)
+    config = DesignConfig(max_iter=150, beta_final=3.0, **SMALL)
+    with caplog.at_level("INFO", logger="design.optimize"):
+        whole = run_design(config, tmp_path / "whole")
+    assert any("restarting L-BFGS" in r.getMessage() for r in caplog.records)
+    calls = []
+    run_design(config, tmp_path / "parts", should_stop=lambda: len(calls) >= at,
+               on_iteration=lambda k, x, terms: calls.append(k))
+    second = run_design(None, tmp_path / "parts", resume=True)
+    assert second.iterations == whole.iterations > at
+    np.testing.assert_array_equal(_history(tmp_path / "parts"), _history(tmp_path / "whole"))
+
+
 def test_a_default_design_run_evaluates_what_nlopts_ld_lbfgs_evaluates(tmp_path):
     # beta continuation: 4 stages of 8 evaluations, each a fresh optimiser in both
     config = DesignConfig(max_iter=32, beta_final=12.0, **SMALL)
