@@ -18,8 +18,9 @@ what an iteration needs, on arrays allocated once:
     functions of the two latest points (cubic, else secant, else quadratic; `_model_step`). A
     search that fails after 10 model steps, or a pair with ``s^T y <= 0``, or a direction that is
     not a uniform descent direction (``g^T d > -1e-4 |g| |d|``), resets the memory to steepest
-    descent; a failing steepest-descent search ends with `STALLED`. Measured, this gives the same
-    designs as nlopt's LD_LBFGS evaluation for evaluation (docs/benchmarks.md);
+    descent; a failing steepest-descent search ends with `STALLED`. Measured, this evaluates the
+    designs nlopt's LD_LBFGS evaluates, bit for bit, until nlopt ends a session on a stopping test
+    of its own once J no longer changes (docs/benchmarks.md);
   - "strong-wolfe": a step satisfying the strong Wolfe conditions
     ``f(x + a d) <= f(x) + c1 a g^T d`` and ``|g(x + a d)^T d| <= c2 |g^T d|`` (Nocedal and
     Wright, eq. 3.7; bracketing and zoom of algorithms 3.5-3.6 with safeguarded cubic
