@@ -285,8 +285,7 @@ class Lbfgs:
             self.model_steps = 0
         else:
             if not dg0 < 0.0:  # H is positive definite, so only g = 0 gets here after a reset
-                self.count = self.head = 0
-                self.gamma = 0.0
+                self._forget()
                 np.negative(self.g, out=self.d)
                 dg0 = -_dot(self.g, self.g)
                 if not dg0 < 0.0:
@@ -301,10 +300,14 @@ class Lbfgs:
         self._set_trial()
         return STEP
 
-    def _reset(self) -> str:
-        """Forget the curvature pairs and begin a steepest-descent search from `x`."""
+    def _forget(self) -> None:
+        """Drop the curvature pairs: the next direction is steepest descent."""
         self.count = self.head = 0
         self.gamma = 0.0
+
+    def _reset(self) -> str:
+        """Forget the curvature pairs and begin a steepest-descent search from `x`."""
+        self._forget()
         return self._begin_search()
 
     def _direction(self) -> None:
@@ -454,8 +457,7 @@ class Lbfgs:
             self.head = (slot + 1) % cfg.memory
             self.count = min(self.count + 1, cfg.memory)
         elif cfg.line_search == "luksan":
-            self.count = self.head = 0
-            self.gamma = 0.0
+            self._forget()
         f_old = self.f
         small_x = cfg.xtol_rel > 0 and np.linalg.norm(s) <= cfg.xtol_rel * np.linalg.norm(self.x_trial)
         self.x, self.x_trial = self.x_trial, self.x
