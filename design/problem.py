@@ -56,7 +56,8 @@ W_CONNECT = 5.0
 """Default weight of the connectivity penalty J_conn (`design.connectivity`); measured against 2 and
 20 on extruded designs (docs/results.md, "Shapes nobody tuned for")."""
 START_FILL = 2.0 / 3.0
-"""Density of the compact start of an extruded design without a source shape (`start_region`)."""
+"""Density of the compact start of an extruded design (`start_region`): a target without a source starts
+at it, and a start is hollowed only as far as its band still holds the target's volume at it."""
 OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
 """`DesignConfig.optimizer` choices: `design.lbfgs` (default) and three nlopt algorithms."""
 ANALYTIC_W_RATE = 1.0
@@ -351,13 +352,26 @@ def extrusion_height_mm(target: Target, dx_mm: float) -> float:
     return max(target.final_mm3 ** (1.0 / 3.0), 2.0 * end + 2.0 * dx_mm)
 
 
-def start_region(space: DesignSpace, target: Target, half_extent_mm: np.ndarray | None) -> np.ndarray | None:
+def start_region(space: DesignSpace, target: Target, half_extent_mm: np.ndarray | None,
+                 radius_mm: float) -> np.ndarray | None:
     """Where an extruded design starts with material (`DesignObjective.uniform_start`), or None (everywhere).
 
-    The source's footprint (its bounding box plus a voxel), or for a target without a source a centred
-    square holding the target's volume at density `START_FILL` over the extrusion height. Spreading the
-    start over the whole domain footprint, as for the other spaces, leaves an extruded design far
-    from the compact part and lets it split into one piece per quadrant (docs/results.md).
+    The outline is the source's footprint (its bounding box plus a voxel), or for a target without a
+    source a centred square. Spreading the start over the whole domain footprint, as for the other
+    spaces, leaves an extruded design far from the compact part and lets it split into one piece per
+    quadrant (docs/results.md).
+
+    When the extrusion is taller than twice the target's release end D, the start leaves out the
+    outline's core deeper than 2 D from its edge. A point of a prism dissolves at min(in-plane distance
+    to the nearest edge, distance to the top or bottom face), so the part's material must lie within D
+    of an in-plane edge for its release to end by D; the band that remains has that width between the
+    outline and the hole, and a start that holds the core solid gives the design a core that the
+    projection then keeps (a ring's central hole never opens; docs/results.md). The band is widened
+    until it holds the target's volume at density `START_FILL`, and no hole is cut whose half-width
+    would be below the smoothing radius (the filter would keep it a grey pin-hole that the printed solid
+    opens). A target without a source gets the
+    square whose band of width 2 D holds that volume (a square ring), or, when that band would fill
+    the square, the square that holds it at `START_FILL` throughout.
 
     Returns
     -------
@@ -366,14 +380,27 @@ def start_region(space: DesignSpace, target: Target, half_extent_mm: np.ndarray 
     if not space.extruded:
         return None
     dx = space.dx_mm
+    height_mm = space.grid_shape[BUILD_AXIS] * dx
+    end_mm = curve_end_mm(target.tau_mm, target.released_mm3)
+    need_cells = target.final_mm3 / (START_FILL * height_mm * dx * dx * space.multiplicity)
     if half_extent_mm is None:
-        height_mm = space.grid_shape[BUILD_AXIS] * dx
-        side = np.sqrt(target.final_mm3 / (height_mm * START_FILL))
+        need_mm2 = target.final_mm3 / (height_mm * START_FILL)  # the full footprint's area
+        band = 2.0 * end_mm  # a square band of width W and side s covers 4 W (s - W)
+        side = max(np.sqrt(need_mm2), band + need_mm2 / (4.0 * band)) if band > 0 else np.sqrt(need_mm2)
         half = np.array([0.5 * side, 0.5 * side])
     else:
         half = np.array([half_extent_mm[ax] for ax in range(3) if ax != BUILD_AXIS]) + dx
-    axes = [(np.arange(n) + 0.5) * dx < h for n, h in zip(space.var_shape, half)]
-    region = np.logical_and.outer(*axes)
+    half = np.minimum(half, np.asarray(space.var_shape, float) * dx)  # within the domain
+    centres = [(np.arange(n) + 0.5) * dx for n in space.var_shape]
+    depth = np.minimum.outer(half[0] - centres[0], half[1] - centres[1])  # to the outline's edge, mm
+    region = depth > 0
+    if end_mm < 0.5 * height_mm - 0.5 * dx:  # the faces alone do not dissolve the core in time
+        inside = np.sort(depth[region])
+        width = 2.0 * end_mm + 0.5 * dx
+        if np.count_nonzero(inside <= width) < need_cells:
+            width = inside[min(int(np.ceil(need_cells)), inside.size - 1)]
+        if inside[-1] - width >= radius_mm:
+            region &= depth <= width
     return region if region.any() and not region.all() else None
 
 
@@ -450,5 +477,6 @@ def prepare(config: DesignConfig) -> Problem:
     log.info("design grid %s (reduced %s), dx = %.4g mm, T = %.4g mm; %s", sim_full, space.grid_shape, dx,
              t_total, feasibility.text())
     half_mm = 0.5 * (hi - lo) if mesh is not None else None
-    return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, _radius_vox(config, dx),
-                   start_region(space, target, half_mm))
+    radius_vox = _radius_vox(config, dx)
+    return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, radius_vox,
+                   start_region(space, target, half_mm, radius_vox * dx))

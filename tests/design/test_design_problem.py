@@ -1,10 +1,11 @@
 """Problem set-up: domain sizing from the target, mesh targets on the design grid, extrusion height."""
 import numpy as np
 import pytest
+import trimesh
 
 from design.errors import DesignError
 from design.forward import simulate
-from design.problem import DesignConfig, prepare
+from design.problem import START_FILL, DesignConfig, prepare
 from design.targets import target_from_csv
 
 
@@ -43,25 +44,56 @@ def test_mesh_target_is_the_source_voxelised_on_the_design_grid(target, space, r
     np.testing.assert_allclose(problem.target.released_mm3, own, rtol=0, atol=1e-9 * problem.target.final_mm3)
 
 
-def test_extruded_analytic_target_gets_a_compact_height_and_start():
-    problem = prepare(DesignConfig(target="zero-order:final=0.15,duration=0.2", space="extruded", resolution=24))
-    target, space = problem.target, problem.space
+def _start_mm3(problem):
+    """Volume the start region covers over the extrusion height (all mirror copies), mm^3."""
+    space = problem.space
     height_mm = space.grid_shape[2] * problem.dx_mm
-    end_mm = 0.2 * 10.0 - 0.5 * problem.dx_mm  # duration 0.2 of the 20 mm cube's horizon
+    return np.count_nonzero(problem.start_region) * problem.dx_mm ** 2 * height_mm * space.multiplicity
+
+
+def test_extruded_analytic_target_gets_a_compact_height_and_a_square_ring_start():
+    problem = prepare(DesignConfig(target="zero-order:final=0.15,duration=0.2", space="extruded", resolution=24))
+    target, space, dx = problem.target, problem.space, problem.dx_mm
+    height_mm = space.grid_shape[2] * dx
+    end_mm = 0.2 * 10.0 - 0.5 * dx  # duration 0.2 of the 20 mm cube's horizon
     # as tall as a cube of the target's volume, and at least twice the release's duration
-    assert height_mm == pytest.approx(max(target.final_mm3 ** (1 / 3), 2 * end_mm + 2 * problem.dx_mm),
-                                      abs=problem.dx_mm)
+    assert height_mm == pytest.approx(max(target.final_mm3 ** (1 / 3), 2 * end_mm + 2 * dx), abs=dx)
     assert target.total_time_mm >= 0.2 * 9.0 and target.final_mm3 == pytest.approx(0.15 * 20.0 ** 3, rel=0.02)
     region = problem.start_region
-    assert region is not None and region.shape == space.var_shape and region[0, 0] and not region[-1, -1]
+    assert region is not None and region.shape == space.var_shape
+    # material deeper than the release's end would release after it: the centre starts empty, and the
+    # band around it holds the target's volume at START_FILL or less
+    assert not region[0, 0] and region[0].any() and region[:, 0].any()
+    assert _start_mm3(problem) * START_FILL >= target.final_mm3 * (1 - 1e-9)
 
 
 def test_extruded_mesh_start_covers_the_source_footprint_and_nfc_starts_everywhere():
     problem = prepare(DesignConfig(target="pill", space="extruded", resolution=24))
     region = problem.start_region
-    covered = problem.source_solid[problem.full_shape[0] // 2:, problem.full_shape[1] // 2:].any(axis=2)
-    assert np.all(region[covered]) and not region.all()
+    outline = problem.source_solid[problem.full_shape[0] // 2:, problem.full_shape[1] // 2:].any(axis=2)
+    # the outline's rim is in the start (the core may be left out)
+    rim = outline & ~np.pad(outline[1:, 1:], ((0, 1), (0, 1)))
+    assert np.all(region[rim]) and not region.all()
     assert prepare(DesignConfig(target="pill", space="nfc", resolution=16)).start_region is None
+
+
+def _write(mesh, path):
+    mesh.export(path)
+    return str(path)
+
+
+def test_extruded_start_leaves_out_the_core_a_ring_releases_too_late_from(tmp_path):
+    # a ring 6 mm tall whose wall is 3 mm thick ends its release at 1.5 mm, long before its faces
+    # (3 mm) would dissolve a solid core: the start's core is empty
+    ring = _write(trimesh.creation.annulus(r_min=4.0, r_max=7.0, height=6.0, sections=64), tmp_path / "ring.stl")
+    problem = prepare(DesignConfig(target=ring, space="extruded", resolution=32))
+    region = problem.start_region
+    assert region is not None and not region[0, 0] and region[0].any()
+    assert _start_mm3(problem) * START_FILL >= problem.target.final_mm3 * (1 - 1e-9)
+    # a flat tablet's faces dissolve it before any in-plane core matters: its whole footprint starts
+    tablet = _write(trimesh.creation.box(extents=(14.0, 10.0, 3.0)), tmp_path / "tablet.stl")
+    region = prepare(DesignConfig(target=tablet, space="extruded", resolution=32)).start_region
+    assert region is not None and np.array_equal(region, np.logical_and.outer(region[:, 0], region[0]))
 
 
 def test_radius_in_mm_gives_the_same_feature_size_at_every_resolution():
