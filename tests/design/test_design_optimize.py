@@ -3,6 +3,7 @@ import json
 
 import numpy as np
 import pytest
+import trimesh
 
 from design.errors import DesignError
 from design.optimize import run_design
@@ -86,3 +87,18 @@ def test_beta_continuation_defaults_and_stored_fixed_runs(tmp_path):
     run_design(None, tmp_path, resume=True)
     resumed = json.loads((tmp_path / "summary.json").read_text())["config"]
     assert resumed["beta_final"] == resumed["beta"]
+
+
+def test_an_extruded_ring_opens_its_hole_with_default_flags(tmp_path):
+    # a ring 6 mm tall with a 5 mm wall ends its release at 2.5 mm, before its faces (3 mm) dissolve a
+    # solid core: a start whose core is solid kept it (1.38% at these settings); the start without
+    # it opens the hole: 0.37% measured, one piece
+    trimesh.creation.annulus(r_min=3.0, r_max=8.0, height=6.0, sections=64).export(tmp_path / "ring.stl")
+    run_design(DesignConfig(target=str(tmp_path / "ring.stl"), space="extruded", resolution=48, max_iter=150),
+               tmp_path / "run")
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["rel_rmse_binary"] < 0.01 and summary["pieces"] == 1
+    with np.load(tmp_path / "run" / "density.npz") as saved:
+        solid = saved["solid"]
+    centre = tuple(n // 2 for n in solid.shape)
+    assert not solid[centre]  # the hole goes through the middle of the extrusion
