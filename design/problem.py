@@ -366,12 +366,12 @@ def start_region(space: DesignSpace, target: Target, half_extent_mm: np.ndarray 
     to the nearest edge, distance to the top or bottom face), so the part's material must lie within D
     of an in-plane edge for its release to end by D; the band that remains has that width between the
     outline and the hole, and a start that holds the core solid gives the design a core that the
-    projection then keeps (a ring's central hole never opens; docs/results.md). The band is widened
-    until it holds the target's volume at density `START_FILL`, and no hole is cut whose half-width
-    would be below the smoothing radius (the filter would keep it a grey pin-hole that the printed solid
-    opens). A target without a source gets the
-    square whose band of width 2 D holds that volume (a square ring), or, when that band would fill
-    the square, the square that holds it at `START_FILL` throughout.
+    projection then keeps (a ring's central hole never opens; docs/results.md). The hole is cut only
+    as far as the band that remains holds the target's volume at density `START_FILL`, and not at all
+    when its half-width would be below the smoothing radius (the filter would keep it a grey pin-hole
+    that the printed solid opens). A target without a source starts in the square that holds its
+    volume at `START_FILL` throughout, so it has no room for a hole: a square ring start with the
+    core's connectivity penalty closes up instead (docs/results.md).
 
     Returns
     -------
@@ -384,9 +384,7 @@ def start_region(space: DesignSpace, target: Target, half_extent_mm: np.ndarray 
     end_mm = curve_end_mm(target.tau_mm, target.released_mm3)
     need_cells = target.final_mm3 / (START_FILL * height_mm * dx * dx * space.multiplicity)
     if half_extent_mm is None:
-        need_mm2 = target.final_mm3 / (height_mm * START_FILL)  # the full footprint's area
-        band = 2.0 * end_mm  # a square band of width W and side s covers 4 W (s - W)
-        side = max(np.sqrt(need_mm2), band + need_mm2 / (4.0 * band)) if band > 0 else np.sqrt(need_mm2)
+        side = np.sqrt(target.final_mm3 / (height_mm * START_FILL))
         half = np.array([0.5 * side, 0.5 * side])
     else:
         half = np.array([half_extent_mm[ax] for ax in range(3) if ax != BUILD_AXIS]) + dx
