@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# One start against `--starts 4` at equal wall time, extruded space (docs/results.md, "Multi-start").
+# One start against `--starts 4` at equal wall time (docs/results.md, "Multi-start").
 #
-#   bash benchmarks/multistart_equal_time.sh SOURCE OUT_DIR [RESOLUTION]
+#   bash benchmarks/multistart_equal_time.sh SOURCE OUT_DIR [RESOLUTION] [SPACE]
 #
-# Runs `sfr design --target SOURCE --space extruded --resolution R` three times into OUT_DIR: one start
+# Runs `sfr design --target SOURCE --space SPACE --resolution R` (default 128, extruded) three times into
+# OUT_DIR: one start
 # with 300 evaluations (wall time T_1), `--starts 4 --max-iter 300` (wall time T_4, outputs included),
 # and one start with 300 T_4 / T_1 evaluations (rounded to 10, at least 300). Runs whose folder holds a
 # summary are kept, so an interrupted sweep resumes (their times are then those of this call: 0 s).
@@ -12,8 +13,9 @@ set -euo pipefail
 source=$1
 out=$2
 resolution=${3:-128}
+space=${4:-extruded}
 python=${PYTHON:-python}
-design() { "$python" -m labapp.cli design --target "$source" --space extruded --resolution "$resolution" "$@"; }
+design() { "$python" -m labapp.cli design --target "$source" --space "$space" --resolution "$resolution" "$@"; }
 now() { "$python" -c 'import time; print(time.time())'; }
 timed() {  # timed FOLDER ARGS...: run into FOLDER unless done; prints the wall seconds
     local folder=$1 start

@@ -5,7 +5,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from drivers.camera.base import Camera, CameraError, CameraSettings, Capture, CaptureMissed
+from drivers.camera.base import DSLR_FRAME_BYTES, Camera, CameraError, CameraSettings, Capture, CaptureMissed
 from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
 from labapp.engine import Engine
 from labapp.errors import LabError
@@ -28,7 +28,8 @@ class Bench:
     """A camera, an optional hotplate, and hooks through which a simulated bench follows the procedure.
 
     ``on_drop(t_unix_s)`` is called when the object goes in (time zero, also again on resume);
-    ``on_add_mass(total_g)`` when a calibration step adds filament (cumulative mass).
+    ``on_add_mass(total_g)`` when a calibration step adds filament (cumulative mass). ``frame_bytes`` is
+    what one capture takes on disk, bytes, for the disk-space check before a run.
     """
 
     camera: Camera
@@ -38,6 +39,7 @@ class Bench:
     on_drop: Callable[[float], None] | None = None
     on_add_mass: Callable[[float], None] | None = None
     description: str = ""
+    frame_bytes: int = DSLR_FRAME_BYTES
 
 
 class BenchSession:

@@ -49,14 +49,14 @@ class RunConfig:
     notes: str = ""
     auto_drop: bool = False
     keepalive_s: float = 2.0
-    frame_bytes_estimate: int = 15_000_000
+    frame_bytes_estimate: int | None = None
     low_space_bytes: int = 2_000_000_000
 
     def __post_init__(self) -> None:
         positive = ("interval_s", "hold_s", "heat_timeout_s", "stable_step_s", "max_duration_s", "water_g",
                     "keepalive_s", "frame_bytes_estimate")
         for key in positive:
-            if not getattr(self, key) > 0:
+            if getattr(self, key) is not None and not getattr(self, key) > 0:
                 raise UsageError(f"RunConfig.{key} must be > 0, got {getattr(self, key)}")
         if not 0 <= self.setpoint_c <= 150:
             raise UsageError(f"RunConfig.setpoint_c must be in [0, 150] C, got {self.setpoint_c}")
@@ -136,7 +136,7 @@ class RunProcedure:
         n_frames = math.ceil(cfg.max_duration_s / cfg.interval_s)
         if self.resume_path is None:
             self.data_dir.mkdir(parents=True, exist_ok=True)
-            check_disk_space(self.data_dir, cfg.frame_bytes_estimate, n_frames)
+            check_disk_space(self.data_dir, cfg.frame_bytes_estimate or self.bench.frame_bytes, n_frames)
         self.session = BenchSession(self.bench, engine, None, keepalive_s=cfg.keepalive_s)
         self.session.connect(cfg.setpoint_c, cfg.speed_rpm)
         if self.resume_path is not None:

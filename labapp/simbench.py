@@ -230,7 +230,8 @@ class SimulatedBench:
         return Bench(_ClockedCamera(self.camera, self.clock), self.hotplate, CameraSettings(), simulated=True,
                      on_drop=self.drop, on_add_mass=self.add_mass,
                      description=f"simulated bench ({self.release.name}, {self.release.mass_g:.2f} g, "
-                                 f"x{self.clock.speed:g} time)")
+                                 f"x{self.clock.speed:g} time)",
+                     frame_bytes=3 * self.scene.width * self.scene.height)  # a JPEG is below its raw RGB
 
     # -- faults ------------------------------------------------------------------------------------------
     def camera_busy(self, n: int = 1) -> None:

@@ -25,6 +25,10 @@ class CameraSettings:
     image_format: str | None = "JPEG Fine"
 
 
+DSLR_FRAME_BYTES = 15_000_000
+"""Bytes of one tethered DSLR capture (a JPEG Fine and its companion raw), for disk-space estimates."""
+
+
 @dataclass(frozen=True)
 class Capture:
     """One captured frame: encoded image bytes as the camera wrote them.

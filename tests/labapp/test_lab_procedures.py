@@ -1,18 +1,20 @@
 """The calibration series and the release run, walked by the engine on fake devices and a stepped clock."""
 import csv
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from analysis import BenchCalibration, analyze_run
-from drivers.camera.base import CameraError, CaptureMissed
+from drivers.camera.base import DSLR_FRAME_BYTES, CameraError, CaptureMissed
 from labapp.bench import Bench
 from labapp.calseries import CalibrationProcedure, SeriesConfig
 from labapp.clock import SteppedClock
 from labapp.engine import Engine
 from labapp.events import FrameStored, Prompt, StateChanged
 from labapp.procedures import RunConfig, RunProcedure
+from labapp.simbench import SimulatedBench
 from labapp.storage import read_run, verify_run
 from tests.labapp.lab_fakes import SCENE, ModelHotplate, RenderCamera
 
@@ -108,3 +110,26 @@ def test_config_guards():
         RunConfig(setpoint_c=400)
     with pytest.raises(ValueError, match="increasing"):
         SeriesConfig(crop=(0, 0, 100), masses_g=(0.5, 0.25))
+
+
+def test_the_disk_check_before_a_run_uses_the_benchs_frame_size(tmp_path, calibration, monkeypatch):
+    monkeypatch.setattr("labapp.storage.free_bytes", lambda folder: 10**9)  # 1 GB free
+    config = RunConfig(stable_step_s=30, keepalive_s=0.02, max_duration_s=3600)  # 328 frames at 11 s
+    clock = SteppedClock(start_s=4e9)
+    dslr = _bench(clock, _truth([None]))  # 15 MB a frame: 328 x 15 MB x 1.5 = 7.4 GB do not fit
+    assert dslr.frame_bytes == DSLR_FRAME_BYTES
+    engine = Engine(clock)
+    assert engine.run(RunProcedure(config, dslr, tmp_path / "dslr", calibration)) == "failed"
+    assert not any((tmp_path / "dslr").iterdir())  # refused before any folder is made
+    # 200 kB frames (a simulated camera's JPEGs): 98 MB fit, and the run starts
+    small = dataclasses.replace(dslr, frame_bytes=200_000)
+    engine = Engine(clock)
+    engine.subscribe(lambda e: engine.stop() if isinstance(e, Prompt) and e.prompt == "drop" else None)
+    proc = RunProcedure(config, small, tmp_path / "small", calibration)
+    assert engine.run(proc) == "stopped" and proc.run.path.is_dir()
+
+
+def test_a_simulated_bench_estimates_its_frames_from_its_image_size():
+    sim = SimulatedBench(SteppedClock(start_s=4e9), sample="sphere")
+    # its JPEGs are below their raw RGB size, far below a DSLR's raw capture
+    assert sim.bench().frame_bytes == 3 * sim.scene.width * sim.scene.height < DSLR_FRAME_BYTES
