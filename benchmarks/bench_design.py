@@ -82,7 +82,8 @@ def bench(n_reduced: int, warmup: int, rounds: int, block: int, solves: int, opt
     """One grid size: per-round seconds per iteration, its breakdown, skfmm seconds and their ratio."""
     config = DesignConfig(target="zero-order:final=0.15,duration=0.2", space="nfc", resolution=2 * n_reduced,
                           domain_mm=(20.0, 20.0, 20.0), max_iter=warmup + rounds * block, checkpoint_every=block,
-                          optimizer=optimizer, radius_vox=4.0, allow_pieces=True, beta_final=3.0)  # one stage
+                          optimizer=optimizer, radius_vox=4.0, allow_pieces=True, beta_final=3.0,  # one stage
+                          starts=1)
     totals = dict.fromkeys(PARTS, 0.0)
     last: dict = {}
     marks: dict = {"out": None, "iter": 0.0, "n": 0, "parts": dict(totals)}
