@@ -62,10 +62,11 @@ MULTISTART_STARTS = 4
 MULTISTART_MIN_RESOLUTION = 128
 MULTISTART_SPACES = ("nfc", "extruded")
 """Default multi-start (`DesignConfig.starts`): 4 seeded starts at half the resolution, then the best
-refined, for nfc and extruded designs at resolution 128 or finer. Measured against one start given
-the same wall time on 15 sources (docs/results.md, "Multi-start"): at 128 it wins in both spaces; at
-64 (starts at 32, where the 1 mm radius is about one voxel) it loses in the extruded space. ICO is not
-measured."""
+refined, for nfc and extruded designs of a source shape at resolution 128 or finer. Measured against
+one start given the same wall time on 15 sources (docs/results.md, "Multi-start"): at 128 it wins in
+both spaces; at 64 (starts at 32, where the 1 mm radius is about one voxel) it loses in the extruded
+space. Curve targets keep one start: on the zero-order settings it helped four and set back two well
+beyond their documented figures. ICO is not measured."""
 OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
 """`DesignConfig.optimizer` choices: `design.lbfgs` (default) and three nlopt algorithms."""
 ANALYTIC_W_RATE = 1.0
@@ -110,7 +111,8 @@ class DesignConfig:
     starts : int or None
         Seeded starts run at half the resolution before the best is refined at full resolution
         (`design.multistart`); 1 = a single run from the start design. None = `MULTISTART_STARTS` for
-        nfc and extruded designs at resolution `MULTISTART_MIN_RESOLUTION` or finer, else 1.
+        nfc and extruded designs of a source shape at resolution `MULTISTART_MIN_RESOLUTION` or
+        finer, else 1.
     w_fab : float or None
         Weight w_f of the space's fabrication term (ico only; None = preset or `SPACE_DEFAULTS`,
         0 for spaces without one).
@@ -245,7 +247,8 @@ class DesignConfig:
         if not self.w_connect >= 0:
             raise DesignError(f"w_connect must be >= 0, got {self.w_connect}")
         if self.starts is None:
-            multi = self.space in MULTISTART_SPACES and self.resolution >= MULTISTART_MIN_RESOLUTION
+            multi = (self.space in MULTISTART_SPACES and self.resolution >= MULTISTART_MIN_RESOLUTION
+                     and _is_shape_target(self.target))
             object.__setattr__(self, "starts", MULTISTART_STARTS if multi else 1)
         if not 1 <= self.starts <= 64:
             raise DesignError(f"starts must be in [1, 64], got {self.starts}")
@@ -324,11 +327,16 @@ def _parse_analytic(spec: str) -> tuple[float, float, float] | None:
     return params["q"], params["final"], params["duration"]
 
 
+def _is_shape_target(spec: str) -> bool:
+    """Whether a target spec names a source shape (a sample shape or a mesh file), not a curve."""
+    return spec in SAMPLE_SHAPES or Path(spec).suffix.lower() in MESH_SUFFIXES
+
+
 def _source_mesh(spec: str):
     if spec in SAMPLE_SHAPES:
         return sample_shape(spec)
     path = Path(spec)
-    if path.suffix.lower() in MESH_SUFFIXES:
+    if _is_shape_target(spec):
         if not path.exists():
             raise DesignError(f"target mesh {path} does not exist")
         return load_mesh(path)

@@ -48,8 +48,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="weight of the connectivity penalty J_conn (default 5)")
     parser.add_argument("--starts", type=positive_int,
                         help="seeded starts at half the resolution, the best then refined at full resolution "
-                             "(default 4 for nfc and extruded designs at resolution 128 or finer, else 1: a "
-                             "single run)")
+                             "(default 4 for nfc and extruded designs of a source shape at resolution 128 or "
+                             "finer, else 1: a single run)")
     parser.add_argument("--beta", type=positive_float, help="projection steepness (default 3)")
     parser.add_argument("--beta-final", type=positive_float,
                         help="beta continuation: raise beta to this over the run in 4 stages (default 12 for nfc "
