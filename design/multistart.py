@@ -20,7 +20,7 @@ import numpy as np
 from scipy import ndimage
 
 from design.objective import DesignObjective
-from design.optimize import IterationCallback, run_design
+from design.optimize import IterationCallback, run_design, with_phase
 from design.problem import DesignConfig, Problem
 
 log = logging.getLogger(__name__)
@@ -110,9 +110,10 @@ def coarse_start(config: DesignConfig, out_dir: str | Path, *, on_iteration: Ite
     for k in range(config.starts):
         folder = out_dir / "starts" / f"{k:02d}"
         if not (folder / "summary.json").exists():
-            log.info("coarse start %d of %d at resolution %d", k + 1, config.starts, coarse.resolution)
+            phase = f"coarse start {k + 1} of {config.starts} at resolution {coarse.resolution}"
+            log.info(phase)
             resume = (folder / "config.json").exists()
-            result = run_design(None if resume else coarse, folder, on_iteration=on_iteration,
+            result = run_design(None if resume else coarse, folder, on_iteration=with_phase(on_iteration, phase),
                                 should_stop=should_stop, resume=resume, start=perturbed_start(k))
             if result.status == "interrupted":
                 raise KeyboardInterrupt

@@ -52,6 +52,15 @@ from design.problem import DesignConfig, Problem, prepare
 log = logging.getLogger(__name__)
 
 IterationCallback = Callable[[int, np.ndarray, dict], None]
+
+
+def with_phase(on_iteration: IterationCallback | None, phase: str) -> IterationCallback | None:
+    """``on_iteration`` with ``terms["phase"]`` set to ``phase`` (which run of a multi-start, for progress)."""
+    if on_iteration is None:
+        return None
+    return lambda k, x, terms: on_iteration(k, x, dict(terms, phase=phase))
+
+
 StartDesign = Callable[[DesignObjective, Problem], np.ndarray]
 MAX_RESTARTS = 20
 """L-BFGS restarts from the best point after the optimiser ends early (module doc)."""
@@ -374,7 +383,8 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         The run folder; must not hold a run unless resuming.
     on_iteration : callable, optional
         ``on_iteration(k, x, terms)`` after every evaluation; ``terms`` holds J, J_fit,
-        J_binary, J_fab, grad_norm, seconds and eta_s (upper bound from the iteration limit).
+        J_binary, J_fab, grad_norm, seconds and eta_s (upper bound from the iteration limit), and
+        in a multi-start run ``phase`` (which coarse start, or the refinement).
     should_stop : callable, optional
         Polled before every evaluation; True stops cleanly (best design still written).
     resume : bool
@@ -430,6 +440,8 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     if not saved and start is None and config.starts > 1:  # coarse-to-fine multi-start
         from design.multistart import coarse_start
         start = coarse_start(config, out_dir, on_iteration=on_iteration, should_stop=should_stop)
+    if config.starts > 1:
+        on_iteration = with_phase(on_iteration, f"refinement at resolution {config.resolution}")
     if saved:
         x0 = saved["x"].reshape(problem.space.var_shape)
     elif start is not None:

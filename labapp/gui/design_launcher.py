@@ -193,7 +193,8 @@ class DesignLauncher(QWidget):
 
     def _progress(self, update: tuple) -> None:
         k, terms, image = update
-        self.status.setText(f"iteration {k}: J = {terms.get('J', float('nan')):.5g}, "
+        phase = f"{terms['phase']}, " if "phase" in terms else ""
+        self.status.setText(f"{phase}iteration {k}: J = {terms.get('J', float('nan')):.5g}, "
                             f"fit {terms.get('J_fit', float('nan')):.4g}")
         if image is not None:
             self.slice_image.setImage(image, levels=(0.0, 1.0))

@@ -26,7 +26,11 @@ def test_coarse_resolution_halves_and_stays_even():
 
 def test_multistart_runs_the_starts_and_refines_the_best(tmp_path):
     config = DesignConfig(target="sphere", space="extruded", resolution=32, max_iter=6, radius_vox=1.5, starts=2)
-    result = run_design(config, tmp_path / "run")
+    phases = []
+    result = run_design(config, tmp_path / "run", on_iteration=lambda k, x, terms: phases.append(terms["phase"]))
+    # progress names the run each evaluation belongs to
+    assert list(dict.fromkeys(phases)) == ["coarse start 1 of 2 at resolution 16",
+                                           "coarse start 2 of 2 at resolution 16", "refinement at resolution 32"]
     record = json.loads((tmp_path / "run" / "multistart.json").read_text())
     assert record["coarse_resolution"] == 16 and set(record["best_J"]) == {"00", "01"}
     for k in ("00", "01"):
