@@ -1,34 +1,42 @@
-"""One printable piece: a penalty on material that is reachable from the design's core only through void.
+"""One printable piece: a penalty on material that reaches the design's core or a mirror plane only through void.
 
-The core is the voxel at the centre of the symmetric design, where all its mirror planes meet (index 0
-of every mirrored axis, the middle of the others). A geodesic distance d from the core is solved by the
-same fast marching as the release (eq. 5, `design.fmm`) with the slowness
+The reduced design is one corner of a mirror-symmetric object. Its mirror copies join into one piece
+when the reduced design is one piece that touches every mirror plane; a piece that misses a plane
+(the quadrant "pillar" of a four-piece design, or one of two brackets facing each other across a
+plane) stays apart from its copy across that plane.
+
+Geodesic distances are solved by the same fast marching as the release (eq. 5, `design.fmm`) with the
+slowness
 
     s(rho) = 1 + (S_void - 1) (1 - rho)^2,
 
 1 in solid and S_void in void, so a path through material is as long as it is, and a path that crosses
-a void gap pays S_void - 1 extra per voxel of the gap. With ``d0`` the distance when every voxel is
-solid, the excess ``e = d - d0 >= 0`` measures how much a voxel's best path to the core detours or
-crosses void. A voxel counts as unreachable when its excess exceeds the allowance
-``a = ALLOWANCE d0 + MARGIN_VOX dx`` (winding but solid paths are free); S_void is chosen so that a
-single void voxel on the way exceeds the largest allowance. The penalty is
+a void gap pays S_void - 1 extra per voxel of the gap. Each distance d starts from a seed: the core
+(the voxel where all mirror planes meet: index 0 of every mirrored axis, the middle of the others),
+and each mirror plane p. With ``d0`` the seed's distance when every voxel is solid, the excess
+``e = d - d0 >= 0`` measures how much a voxel's best path to the seed detours or crosses void. A voxel
+counts as unreachable when its excess exceeds the allowance ``a = allowance d0 + MARGIN_VOX dx``
+(`CORE_ALLOWANCE`, `PLANE_ALLOWANCE`: winding but solid paths are free); S_void is chosen so that a
+single void voxel on the way exceeds the largest allowance. With P mirror planes the penalty is
 
-    J_conn = sum_i rho_i^2 h(e_i / a_i) dx^3 m,    h(t) = (t - 1)_+^2 / (1 + (t - 1)_+^2),
+    J_conn = sum_i rho_i^2 [h(e_core,i / a_core,i) + (1/P) sum_p h(e_p,i / a_p,i)] dx^3 m,
+    h(t) = (t - 1)_+^2 / (1 + (t - 1)_+^2),
 
-bounded by the solid volume (h < 1), zero for a design whose material all connects to the core, and
-smooth (C1). Its gradient is exact: the chain runs through the fast-marching adjoint (eqs. 9-10).
+zero for a design whose material all connects to the core, about the volume of a floating piece for
+each of the two parts, and smooth (C1). Its gradient is exact: the chain runs through the
+fast-marching adjoint (eqs. 9-10). The core term holds a compact part's centre solid; the plane term
+keeps guiding when the centre is void (a ring, a tube, a shell), where every voxel is far from the
+core and the core term is a uniform pressure on the mass without a direction (docs/results.md).
 
-A design connected to the core touches every mirror plane, so its mirror copies join into one piece;
-a reduced piece that misses the core (the quadrant "pillar" of a four-piece design) is penalised.
-
-Cost. The distance is solved on the density averaged over blocks of ``coarsen^D`` voxels (a
+Cost. The distances are solved on the density averaged over blocks of ``coarsen^D`` voxels (a
 geodesic needs no more detail than the smoothing filter leaves: bridges are at least a filter radius
-wide), so the extra solve costs about ``1 / coarsen^D`` of the release solve.
+wide), so each solve costs about ``1 / coarsen^D`` of the release solve.
 
 Seeding. The marcher (`design.fmm.march`) starts fronts from the grid's ordinary faces. The field is
-flipped along its mirrored axes so that the core sits at the high corner, every low face is declared a
-mirror (no front), and every high face gets one extra "gate" layer of slowness `GATE` that holds the
-fronts back, except for a single opening next to the core.
+flipped along its mirrored axes so that the mirror planes sit at the high faces, every low face is
+declared a mirror (no front), and every high face gets one extra "gate" layer whose slowness holds the
+fronts back, except for the seed's opening: one gate voxel next to the core, or the layer beyond
+plane p's face.
 """
 from __future__ import annotations
 
@@ -41,12 +49,15 @@ from design.fmm import MarchBuffers, march, march_adjoint
 
 log = logging.getLogger(__name__)
 
-ALLOWANCE = 0.5
+CORE_ALLOWANCE = 0.5
 """Free detour of a solid path to the core, as a fraction of the straight (all-solid) distance."""
+PLANE_ALLOWANCE = 1.0
+"""Free detour of a solid path to a mirror plane, as a fraction of the straight distance (along a
+quarter ring from one plane to the other the path is pi/2 times the straight distance)."""
 MARGIN_VOX = 2.0
-"""Free excess distance next to the core, in (coarse) voxel edges."""
+"""Free excess distance next to a seed, in (coarse) voxel edges."""
 OPENING_SLOWNESS = 1e-6
-"""Slowness of the gate voxel that lets the front in next to the core."""
+"""Slowness of the gate voxels that let the front in at a seed."""
 
 
 def _pool(x: np.ndarray, c: int) -> np.ndarray:
@@ -83,7 +94,7 @@ class Connectivity:
     dx_mm : float
         Voxel edge, mm.
     coarsen : int
-        Block edge of the averaging before the distance solve, voxels (>= 1).
+        Block edge of the averaging before the distance solves, voxels (>= 1).
     """
 
     def __init__(self, shape: tuple[int, ...], mirror: tuple[bool, ...], dx_mm: float, coarsen: int = 1) -> None:
@@ -100,29 +111,31 @@ class Connectivity:
         self.coarsen = int(coarsen)
         self.dx_mm = float(dx_mm) * self.coarsen
         self.coarse_shape = tuple(-(-n // self.coarsen) for n in self.shape)
-        flips = tuple(ax for ax, m in enumerate(self.mirror) if m)
-        self._flips = flips
-        # core in the flipped grid: high corner on mirrored axes, middle of the others
-        self._core = tuple(n - 1 if m else n // 2 for n, m in zip(self.coarse_shape, self.mirror))
+        self._flips = tuple(ax for ax, m in enumerate(self.mirror) if m)
         gated = tuple(n + 1 for n in self.coarse_shape)
         self._buffers = MarchBuffers(gated)
         self._inner = tuple(slice(0, n) for n in self.coarse_shape)
-        opening = list(self._core)
-        opening[flips[0]] = self.coarse_shape[flips[0]]
-        self._opening = tuple(opening)
+        # seeds in the flipped, gated frame: the gate voxel next to the core (high corner on mirrored
+        # axes, middle of the others), then each plane's whole gate layer; with their weights and allowances
+        core = [n - 1 if m else n // 2 for n, m in zip(self.coarse_shape, self.mirror)]
+        core[self._flips[0]] = self.coarse_shape[self._flips[0]]
+        planes = [tuple(n if ax == p else slice(0, n) for ax, n in enumerate(self.coarse_shape)) for p in self._flips]
+        self._openings = [tuple(core)] + planes
+        self._weights = [1.0] + [1.0 / len(planes)] * len(planes)
         # all solid: every path inside is shorter than the gate's 10 (1 + sum of the gated sizes) voxels
-        d0 = self._distance(np.ones(self.coarse_shape), gate=10.0 * (1.0 + sum(gated)))[0]
-        self._allow = ALLOWANCE * d0 + MARGIN_VOX * self.dx_mm
+        solid = np.ones(self.coarse_shape)
+        self._d0 = [self._distance(solid, opening, gate=10.0 * (1.0 + sum(gated)))[0] for opening in self._openings]
+        allowances = [CORE_ALLOWANCE] + [PLANE_ALLOWANCE] * len(planes)
+        self._allow = [f * d0 + MARGIN_VOX * self.dx_mm for f, d0 in zip(allowances, self._d0)]
         # one void voxel on a path must cost more than the largest allowance
-        self.s_void = 1.0 + 2.0 * float(self._allow.max()) / self.dx_mm
+        self.s_void = 1.0 + 2.0 * max(float(a.max()) for a in self._allow) / self.dx_mm
         self._gate = 10.0 * self.s_void * sum(gated)
-        self._d0 = d0
 
-    def _distance(self, s: np.ndarray, gate: float):
-        """Geodesic distance from the core for slowness ``s`` (coarse grid), and the solve."""
+    def _distance(self, s: np.ndarray, opening: tuple, gate: float):
+        """Geodesic distance from one seed for slowness ``s`` (coarse grid), and the solve."""
         n = np.full(tuple(k + 1 for k in self.coarse_shape), gate)
         n[self._inner] = np.flip(s, self._flips)
-        n[self._opening] = OPENING_SLOWNESS
+        n[opening] = OPENING_SLOWNESS
         marching = march(n, self.dx_mm, (True,) * len(self.shape), self._buffers)
         d = np.array(marching.interior(marching.u_pad)[self._inner])
         return np.flip(d, self._flips), marching
@@ -148,21 +161,27 @@ class Connectivity:
         """
         c = self.coarsen
         rc = _pool(rho, c)
-        d, marching = self._distance(self.slowness(rc), gate=self._gate)
-        t = (d - self._d0) / self._allow
-        over = np.maximum(t - 1.0, 0.0)
-        h = over ** 2 / (1.0 + over ** 2)
-        dh_dt = 2.0 * over / (1.0 + over ** 2) ** 2
+        s = self.slowness(rc)
         cell = cell_mm3 * c ** len(self.shape)
-        value = float(np.sum(rc ** 2 * h) * cell)
-        # adjoint: d/dd of sum rc^2 h(t) through the marcher (in the flipped, gated frame)
-        u_bar = np.zeros(tuple(k + 1 for k in self.coarse_shape))
-        u_bar[self._inner] = np.flip(rc ** 2 * dh_dt / self._allow * cell, self._flips)
-        n_bar = np.flip(march_adjoint(marching, u_bar)[self._inner], self._flips)
+        h_sum = np.zeros(self.coarse_shape)  # sum over the seeds of weight * h
+        s_bar = np.zeros(self.coarse_shape)
+        for opening, weight, d0, allow in zip(self._openings, self._weights, self._d0, self._allow):
+            d, marching = self._distance(s, opening, gate=self._gate)
+            over = np.maximum((d - d0) / allow - 1.0, 0.0)
+            h_sum += weight * over ** 2 / (1.0 + over ** 2)
+            dh_dt = 2.0 * over / (1.0 + over ** 2) ** 2
+            # adjoint of sum rc^2 h(t) through this seed's solve (flipped, gated frame); the next solve
+            # reuses the marcher's buffers, so it runs now
+            u_bar = np.zeros(tuple(k + 1 for k in self.coarse_shape))
+            u_bar[self._inner] = np.flip(rc ** 2 * dh_dt / allow * weight * cell, self._flips)
+            s_bar += np.flip(march_adjoint(marching, u_bar)[self._inner], self._flips)
+        value = float(np.sum(rc ** 2 * h_sum) * cell)
         ds_drho = -2.0 * (self.s_void - 1.0) * (1.0 - rc)
-        g_coarse = 2.0 * rc * h * cell + n_bar * ds_drho
+        g_coarse = 2.0 * rc * h_sum * cell + s_bar * ds_drho
         return value, _pool_adjoint(g_coarse, c, self.shape)
 
     def distance(self, rho: np.ndarray) -> np.ndarray:
-        """Geodesic distance from the core of every coarse voxel, mm (for reports and tests)."""
-        return self._distance(self.slowness(_pool(rho, self.coarsen)), gate=self._gate)[0]
+        """Geodesic distance of every coarse voxel from each seed (the core, then each mirror plane), mm:
+        shape (1 + planes, *coarse_shape)."""
+        s = self.slowness(_pool(rho, self.coarsen))
+        return np.stack([self._distance(s, opening, gate=self._gate)[0] for opening in self._openings])

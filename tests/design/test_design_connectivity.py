@@ -1,4 +1,5 @@
-"""The connectivity penalty: zero for connected designs, the floating volume for pieces, exact gradient."""
+"""The connectivity penalty: zero for connected designs, the floating volume (once from the core, once from
+the mirror planes) for pieces, a direction for hollow designs, exact gradient."""
 import numpy as np
 import pytest
 
@@ -18,11 +19,12 @@ def _disc_and_blob(n=20):
     return disc, blob
 
 
-def test_connected_design_is_free_and_a_floating_piece_costs_its_volume():
+def test_connected_design_is_free_and_a_floating_piece_costs_its_volume_twice():
     disc, blob = _disc_and_blob()
     conn = Connectivity(disc.shape, (True, True), 0.5)
     assert conn(disc, 1.0)[0] == 0.0
-    assert conn(blob, 1.0)[0] == pytest.approx(16.0, rel=0.01)  # h -> 1 far beyond the allowance
+    # h -> 1 far beyond the allowance: 16 from the core and 16 from the mean over the two planes
+    assert conn(blob, 1.0)[0] == pytest.approx(32.0, rel=0.01)
     bridged = blob.copy()
     for i in range(16):  # a three-voxel-wide diagonal bridge joins the blob to the disc
         bridged[i, max(0, i - 1):i + 2] = 1.0
@@ -34,10 +36,26 @@ def test_a_quadrant_pillar_that_misses_the_mirror_planes_is_penalised():
     conn = Connectivity((20, 20), (True, True), 0.5)
     pillar = np.zeros((20, 20))
     pillar[8:14, 8:14] = 1.0
-    assert conn(pillar, 1.0)[0] == pytest.approx(36.0, rel=0.01)
+    assert conn(pillar, 1.0)[0] == pytest.approx(2 * 36.0, rel=0.01)
     cross = np.zeros((20, 20))
     cross[:3, :14] = cross[:14, :3] = 1.0  # arms along both mirror planes, through the centre
     assert conn(cross, 1.0)[0] == 0.0
+
+
+def test_a_ring_hollow_at_the_centre_and_brackets_that_miss_a_plane():
+    x, y = _grid((24, 24))
+    r2 = x ** 2 + y ** 2
+    ring = ((r2 > 8 ** 2) & (r2 < 12 ** 2)).astype(float)  # a quarter ring: its copies close the ring
+    conn = Connectivity(ring.shape, (True, True), 0.5)
+    # far from the void core, every voxel pays the core term; the planes see one piece
+    assert conn(ring, 1.0)[0] == pytest.approx(ring.sum(), rel=0.02)
+    # cut off plane 1 (y = 0): two brackets face each other across it, each reaching plane 0 only; the
+    # plane term adds half their volume and, unlike the saturated core term, points to a bridge
+    arc = ring * (y > 3)
+    value, grad = conn(arc, 1.0)
+    assert 1.4 * arc.sum() < value < 1.5 * arc.sum()
+    gap = (r2 > 8 ** 2) & (r2 < 12 ** 2) & (y < 3)  # filling the gap to plane 1 lowers J
+    assert grad[gap].mean() < 0
 
 
 def test_floating_piece_in_an_octant_and_the_coarse_distance():
@@ -48,7 +66,7 @@ def test_floating_piece_in_an_octant_and_the_coarse_distance():
     assert conn(ball, 1.0)[0] < 0.02 * ball.sum()  # grey coarse voxels on the surface cost a little
     ball[12:16, 12:16, 12:16] = 1.0
     value, grad = conn(ball, 1.0)
-    assert value == pytest.approx(64.0, rel=0.05) and grad.shape == ball.shape
+    assert value == pytest.approx(2 * 64.0, rel=0.05) and grad.shape == ball.shape
 
 
 @pytest.mark.parametrize("shape, mirror, coarsen", [((14, 12), (True, True), 1), ((12, 10, 8), (True, True, False), 2),
