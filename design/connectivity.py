@@ -95,9 +95,12 @@ class Connectivity:
         Voxel edge, mm.
     coarsen : int
         Block edge of the averaging before the distance solves, voxels (>= 1).
+    planes : bool
+        Add the plane term; False = the core term alone (runs stored before the plane term).
     """
 
-    def __init__(self, shape: tuple[int, ...], mirror: tuple[bool, ...], dx_mm: float, coarsen: int = 1) -> None:
+    def __init__(self, shape: tuple[int, ...], mirror: tuple[bool, ...], dx_mm: float, coarsen: int = 1,
+                 planes: bool = True) -> None:
         if len(shape) not in (2, 3) or len(mirror) != len(shape):
             raise DesignError(f"connectivity needs a 2D or 3D grid with one mirror flag per axis, got {shape}, "
                               f"{mirror}")
@@ -119,13 +122,14 @@ class Connectivity:
         # axes, middle of the others), then each plane's whole gate layer; with their weights and allowances
         core = [n - 1 if m else n // 2 for n, m in zip(self.coarse_shape, self.mirror)]
         core[self._flips[0]] = self.coarse_shape[self._flips[0]]
-        planes = [tuple(n if ax == p else slice(0, n) for ax, n in enumerate(self.coarse_shape)) for p in self._flips]
-        self._openings = [tuple(core)] + planes
-        self._weights = [1.0] + [1.0 / len(planes)] * len(planes)
+        faces = [tuple(n if ax == p else slice(0, n) for ax, n in enumerate(self.coarse_shape)) for p in self._flips]
+        faces = faces if planes else []
+        self._openings = [tuple(core)] + faces
+        self._weights = [1.0] + [1.0 / len(faces) for _ in faces]
         # all solid: every path inside is shorter than the gate's 10 (1 + sum of the gated sizes) voxels
         solid = np.ones(self.coarse_shape)
         self._d0 = [self._distance(solid, opening, gate=10.0 * (1.0 + sum(gated)))[0] for opening in self._openings]
-        allowances = [CORE_ALLOWANCE] + [PLANE_ALLOWANCE] * len(planes)
+        allowances = [CORE_ALLOWANCE] + [PLANE_ALLOWANCE] * len(faces)
         self._allow = [f * d0 + MARGIN_VOX * self.dx_mm for f, d0 in zip(allowances, self._d0)]
         # one void voxel on a path must cost more than the largest allowance
         self.s_void = 1.0 + 2.0 * max(float(a.max()) for a in self._allow) / self.dx_mm

@@ -108,6 +108,9 @@ class DesignConfig:
         Drop the connectivity penalty: the design may fall apart into pieces (as in the paper).
     w_connect : float
         Weight of the connectivity penalty J_conn (`design.connectivity`) unless ``allow_pieces``.
+    connect_planes : bool
+        J_conn also measures paths to the mirror planes (its plane term); runs stored before the
+        term resume without it.
     starts : int or None
         Seeded starts run at half the resolution before the best is refined at full resolution
         (`design.multistart`); 1 = a single run from the start design. None = `MULTISTART_STARTS` for
@@ -179,6 +182,7 @@ class DesignConfig:
     radius_mm: float | None = None
     allow_pieces: bool = False
     w_connect: float = W_CONNECT
+    connect_planes: bool = True
     starts: int | None = None
     beta: float | None = None
     w_fab: float | None = None
