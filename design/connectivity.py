@@ -19,14 +19,27 @@ counts as unreachable when its excess exceeds the allowance ``a = allowance d0 +
 (`CORE_ALLOWANCE`, `PLANE_ALLOWANCE`: winding but solid paths are free); S_void is chosen so that a
 single void voxel on the way exceeds the largest allowance. With P mirror planes the penalty is
 
-    J_conn = sum_i rho_i^2 [h(e_core,i / a_core,i) + (1/P) sum_p h(e_p,i / a_p,i)] dx^3 m,
-    h(t) = (t - 1)_+^2 / (1 + (t - 1)_+^2),
+    J_conn = sum_i rho_i^2 [h(e_core,i / a_core,i) + (1/P) sum_p h(e_p,i / a_p,i)] dx^3 m + J_tail,
+    h(t) = u^2 / (1 + u^2),   u = (t - 1)_+,
 
 zero for a design whose material all connects to the core, about the volume of a floating piece for
 each of the two parts, and smooth (C1). Its gradient is exact: the chain runs through the
 fast-marching adjoint (eqs. 9-10). The core term holds a compact part's centre solid; the plane term
 keeps guiding when the centre is void (a ring, a tube, a shell), where every voxel is far from the
 core and the core term is a uniform pressure on the mass without a direction (docs/results.md).
+
+Tail. h is bounded, so it saturates for a piece far beyond its allowance and gives no direction
+there. The plane term supplies one for a piece that misses a plane, but not for pieces that each
+touch every plane: a frame around a cross, a ring around a pin. For them the tail
+
+    J_tail = k sum_i rho_i^2 (sqrt(1 + v_i^2) - 1) dx^3 m,   v_i = ((e_core,i - e_core,*) / a_core,i - 1)_+,
+
+grows with the gap (slope k, `TAIL_SLOPE`, per allowance), so shortening the path (a bridge) always
+lowers it. Excess is measured from e_core,* at the innermost solid voxel (the solid coarse voxel of
+least core excess; block density at least `SOLID_LEVEL`): a hollow part in one piece (a ring whose
+centre is void) is all at about the same excess and pays no tail, so the tail adds no pressure to close
+its hole. The reference voxel changes only when the solid set does, so the gradient is exact between
+such changes, as the marcher's is between changes of its upwind choices.
 
 Cost. The distances are solved on the density averaged over blocks of ``coarsen^D`` voxels (a
 geodesic needs no more detail than the smoothing filter leaves: bridges are at least a filter radius
@@ -56,6 +69,10 @@ PLANE_ALLOWANCE = 1.0
 quarter ring from one plane to the other the path is pi/2 times the straight distance)."""
 MARGIN_VOX = 2.0
 """Free excess distance next to a seed, in (coarse) voxel edges."""
+TAIL_SLOPE = 0.1
+"""Slope k of the tail J_tail far beyond the allowance, per allowance (module doc); 0 = no tail."""
+SOLID_LEVEL = 0.5
+"""Block-averaged density from which a coarse voxel counts as solid for the tail's reference."""
 OPENING_SLOWNESS = 1e-6
 """Slowness of the gate voxels that let the front in at a seed."""
 
@@ -97,18 +114,21 @@ class Connectivity:
         Block edge of the averaging before the distance solves, voxels (>= 1).
     planes : bool
         Add the plane term; False = the core term alone (runs stored before the plane term).
+    tail_slope : float
+        Slope k of the tail J_tail (>= 0; 0 = no tail, as runs stored before it).
     """
 
     def __init__(self, shape: tuple[int, ...], mirror: tuple[bool, ...], dx_mm: float, coarsen: int = 1,
-                 planes: bool = True) -> None:
+                 planes: bool = True, tail_slope: float = TAIL_SLOPE) -> None:
         if len(shape) not in (2, 3) or len(mirror) != len(shape):
             raise DesignError(f"connectivity needs a 2D or 3D grid with one mirror flag per axis, got {shape}, "
                               f"{mirror}")
         if not any(mirror):
             raise DesignError("the connectivity penalty measures paths to the symmetry centre and needs at least "
                               "one mirror plane; allow pieces for this design space")
-        if coarsen < 1 or not dx_mm > 0:
-            raise DesignError(f"need coarsen >= 1 and dx > 0, got {coarsen}, {dx_mm}")
+        if coarsen < 1 or not dx_mm > 0 or not tail_slope >= 0:
+            raise DesignError(f"need coarsen >= 1, dx > 0 and tail_slope >= 0, got {coarsen}, {dx_mm}, {tail_slope}")
+        self.tail_slope = float(tail_slope)
         self.shape = tuple(int(n) for n in shape)
         self.mirror = tuple(bool(m) for m in mirror)
         self.coarsen = int(coarsen)
@@ -168,21 +188,44 @@ class Connectivity:
         s = self.slowness(rc)
         cell = cell_mm3 * c ** len(self.shape)
         h_sum = np.zeros(self.coarse_shape)  # sum over the seeds of weight * h
+        value_tail, g_tail = 0.0, np.zeros(self.coarse_shape)
         s_bar = np.zeros(self.coarse_shape)
-        for opening, weight, d0, allow in zip(self._openings, self._weights, self._d0, self._allow):
+        for seed, (opening, weight, d0, allow) in enumerate(zip(self._openings, self._weights, self._d0,
+                                                                  self._allow)):
             d, marching = self._distance(s, opening, gate=self._gate)
             over = np.maximum((d - d0) / allow - 1.0, 0.0)
             h_sum += weight * over ** 2 / (1.0 + over ** 2)
             dh_dt = 2.0 * over / (1.0 + over ** 2) ** 2
             # adjoint of sum rc^2 h(t) through this seed's solve (flipped, gated frame); the next solve
             # reuses the marcher's buffers, so it runs now
+            e_bar = rc ** 2 * dh_dt / allow * weight * cell
+            if seed == 0 and self.tail_slope > 0:
+                tail, tail_e_bar, tail_rc_bar = self._tail(rc, d - d0, allow)
+                value_tail += tail * cell
+                e_bar = e_bar + tail_e_bar * cell
+                g_tail += tail_rc_bar * cell
             u_bar = np.zeros(tuple(k + 1 for k in self.coarse_shape))
-            u_bar[self._inner] = np.flip(rc ** 2 * dh_dt / allow * weight * cell, self._flips)
+            u_bar[self._inner] = np.flip(e_bar, self._flips)
             s_bar += np.flip(march_adjoint(marching, u_bar)[self._inner], self._flips)
-        value = float(np.sum(rc ** 2 * h_sum) * cell)
+        value = float(np.sum(rc ** 2 * h_sum) * cell) + value_tail
         ds_drho = -2.0 * (self.s_void - 1.0) * (1.0 - rc)
-        g_coarse = 2.0 * rc * h_sum * cell + s_bar * ds_drho
+        g_coarse = 2.0 * rc * h_sum * cell + s_bar * ds_drho + g_tail
         return value, _pool_adjoint(g_coarse, c, self.shape)
+
+    def _tail(self, rc: np.ndarray, excess: np.ndarray, allow: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """The core term's tail (module doc) per unit cell volume, and its partial derivatives by the
+        excess and by the coarse density."""
+        solid = rc >= SOLID_LEVEL
+        if not solid.any():
+            return 0.0, np.zeros_like(rc), np.zeros_like(rc)
+        inner = np.unravel_index(np.argmin(np.where(solid, excess, np.inf)), rc.shape)
+        over = np.maximum((excess - excess[inner]) / allow - 1.0, 0.0)
+        root = np.sqrt(1.0 + over ** 2)
+        k = self.tail_slope
+        value = k * float(np.sum(rc ** 2 * (root - 1.0)))
+        e_bar = k * rc ** 2 * over / root / allow
+        e_bar[inner] -= e_bar.sum()  # every excess is measured from the innermost solid voxel's
+        return value, e_bar, 2.0 * rc * k * (root - 1.0)
 
     def distance(self, rho: np.ndarray) -> np.ndarray:
         """Geodesic distance of every coarse voxel from each seed (the core, then each mirror plane), mm:

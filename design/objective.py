@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from design.connectivity import Connectivity
+from design.connectivity import TAIL_SLOPE, Connectivity
 from design.errors import DesignError
 from design.filters import SmoothingFilter, project, project_adjoint, project_inverse
 from design.fmm import MarchBuffers
@@ -107,13 +107,16 @@ class DesignObjective:
         Block edge of J_conn's distance grid, voxels; None = half the smoothing radius (at least 1).
     conn_planes : bool
         J_conn's plane term (`design.connectivity.Connectivity`); False = the core term alone.
+    conn_tail : float
+        Slope of J_conn's tail (`design.connectivity.TAIL_SLOPE`); 0 = no tail.
     """
 
     def __init__(self, space: DesignSpace, target_mm3: np.ndarray, total_time_mm: float, *,
                  radius_vox: float, beta: float, w_binary: float, w_fab: float = 0.0, w_rate: float = 0.0,
                  rate_lag: int | None = None, robust_eta: float = 0.0,
                  rate_span: tuple[float, float] = (0.0, 1.0), w_conn: float = 0.0,
-                 conn_coarsen: int | None = None, conn_planes: bool = True) -> None:
+                 conn_coarsen: int | None = None, conn_planes: bool = True,
+                 conn_tail: float = TAIL_SLOPE) -> None:
         target = np.asarray(target_mm3, dtype=float)
         if target.ndim != 1 or target.size < 3 or not target[-1] > 0:
             raise DesignError(f"target must be a 1D curve with >= 3 samples and a positive end, got {target.shape}")
@@ -157,7 +160,8 @@ class DesignObjective:
         self.w_conn = float(w_conn)
         coarsen = max(1, int(radius_vox // 2)) if conn_coarsen is None else int(conn_coarsen)
         self.connectivity = (Connectivity(space.var_shape, space.var_mirror, space.dx_mm, coarsen,
-                                          planes=conn_planes) if self.w_conn > 0 else None)
+                                          planes=conn_planes, tail_slope=conn_tail)
+                             if self.w_conn > 0 else None)
 
     def density(self, x: np.ndarray) -> np.ndarray:
         """The reduced simulation density ``rho`` of variables ``x`` (eq. 4 filter chain)."""

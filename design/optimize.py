@@ -113,6 +113,7 @@ def _load_config(out_dir: Path) -> DesignConfig:
     data.setdefault("optimizer", "LD_LBFGS")  # and were optimised with nlopt's L-BFGS
     data.setdefault("allow_pieces", True)  # runs stored without the option had no connectivity term
     data.setdefault("connect_planes", False)  # and runs stored before the plane term measured the core only
+    data.setdefault("connect_tail", 0.0)  # and before the tail, without it
     data.setdefault("line_search", "strong-wolfe")  # the "lbfgs" optimiser's only rule before the option
     if data.get("beta_final") is None:  # stored resolved: None always meant a fixed beta
         data["beta_final"] = data.get("beta")
@@ -426,7 +427,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
                                 w_fab=config.w_fab, w_rate=config.w_rate, robust_eta=config.robust_eta,
                                 rate_span=tuple(config.rate_span),
                                 w_conn=0.0 if config.allow_pieces else config.w_connect,
-                                conn_planes=config.connect_planes,
+                                conn_planes=config.connect_planes, conn_tail=config.connect_tail,
                                 rate_lag=max(1, round(config.rate_window_vox * problem.space.dx_mm * (config.samples - 1)
                                                       / problem.target.total_time_mm)))
     history: list[list[float]] = []

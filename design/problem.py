@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from design.connectivity import TAIL_SLOPE
 from design.errors import DesignError
 from design.ico import DEFAULT_COARSEN, DEFAULT_LAYERS, IcoConfig
 from design.lbfgs import LINE_SEARCHES
@@ -111,6 +112,9 @@ class DesignConfig:
     connect_planes : bool
         J_conn also measures paths to the mirror planes (its plane term); runs stored before the
         term resume without it.
+    connect_tail : float
+        Slope of J_conn's tail (`design.connectivity.TAIL_SLOPE`); runs stored before the tail
+        resume without it (0).
     starts : int or None
         Seeded starts run at half the resolution before the best is refined at full resolution
         (`design.multistart`); 1 = a single run from the start design. None = `MULTISTART_STARTS` for
@@ -183,6 +187,7 @@ class DesignConfig:
     allow_pieces: bool = False
     w_connect: float = W_CONNECT
     connect_planes: bool = True
+    connect_tail: float = TAIL_SLOPE
     starts: int | None = None
     beta: float | None = None
     w_fab: float | None = None
@@ -250,6 +255,8 @@ class DesignConfig:
             raise DesignError(f"smoothing radius must be > 0 mm, got {self.radius_mm}")
         if not self.w_connect >= 0:
             raise DesignError(f"w_connect must be >= 0, got {self.w_connect}")
+        if not self.connect_tail >= 0:
+            raise DesignError(f"connect_tail must be >= 0, got {self.connect_tail}")
         if self.starts is None:
             multi = (self.space in MULTISTART_SPACES and self.resolution >= MULTISTART_MIN_RESOLUTION
                      and _is_shape_target(self.target))

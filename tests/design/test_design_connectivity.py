@@ -1,5 +1,5 @@
 """The connectivity penalty: zero for connected designs, the floating volume (once from the core, once from
-the mirror planes) for pieces, a direction for hollow designs, exact gradient."""
+the mirror planes) for pieces with the bounded h, a direction for hollow and nested designs, exact gradient."""
 import numpy as np
 import pytest
 
@@ -21,10 +21,13 @@ def _disc_and_blob(n=20):
 
 def test_connected_design_is_free_and_a_floating_piece_costs_its_volume_twice():
     disc, blob = _disc_and_blob()
+    bounded = Connectivity(disc.shape, (True, True), 0.5, tail_slope=0.0)
     conn = Connectivity(disc.shape, (True, True), 0.5)
-    assert conn(disc, 1.0)[0] == 0.0
-    # h -> 1 far beyond the allowance: 16 from the core and 16 from the mean over the two planes
-    assert conn(blob, 1.0)[0] == pytest.approx(32.0, rel=0.01)
+    assert conn(disc, 1.0)[0] == bounded(disc, 1.0)[0] == 0.0
+    # h -> 1 far beyond the allowance: 16 from the core and 16 from the mean over the two planes; the
+    # tail adds to that
+    assert bounded(blob, 1.0)[0] == pytest.approx(32.0, rel=0.01)
+    assert conn(blob, 1.0)[0] > 32.5
     bridged = blob.copy()
     for i in range(16):  # a three-voxel-wide diagonal bridge joins the blob to the disc
         bridged[i, max(0, i - 1):i + 2] = 1.0
@@ -33,7 +36,7 @@ def test_connected_design_is_free_and_a_floating_piece_costs_its_volume_twice():
 
 def test_a_quadrant_pillar_that_misses_the_mirror_planes_is_penalised():
     # in the full object its four mirror copies are four pieces; touching both planes makes one
-    conn = Connectivity((20, 20), (True, True), 0.5)
+    conn = Connectivity((20, 20), (True, True), 0.5, tail_slope=0.0)
     pillar = np.zeros((20, 20))
     pillar[8:14, 8:14] = 1.0
     assert conn(pillar, 1.0)[0] == pytest.approx(2 * 36.0, rel=0.01)
@@ -46,7 +49,7 @@ def test_a_ring_hollow_at_the_centre_and_brackets_that_miss_a_plane():
     x, y = _grid((24, 24))
     r2 = x ** 2 + y ** 2
     ring = ((r2 > 8 ** 2) & (r2 < 12 ** 2)).astype(float)  # a quarter ring: its copies close the ring
-    conn = Connectivity(ring.shape, (True, True), 0.5)
+    conn = Connectivity(ring.shape, (True, True), 0.5, tail_slope=0.0)
     # far from the void core, every voxel pays the core term; the planes see one piece
     assert conn(ring, 1.0)[0] == pytest.approx(ring.sum(), rel=0.02)
     # cut off plane 1 (y = 0): two brackets face each other across it, each reaching plane 0 only; the
@@ -58,10 +61,50 @@ def test_a_ring_hollow_at_the_centre_and_brackets_that_miss_a_plane():
     assert grad[gap].mean() < 0
 
 
+def _cross_in_a_frame(n=24, arm=10):
+    """A cross whose arms lie along both mirror planes, inside a square frame: both pieces touch every
+    plane, and only the core term sees the frame."""
+    rho = np.zeros((n, n))
+    rho[:3, :arm] = rho[:arm, :3] = 1.0
+    rho[16:19, :19] = rho[:19, 16:19] = 1.0
+    return rho
+
+
+def test_a_frame_around_a_cross_gets_a_direction_to_a_bridge_from_the_tail():
+    nested, half_bridged = _cross_in_a_frame(), _cross_in_a_frame(arm=13)
+    frame = nested.sum() - (2 * 3 * 10 - 9)
+    gap = (slice(0, 3), slice(10, 16))  # along plane 0, between the arm's end and the frame
+    bounded = Connectivity(nested.shape, (True, True), 0.5, tail_slope=0.0)
+    value, grad = bounded(nested, 1.0)
+    # saturated: the frame costs its volume, and halving the gap changes that by under 1%
+    assert value == pytest.approx(frame, rel=0.01)
+    assert bounded(half_bridged, 1.0)[0] > 0.99 * value
+    conn = Connectivity(nested.shape, (True, True), 0.5)
+    tail_value, tail_grad = conn(nested, 1.0)
+    # the tail pays for the gap's length: halving it lowers J by over a third, and the gradient in the
+    # gap points to the bridge, over 100 times as steeply as the bounded h's
+    assert conn(half_bridged, 1.0)[0] < 0.67 * tail_value
+    assert tail_grad[gap].mean() < 100 * grad[gap].mean() < 0
+
+
+def test_the_tail_spares_a_ring_in_one_piece_but_not_a_ring_around_a_pin():
+    x, y = _grid((24, 24))
+    r2 = x ** 2 + y ** 2
+    ring = ((r2 > 8 ** 2) & (r2 < 12 ** 2)).astype(float)
+    bounded = Connectivity(ring.shape, (True, True), 0.5, tail_slope=0.0)
+    conn = Connectivity(ring.shape, (True, True), 0.5)
+    # far from the void core, but measured from its own innermost voxel: no tail, so nothing pushes the
+    # hole to close
+    assert conn(ring, 1.0)[0] == bounded(ring, 1.0)[0]
+    pinned = ring.copy()
+    pinned[:3, :3] = 1.0  # a pin at the centre: the ring is now a second piece around it
+    assert conn(pinned, 1.0)[0] > 2.0 * bounded(pinned, 1.0)[0]
+
+
 def test_floating_piece_in_an_octant_and_the_coarse_distance():
     x, y, z = _grid((16, 16, 16))
     ball = ((x ** 2 + y ** 2 + z ** 2) < 64).astype(float)
-    conn = Connectivity(ball.shape, (True, True, True), 0.5, coarsen=2)
+    conn = Connectivity(ball.shape, (True, True, True), 0.5, coarsen=2, tail_slope=0.0)
     assert conn.coarse_shape == (8, 8, 8)
     assert conn(ball, 1.0)[0] < 0.02 * ball.sum()  # grey coarse voxels on the surface cost a little
     ball[12:16, 12:16, 12:16] = 1.0
@@ -79,7 +122,7 @@ def test_gradient_matches_central_differences(shape, mirror, coarsen):
     rho[far] = 0.9  # a floating blob, so that the penalty and its geodesic chain are active
     conn = Connectivity(shape, mirror, 0.3, coarsen=coarsen)
     value, grad = conn(rho, 2.0)
-    assert value > 0
+    assert value > Connectivity(shape, mirror, 0.3, coarsen=coarsen, tail_slope=0.0)(rho, 2.0)[0] > 0  # tail on
     scale = np.abs(grad).max()
     for _ in range(12):
         idx = tuple(int(rng.integers(0, n)) for n in shape)
@@ -98,3 +141,5 @@ def test_guards():
         Connectivity((8, 8), (False, False), 1.0)
     with pytest.raises(DesignError, match="coarsen"):
         Connectivity((8, 8), (True, True), 1.0, coarsen=0)
+    with pytest.raises(DesignError, match="tail_slope"):
+        Connectivity((8, 8), (True, True), 1.0, tail_slope=-0.1)

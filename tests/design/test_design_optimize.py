@@ -104,19 +104,20 @@ def test_an_extruded_ring_opens_its_hole_with_default_flags(tmp_path):
     assert not solid[centre]  # the hole goes through the middle of the extrusion
 
 
-def test_a_run_stored_before_the_plane_term_resumes_with_the_core_term_alone(tmp_path):
+def test_a_run_stored_before_the_plane_term_and_the_tail_resumes_with_the_bounded_core_term_alone(tmp_path):
     config = DesignConfig(max_iter=6, **SMALL)
     assert config.connect_planes
     run_design(config, tmp_path, should_stop=lambda: True)
     stored = json.loads((tmp_path / "config.json").read_text())
-    del stored["connect_planes"]
+    del stored["connect_planes"], stored["connect_tail"]
     (tmp_path / "config.json").write_text(json.dumps(stored))
     run_design(None, tmp_path, resume=True)
-    assert json.loads((tmp_path / "summary.json").read_text())["config"]["connect_planes"] is False
+    resumed = json.loads((tmp_path / "summary.json").read_text())["config"]
+    assert resumed["connect_planes"] is False and resumed["connect_tail"] == 0.0
     # the core term alone is the plane term's absence: a floating blob pays its volume once, not twice
     from design.connectivity import Connectivity
     blob = np.zeros((12, 12))
     blob[0:4, 0:4] = blob[8:11, 8:11] = 1.0
-    core_only = Connectivity(blob.shape, (True, True), 0.5, planes=False)(blob, 1.0)[0]
-    both = Connectivity(blob.shape, (True, True), 0.5)(blob, 1.0)[0]
+    core_only = Connectivity(blob.shape, (True, True), 0.5, planes=False, tail_slope=0.0)(blob, 1.0)[0]
+    both = Connectivity(blob.shape, (True, True), 0.5, tail_slope=0.0)(blob, 1.0)[0]
     assert core_only == pytest.approx(9.0, rel=0.02) and both == pytest.approx(18.0, rel=0.02)

@@ -103,3 +103,9 @@ def test_radius_in_mm_gives_the_same_feature_size_at_every_resolution():
     assert prepare(DesignConfig(target="sphere", resolution=16, radius_vox=3.0)).radius_vox == 3.0
     with pytest.raises(DesignError, match="not both"):
         DesignConfig(target="sphere", radius_vox=3.0, radius_mm=1.0)
+
+
+@pytest.mark.parametrize("field, value", [("w_connect", -1.0), ("connect_tail", -0.1)])
+def test_connectivity_settings_must_not_be_negative(field, value):
+    with pytest.raises(DesignError, match=f"{field} must be >= 0"):
+        DesignConfig(target="sphere", **{field: value})
