@@ -1,7 +1,7 @@
 """Source shapes for the robustness evidence (docs/results.md, "Shapes nobody tuned for").
 
 Writes closed meshes in mm, each scaled to the sample shapes' volume (`design.shapes.VOLUME_MM3`),
-none of them shipped as a sample or used while the defaults were chosen:
+none of them shipped as a sample. Sources in use while the design defaults were chosen (`TUNING`):
 
 - ``stadium_tablet``: a stadium (rectangle with round ends) extruded, itself an extrusion;
 - ``disc_three_holes``: a disc with three through-holes on a circle, itself an extrusion;
@@ -9,6 +9,21 @@ none of them shipped as a sample or used while the defaults were chosen:
 - ``ellipsoid``: an ellipsoid with semi-axes 1 : 0.7 : 0.5;
 - ``frustum``: a truncated cone;
 - ``bow``: two square pyramids joined at their tips by a short square neck (a polyhedral bow).
+
+Further sources, made after the defaults were chosen (`FURTHER`):
+
+- ``ring``: an annulus, radii 3 and 8, height 6, an extrusion;
+- ``cone``: a cone standing on its base;
+- ``capsule``: a capsule lying on its side (axis along x);
+- ``slotted_box``: a 16 x 10 x 8 box with a 10 x 3 through-slot along the build axis, an extrusion.
+
+Fresh sources, made after J_conn's core term and the multi-start default were in place (`FRESH`; the
+tube's two-piece design led to J_conn's plane term):
+
+- ``tube``: a tube, radii 4 and 6.5, height 14, standing on the build axis, an extrusion;
+- ``torus``: a torus lying flat;
+- ``l_bracket``: an L-shaped prism, an extrusion without mirror symmetry;
+- ``asterisk``: a six-armed star prism turned by 15 degrees, an extrusion without mirror symmetry.
 
     python benchmarks/robust_sources.py OUT_DIR
 
@@ -24,7 +39,8 @@ import trimesh
 
 from design.shapes import VOLUME_MM3
 
-EXTRUSIONS = ("stadium_tablet", "disc_three_holes", "hex_prism")
+EXTRUSIONS = ("stadium_tablet", "disc_three_holes", "hex_prism", "ring", "slotted_box", "tube", "l_bracket",
+              "asterisk")
 """The sources that are extrusions along z (the build axis), so the extruded space holds them."""
 
 
@@ -68,8 +84,50 @@ def _bow() -> trimesh.Trimesh:
     return trimesh.boolean.union([left, right, neck], engine="manifold")
 
 
-BUILDERS = {"stadium_tablet": _stadium_tablet, "disc_three_holes": _disc_three_holes, "hex_prism": _hex_prism,
-            "ellipsoid": _ellipsoid, "frustum": _frustum, "bow": _bow}
+def _ring() -> trimesh.Trimesh:
+    return trimesh.creation.annulus(r_min=3.0, r_max=8.0, height=6.0, sections=64)
+
+
+def _cone() -> trimesh.Trimesh:
+    return trimesh.creation.cone(radius=1.0, height=1.5, sections=64)
+
+
+def _capsule() -> trimesh.Trimesh:
+    mesh = trimesh.creation.capsule(height=2.0, radius=1.0, count=[32, 32])
+    return mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2.0, [0, 1, 0]))
+
+
+def _slotted_box() -> trimesh.Trimesh:
+    slot = trimesh.creation.box(extents=(10.0, 3.0, 12.0))
+    return trimesh.boolean.difference([trimesh.creation.box(extents=(16.0, 10.0, 8.0)), slot], engine="manifold")
+
+
+def _tube() -> trimesh.Trimesh:
+    return trimesh.creation.annulus(r_min=4.0, r_max=6.5, height=14.0, sections=64)
+
+
+def _torus() -> trimesh.Trimesh:
+    return trimesh.creation.torus(major_radius=3.0, minor_radius=1.0, major_sections=64, minor_sections=32)
+
+
+def _l_bracket() -> trimesh.Trimesh:
+    foot = trimesh.creation.box(extents=(3.0, 1.0, 1.0)).apply_translation([1.5, 0.5, 0.0])
+    leg = trimesh.creation.box(extents=(1.0, 2.5, 1.0)).apply_translation([0.5, 1.25, 0.0])
+    return trimesh.boolean.union([foot, leg], engine="manifold")
+
+
+def _asterisk() -> trimesh.Trimesh:
+    bars = [trimesh.creation.box(extents=(3.0, 0.6, 0.8)).apply_transform(
+        trimesh.transformations.rotation_matrix(np.deg2rad(15.0 + 60.0 * k), [0, 0, 1])) for k in range(3)]
+    return trimesh.boolean.union(bars, engine="manifold")
+
+
+TUNING = {"stadium_tablet": _stadium_tablet, "disc_three_holes": _disc_three_holes, "hex_prism": _hex_prism,
+          "ellipsoid": _ellipsoid, "frustum": _frustum, "bow": _bow}
+"""Sources that were in use while the design defaults were chosen."""
+FURTHER = {"ring": _ring, "cone": _cone, "capsule": _capsule, "slotted_box": _slotted_box}
+FRESH = {"tube": _tube, "torus": _torus, "l_bracket": _l_bracket, "asterisk": _asterisk}
+BUILDERS = {**TUNING, **FURTHER, **FRESH}
 
 
 def source(name: str) -> trimesh.Trimesh:
