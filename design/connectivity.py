@@ -69,7 +69,7 @@ PLANE_ALLOWANCE = 1.0
 quarter ring from one plane to the other the path is pi/2 times the straight distance)."""
 MARGIN_VOX = 2.0
 """Free excess distance next to a seed, in (coarse) voxel edges."""
-TAIL_SLOPE = 0.1
+TAIL_SLOPE = 0.01
 """Slope k of the tail J_tail far beyond the allowance, per allowance (module doc); 0 = no tail."""
 SOLID_LEVEL = 0.5
 """Block-averaged density from which a coarse voxel counts as solid for the tail's reference."""

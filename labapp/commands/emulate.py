@@ -37,8 +37,8 @@ def run(args: argparse.Namespace) -> int:
 
     emulator = HeidolphEmulator(speed=args.speed, watchdog_s=args.watchdog_s, probe_connected=not args.no_probe,
                                 seed=args.seed)
-    print(emulator.start(), flush=True)
-    try:
+    try:  # a stop request may come as soon as the path is out, before the loop is reached
+        print(emulator.start(), flush=True)
         while True:
             time.sleep(args.status_every_s or 3600.0)
             if args.status_every_s:
@@ -49,4 +49,5 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return 0
     finally:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second stop request does not cut the clean-up short
         emulator.stop()
