@@ -33,7 +33,7 @@ def seconds(objective: DesignObjective, x: np.ndarray, repeats: int = 3) -> floa
     return float(np.median(times))
 
 
-def objective(problem: Problem, radius: float, w_conn: float, conn_tail: float = TAIL_SLOPE) -> DesignObjective:
+def make_objective(problem: Problem, radius: float, w_conn: float, conn_tail: float = TAIL_SLOPE) -> DesignObjective:
     """The benchmark's objective at smoothing radius ``radius`` voxels and J_conn weight ``w_conn``."""
     return DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
                            radius_vox=radius, beta=3.0, w_binary=20.0, w_rate=1.0, w_conn=w_conn,
@@ -64,11 +64,11 @@ def main() -> None:
     share = 0.0
     for radius in (4.0, problem.radius_vox):
         x = np.clip(shell + np.random.default_rng(0).uniform(-0.05, 0.05, shell.shape), 0.0, 1.0)
-        base = seconds(objective(problem, radius, 0.0), x)
-        with_conn = objective(problem, radius, 20.0)
+        base = seconds(make_objective(problem, radius, 0.0), x)
+        with_conn = make_objective(problem, radius, 20.0)
         conn = seconds(with_conn, x)
         alone = conn_seconds(with_conn, x)
-        no_tail = conn_seconds(objective(problem, radius, 20.0, conn_tail=0.0), x)
+        no_tail = conn_seconds(make_objective(problem, radius, 20.0, conn_tail=0.0), x)
         print(f"r = {radius:.2f} voxels: evaluate {base:.3f} s without J_conn, {conn:.3f} s with; "
               f"J_conn alone {alone:.4f} s ({alone / base:.1%}), without its tail {no_tail:.4f} s")
         share = alone / base
