@@ -83,7 +83,7 @@ def bench(n_reduced: int, warmup: int, rounds: int, block: int, solves: int, opt
     config = DesignConfig(target="zero-order:final=0.15,duration=0.2", space="nfc", resolution=2 * n_reduced,
                           domain_mm=(20.0, 20.0, 20.0), max_iter=warmup + rounds * block, checkpoint_every=block,
                           optimizer=optimizer, radius_vox=4.0, allow_pieces=True, beta_final=3.0,  # one stage
-                          starts=1)
+                          starts=1, robust_eta=0.0)  # one simulation per evaluation
     totals = dict.fromkeys(PARTS, 0.0)
     last: dict = {}
     marks: dict = {"out": None, "iter": 0.0, "n": 0, "parts": dict(totals)}

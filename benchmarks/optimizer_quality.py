@@ -58,7 +58,8 @@ def run_one(target: str, space: str, optimizer: str, seed: int, args: argparse.N
     """One design run (seed 0: the uniform start); its summary's headline numbers."""
     paper = {} if args.product_defaults else {"radius_vox": args.radius_vox, "allow_pieces": True}
     config = DesignConfig(target=target, space=space, resolution=args.resolution, max_iter=args.max_iter,
-                          optimizer=optimizer, starts=1, **paper)  # one run per optimiser and seed
+                          optimizer=optimizer, starts=1, robust_eta=0.0,  # one design, as measured
+                          **paper)  # one run per optimiser and seed
     folder = args.out / f"{target.split(':')[0]}_{space}_{optimizer}" / f"seed{seed}"
     result = run_design(config, folder, start=perturbed_start(seed) if seed else None)
     s = json.loads((folder / "summary.json").read_text())

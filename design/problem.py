@@ -73,6 +73,13 @@ OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
 ANALYTIC_W_RATE = 1.0
 """Default weight of the rate-fit term J_rate for analytic (zero-order / accel) targets; 0 for the
 others, whose curves come from shapes or measurements (see docs/results.md, "Zero-order")."""
+ANALYTIC_ROBUST_ETA = 0.1
+"""Default threshold offset of the robust formulation for analytic targets; 0 (one design, as in the
+paper) for the others. Without it, designs of analytic curves kept holes narrower than the smoothing
+radius grey: the density released like the target while the printed solid, whose contour opens them,
+released up to 9 points of rel. RMSE off (docs/results.md, "Analytic targets: the robust formulation
+by default"). ICO is not measured and keeps one design."""
+ROBUST_SPACES = ("nfc", "extruded")
 
 
 @dataclass(frozen=True)
@@ -141,10 +148,11 @@ class DesignConfig:
     rate_span : (float, float)
         J_rate compares rates only between the times the target reaches these fractions of its
         final release (`design.rate`); (0, 1) = the whole curve.
-    robust_eta : float
+    robust_eta : float or None
         Threshold offset d of the robust formulation (`design.objective`): the designs projected at
         1/2 - d and 1/2 + d must release with the target's rate profile too; 0 = off (as in the
-        paper). Three simulations per evaluation; needs w_rate > 0.
+        paper). Three simulations per evaluation; needs w_rate > 0. None = `ANALYTIC_ROBUST_ETA` for
+        analytic targets in `ROBUST_SPACES` whose w_rate > 0, else 0.
     max_iter : int
         Maximum objective evaluations (paper: 500).
     optimizer : str
@@ -198,7 +206,7 @@ class DesignConfig:
     rate_window_vox: float = 1.0
     w_rate: float | None = None
     rate_span: tuple[float, float] = (0.05, 0.95)
-    robust_eta: float = 0.0
+    robust_eta: float | None = None
     max_iter: int = 500
     optimizer: str = "lbfgs"
     ftol_rel: float = 0.0
@@ -234,6 +242,9 @@ class DesignConfig:
                               f"{self.rate_window_vox}")
         if len(self.rate_span) != 2 or not 0.0 <= self.rate_span[0] < self.rate_span[1] <= 1.0:
             raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {self.rate_span}")
+        if self.robust_eta is None:
+            robust = _parse_analytic(self.target) and self.w_rate > 0 and self.space in ROBUST_SPACES
+            object.__setattr__(self, "robust_eta", ANALYTIC_ROBUST_ETA if robust else 0.0)
         if not 0.0 <= self.robust_eta <= 0.4:
             raise DesignError(f"robust_eta must be in [0, 0.4], got {self.robust_eta}")
         if self.robust_eta > 0 and not self.w_rate > 0:

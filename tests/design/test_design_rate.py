@@ -5,7 +5,7 @@ import pytest
 from design.errors import DesignError
 from design.objective import DesignObjective
 from design.optimize import run_design
-from design.problem import ANALYTIC_W_RATE, DesignConfig
+from design.problem import ANALYTIC_ROBUST_ETA, ANALYTIC_W_RATE, DesignConfig
 from design.rate import (lag_rate, lag_rate_adjoint, rate_deviation, rate_fit, rate_shape_fit,
                          release_duration)
 from design.spaces import SpaceRequest, build_space
@@ -99,7 +99,7 @@ def test_rate_term_lowers_the_rate_deviation_on_a_tiny_problem(tmp_path):
     devs = {}
     for w_rate, span in ((0.0, (0.0, 1.0)), (1.0, (0.0, 1.0)), (1.0, (0.05, 0.95))):
         config = DesignConfig(target="zero-order:final=0.1,duration=0.2", resolution=24, radius_vox=1.5,
-                              max_iter=80, w_rate=w_rate, rate_span=span, allow_pieces=True)
+                              max_iter=80, w_rate=w_rate, rate_span=span, allow_pieces=True, robust_eta=0.0)
         summary = run_design(config, tmp_path / f"w{w_rate}_{span[0]}").outputs.summary
         devs[w_rate, span] = summary["rate_dev_mid80"]["density"]
     # measured 0.37 without the term, 0.23 with it over the whole curve, 0.29 over the target's 5%-95%
@@ -114,6 +114,18 @@ def test_rate_weight_defaults_by_target_kind():
     with pytest.raises(DesignError, match="w_rate must be >= 0"):
         DesignConfig(target="sphere", w_rate=-1.0)
     assert DesignConfig(target="sphere").robust_eta == 0.0  # the paper's single design by default
+
+
+def test_analytic_targets_default_to_the_robust_formulation_in_nfc_and_extruded():
+    for space in ("nfc", "extruded"):
+        assert DesignConfig(target="accel:q=0.5", space=space).robust_eta == ANALYTIC_ROBUST_ETA
+    assert DesignConfig(target="zero-order", space="ico").robust_eta == 0.0  # not measured there
+    assert DesignConfig(target="zero-order", w_rate=0.0).robust_eta == 0.0  # it compares rates
+    assert DesignConfig(target="zero-order", robust_eta=0.0).robust_eta == 0.0
+    assert DesignConfig(target="zero-order", robust_eta=0.05).robust_eta == 0.05
+
+
+def test_rate_span_and_robust_settings_are_checked():
     assert DesignConfig(target="sphere").rate_span == (0.05, 0.95)
     with pytest.raises(DesignError, match="rate_span must be two fractions"):
         DesignConfig(target="sphere", rate_span=(0.9, 0.1))
