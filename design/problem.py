@@ -73,13 +73,17 @@ OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
 ANALYTIC_W_RATE = 1.0
 """Default weight of the rate-fit term J_rate for analytic (zero-order / accel) targets; 0 for the
 others, whose curves come from shapes or measurements (see docs/results.md, "Zero-order")."""
+ANALYTIC_SPACES = ("nfc",)
 ANALYTIC_ROBUST_ETA = 0.1
-"""Default threshold offset of the robust formulation for analytic targets; 0 (one design, as in the
-paper) for the others. Without it, designs of analytic curves kept holes narrower than the smoothing
-radius grey: the density released like the target while the printed solid, whose contour opens them,
-released up to 9 points of rel. RMSE off (docs/results.md, "Analytic targets: the robust formulation
-by default"). ICO is not measured and keeps one design."""
-ROBUST_SPACES = ("nfc", "extruded")
+ANALYTIC_BETA_FINAL = 64.0
+"""Defaults for analytic targets in `ANALYTIC_SPACES`: the robust formulation's threshold offset (0,
+one design as in the paper, for the other targets) and the final beta of the continuation (else
+`SPACE_DEFAULTS`). With one design and beta 3 -> 12, designs of analytic curves kept holes narrower
+than the smoothing radius grey: the density released like the target while the printed solid, whose
+contour opens them, was up to 6.79% off in nfc. Measured on six analytic targets in both spaces
+(docs/results.md, "Analytic targets in nfc: the robust formulation and beta 64 by default"). The
+extruded space keeps one design: there the robust formulation fitted five of six targets better but
+split a nested zero-order target into five pieces. ICO is not measured and keeps its defaults."""
 
 
 @dataclass(frozen=True)
@@ -141,7 +145,8 @@ class DesignConfig:
     beta_final : float or None
         Beta continuation: raise beta geometrically from ``beta`` to ``beta_final`` over
         `design.optimize.BETA_STAGES` equal stages of the run; equal to ``beta``: fixed, as in the
-        paper. None = the preset's, else `SPACE_DEFAULTS` (at least ``beta``), else fixed.
+        paper. None = the preset's, else `ANALYTIC_BETA_FINAL` for analytic targets in
+        `ANALYTIC_SPACES`, else `SPACE_DEFAULTS` (at least ``beta``), else fixed.
     w_rate : float or None
         Weight of the rate-fit term J_rate (`design.rate`); None = `ANALYTIC_W_RATE` for analytic
         targets, 0 (eq. 4 as in the paper) otherwise.
@@ -152,7 +157,7 @@ class DesignConfig:
         Threshold offset d of the robust formulation (`design.objective`): the designs projected at
         1/2 - d and 1/2 + d must release with the target's rate profile too; 0 = off (as in the
         paper). Three simulations per evaluation; needs w_rate > 0. None = `ANALYTIC_ROBUST_ETA` for
-        analytic targets in `ROBUST_SPACES` whose w_rate > 0, else 0.
+        analytic targets in `ANALYTIC_SPACES` whose w_rate > 0, else 0.
     max_iter : int
         Maximum objective evaluations (paper: 500).
     optimizer : str
@@ -225,7 +230,11 @@ class DesignConfig:
         if self.space not in SPACE_CHOICES:
             raise DesignError(f"space must be one of {SPACE_CHOICES}, got {self.space!r}")
         presets = [preset_values(self.preset, self.space)] if self.preset is not None else []
-        for values in presets + [SPACE_DEFAULTS.get(self.space, {}), {"w_fab": 0.0}]:
+        analytic = _parse_analytic(self.target) is not None and self.space in ANALYTIC_SPACES
+        space_defaults = dict(SPACE_DEFAULTS.get(self.space, {}))
+        if analytic:
+            space_defaults["beta_final"] = ANALYTIC_BETA_FINAL
+        for values in presets + [space_defaults, {"w_fab": 0.0}]:
             for key, value in values.items():
                 if getattr(self, key) is None and not (key == "radius_vox" and self.radius_mm is not None):
                     object.__setattr__(self, key, max(value, self.beta) if key == "beta_final" else value)
@@ -243,8 +252,7 @@ class DesignConfig:
         if len(self.rate_span) != 2 or not 0.0 <= self.rate_span[0] < self.rate_span[1] <= 1.0:
             raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {self.rate_span}")
         if self.robust_eta is None:
-            robust = _parse_analytic(self.target) and self.w_rate > 0 and self.space in ROBUST_SPACES
-            object.__setattr__(self, "robust_eta", ANALYTIC_ROBUST_ETA if robust else 0.0)
+            object.__setattr__(self, "robust_eta", ANALYTIC_ROBUST_ETA if analytic and self.w_rate > 0 else 0.0)
         if not 0.0 <= self.robust_eta <= 0.4:
             raise DesignError(f"robust_eta must be in [0, 0.4], got {self.robust_eta}")
         if self.robust_eta > 0 and not self.w_rate > 0:

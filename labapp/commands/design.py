@@ -53,7 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--beta", type=positive_float, help="projection steepness (default 3)")
     parser.add_argument("--beta-final", type=positive_float,
                         help="beta continuation: raise beta to this over the run in 4 stages (default 12 for nfc "
-                             "and extruded, fixed for ico; equal to --beta: fixed)")
+                             "and extruded, 64 for analytic targets in nfc, fixed for ico; equal to --beta: "
+                             "fixed)")
     parser.add_argument("--rate-window", type=positive_float, metavar="VOX",
                         help="finite-difference span of the rate-fit term's rates, voxels (default 1)")
     parser.add_argument("--w-rate", type=nonnegative_float,
@@ -64,7 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robust-eta", type=nonnegative_float, metavar="D",
                         help="robust formulation: fit the designs projected at 1/2 - D, 1/2, 1/2 + D "
                              "(0 = off; 3 simulations per evaluation; default 0.1 for analytic targets "
-                             "in nfc and extruded, else 0)")
+                             "in nfc, else 0)")
     parser.add_argument("--height", type=positive_float, metavar="MM",
                         help="extrusion height, mm (default: the source's height, else the domain's)")
     parser.add_argument("--max-iter", type=positive_int, help="maximum objective evaluations (default 500)")

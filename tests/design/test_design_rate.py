@@ -5,7 +5,7 @@ import pytest
 from design.errors import DesignError
 from design.objective import DesignObjective
 from design.optimize import run_design
-from design.problem import ANALYTIC_ROBUST_ETA, ANALYTIC_W_RATE, DesignConfig
+from design.problem import ANALYTIC_BETA_FINAL, ANALYTIC_ROBUST_ETA, ANALYTIC_W_RATE, SPACE_DEFAULTS, DesignConfig
 from design.rate import (lag_rate, lag_rate_adjoint, rate_deviation, rate_fit, rate_shape_fit,
                          release_duration)
 from design.spaces import SpaceRequest, build_space
@@ -116,10 +116,17 @@ def test_rate_weight_defaults_by_target_kind():
     assert DesignConfig(target="sphere").robust_eta == 0.0  # the paper's single design by default
 
 
-def test_analytic_targets_default_to_the_robust_formulation_in_nfc_and_extruded():
-    for space in ("nfc", "extruded"):
-        assert DesignConfig(target="accel:q=0.5", space=space).robust_eta == ANALYTIC_ROBUST_ETA
-    assert DesignConfig(target="zero-order", space="ico").robust_eta == 0.0  # not measured there
+def test_analytic_targets_in_nfc_default_to_the_robust_formulation_and_a_steep_final_beta():
+    config = DesignConfig(target="accel:q=0.5", space="nfc")
+    assert (config.robust_eta, config.beta_final) == (ANALYTIC_ROBUST_ETA, ANALYTIC_BETA_FINAL)
+    assert DesignConfig(target="sphere", space="nfc").beta_final == SPACE_DEFAULTS["nfc"]["beta_final"]
+    preset = DesignConfig(target="zero-order", space="nfc", preset="paper:design-4")
+    assert preset.beta_final == preset.beta  # a preset keeps the paper's fixed beta
+    # the extruded space keeps one design (robust, it split the nested zero-order target into pieces)
+    extruded = DesignConfig(target="zero-order", space="extruded")
+    assert (extruded.robust_eta, extruded.beta_final) == (0.0, SPACE_DEFAULTS["extruded"]["beta_final"])
+    ico = DesignConfig(target="zero-order", space="ico")  # not measured there
+    assert (ico.robust_eta, ico.beta_final) == (0.0, None)  # None: a fixed beta
     assert DesignConfig(target="zero-order", w_rate=0.0).robust_eta == 0.0  # it compares rates
     assert DesignConfig(target="zero-order", robust_eta=0.0).robust_eta == 0.0
     assert DesignConfig(target="zero-order", robust_eta=0.05).robust_eta == 0.05
