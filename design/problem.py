@@ -80,10 +80,11 @@ ANALYTIC_BETA_FINAL = 64.0
 one design as in the paper, for the other targets) and the final beta of the continuation (else
 `SPACE_DEFAULTS`). With one design and beta 3 -> 12, designs of analytic curves kept holes narrower
 than the smoothing radius grey: the density released like the target while the printed solid, whose
-contour opens them, was up to 6.79% off in nfc. Measured on six analytic targets in both spaces
-(docs/results.md, "Analytic targets in nfc: the robust formulation and beta 64 by default"). The
-extruded space keeps one design: there the robust formulation fitted five of six targets better but
-split a nested zero-order target into five pieces. ICO is not measured and keeps its defaults."""
+contour opens them, was up to 8.42% off in nfc (500 evaluations). Measured on six analytic targets in
+both spaces (docs/results.md, "Analytic targets in nfc: the robust formulation and beta 64 by
+default"). The extruded space keeps one design: there the robust formulation fitted five of six
+targets better but split a nested zero-order target into five pieces. ICO is not measured and keeps
+its defaults."""
 
 
 @dataclass(frozen=True)
