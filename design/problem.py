@@ -73,18 +73,19 @@ OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
 ANALYTIC_W_RATE = 1.0
 """Default weight of the rate-fit term J_rate for analytic (zero-order / accel) targets; 0 for the
 others, whose curves come from shapes or measurements (see docs/results.md, "Zero-order")."""
-ANALYTIC_SPACES = ("nfc",)
-ANALYTIC_ROBUST_ETA = 0.1
-ANALYTIC_BETA_FINAL = 64.0
-"""Defaults for analytic targets in `ANALYTIC_SPACES`: the robust formulation's threshold offset (0,
-one design as in the paper, for the other targets) and the final beta of the continuation (else
-`SPACE_DEFAULTS`). With one design and beta 3 -> 12, designs of analytic curves kept holes narrower
-than the smoothing radius grey: the density released like the target while the printed solid, whose
-contour opens them, was up to 8.42% off in nfc (500 evaluations). Measured on six analytic targets in
-both spaces (docs/results.md, "Analytic targets in nfc: the robust formulation and beta 64 by
-default"). The extruded space keeps one design: there the robust formulation fitted five of six
-targets better but split a nested zero-order target into five pieces. ICO is not measured and keeps
-its defaults."""
+ANALYTIC_DEFAULTS: dict[str, dict[str, float]] = {
+    "nfc": {"robust_eta": 0.1, "beta_final": 64.0},
+    "extruded": {"robust_eta": 0.1, "beta_final": 64.0, "w_connect": 10.0},
+}
+"""Defaults for analytic targets, per design space, over `SPACE_DEFAULTS` and `W_CONNECT`: the robust
+formulation's threshold offset (0, one design as in the paper, for the other targets; it needs
+w_rate > 0), the final beta of the continuation and, for extruded designs, the connectivity weight.
+With one design and beta 3 -> 12, designs of analytic curves kept holes narrower than the smoothing
+radius grey: the density released like the target while the printed solid, whose contour opens them,
+was up to 11.6% off (500 evaluations). In the extruded space the robust formulation at the weight 5
+split a nested zero-order target into five pieces; 10 keeps it and every measured extruded target one
+piece. Measured on six analytic targets and the nested one (docs/results.md, "Analytic targets: the
+robust formulation and beta 64 by default"). ICO is not measured and keeps its defaults."""
 
 
 @dataclass(frozen=True)
@@ -119,8 +120,9 @@ class DesignConfig:
         `DEFAULT_RADIUS_MM`. Converted to voxels of the design grid (at least 1) by `prepare`.
     allow_pieces : bool
         Drop the connectivity penalty: the design may fall apart into pieces (as in the paper).
-    w_connect : float
-        Weight of the connectivity penalty J_conn (`design.connectivity`) unless ``allow_pieces``.
+    w_connect : float or None
+        Weight of the connectivity penalty J_conn (`design.connectivity`) unless ``allow_pieces``;
+        None = `ANALYTIC_DEFAULTS` for analytic targets, else `W_CONNECT`.
     connect_planes : bool
         J_conn also measures paths to the mirror planes (its plane term); runs stored before the
         term resume without it.
@@ -146,8 +148,8 @@ class DesignConfig:
     beta_final : float or None
         Beta continuation: raise beta geometrically from ``beta`` to ``beta_final`` over
         `design.optimize.BETA_STAGES` equal stages of the run; equal to ``beta``: fixed, as in the
-        paper. None = the preset's, else `ANALYTIC_BETA_FINAL` for analytic targets in
-        `ANALYTIC_SPACES`, else `SPACE_DEFAULTS` (at least ``beta``), else fixed.
+        paper. None = the preset's, else `ANALYTIC_DEFAULTS` for analytic targets, else
+        `SPACE_DEFAULTS` (at least ``beta``), else fixed.
     w_rate : float or None
         Weight of the rate-fit term J_rate (`design.rate`); None = `ANALYTIC_W_RATE` for analytic
         targets, 0 (eq. 4 as in the paper) otherwise.
@@ -157,8 +159,8 @@ class DesignConfig:
     robust_eta : float or None
         Threshold offset d of the robust formulation (`design.objective`): the designs projected at
         1/2 - d and 1/2 + d must release with the target's rate profile too; 0 = off (as in the
-        paper). Three simulations per evaluation; needs w_rate > 0. None = `ANALYTIC_ROBUST_ETA` for
-        analytic targets in `ANALYTIC_SPACES` whose w_rate > 0, else 0.
+        paper). Three simulations per evaluation; needs w_rate > 0. None = `ANALYTIC_DEFAULTS` for
+        analytic targets whose w_rate > 0, else 0.
     max_iter : int
         Maximum objective evaluations (paper: 500).
     optimizer : str
@@ -199,7 +201,7 @@ class DesignConfig:
     radius_vox: float | None = None
     radius_mm: float | None = None
     allow_pieces: bool = False
-    w_connect: float = W_CONNECT
+    w_connect: float | None = None
     connect_planes: bool = True
     connect_tail: float = TAIL_SLOPE
     starts: int | None = None
@@ -231,11 +233,10 @@ class DesignConfig:
         if self.space not in SPACE_CHOICES:
             raise DesignError(f"space must be one of {SPACE_CHOICES}, got {self.space!r}")
         presets = [preset_values(self.preset, self.space)] if self.preset is not None else []
-        analytic = _parse_analytic(self.target) is not None and self.space in ANALYTIC_SPACES
-        space_defaults = dict(SPACE_DEFAULTS.get(self.space, {}))
-        if analytic:
-            space_defaults["beta_final"] = ANALYTIC_BETA_FINAL
-        for values in presets + [space_defaults, {"w_fab": 0.0}]:
+        analytic = ANALYTIC_DEFAULTS.get(self.space, {}) if _parse_analytic(self.target) is not None else {}
+        space_defaults = {**SPACE_DEFAULTS.get(self.space, {}), **analytic}
+        space_defaults.pop("robust_eta", None)  # resolved below, once w_rate is known
+        for values in presets + [space_defaults, {"w_fab": 0.0, "w_connect": W_CONNECT}]:
             for key, value in values.items():
                 if getattr(self, key) is None and not (key == "radius_vox" and self.radius_mm is not None):
                     object.__setattr__(self, key, max(value, self.beta) if key == "beta_final" else value)
@@ -253,7 +254,7 @@ class DesignConfig:
         if len(self.rate_span) != 2 or not 0.0 <= self.rate_span[0] < self.rate_span[1] <= 1.0:
             raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {self.rate_span}")
         if self.robust_eta is None:
-            object.__setattr__(self, "robust_eta", ANALYTIC_ROBUST_ETA if analytic and self.w_rate > 0 else 0.0)
+            object.__setattr__(self, "robust_eta", analytic.get("robust_eta", 0.0) if self.w_rate > 0 else 0.0)
         if not 0.0 <= self.robust_eta <= 0.4:
             raise DesignError(f"robust_eta must be in [0, 0.4], got {self.robust_eta}")
         if self.robust_eta > 0 and not self.w_rate > 0:

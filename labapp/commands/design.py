@@ -45,7 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--allow-pieces", action="store_true",
                         help="drop the connectivity penalty: the design may fall apart into pieces")
     parser.add_argument("--w-connect", type=nonnegative_float,
-                        help="weight of the connectivity penalty J_conn (default 5)")
+                        help="weight of the connectivity penalty J_conn (default 5; 10 for analytic targets "
+                             "in extruded)")
     parser.add_argument("--starts", type=positive_int,
                         help="seeded starts at half the resolution, the best then refined at full resolution "
                              "(default 4 for nfc and extruded designs of a source shape at resolution 128 or "
@@ -53,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--beta", type=positive_float, help="projection steepness (default 3)")
     parser.add_argument("--beta-final", type=positive_float,
                         help="beta continuation: raise beta to this over the run in 4 stages (default 12 for nfc "
-                             "and extruded, 64 for analytic targets in nfc, fixed for ico; equal to --beta: "
+                             "and extruded, 64 for analytic targets there, fixed for ico; equal to --beta: "
                              "fixed)")
     parser.add_argument("--rate-window", type=positive_float, metavar="VOX",
                         help="finite-difference span of the rate-fit term's rates, voxels (default 1)")
@@ -65,7 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robust-eta", type=nonnegative_float, metavar="D",
                         help="robust formulation: fit the designs projected at 1/2 - D, 1/2, 1/2 + D "
                              "(0 = off; 3 simulations per evaluation; default 0.1 for analytic targets "
-                             "in nfc, else 0)")
+                             "in nfc and extruded, else 0)")
     parser.add_argument("--height", type=positive_float, metavar="MM",
                         help="extrusion height, mm (default: the source's height, else the domain's)")
     parser.add_argument("--max-iter", type=positive_int, help="maximum objective evaluations (default 500)")

@@ -5,7 +5,7 @@ import pytest
 from design.errors import DesignError
 from design.objective import DesignObjective
 from design.optimize import run_design
-from design.problem import ANALYTIC_BETA_FINAL, ANALYTIC_ROBUST_ETA, ANALYTIC_W_RATE, SPACE_DEFAULTS, DesignConfig
+from design.problem import ANALYTIC_DEFAULTS, ANALYTIC_W_RATE, SPACE_DEFAULTS, W_CONNECT, DesignConfig
 from design.rate import (lag_rate, lag_rate_adjoint, rate_deviation, rate_fit, rate_shape_fit,
                          release_duration)
 from design.spaces import SpaceRequest, build_space
@@ -116,20 +116,24 @@ def test_rate_weight_defaults_by_target_kind():
     assert DesignConfig(target="sphere").robust_eta == 0.0  # the paper's single design by default
 
 
-def test_analytic_targets_in_nfc_default_to_the_robust_formulation_and_a_steep_final_beta():
-    config = DesignConfig(target="accel:q=0.5", space="nfc")
-    assert (config.robust_eta, config.beta_final) == (ANALYTIC_ROBUST_ETA, ANALYTIC_BETA_FINAL)
-    assert DesignConfig(target="sphere", space="nfc").beta_final == SPACE_DEFAULTS["nfc"]["beta_final"]
-    preset = DesignConfig(target="zero-order", space="nfc", preset="paper:design-4")
-    assert preset.beta_final == preset.beta  # a preset keeps the paper's fixed beta
-    # the extruded space keeps one design (robust, it split the nested zero-order target into pieces)
-    extruded = DesignConfig(target="zero-order", space="extruded")
-    assert (extruded.robust_eta, extruded.beta_final) == (0.0, SPACE_DEFAULTS["extruded"]["beta_final"])
+def test_analytic_targets_default_to_the_robust_formulation_steep_beta_and_their_space_s_connectivity():
+    for space in ("nfc", "extruded"):
+        config = DesignConfig(target="accel:q=0.5", space=space)
+        analytic = ANALYTIC_DEFAULTS[space]
+        assert (config.robust_eta, config.beta_final) == (analytic["robust_eta"], analytic["beta_final"])
+        assert config.w_connect == analytic.get("w_connect", W_CONNECT)
+        sphere = DesignConfig(target="sphere", space=space)
+        assert (sphere.robust_eta, sphere.beta_final, sphere.w_connect) == (0.0, SPACE_DEFAULTS[space]["beta_final"],
+                                                                            W_CONNECT)
+        preset = DesignConfig(target="zero-order", space=space, preset="paper:design-4")
+        assert preset.beta_final == preset.beta  # a preset keeps the paper's fixed beta
+    assert DesignConfig(target="zero-order", space="extruded").w_connect > W_CONNECT
     ico = DesignConfig(target="zero-order", space="ico")  # not measured there
-    assert (ico.robust_eta, ico.beta_final) == (0.0, None)  # None: a fixed beta
+    assert (ico.robust_eta, ico.beta_final, ico.w_connect) == (0.0, None, W_CONNECT)  # None: a fixed beta
     assert DesignConfig(target="zero-order", w_rate=0.0).robust_eta == 0.0  # it compares rates
     assert DesignConfig(target="zero-order", robust_eta=0.0).robust_eta == 0.0
     assert DesignConfig(target="zero-order", robust_eta=0.05).robust_eta == 0.05
+    assert DesignConfig(target="zero-order", space="extruded", w_connect=2.0).w_connect == 2.0
 
 
 def test_rate_span_and_robust_settings_are_checked():
