@@ -233,7 +233,8 @@ class DesignConfig:
         if self.space not in SPACE_CHOICES:
             raise DesignError(f"space must be one of {SPACE_CHOICES}, got {self.space!r}")
         presets = [preset_values(self.preset, self.space)] if self.preset is not None else []
-        analytic = ANALYTIC_DEFAULTS.get(self.space, {}) if _parse_analytic(self.target) is not None else {}
+        is_analytic = _parse_analytic(self.target) is not None
+        analytic = ANALYTIC_DEFAULTS.get(self.space, {}) if is_analytic else {}
         space_defaults = {**SPACE_DEFAULTS.get(self.space, {}), **analytic}
         space_defaults.pop("robust_eta", None)  # resolved below, once w_rate is known
         for values in presets + [space_defaults, {"w_fab": 0.0, "w_connect": W_CONNECT}]:
@@ -247,7 +248,7 @@ class DesignConfig:
             raise DesignError(f"height_fraction must be in (0, 1], got {self.height_fraction}")
         IcoConfig(self.layers, self.ico_coarsen, self.stiffness_law)  # checks the ICO settings
         if self.w_rate is None:
-            object.__setattr__(self, "w_rate", ANALYTIC_W_RATE if _parse_analytic(self.target) else 0.0)
+            object.__setattr__(self, "w_rate", ANALYTIC_W_RATE if is_analytic else 0.0)
         if self.w_rate < 0 or not 0 < self.rate_window_vox <= 64:
             raise DesignError(f"w_rate must be >= 0 and rate_window_vox in (0, 64]; got {self.w_rate}, "
                               f"{self.rate_window_vox}")
