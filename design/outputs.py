@@ -75,6 +75,16 @@ def _ico_summary(objective: DesignObjective, rho: np.ndarray, rows: np.ndarray, 
             "fab_time_share": fab_seconds / seconds if seconds > 0 else None}
 
 
+def enclosed_voids_text(summary: dict) -> str:
+    """The enclosed-void fact of a run's summary as a phrase ("no enclosed voids", "2 enclosed voids, 12.5 mm^3")."""
+    count = summary.get("enclosed_voids")
+    if count is None:  # a summary written before the fact was recorded
+        return "enclosed voids not assessed"
+    if count == 0:
+        return "no enclosed voids"
+    return f"{count} enclosed void{'s' if count > 1 else ''}, {summary['enclosed_void_mm3']:.4g} mm^3"
+
+
 def solid_release(solid: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], total_time_mm: float,
                   dtau_mm: float) -> np.ndarray:
     """Released volume of a full (unfolded) binary solid, simulated on its reduced grid, mm^3 per tau sample."""
@@ -154,6 +164,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         "volume_mm3": facts.volume_mm3,
         "print_mass_g": facts.mass_g,
         "min_channel_mm": facts.min_channel_mm,
+        "enclosed_voids": facts.enclosed_voids,
+        "enclosed_void_mm3": facts.enclosed_void_mm3,
         "overhang_fraction": facts.overhang_fraction,
         "max_overhang_run_mm": facts.max_overhang_run_mm,
         "preset": config.preset,

@@ -1,9 +1,12 @@
-"""Printability facts of a designed solid: print mass, narrowest open channel, overhangs, slicer profile.
+"""Printability facts of a designed solid: print mass, narrowest open channel, enclosed voids,
+overhangs, slicer profile.
 
 The paper prints with AquaSys 120 on a Prusa i3 MK3s (section 4.1): measured print density
 1.32 g/cm^3, 100% concentric infill, 0.1 mm layers, 0.2 mm lines, 245/85 C. Its one large
 measured mismatch (Fig. 10) came from narrow internal channels that clogged as the material
-swelled, hence the channel check. Overhangs are measured along the build direction +z (array
+swelled, hence the channel check. An enclosed void traps air (the dose form may float) and, in
+the model of eqs. (5)-(7), opens at once when its wall dissolves, a jump in the release rate.
+Overhangs are measured along the build direction +z (array
 axis 2, z = 0 on the build plate), the one the ICO space designs for (section 3.6).
 """
 from __future__ import annotations
@@ -34,6 +37,10 @@ class Printability:
     min_channel_mm : float or None
         Width of the narrowest passage leading from the outside into a wider void region;
         None when there is none narrower than the search limit.
+    enclosed_voids : int
+        Void regions the medium cannot reach from outside (`enclosed_voids`).
+    enclosed_void_mm3 : float
+        Their total volume, mm^3.
     overhang_fraction : float
         Share of solid voxels with nothing below them (`overhangs`).
     max_overhang_run_mm : float
@@ -44,6 +51,8 @@ class Printability:
     volume_mm3: float
     mass_g: float
     min_channel_mm: float | None
+    enclosed_voids: int
+    enclosed_void_mm3: float
     overhang_fraction: float
     max_overhang_run_mm: float
     warnings: tuple[str, ...]
@@ -52,6 +61,18 @@ class Printability:
 def print_mass_g(volume_mm3: float, density_g_per_cm3: float = PRINT_DENSITY_G_PER_CM3) -> float:
     """Mass of a print of the given solid volume, g (1 cm^3 = 1000 mm^3)."""
     return float(volume_mm3) * density_g_per_cm3 / 1000.0
+
+
+def enclosed_voids(solid: np.ndarray) -> tuple[int, int]:
+    """``(count, voxels)`` of the void regions of a voxel solid not connected to the grid's border.
+
+    Void is connected 6-wise, as water flows; the grid's border is open medium.
+    """
+    void = np.pad(~np.asarray(solid, bool), 1, constant_values=True)
+    labels, count = ndimage.label(void)
+    enclosed = labels[1:-1, 1:-1, 1:-1] != labels[0, 0, 0]
+    enclosed &= labels[1:-1, 1:-1, 1:-1] > 0
+    return count - 1, int(np.count_nonzero(enclosed))
 
 
 def narrowest_channel_mm(solid: np.ndarray, dx_mm: float, max_width_mm: float) -> float | None:
@@ -160,7 +181,7 @@ def overhang_stats(solid: np.ndarray, dx_mm: float) -> tuple[float, float]:
 
 def assess(solid: np.ndarray, dx_mm: float, *, warn_channel_mm: float = 1.0,
            density_g_per_cm3: float = PRINT_DENSITY_G_PER_CM3) -> Printability:
-    """Print mass and narrowest channel of a voxel solid, with warnings.
+    """Print mass, narrowest channel, enclosed voids and overhangs of a voxel solid, with warnings.
 
     Parameters
     ----------
@@ -179,9 +200,14 @@ def assess(solid: np.ndarray, dx_mm: float, *, warn_channel_mm: float = 1.0,
     if channel is not None and channel < warn_channel_mm:
         warnings.append(f"narrowest open channel is {channel:.2f} mm, below {warn_channel_mm:g} mm: it may "
                         f"clog as the material swells (paper Fig. 10)")
+    voids, void_voxels = enclosed_voids(solid)
+    void_mm3 = void_voxels * dx_mm ** 3
+    if voids:
+        warnings.append(f"the solid encloses {voids} void(s) of {void_mm3:.4g} mm^3 in all: they trap air, and "
+                        f"each opens at once when its wall dissolves (a jump in the release rate)")
     fraction, run_mm = overhang_stats(solid, dx_mm)
-    return Printability(volume, print_mass_g(volume, density_g_per_cm3), channel, fraction, run_mm,
-                        tuple(warnings))
+    return Printability(volume, print_mass_g(volume, density_g_per_cm3), channel, voids, void_mm3, fraction,
+                        run_mm, tuple(warnings))
 
 
 PRUSA_SETTINGS: dict[str, str] = {

@@ -120,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from analysis import BenchCalibration
+    from design.outputs import enclosed_voids_text
     from design.problem import DesignConfig
     from labapp.simcal import load_simcal
     from labapp import jobs
@@ -166,7 +167,8 @@ def run(args: argparse.Namespace) -> int:
     dev = {k: "-" if v is None else f"{v:.2%}" for k, v in s["rate_dev_mid80"].items()}
     print(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid {dev['binary']}")
     print(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
-          f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}")
+          f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}, "
+          f"{enclosed_voids_text(s)}")
     print(f"overhangs along +z: {s['overhang_fraction']:.1%} of the solid, longest run "
           f"{s['max_overhang_run_mm']:.2f} mm" + (f"; preset {s['preset']}" if s.get("preset") else ""))
     if s.get("ico"):

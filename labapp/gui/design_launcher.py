@@ -13,6 +13,7 @@ import pyqtgraph as pg
 from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, QHBoxLayout, QLabel, QLineEdit, QPushButton,
                                QSpinBox, QVBoxLayout, QWidget)
 
+from design.outputs import enclosed_voids_text
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.sweep_panel import SweepPanel
 from labapp.simcal import SimCalFile, load_simcal
@@ -210,7 +211,7 @@ class DesignLauncher(QWidget):
         summary = result.outputs.summary
         text = (f"design {result.status} after {result.iterations} evaluations in {result.out_dir}. Overhangs "
                 f"along +z: {summary['overhang_fraction']:.1%} of the solid, longest run "
-                f"{summary['max_overhang_run_mm']:.2f} mm.")
+                f"{summary['max_overhang_run_mm']:.2f} mm; {enclosed_voids_text(summary)}.")
         if physical is not None:
             rows = read_curves(result.out_dir / "curves_physical.csv")
             hours = [t / 3600.0 for t in rows["t_s"]]

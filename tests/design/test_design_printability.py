@@ -1,9 +1,9 @@
-"""Print mass, narrowest channel and slicer profile."""
+"""Print mass, narrowest channel, enclosed voids and slicer profile."""
 import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.printability import assess, narrowest_channel_mm, overhang_stats, overhangs, print_mass_g, prusa_profile
+from design.printability import assess, enclosed_voids, narrowest_channel_mm, overhang_stats, overhangs, print_mass_g, prusa_profile
 
 
 def _hollow_ball(hole_vox: int, n: int = 40) -> np.ndarray:
@@ -32,6 +32,35 @@ def test_solid_ball_and_sealed_cavity_have_no_open_channel():
     r = np.sqrt(x ** 2 + y ** 2 + z ** 2)
     assert narrowest_channel_mm(r < 12, 0.1, 2.0) is None
     assert narrowest_channel_mm((r < 12) & (r > 5), 0.1, 2.0) is None
+
+
+def test_enclosed_voids_are_counted_and_measured():
+    z, y, x = np.mgrid[:30, :30, :30] - 14.5
+    r = np.sqrt(x ** 2 + y ** 2 + z ** 2)
+    shell = (r < 12) & (r > 5)
+    cavity = int(np.count_nonzero(r <= 5))
+    assert enclosed_voids(r < 12) == (0, 0)
+    assert enclosed_voids(shell) == (1, cavity)
+    # a second cavity, and a hole that opens the first: one left
+    small = (np.abs(x - 8.5) <= 1) & (np.abs(y) <= 1) & (np.abs(z) <= 1)  # inside the shell's wall
+    two = shell & ~small
+    assert enclosed_voids(two) == (2, cavity + int(np.count_nonzero(small)))
+    opened = two & ~((np.abs(x) < 2) & (np.abs(y) < 2) & (z > 0))
+    assert enclosed_voids(opened) == (1, int(np.count_nonzero(small)))
+    # void on the grid's border is open medium, even where the solid touches the border elsewhere
+    slab = np.zeros((10, 10, 10), bool)
+    slab[:, :, 3:7] = True
+    assert enclosed_voids(slab) == (0, 0)
+
+
+def test_assess_reports_and_warns_of_enclosed_voids():
+    z, y, x = np.mgrid[:30, :30, :30] - 14.5
+    r = np.sqrt(x ** 2 + y ** 2 + z ** 2)
+    report = assess((r < 12) & (r > 5), 0.1)
+    assert report.enclosed_voids == 1
+    assert report.enclosed_void_mm3 == pytest.approx(np.count_nonzero(r <= 5) * 1e-3)
+    assert any("encloses 1 void" in w and "trap air" in w for w in report.warnings)
+    assert assess(_hollow_ball(4), 0.1).enclosed_voids == 0
 
 
 def test_assess_warns_below_threshold():
@@ -77,3 +106,10 @@ def test_supports_follow_the_design_space():
     on = dict(line.split(" = ") for line in prusa_profile(supports=True).splitlines() if not line.startswith("#"))
     off = dict(line.split(" = ") for line in prusa_profile().splitlines() if not line.startswith("#"))
     assert on["support_material"] == "1" and off["support_material"] == "0"
+
+
+def test_enclosed_voids_phrase_reads_the_summary():
+    from design.outputs import enclosed_voids_text
+    assert enclosed_voids_text({"enclosed_voids": 0, "enclosed_void_mm3": 0.0}) == "no enclosed voids"
+    assert enclosed_voids_text({"enclosed_voids": 2, "enclosed_void_mm3": 12.5}) == "2 enclosed voids, 12.5 mm^3"
+    assert enclosed_voids_text({"pieces": 1}) == "enclosed voids not assessed"
