@@ -39,7 +39,7 @@ def summary_row(folder: Path) -> dict:
     except (OSError, ValueError):
         return {}
     row = {key: s.get(key) for key in ("status", "rel_rmse_density", "rel_rmse_binary", "pieces", "min_channel_mm",
-                                       "print_mass_g", "iterations", "seconds", "overhang_fraction",
+                                       "enclosed_void_mm3", "print_mass_g", "iterations", "seconds", "overhang_fraction",
                                        "rel_rmse_physical")}
     row["warn_channel_mm"] = s.get("config", {}).get("warn_channel_mm")
     curves = _curves(Path(folder))

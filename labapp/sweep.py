@@ -41,7 +41,7 @@ RUNS, FAILED, LOCKS = "runs", "failed", ".locks"
 STOP_POLL_S = 1.0
 """How often a running design asks the scheduler whether the sweep was stopped, s."""
 TABLE_COLUMNS = ("name", "status", "error", "rel_rmse_density", "rel_rmse_binary", "rmse_mm3", "rel_rmse_physical",
-                 "pieces", "overhang_fraction", "min_channel_mm", "warn_channel_mm", "print_mass_g", "iterations",
+                 "pieces", "overhang_fraction", "min_channel_mm", "enclosed_void_mm3", "warn_channel_mm", "print_mass_g", "iterations",
                  "seconds", "folder")
 """Columns of sweep.csv; the swept settings go between ``name`` and ``status``."""
 

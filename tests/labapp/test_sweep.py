@@ -115,6 +115,7 @@ def test_serial_sweep_records_failures_and_reruns_skip_done(tmp_path):
         table = list(csv.DictReader(fh))
     assert [r["name"] for r in table] == ["radius_vox=2", "radius_vox=32"]
     assert table[0]["iterations"] == "6" and float(table[0]["rmse_mm3"]) > 0 and table[1]["status"] == "failed"
+    assert float(table[0]["enclosed_void_mm3"]) >= 0 and table[1]["enclosed_void_mm3"] == ""
     done = out / "runs" / "radius_vox=2"
     assert folder_state(done) == "done"
     stamp = (done / "summary.json").stat().st_mtime_ns
