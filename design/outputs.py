@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from design.errors import DesignError
 from design.extract import centred_iou, count_pieces, density_mesh, mass_preserving_level, revoxelize
 from design.forward import simulate
 from design.objective import DesignObjective, rel_rmse
@@ -49,11 +50,15 @@ def _csv(columns: tuple[str, ...], rows: np.ndarray) -> str:
 def _rate_dev(target, curve_mm3: np.ndarray, vs_target: bool) -> float | None:
     """`rate_deviation` of an achieved curve: over its own middle 80% against its own mean rate, or
     (``vs_target``) over the target's middle 80% against the target's mean rate there. None when the
-    curve does not rise (a grey design without a solid)."""
+    curve does not rise (a grey design without a solid) or rises from 10% to 90% within one tau sample
+    (no middle 80% to measure)."""
     if not curve_mm3[-1] > curve_mm3[0]:
         return None
     if not vs_target:
-        return rate_deviation(target.tau_mm, curve_mm3)
+        try:
+            return rate_deviation(target.tau_mm, curve_mm3)
+        except DesignError:  # the only error left for a rising curve on the target's grid: zero duration
+            return None
     tau, c = target.tau_mm, target.released_mm3
     lo, hi = np.interp([MID_LO * c[-1], MID_HI * c[-1]], c, tau)
     ref = (MID_HI - MID_LO) * c[-1] / (hi - lo)
@@ -117,7 +122,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     density_curve = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
                              dtau_mm=dtau_mm).released_mm3
     rho_full = space.unfold(rho)
-    warnings: list[str] = []
+    warnings: list[str] = list(problem.warnings)
     level = mass_preserving_level(rho_full)
     if np.any(rho_full >= level):
         mesh = density_mesh(rho_full, space.dx_mm, problem.origin_mm, level=level)

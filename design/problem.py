@@ -15,6 +15,7 @@ import numpy as np
 
 from design.connectivity import TAIL_SLOPE
 from design.errors import DesignError
+from design.extract import count_pieces
 from design.ico import DEFAULT_COARSEN, DEFAULT_LAYERS, IcoConfig
 from design.lbfgs import LINE_SEARCHES
 from design.forward import total_time
@@ -329,6 +330,9 @@ class Problem:
         Smoothing radius r on this grid, voxels (`DesignConfig.radius_vox` or its ``radius_mm``).
     start_region : ndarray of bool or None
         Where the start design holds material (`start_region`); None = the whole domain.
+    warnings : tuple of str
+        What is known about the source before the run (`source_warnings`); logged when the problem is
+        prepared and kept in the run's summary.
     """
 
     space: DesignSpace
@@ -340,6 +344,18 @@ class Problem:
     source_solid: np.ndarray | None
     radius_vox: float
     start_region: np.ndarray | None = None
+    warnings: tuple[str, ...] = ()
+
+
+def source_warnings(source_solid: np.ndarray | None, allow_pieces: bool) -> tuple[str, ...]:
+    """Warnings about a voxelised source: several separate pieces where the design must be one."""
+    if source_solid is None or allow_pieces:
+        return ()
+    pieces = count_pieces(source_solid)
+    if pieces < 2:
+        return ()
+    return (f"the source is {pieces} separate pieces and the design is held to one piece, so it cannot take "
+            "the source's own shape; allow pieces (--allow-pieces) to let it",)
 
 
 def _parse_analytic(spec: str) -> tuple[float, float, float] | None:
@@ -529,5 +545,8 @@ def prepare(config: DesignConfig) -> Problem:
              t_total, feasibility.text())
     half_mm = 0.5 * (hi - lo) if mesh is not None else None
     radius_vox = _radius_vox(config, dx)
+    warnings = source_warnings(source_solid, config.allow_pieces)
+    for warning in warnings:
+        log.warning("%s", warning)
     return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, radius_vox,
-                   start_region(space, target, half_mm, radius_vox * dx))
+                   start_region(space, target, half_mm, radius_vox * dx), warnings)

@@ -221,6 +221,7 @@ class DesignLauncher(QWidget):
             text += (f" Predicted release within {physical['rel_rmse_physical']:.2%} RMS of the target; print mass "
                      f"{physical['print_mass_g']:.3f} g; narrowest channel "
                      f"{'none' if channel is None else format(channel, '.2f') + ' mm'}.")
+        text += "".join(f" Warning: {w}." for w in summary["warnings"])
         self.status.setText(text)
 
     def _failed(self, message: str) -> None:

@@ -1,4 +1,4 @@
-"""The design launcher offers the ico space and reports the overhang figure (headless)."""
+"""The design launcher offers the ico space and reports the overhang figure and the run's warnings (headless)."""
 import numpy as np
 import pytest
 
@@ -23,3 +23,20 @@ def test_launcher_runs_an_ico_design_and_shows_overhangs(qtbot, tmp_path):
     qtbot.waitUntil(lambda: launcher.start_button.isEnabled() and "evaluations" in launcher.status.text(),
                     timeout=120_000)
     assert "Overhangs along +z" in launcher.status.text() and "longest run" in launcher.status.text()
+
+
+def test_launcher_shows_the_run_s_warnings(qtbot, tmp_path):
+    import trimesh
+    boxes = [trimesh.creation.box(extents=(4.0, 4.0, 4.0)).apply_translation([x, 0.0, 0.0]) for x in (-4.0, 4.0)]
+    source = tmp_path / "two_boxes.stl"
+    trimesh.util.concatenate(boxes).export(source)
+    launcher = DesignLauncher(tmp_path)
+    qtbot.addWidget(launcher)
+    launcher.source.setText(str(source))
+    launcher.space.setCurrentText("nfc")
+    launcher.resolution.setValue(16)
+    launcher.max_iter.setValue(2)
+    launcher.start()
+    qtbot.waitUntil(lambda: launcher.start_button.isEnabled() and "evaluations" in launcher.status.text(),
+                    timeout=120_000)
+    assert "Warning: the source is 2 separate pieces" in launcher.status.text()
