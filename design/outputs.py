@@ -9,7 +9,9 @@ from __future__ import annotations
 import json
 import logging
 import os
+import platform
 from dataclasses import asdict, dataclass
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +47,22 @@ def _write_text(path: Path, text: str) -> None:
 def _csv(columns: tuple[str, ...], rows: np.ndarray) -> str:
     body = "\n".join(",".join(f"{v:.10g}" for v in row) for row in rows)
     return ",".join(columns) + "\n" + body + ("\n" if len(rows) else "")
+
+
+SOFTWARE_PACKAGES = ("shape-from-release", "numpy", "scipy", "scikit-fmm", "nlopt", "numba")
+"""Packages whose versions a summary records: the design's figures move with the numerical libraries'
+build (docs/results.md, "Best of three starts, and the figures on this build")."""
+
+
+def software_versions() -> dict[str, str | None]:
+    """Python's and `SOFTWARE_PACKAGES`' versions (None for a package that is not installed)."""
+    versions: dict[str, str | None] = {"python": platform.python_version()}
+    for name in SOFTWARE_PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return versions
 
 
 def _rate_dev(target, curve_mm3: np.ndarray, vs_target: bool) -> float | None:
@@ -184,6 +202,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         "reduced_shape": list(space.grid_shape),
         "feasible": problem.feasibility.feasible,
         "warnings": warnings,
+        "software": software_versions(),
         "config": asdict(config),
     }
     for w in warnings:

@@ -23,6 +23,7 @@ def test_sphere_run_writes_every_output_and_fits(tmp_path):
                 "pieces", "print_mass_g", "min_channel_mm", "enclosed_voids", "enclosed_void_mm3"):
         assert key in summary
     assert summary["enclosed_voids"] == 0 and summary["enclosed_void_mm3"] == 0.0  # a sphere's design is solid
+    assert summary["software"]["numpy"] == np.__version__ and summary["software"]["shape-from-release"]
     assert (out / "curves.csv").read_text().splitlines()[0] == "tau_mm,target_mm3,density_mm3,binary_mm3"
     history = np.loadtxt(out / "history.csv", delimiter=",", skiprows=1)
     assert result.iterations == len(history) <= 80
