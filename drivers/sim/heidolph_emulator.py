@@ -312,9 +312,9 @@ class HeidolphEmulator:
         return buffer
 
     def _client_left(self) -> None:
-        self._client = False
         termios.tcflush(self._master, termios.TCIOFLUSH)
         termios.tcsetattr(self._master, termios.TCSANOW, self._saved_attrs)
+        self._client = False  # only now: a client that sees the port free may reopen it at once
         log.debug("emulator: client left, terminal settings restored")
 
     def _handle(self, line: str) -> None:
