@@ -38,3 +38,14 @@ def _qt_garbage_in_the_gui_thread(request):
     finally:
         gc.enable()
         gc.collect()
+
+
+@pytest.fixture
+def two_boxes_stl(tmp_path):
+    """An STL of two separate 4 mm cubes 4 mm apart: a source that is itself two pieces."""
+    import trimesh
+
+    boxes = [trimesh.creation.box(extents=(4.0, 4.0, 4.0)).apply_translation([x, 0.0, 0.0]) for x in (-4.0, 4.0)]
+    path = tmp_path / "two_boxes.stl"
+    trimesh.util.concatenate(boxes).export(path)
+    return path

@@ -111,14 +111,8 @@ def test_connectivity_settings_must_not_be_negative(field, value):
         DesignConfig(target="sphere", **{field: value})
 
 
-def _two_boxes(path):
-    boxes = [trimesh.creation.box(extents=(4.0, 4.0, 4.0)).apply_translation([x, 0.0, 0.0]) for x in (-4.0, 4.0)]
-    trimesh.util.concatenate(boxes).export(path)
-    return path
-
-
-def test_a_source_in_separate_pieces_is_warned_about_unless_pieces_are_allowed(tmp_path, caplog):
-    path = _two_boxes(tmp_path / "two_boxes.stl")
+def test_a_source_in_separate_pieces_is_warned_about_unless_pieces_are_allowed(two_boxes_stl, caplog):
+    path = two_boxes_stl
     with caplog.at_level("WARNING", logger="design.problem"):
         problem = prepare(DesignConfig(target=str(path), resolution=16))
     assert len(problem.warnings) == 1 and "the source is 2 separate pieces" in problem.warnings[0]

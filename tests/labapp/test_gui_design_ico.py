@@ -1,7 +1,6 @@
 """The design launcher offers the ico space and reports the overhang figure and the run's warnings (headless)."""
 import numpy as np
 import pytest
-import trimesh
 
 pytest.importorskip("pytestqt")
 
@@ -32,9 +31,6 @@ def test_launcher_runs_an_ico_design_and_shows_overhangs(qtbot, tmp_path):
     assert "Overhangs along +z" in launcher.status.text() and "longest run" in launcher.status.text()
 
 
-def test_launcher_shows_the_run_s_warnings(qtbot, tmp_path):
-    boxes = [trimesh.creation.box(extents=(4.0, 4.0, 4.0)).apply_translation([x, 0.0, 0.0]) for x in (-4.0, 4.0)]
-    source = tmp_path / "two_boxes.stl"
-    trimesh.util.concatenate(boxes).export(source)
-    launcher = _design(qtbot, tmp_path, source, "nfc", 2)
+def test_launcher_shows_the_run_s_warnings(qtbot, tmp_path, two_boxes_stl):
+    launcher = _design(qtbot, tmp_path, two_boxes_stl, "nfc", 2)
     assert "Warning: the source is 2 separate pieces" in launcher.status.text()
