@@ -24,14 +24,15 @@ def _rate(tau: np.ndarray, c: np.ndarray, points: int = 100) -> tuple[np.ndarray
 
 
 def report_figure(tau_mm: np.ndarray, target_mm3: np.ndarray, density_mm3: np.ndarray, binary_mm3: np.ndarray,
-                  rho_full: np.ndarray, solid_full: np.ndarray, title: str) -> Figure:
+                  fine_mm3: np.ndarray, rho_full: np.ndarray, solid_full: np.ndarray, title: str) -> Figure:
     """Build the report figure.
 
     Parameters
     ----------
     tau_mm : (K,) ndarray of float, mm
-    target_mm3, density_mm3, binary_mm3 : (K,) ndarrays of float, mm^3
-        Target, optimised density and re-voxelised binary solid cumulative release.
+    target_mm3, density_mm3, binary_mm3, fine_mm3 : (K,) ndarrays of float, mm^3
+        Target, optimised density, re-voxelised binary solid and the binary solid on a finer grid
+        (`design.outputs.fine_release`) cumulative release.
     rho_full : (D, H, W) ndarray of float
         Full optimised density.
     solid_full : (D, H, W) ndarray of bool
@@ -44,7 +45,7 @@ def report_figure(tau_mm: np.ndarray, target_mm3: np.ndarray, density_mm3: np.nd
     ax_c = fig.add_subplot(grid[0, 0:2])
     ax_r = fig.add_subplot(grid[0, 2:4])
     styles = (("target", target_mm3, "-", "tab:green"), ("density", density_mm3, "--", "tab:blue"),
-              ("binary solid", binary_mm3, ":", "tab:red"))
+              ("binary solid", binary_mm3, ":", "tab:red"), ("binary solid, finer grid", fine_mm3, "-.", "tab:gray"))
     # a release that ends early (zero-order targets) is shown zoomed, with rates over 1/100 of the view
     t_end = float(tau_mm[np.argmax(target_mm3 >= 0.999 * target_mm3[-1])])
     view = min(float(tau_mm[-1]), 1.5 * t_end) if t_end < 0.5 * tau_mm[-1] else float(tau_mm[-1])

@@ -163,9 +163,11 @@ def run(args: argparse.Namespace) -> int:
     s = physical or result.outputs.summary
     print(f"{result.status} after {result.iterations} evaluations ({s['seconds']:.1f} s, "
           f"{s['seconds_per_iteration'] or 0:.3f} s each)")
-    print(f"rel. RMSE: density {s['rel_rmse_density']:.3%}, binary solid {s['rel_rmse_binary']:.3%}")
+    print(f"rel. RMSE: density {s['rel_rmse_density']:.3%}, binary solid {s['rel_rmse_binary']:.3%}, "
+          f"binary solid on a {s['fine_factor']}x finer grid {s['rel_rmse_fine']:.3%}")
     dev = {k: "-" if v is None else f"{v:.2%}" for k, v in s["rate_dev_mid80"].items()}
-    print(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid {dev['binary']}")
+    print(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid {dev['binary']}, "
+          f"on the finer grid {dev['fine']}")
     print(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
           f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}, "
           f"{enclosed_voids_text(s)}")

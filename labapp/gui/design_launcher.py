@@ -27,7 +27,7 @@ NO_SIMCAL = ("no active simulation calibration: a measured run cannot become a t
 
 
 def read_curves(path: Path) -> dict[str, list[float]]:
-    """Columns of a design's ``curves.csv`` (``tau_mm,target_mm3,density_mm3,binary_mm3``)."""
+    """Columns of a design's ``curves.csv`` (`design.outputs.CURVE_COLUMNS`)."""
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
     return {key: [float(r[key]) for r in rows] for key in (rows[0] if rows else {})}
@@ -209,7 +209,9 @@ class DesignLauncher(QWidget):
         self.achieved_curve.setData(curves["tau_mm"], curves["binary_mm3"])
         self.save_button.setEnabled((result.out_dir / "design.stl").is_file())
         summary = result.outputs.summary
-        text = (f"design {result.status} after {result.iterations} evaluations in {result.out_dir}. Overhangs "
+        text = (f"design {result.status} after {result.iterations} evaluations in {result.out_dir}. Binary solid "
+                f"within {summary['rel_rmse_binary']:.2%} RMS of the target ({summary['rel_rmse_fine']:.2%} on a "
+                f"{summary['fine_factor']}x finer grid). Overhangs "
                 f"along +z: {summary['overhang_fraction']:.1%} of the solid, longest run "
                 f"{summary['max_overhang_run_mm']:.2f} mm; {enclosed_voids_text(summary)}.")
         if physical is not None:

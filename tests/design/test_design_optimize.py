@@ -24,7 +24,8 @@ def test_sphere_run_writes_every_output_and_fits(tmp_path):
         assert key in summary
     assert summary["enclosed_voids"] == 0 and summary["enclosed_void_mm3"] == 0.0  # a sphere's design is solid
     assert summary["software"]["numpy"] == np.__version__ and summary["software"]["shape-from-release"]
-    assert (out / "curves.csv").read_text().splitlines()[0] == "tau_mm,target_mm3,density_mm3,binary_mm3"
+    assert (out / "curves.csv").read_text().splitlines()[0] == "tau_mm,target_mm3,density_mm3,binary_mm3,fine_mm3"
+    assert summary["rel_rmse_fine"] < 0.05 and summary["fine_factor"] == 2
     history = np.loadtxt(out / "history.csv", delimiter=",", skiprows=1)
     assert result.iterations == len(history) <= 80
     assert history[-1, 1] < history[0, 1] / 5  # J falls well below the uniform start

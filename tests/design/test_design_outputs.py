@@ -1,0 +1,35 @@
+"""The printed solid's release on a grid finer than the design's."""
+from types import SimpleNamespace
+
+import numpy as np
+import trimesh
+
+from design.extract import revoxelize
+from design.objective import rel_rmse
+from design.outputs import FINE_FACTOR, fine_release, solid_release
+
+
+def test_fine_release_of_a_turned_plate_is_closer_to_its_exact_release():
+    """The printed mesh on voxels half the design's size: a 6 x 5 x 1.3 mm plate turned by 17 degrees
+    on a 0.25 mm grid has the exact release abc - (a - 2t)(b - 2t)(c - 2t) (uniform inward motion).
+    The design grid misses it by ~15% RMS (the 1.3 mm side is five voxels); halving the voxel must cut
+    that error by more than half (voxel volume errors fall with dx), and it measures ~2.6%."""
+    a, b, c = 6.0, 5.0, 1.3
+    mesh = trimesh.creation.box(extents=(a, b, c))
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(np.radians(17.0), (0.0, 0.0, 1.0)))
+    mesh.apply_translation((5.0, 5.0, 5.0))
+    dx, shape, origin, mirror = 0.25, (40, 40, 40), np.zeros(3), (True, True, True)
+    problem = SimpleNamespace(full_shape=shape, origin_mm=origin, space=SimpleNamespace(dx_mm=dx, mirror=mirror))
+    tau = np.linspace(0.0, 1.0, 1001)
+    exact = a * b * c - np.prod([np.clip(s - 2.0 * tau, 0.0, None) for s in (a, b, c)], axis=0)
+    design_grid = solid_release(revoxelize(mesh, dx, origin, shape), dx, mirror, 1.0, 1e-3)
+    fine = fine_release(mesh, problem, 1.0, 1e-3)
+    assert FINE_FACTOR == 2
+    assert rel_rmse(fine, exact) < 0.5 * rel_rmse(design_grid, exact)
+    assert rel_rmse(fine, exact) < 0.04
+
+
+def test_fine_release_without_a_solid_is_zero():
+    problem = SimpleNamespace(full_shape=(8, 8, 8), origin_mm=np.zeros(3),
+                              space=SimpleNamespace(dx_mm=0.5, mirror=(True, True, True)))
+    assert not np.any(fine_release(None, problem, 2.0, 0.01))
