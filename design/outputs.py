@@ -125,14 +125,16 @@ def solid_release(solid: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], tot
                     dtau_mm=dtau_mm).released_mm3
 
 
-def fine_release(mesh, problem, total_time_mm: float, dtau_mm: float) -> np.ndarray:
-    """Released volume of the printed mesh on a grid `FINE_FACTOR` times finer over the design domain,
-    mm^3 per tau sample (zeros when no solid was extracted, ``mesh`` None)."""
-    shape = tuple(FINE_FACTOR * n for n in problem.full_shape)
-    dx_mm = problem.space.dx_mm / FINE_FACTOR
-    solid = (revoxelize(mesh, dx_mm, problem.origin_mm, shape) if mesh is not None
-             else np.zeros(shape, dtype=bool))
-    return solid_release(solid, dx_mm, problem.space.mirror, total_time_mm, dtau_mm)
+def fine_release(mesh, dx_mm: float, origin_mm: np.ndarray, full_shape: tuple[int, int, int],
+                 mirror: tuple[bool, ...], total_time_mm: float, dtau_mm: float,
+                 factor: int = FINE_FACTOR) -> np.ndarray:
+    """Released volume of a printed mesh re-voxelised on voxels `factor` times smaller than the design
+    grid's (same domain: `dx_mm`, `origin_mm`, `full_shape`, `mirror`), mm^3 per tau sample; zeros
+    for ``mesh`` None (no solid extracted)."""
+    shape = tuple(factor * n for n in full_shape)
+    fine_dx = dx_mm / factor
+    solid = (revoxelize(mesh, fine_dx, origin_mm, shape) if mesh is not None else np.zeros(shape, dtype=bool))
+    return solid_release(solid, fine_dx, mirror, total_time_mm, dtau_mm)
 
 
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
@@ -173,7 +175,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         warnings.append(f"no density reaches the extraction level {level:.3f} yet: no solid extracted "
                         "(design.stl not written)")
     binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm)
-    fine_curve = fine_release(mesh, problem, target.total_time_mm, dtau_mm)
+    fine_curve = fine_release(mesh, space.dx_mm, problem.origin_mm, problem.full_shape, space.mirror,
+                              target.total_time_mm, dtau_mm)
     pieces = count_pieces(solid)
     if pieces > 1:
         warnings.append(f"the solid has {pieces} separate pieces")

@@ -1,6 +1,4 @@
 """The printed solid's release on a grid finer than the design's."""
-from types import SimpleNamespace
-
 import numpy as np
 import trimesh
 
@@ -19,17 +17,14 @@ def test_fine_release_of_a_turned_plate_is_closer_to_its_exact_release():
     mesh.apply_transform(trimesh.transformations.rotation_matrix(np.radians(17.0), (0.0, 0.0, 1.0)))
     mesh.apply_translation((5.0, 5.0, 5.0))
     dx, shape, origin, mirror = 0.25, (40, 40, 40), np.zeros(3), (True, True, True)
-    problem = SimpleNamespace(full_shape=shape, origin_mm=origin, space=SimpleNamespace(dx_mm=dx, mirror=mirror))
     tau = np.linspace(0.0, 1.0, 1001)
     exact = a * b * c - np.prod([np.clip(s - 2.0 * tau, 0.0, None) for s in (a, b, c)], axis=0)
     design_grid = solid_release(revoxelize(mesh, dx, origin, shape), dx, mirror, 1.0, 1e-3)
-    fine = fine_release(mesh, problem, 1.0, 1e-3)
+    fine = fine_release(mesh, dx, origin, shape, mirror, 1.0, 1e-3)
     assert FINE_FACTOR == 2
     assert rel_rmse(fine, exact) < 0.5 * rel_rmse(design_grid, exact)
     assert rel_rmse(fine, exact) < 0.04
 
 
 def test_fine_release_without_a_solid_is_zero():
-    problem = SimpleNamespace(full_shape=(8, 8, 8), origin_mm=np.zeros(3),
-                              space=SimpleNamespace(dx_mm=0.5, mirror=(True, True, True)))
-    assert not np.any(fine_release(None, problem, 2.0, 0.01))
+    assert not np.any(fine_release(None, 0.5, np.zeros(3), (8, 8, 8), (True, True, True), 2.0, 0.01))
