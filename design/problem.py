@@ -21,6 +21,7 @@ from design.lbfgs import LINE_SEARCHES
 from design.forward import total_time
 from design.meshio import load_mesh
 from design.presets import preset_values
+from design.rate import RATE_SPAN_MIN_VOX, middle_span_mm
 from design.shapes import SAMPLE_SHAPES, sample_shape
 from design.spaces import BUILD_AXIS, SPACE_CHOICES, DesignSpace, SpaceRequest, build_space
 from design.targets import (Feasibility, Target, check_feasibility, constant_acceleration, curve_end_mm,
@@ -331,8 +332,8 @@ class Problem:
     start_region : ndarray of bool or None
         Where the start design holds material (`start_region`); None = the whole domain.
     warnings : tuple of str
-        What is known about the source before the run (`source_warnings`); logged when the problem is
-        prepared and kept in the run's summary.
+        What is known about the source and the target before the run (`source_warnings`,
+        `rate_resolution_warnings`); logged when the problem is prepared and kept in the run's summary.
     """
 
     space: DesignSpace
@@ -356,6 +357,24 @@ def source_warnings(source_solid: np.ndarray | None, allow_pieces: bool) -> tupl
         return ()
     return (f"the source is {pieces} separate pieces and the design is held to one piece, so it cannot take "
             "the source's own shape; allow pieces (--allow-pieces) to let it",)
+
+
+def rate_resolution_warnings(target: Target, dx_mm: float, w_rate: float, resolution: int) -> tuple[str, ...]:
+    """Warnings about a rate-fitted target whose middle 80% spans too few voxels of tau to be measured.
+
+    Below `design.rate.RATE_SPAN_MIN_VOX` the grid's own error in the rate deviation reaches several
+    points; the warning names the resolution at which the span reaches it.
+    """
+    if not w_rate > 0 or not target.final_mm3 > 0:
+        return ()
+    lo, hi = middle_span_mm(target.tau_mm, np.maximum.accumulate(target.released_mm3))
+    span_vox = (hi - lo) / dx_mm
+    if span_vox >= RATE_SPAN_MIN_VOX:
+        return ()
+    needed = _even_ceil(resolution * RATE_SPAN_MIN_VOX / span_vox)
+    return (f"the target's middle 80% (10% to 90% released) spans {span_vox:.1f} voxels of tau at resolution "
+            f"{resolution}: too few to measure a release rate to better than a few points, so the design's rate "
+            f"deviation is that uncertain; at about resolution {needed} it spans {RATE_SPAN_MIN_VOX:g}",)
 
 
 def _parse_analytic(spec: str) -> tuple[float, float, float] | None:
@@ -545,7 +564,8 @@ def prepare(config: DesignConfig) -> Problem:
              t_total, feasibility.text())
     half_mm = 0.5 * (hi - lo) if mesh is not None else None
     radius_vox = _radius_vox(config, dx)
-    warnings = source_warnings(source_solid, config.allow_pieces)
+    warnings = (source_warnings(source_solid, config.allow_pieces)
+                + rate_resolution_warnings(target, dx, config.w_rate, config.resolution))
     for warning in warnings:
         log.warning("%s", warning)
     return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, radius_vox,

@@ -31,6 +31,10 @@ MID_LO, MID_HI = 0.1, 0.9
 """The middle 80% of a release: from 10% to 90% of its final mass."""
 MID_INTERVALS = 20
 """Sub-intervals the middle 80% is split into for the rate (each 4% of the 10%-90% time span)."""
+RATE_SPAN_MIN_VOX = 10.0
+"""Voxels of tau the middle 80% of a release should span for `rate_deviation` to be measured to
+about a point: a plate with an exact release (benchmarks/rate_metric_grid.py) gives an error of up to
+4.4 points where the span is about 5 voxels and up to 1.4 where it is about 10 (docs/results.md)."""
 
 
 def release_duration(tau_mm: np.ndarray, curve_mm3: np.ndarray, fraction: float = 0.999) -> float:
@@ -115,6 +119,12 @@ def rate_shape_fit(curve_mm3: np.ndarray, target_mm3: np.ndarray, dtau_mm: float
     return value, lag_rate_adjoint(g_full, lag, dtau_mm)
 
 
+def middle_span_mm(tau_mm: np.ndarray, curve_mm3: np.ndarray) -> tuple[float, float]:
+    """The tau at which a non-decreasing release first reaches 10% and 90% of its final value, mm."""
+    c = np.asarray(curve_mm3, float)
+    return tuple(float(np.interp(f * c[-1], c, tau_mm)) for f in (MID_LO, MID_HI))
+
+
 def rate_deviation(tau_mm: np.ndarray, curve_mm3: np.ndarray, *, window_from: np.ndarray | None = None,
                    reference_rate: float | None = None) -> float:
     """Largest relative deviation of a release rate from constant over the middle 80% of the release.
@@ -146,8 +156,8 @@ def rate_deviation(tau_mm: np.ndarray, curve_mm3: np.ndarray, *, window_from: np
     if tau.shape != c.shape or tau.shape != w.shape or tau.ndim != 1 or tau.size < 3 or not w[-1] > w[0]:
         raise DesignError(f"need matching 1D tau and rising release curves with >= 3 samples, got {tau.shape}, "
                           f"{c.shape}")
-    lo, hi = (float(np.interp(f * w[-1], w, tau)) if np.all(np.diff(w) >= 0) else
-              float(tau[np.argmax(w >= f * w[-1])]) for f in (MID_LO, MID_HI))
+    lo, hi = (middle_span_mm(tau, w) if np.all(np.diff(w) >= 0) else
+              (float(tau[np.argmax(w >= f * w[-1])]) for f in (MID_LO, MID_HI)))
     if not hi > lo:
         raise DesignError(f"the middle 80% of the release has zero duration ({lo} .. {hi} mm)")
     edges = np.linspace(lo, hi, MID_INTERVALS + 1)
