@@ -27,7 +27,7 @@ from design.extract import centred_iou, count_pieces, density_mesh, mass_preserv
 from design.forward import simulate
 from design.objective import DesignObjective, rel_rmse
 from design.printability import assess, prusa_profile
-from design.rate import MID_HI, MID_LO, rate_deviation
+from design.rate import MID_HI, MID_LO, middle_span_mm, rate_deviation
 from design.report import save_report
 
 log = logging.getLogger(__name__)
@@ -87,7 +87,7 @@ def _rate_dev(target, curve_mm3: np.ndarray, vs_target: bool) -> float | None:
         except DesignError:  # the only error left for a rising curve on the target's grid: zero duration
             return None
     tau, c = target.tau_mm, target.released_mm3
-    lo, hi = np.interp([MID_LO * c[-1], MID_HI * c[-1]], c, tau)
+    lo, hi = middle_span_mm(tau, c)
     ref = (MID_HI - MID_LO) * c[-1] / (hi - lo)
     return rate_deviation(tau, curve_mm3, window_from=c, reference_rate=ref)
 

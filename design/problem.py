@@ -367,7 +367,7 @@ def rate_resolution_warnings(target: Target, dx_mm: float, w_rate: float, resolu
     """
     if not w_rate > 0 or not target.final_mm3 > 0:
         return ()
-    lo, hi = middle_span_mm(target.tau_mm, np.maximum.accumulate(target.released_mm3))
+    lo, hi = middle_span_mm(target.tau_mm, target.released_mm3)
     span_vox = (hi - lo) / dx_mm
     if span_vox >= RATE_SPAN_MIN_VOX:
         return ()

@@ -120,8 +120,12 @@ def rate_shape_fit(curve_mm3: np.ndarray, target_mm3: np.ndarray, dtau_mm: float
 
 
 def middle_span_mm(tau_mm: np.ndarray, curve_mm3: np.ndarray) -> tuple[float, float]:
-    """The tau at which a non-decreasing release first reaches 10% and 90% of its final value, mm."""
-    c = np.asarray(curve_mm3, float)
+    """The tau at which a release first reaches 10% and 90% of its final value, mm.
+
+    Linear interpolation on the curve's running maximum, so a curve that dips (a measured one, or a
+    simulated one whose flat tail varies in the last bit) is read the same way as a rising one.
+    """
+    c = np.maximum.accumulate(np.asarray(curve_mm3, float))
     return tuple(float(np.interp(f * c[-1], c, tau_mm)) for f in (MID_LO, MID_HI))
 
 
@@ -156,8 +160,7 @@ def rate_deviation(tau_mm: np.ndarray, curve_mm3: np.ndarray, *, window_from: np
     if tau.shape != c.shape or tau.shape != w.shape or tau.ndim != 1 or tau.size < 3 or not w[-1] > w[0]:
         raise DesignError(f"need matching 1D tau and rising release curves with >= 3 samples, got {tau.shape}, "
                           f"{c.shape}")
-    lo, hi = (middle_span_mm(tau, w) if np.all(np.diff(w) >= 0) else
-              (float(tau[np.argmax(w >= f * w[-1])]) for f in (MID_LO, MID_HI)))
+    lo, hi = middle_span_mm(tau, w)
     if not hi > lo:
         raise DesignError(f"the middle 80% of the release has zero duration ({lo} .. {hi} mm)")
     edges = np.linspace(lo, hi, MID_INTERVALS + 1)

@@ -84,6 +84,20 @@ def test_rate_deviation_hand_computed():
         rate_deviation(tau, np.zeros_like(tau))
 
 
+def test_rate_deviation_reads_a_tail_that_varies_in_the_last_bit_like_a_flat_one():
+    """A simulated release's flat tail varies by round-off (-1e-13 mm^3 steps on ~800 mm^3); the 10%
+    and 90% times must still be interpolated, not snapped to the next sample (which moved a design's
+    figure by 0.3 points). The curve's 10% and 90% fall between samples: 0.15 and 0.85 of a rate
+    switching at 0.5, on samples 0.007 apart."""
+    tau = np.linspace(0.0, 0.7, 101)
+    c = np.minimum(np.where(tau < 0.5, tau, 0.5 + 2.0 * (tau - 0.5)), 0.6)
+    rough = c.copy()
+    rough[-20:] -= 1e-13 * (np.arange(20) % 2)
+    assert np.any(np.diff(rough) < 0)
+    assert rate_deviation(tau, rough) == rate_deviation(tau, c)
+    assert rate_deviation(tau, c, window_from=rough) == rate_deviation(tau, c)
+
+
 def test_rate_deviation_sees_a_rate_error_the_cumulative_fit_hardly_sees():
     """A 20% rate bump lasting 5% of the release: 1% cumulative error at most, 20% rate deviation."""
     tau = np.linspace(0.0, 1.0, 1001)
