@@ -84,7 +84,7 @@ def _rate_dev(target, curve_mm3: np.ndarray, vs_target: bool) -> float | None:
     if not vs_target:
         try:
             return rate_deviation(target.tau_mm, curve_mm3)
-        except DesignError:  # the only error left for a rising curve on the target's grid: zero duration
+        except DesignError:  # the only error left for a rising curve: a middle 80% within one tau sample
             return None
     tau, c = target.tau_mm, target.released_mm3
     lo, hi = middle_span_mm(tau, c)

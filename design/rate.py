@@ -152,7 +152,7 @@ def rate_deviation(tau_mm: np.ndarray, curve_mm3: np.ndarray, *, window_from: np
     Raises
     ------
     DesignError
-        If the curve never rises (no release to measure).
+        If the curve never rises, or its middle 80% lies within one tau sample (no rate to measure).
     """
     tau = np.asarray(tau_mm, float)
     c = np.asarray(curve_mm3, float)
@@ -161,8 +161,9 @@ def rate_deviation(tau_mm: np.ndarray, curve_mm3: np.ndarray, *, window_from: np
         raise DesignError(f"need matching 1D tau and rising release curves with >= 3 samples, got {tau.shape}, "
                           f"{c.shape}")
     lo, hi = middle_span_mm(tau, w)
-    if not hi > lo:
-        raise DesignError(f"the middle 80% of the release has zero duration ({lo} .. {hi} mm)")
+    if not np.any((tau > lo) & (tau < hi)):
+        raise DesignError(f"the middle 80% of the release ({lo:.6g} .. {hi:.6g} mm) lies within one tau sample: "
+                          "no rate to measure")
     edges = np.linspace(lo, hi, MID_INTERVALS + 1)
     values = np.interp(edges, tau, c)
     rates = np.diff(values) / np.diff(edges)
