@@ -20,7 +20,9 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration):
     win.show()
     try:
         win.connect_devices()                                     # connect: one preview frame and one reading
-        qtbot.waitUntil(lambda: win.engine.outcome == "complete" and not win.engine.running, timeout=60_000)
+        # the window hears of the end through a queued signal, after the engine's own state changes
+        qtbot.waitUntil(lambda: win.engine.outcome == "complete" and not win.engine.running
+                        and win.controls.start_button.isEnabled(), timeout=60_000)
         assert win.live.image.image is not None and win.devices.readouts["plate_c"].text() != "-"
 
         win.controls.calibration.setText(str(cal_path))
