@@ -38,10 +38,12 @@ def summary_row(folder: Path) -> dict:
         s = json.loads((Path(folder) / "summary.json").read_text())
     except (OSError, ValueError):
         return {}
-    row = {key: s.get(key) for key in ("status", "rel_rmse_density", "rel_rmse_binary", "pieces", "min_channel_mm",
-                                       "enclosed_void_mm3", "print_mass_g", "iterations", "seconds", "overhang_fraction",
-                                       "rel_rmse_physical")}
+    row = {key: s.get(key) for key in ("status", "rel_rmse_density", "rel_rmse_binary", "rel_rmse_fine", "pieces",
+                                       "min_channel_mm", "enclosed_void_mm3", "print_mass_g", "iterations", "seconds",
+                                       "overhang_fraction", "rel_rmse_physical")}
     row["warn_channel_mm"] = s.get("config", {}).get("warn_channel_mm")
+    for curve in ("binary", "fine"):
+        row[f"rate_dev_{curve}"] = (s.get("rate_dev_mid80") or {}).get(curve)
     curves = _curves(Path(folder))
     if curves is not None:
         row["rmse_mm3"] = float(np.sqrt(np.mean((curves["binary_mm3"] - curves["target_mm3"]) ** 2)))

@@ -40,9 +40,10 @@ DONE_STATUSES = ("converged", "max_iter", "stalled")
 RUNS, FAILED, LOCKS = "runs", "failed", ".locks"
 STOP_POLL_S = 1.0
 """How often a running design asks the scheduler whether the sweep was stopped, s."""
-TABLE_COLUMNS = ("name", "status", "error", "rel_rmse_density", "rel_rmse_binary", "rmse_mm3", "rel_rmse_physical",
-                 "pieces", "overhang_fraction", "min_channel_mm", "enclosed_void_mm3", "warn_channel_mm", "print_mass_g", "iterations",
-                 "seconds", "folder")
+TABLE_COLUMNS = ("name", "status", "error", "rel_rmse_density", "rel_rmse_binary", "rel_rmse_fine", "rmse_mm3",
+                 "rel_rmse_physical", "rate_dev_binary", "rate_dev_fine", "pieces", "overhang_fraction",
+                 "min_channel_mm", "enclosed_void_mm3", "warn_channel_mm", "print_mass_g", "iterations", "seconds",
+                 "folder")
 """Columns of sweep.csv; the swept settings go between ``name`` and ``status``."""
 
 

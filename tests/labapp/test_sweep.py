@@ -116,6 +116,10 @@ def test_serial_sweep_records_failures_and_reruns_skip_done(tmp_path):
     assert [r["name"] for r in table] == ["radius_vox=2", "radius_vox=32"]
     assert table[0]["iterations"] == "6" and float(table[0]["rmse_mm3"]) > 0 and table[1]["status"] == "failed"
     assert float(table[0]["enclosed_void_mm3"]) >= 0 and table[1]["enclosed_void_mm3"] == ""
+    summary = json.loads((out / "runs" / "radius_vox=2" / "summary.json").read_text())
+    assert float(table[0]["rel_rmse_fine"]) == pytest.approx(summary["rel_rmse_fine"])
+    assert float(table[0]["rate_dev_fine"]) == pytest.approx(summary["rate_dev_mid80"]["fine"])
+    assert table[1]["rel_rmse_fine"] == table[1]["rate_dev_binary"] == ""
     done = out / "runs" / "radius_vox=2"
     assert folder_state(done) == "done"
     stamp = (done / "summary.json").stat().st_mtime_ns
