@@ -163,8 +163,9 @@ def run(args: argparse.Namespace) -> int:
     s = physical or result.outputs.summary
     print(f"{result.status} after {result.iterations} evaluations ({s['seconds']:.1f} s, "
           f"{s['seconds_per_iteration'] or 0:.3f} s each)")
+    fine = "-" if s["rel_rmse_fine"] is None else f"{s['rel_rmse_fine']:.3%}"
     print(f"rel. RMSE: density {s['rel_rmse_density']:.3%}, binary solid {s['rel_rmse_binary']:.3%}, "
-          f"binary solid on a {s['fine_factor']}x finer grid {s['rel_rmse_fine']:.3%}")
+          f"binary solid on a {s['fine_factor']}x finer grid {fine}")
     dev = {k: "-" if v is None else f"{v:.2%}" for k, v in s["rate_dev_mid80"].items()}
     print(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid {dev['binary']}, "
           f"on the finer grid {dev['fine']}")

@@ -209,9 +209,11 @@ class DesignLauncher(QWidget):
         self.achieved_curve.setData(curves["tau_mm"], curves["binary_mm3"])
         self.save_button.setEnabled((result.out_dir / "design.stl").is_file())
         summary = result.outputs.summary
+        fine = summary["rel_rmse_fine"]
         text = (f"design {result.status} after {result.iterations} evaluations in {result.out_dir}. Binary solid "
-                f"within {summary['rel_rmse_binary']:.2%} RMS of the target ({summary['rel_rmse_fine']:.2%} on a "
-                f"{summary['fine_factor']}x finer grid). Overhangs "
+                f"within {summary['rel_rmse_binary']:.2%} RMS of the target ("
+                f"{'not checked' if fine is None else format(fine, '.2%')} on a {summary['fine_factor']}x finer grid). "
+                "Overhangs "
                 f"along +z: {summary['overhang_fraction']:.1%} of the solid, longest run "
                 f"{summary['max_overhang_run_mm']:.2f} mm; {enclosed_voids_text(summary)}.")
         if physical is not None:

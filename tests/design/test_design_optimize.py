@@ -137,3 +137,16 @@ def test_a_release_over_within_one_sample_has_no_rate_deviation_instead_of_faili
     curve[5] -= 1e-12  # all released by the first sample, with round-off: not monotone
     assert _rate_dev(target, curve, vs_target=False) is None
     assert _rate_dev(target, curve, vs_target=True) is not None  # the target's window is well defined
+
+
+def test_a_fine_check_over_its_voxel_budget_is_skipped_with_a_warning(tmp_path, monkeypatch):
+    import design.outputs
+
+    monkeypatch.setattr(design.outputs, "FINE_MAX_VOXELS", 8 ** 3 * 8 - 1)  # the 16^3 nfc run's check is 8^3 * 8
+    result = run_design(DesignConfig(max_iter=6, **SMALL), tmp_path / "run")
+    summary = result.outputs.summary
+    assert summary["rel_rmse_fine"] is None and summary["rate_dev_mid80"]["fine"] is None
+    assert summary["rel_rmse_binary"] is not None
+    assert any("not re-simulated on a 2x finer grid: 4096 voxels, more than 4095" in w for w in summary["warnings"])
+    fine = np.genfromtxt(tmp_path / "run" / "curves.csv", delimiter=",", names=True)["fine_mm3"]
+    assert np.all(np.isnan(fine)) and (tmp_path / "run" / "report.png").is_file()
