@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from design.rate import MID_HI, MID_LO, rate_deviation
+from design.rate import rate_deviation, rate_deviation_vs_target
 
 
 def zero_order_deviation(curves: np.ndarray) -> dict[str, dict[str, float]]:
@@ -27,12 +27,10 @@ def zero_order_deviation(curves: np.ndarray) -> dict[str, dict[str, float]]:
     10%-90% span against the target's mean rate there (``rate_dev_mid80_vs_target``).
     """
     tau, target = curves[:, 0], curves[:, 1]
-    lo, hi = np.interp([MID_LO * target[-1], MID_HI * target[-1]], target, tau)
-    ref = (MID_HI - MID_LO) * target[-1] / (hi - lo)
     out: dict[str, dict[str, float]] = {"own": {}, "vs_target": {}}
     for name, col in (("density", 2), ("binary", 3)):
         out["own"][name] = rate_deviation(tau, curves[:, col])
-        out["vs_target"][name] = rate_deviation(tau, curves[:, col], window_from=target, reference_rate=ref)
+        out["vs_target"][name] = rate_deviation_vs_target(tau, curves[:, col], target)
     return out
 
 

@@ -27,7 +27,7 @@ from design.extract import centred_iou, count_pieces, density_mesh, mass_preserv
 from design.forward import simulate
 from design.objective import DesignObjective, rel_rmse
 from design.printability import assess, prusa_profile
-from design.rate import MID_HI, MID_LO, middle_span_mm, rate_deviation
+from design.rate import rate_deviation, rate_deviation_vs_target
 from design.report import save_report
 
 log = logging.getLogger(__name__)
@@ -94,10 +94,7 @@ def _rate_dev(target, curve_mm3: np.ndarray, vs_target: bool) -> float | None:
             return rate_deviation(target.tau_mm, curve_mm3)
         except DesignError:  # the only error left for a rising curve: a middle 80% within one tau sample
             return None
-    tau, c = target.tau_mm, target.released_mm3
-    lo, hi = middle_span_mm(tau, c)
-    ref = (MID_HI - MID_LO) * c[-1] / (hi - lo)
-    return rate_deviation(tau, curve_mm3, window_from=c, reference_rate=ref)
+    return rate_deviation_vs_target(target.tau_mm, curve_mm3, target.released_mm3)
 
 
 def _ico_summary(objective: DesignObjective, rho: np.ndarray, rows: np.ndarray, seconds: float) -> dict | None:

@@ -169,3 +169,11 @@ def rate_deviation(tau_mm: np.ndarray, curve_mm3: np.ndarray, *, window_from: np
     rates = np.diff(values) / np.diff(edges)
     ref = (values[-1] - values[0]) / (hi - lo) if reference_rate is None else float(reference_rate)
     return float(np.max(np.abs(rates / ref - 1.0)))
+
+
+def rate_deviation_vs_target(tau_mm: np.ndarray, curve_mm3: np.ndarray, target_mm3: np.ndarray) -> float:
+    """`rate_deviation` of a curve over the target's middle 80%, against the target's mean rate there
+    (a release that is constant but early or late also counts against it)."""
+    lo, hi = middle_span_mm(tau_mm, target_mm3)
+    reference = (MID_HI - MID_LO) * float(np.max(target_mm3)) / (hi - lo)
+    return rate_deviation(tau_mm, curve_mm3, window_from=target_mm3, reference_rate=reference)

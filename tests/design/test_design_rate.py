@@ -6,8 +6,8 @@ from design.errors import DesignError
 from design.objective import DesignObjective
 from design.optimize import run_design
 from design.problem import ANALYTIC_DEFAULTS, ANALYTIC_W_RATE, SPACE_DEFAULTS, W_CONNECT, DesignConfig
-from design.rate import (lag_rate, lag_rate_adjoint, rate_deviation, rate_fit, rate_shape_fit,
-                         release_duration)
+from design.rate import (lag_rate, lag_rate_adjoint, rate_deviation, rate_deviation_vs_target, rate_fit,
+                         rate_shape_fit, release_duration)
 from design.spaces import SpaceRequest, build_space
 
 
@@ -166,3 +166,12 @@ def test_rate_weight_guard():
         DesignObjective(space, np.linspace(0, 1, 11), 4.0, radius_vox=2.0, beta=3.0, w_binary=1.0, w_rate=-1.0)
     with pytest.raises(DesignError, match="rate lag"):
         DesignObjective(space, np.linspace(0, 1, 11), 4.0, radius_vox=2.0, beta=3.0, w_binary=1.0, rate_lag=11)
+
+
+def test_rate_deviation_vs_target_counts_a_constant_but_late_release():
+    """A constant rate 10% below the target's over the target's window reads 10%; its own mean reads 0."""
+    tau = np.linspace(0.0, 1.0, 1001)
+    target = np.minimum(tau, 0.5)
+    slow = np.minimum(0.9 * tau, 0.5)
+    assert rate_deviation_vs_target(tau, slow, target) == pytest.approx(0.1, abs=1e-9)
+    assert rate_deviation(tau, slow) == pytest.approx(0.0, abs=1e-9)
