@@ -5,7 +5,9 @@ the folders), re-voxelises the mesh over the run's design domain on voxels 1, 2,
 than the design grid's (`design.outputs.fine_release`, the same function as the ``fine`` curve of
 `sfr design`) and prints one markdown row per run: the rate deviation over the solid's own middle
 80% (`design.rate.rate_deviation`) and the rel. RMSE against the run's target at each factor.
-Factor 1 reproduces the run's own binary solid.
+Factor 1 reproduces the run's own binary solid. The rel. RMSE is against the run's ``target_mm3``,
+which for a mesh target is the source on the design grid; `sfr design`'s own ``rel_rmse_fine``
+compares with the source re-simulated on the finer grid too (``fine_target_mm3``).
 
     python benchmarks/printed_grid.py RUN_FOLDER [RUN_FOLDER ...] [--factors 1 2 3] [--figure PNG]
 

@@ -1,14 +1,15 @@
 """Everything a finished (or stopped) design run writes into its folder.
 
 ``design.stl`` (+ requested formats), ``density.npz``, ``curves.csv``
-(``tau_mm,target_mm3,density_mm3,binary_mm3,fine_mm3``), ``history.csv``, ``report.png``,
+(`CURVE_COLUMNS`), ``history.csv``, ``report.png``,
 ``design.ini`` (PrusaSlicer profile) and ``summary.json``.
 
 The binary solid is the printed mesh re-voxelised on the design grid, as the paper plots it (Fig. 6).
 On that grid a rate measured over a short window (`design.rate.rate_deviation`) is off by a few
 points (docs/results.md, "How precisely a 128-voxel grid measures the rate deviation"), so the
 printed mesh is also re-simulated on a grid `FINE_FACTOR` times finer: the ``fine`` curve and
-figures, the closer estimate of what the print releases.
+figures, the closer estimate of what the print releases. A mesh target (the source's release on the
+design grid) is re-simulated there too, so that the fine figures compare like with like.
 """
 from __future__ import annotations
 
@@ -34,7 +35,9 @@ log = logging.getLogger(__name__)
 
 HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "fab_seconds", "grad_norm", "seconds")
 """``fab_seconds``: time of that evaluation's J_fab (the ICO solves), s; ``seconds``: run time so far, s."""
-CURVE_COLUMNS = ("tau_mm", "target_mm3", "density_mm3", "binary_mm3", "fine_mm3")
+CURVE_COLUMNS = ("tau_mm", "target_mm3", "density_mm3", "binary_mm3", "fine_mm3", "fine_target_mm3")
+"""``fine_target_mm3``: the target on the finer grid: a mesh target's source re-simulated there, else the
+target itself."""
 FINE_FACTOR = 2
 """The ``fine`` curve re-simulates the printed mesh on voxels this many times smaller than the design's."""
 FINE_MAX_VOXELS = 2 ** 25
@@ -82,7 +85,8 @@ def _percent(value: float | None) -> str:
     return "-" if value is None else f"{value:.2%}"
 
 
-def _rate_dev(target, curve_mm3: np.ndarray, vs_target: bool) -> float | None:
+def _rate_dev(tau_mm: np.ndarray, curve_mm3: np.ndarray, target_mm3: np.ndarray,
+              vs_target: bool) -> float | None:
     """`rate_deviation` of an achieved curve: over its own middle 80% against its own mean rate, or
     (``vs_target``) over the target's middle 80% against the target's mean rate there. None when the
     curve does not rise (a grey design without a solid) or rises from 10% to 90% within one tau sample
@@ -91,10 +95,10 @@ def _rate_dev(target, curve_mm3: np.ndarray, vs_target: bool) -> float | None:
         return None
     if not vs_target:
         try:
-            return rate_deviation(target.tau_mm, curve_mm3)
+            return rate_deviation(tau_mm, curve_mm3)
         except DesignError:  # the only error left for a rising curve: a middle 80% within one tau sample
             return None
-    return rate_deviation_vs_target(target.tau_mm, curve_mm3, target.released_mm3)
+    return rate_deviation_vs_target(tau_mm, curve_mm3, target_mm3)
 
 
 def _ico_summary(objective: DesignObjective, rho: np.ndarray, rows: np.ndarray, seconds: float) -> dict | None:
@@ -182,9 +186,12 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm)
     simulated = [n // 2 if m else n for n, m in zip(problem.full_shape, space.mirror)]
     fine_voxels = FINE_FACTOR ** 3 * int(np.prod(simulated))
+    fine_grid = (space.dx_mm, problem.origin_mm, problem.full_shape, space.mirror, target.total_time_mm, dtau_mm)
+    fine_target = target.released_mm3
     if fine_voxels <= FINE_MAX_VOXELS:
-        fine_curve = fine_release(mesh, space.dx_mm, problem.origin_mm, problem.full_shape, space.mirror,
-                                  target.total_time_mm, dtau_mm)
+        fine_curve = fine_release(mesh, *fine_grid)
+        if problem.source_mesh is not None:  # a mesh target is the source's release on the design grid
+            fine_target = fine_release(problem.source_mesh, *fine_grid)
     else:
         fine_curve = np.full_like(binary_curve, np.nan)
         warnings.append(f"the printed solid was not re-simulated on a {FINE_FACTOR}x finer grid: {fine_voxels} "
@@ -196,13 +203,15 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     warnings += list(facts.warnings)
     np.savez_compressed(out_dir / "density.npz", rho_hat=best_x, rho=rho, rho_full=rho_full, solid=solid,
                         dx_mm=space.dx_mm, origin_mm=problem.origin_mm, mirror=np.array(space.mirror))
-    curves = np.column_stack([target.tau_mm, target.released_mm3, density_curve, binary_curve, fine_curve])
+    curves = np.column_stack([target.tau_mm, target.released_mm3, density_curve, binary_curve, fine_curve,
+                              fine_target])
     _write_text(out_dir / "curves.csv", _csv(CURVE_COLUMNS, curves))
     rows = np.array(history, dtype=float).reshape(-1, len(HISTORY_COLUMNS))
     _write_text(out_dir / "history.csv", _csv(HISTORY_COLUMNS, rows))
     # NFC designs may overhang; ICO and extruded ones print without supports (section 3.6)
     _write_text(out_dir / "design.ini", prusa_profile(out_dir.name, supports=space.name == "nfc"))
-    achieved = (("density", density_curve), ("binary", binary_curve), ("fine", fine_curve))
+    achieved = (("density", density_curve, target.released_mm3), ("binary", binary_curve, target.released_mm3),
+                ("fine", fine_curve, fine_target))
     iterations = len(history)
     seconds = float(history[-1][-1]) if history else 0.0
     summary = {
@@ -211,10 +220,11 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         "space": space.name,
         "rel_rmse_density": rel_rmse(density_curve, target.released_mm3),
         "rel_rmse_binary": rel_rmse(binary_curve, target.released_mm3),
-        "rel_rmse_fine": rel_rmse(fine_curve, target.released_mm3) if np.all(np.isfinite(fine_curve)) else None,
+        "rel_rmse_fine": rel_rmse(fine_curve, fine_target) if np.all(np.isfinite(fine_curve)) else None,
         "fine_factor": FINE_FACTOR,
-        "rate_dev_mid80": {name: _rate_dev(target, curve, False) for name, curve in achieved},
-        "rate_dev_mid80_vs_target": {name: _rate_dev(target, curve, True) for name, curve in achieved},
+        "rate_dev_mid80": {name: _rate_dev(target.tau_mm, curve, goal, False) for name, curve, goal in achieved},
+        "rate_dev_mid80_vs_target": {name: _rate_dev(target.tau_mm, curve, goal, True)
+                                     for name, curve, goal in achieved},
         "iterations": iterations,
         "seconds": seconds,
         "seconds_per_iteration": seconds / iterations if iterations else None,

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 from design.connectivity import TAIL_SLOPE
 from design.errors import DesignError
@@ -334,6 +335,8 @@ class Problem:
     warnings : tuple of str
         What is known about the source and the target before the run (`source_warnings`,
         `rate_resolution_warnings`); logged when the problem is prepared and kept in the run's summary.
+    source_mesh : trimesh.Trimesh or None
+        The source mesh of a mesh target, mm (re-simulated on a finer grid for the outputs' check).
     """
 
     space: DesignSpace
@@ -346,6 +349,7 @@ class Problem:
     radius_vox: float
     start_region: np.ndarray | None = None
     warnings: tuple[str, ...] = ()
+    source_mesh: trimesh.Trimesh | None = None
 
 
 def source_warnings(source_solid: np.ndarray | None, allow_pieces: bool) -> tuple[str, ...]:
@@ -569,4 +573,4 @@ def prepare(config: DesignConfig) -> Problem:
     for warning in warnings:
         log.warning("%s", warning)
     return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, radius_vox,
-                   start_region(space, target, half_mm, radius_vox * dx), warnings)
+                   start_region(space, target, half_mm, radius_vox * dx), warnings, mesh)
