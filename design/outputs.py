@@ -30,6 +30,7 @@ from design.objective import DesignObjective, rel_rmse
 from design.printability import assess, prusa_profile
 from design.rate import rate_deviation, rate_deviation_vs_target
 from design.report import save_report
+from design.voxelize import grid_for, voxelize
 
 log = logging.getLogger(__name__)
 
@@ -146,6 +147,15 @@ def fine_release(mesh, dx_mm: float, origin_mm: np.ndarray, full_shape: tuple[in
     return solid_release(solid, fine_dx, mirror, total_time_mm, dtau_mm)
 
 
+def fine_source_release(mesh, dx_mm: float, total_time_mm: float, dtau_mm: float,
+                        factor: int = FINE_FACTOR) -> np.ndarray:
+    """Released volume of a source mesh on voxels `factor` times smaller than `dx_mm`, over its own
+    bounding box and without mirror planes (a source need not be symmetric), mm^3 per tau sample."""
+    fine_dx = dx_mm / factor
+    solid = voxelize(mesh, fine_dx).astype(float)
+    return simulate(solid, fine_dx, total_time_mm=total_time_mm, dtau_mm=dtau_mm).released_mm3
+
+
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
                   history: list[list[float]], config, *, status: str, session_seconds: float) -> DesignOutputs:
     """Extract, re-simulate, assess and write every output of a design run.
@@ -186,12 +196,15 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm)
     simulated = [n // 2 if m else n for n, m in zip(problem.full_shape, space.mirror)]
     fine_voxels = FINE_FACTOR ** 3 * int(np.prod(simulated))
+    if problem.source_mesh is not None:
+        source_shape = grid_for(problem.source_mesh.bounds, space.dx_mm / FINE_FACTOR)[1]
+        fine_voxels = max(fine_voxels, int(np.prod(source_shape)))
     fine_grid = (space.dx_mm, problem.origin_mm, problem.full_shape, space.mirror, target.total_time_mm, dtau_mm)
     fine_target = target.released_mm3
     if fine_voxels <= FINE_MAX_VOXELS:
         fine_curve = fine_release(mesh, *fine_grid)
         if problem.source_mesh is not None:  # a mesh target is the source's release on the design grid
-            fine_target = fine_release(problem.source_mesh, *fine_grid)
+            fine_target = fine_source_release(problem.source_mesh, space.dx_mm, target.total_time_mm, dtau_mm)
     else:
         fine_curve = np.full_like(binary_curve, np.nan)
         warnings.append(f"the printed solid was not re-simulated on a {FINE_FACTOR}x finer grid: {fine_voxels} "
