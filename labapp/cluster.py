@@ -11,6 +11,7 @@ import logging
 import math
 import os
 import signal
+import warnings
 from typing import Iterator
 
 from labapp.errors import LabError
@@ -89,7 +90,9 @@ def dask_client(scheduler: str | None = None, *, workers: int | None = None,
     # process group, and only this process should decide how running tasks stop
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if _main_thread() else None
     try:
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENVIRON}):
+        # another cluster's dashboard on 8787 moves this one to a free port, which `dashboard_link` reports
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENVIRON}), warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Port 8787 is already in use", category=UserWarning)
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit="auto",
                                    dashboard_address=":8787", silence_logs=logging.ERROR)
     except Exception as exc:  # noqa: BLE001 -- any start-up failure is reported the same way

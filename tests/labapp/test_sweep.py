@@ -212,6 +212,14 @@ def test_local_workers_get_one_blas_thread_and_glibcs_own_malloc_thresholds():
     assert "MALLOC_TRIM_THRESHOLD_" not in env     # a fixed threshold made every design ~1.8x slower
 
 
+def test_a_second_local_cluster_takes_another_dashboard_port_without_a_warning(recwarn):
+    from labapp.cluster import dashboard_link, dask_client
+    with dask_client(workers=1) as first, dask_client(workers=1) as second:
+        links = dashboard_link(first), dashboard_link(second)
+    assert links[0] and links[1] and links[0] != links[1]
+    assert not [w for w in recwarn if "already in use" in str(w.message)]
+
+
 def test_the_cluster_starts_the_costliest_designs_first(tmp_path):
     from distributed import Client, LocalCluster
 
