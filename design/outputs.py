@@ -194,8 +194,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         warnings.append(f"no density reaches the extraction level {level:.3f} yet: no solid extracted "
                         "(design.stl not written)")
     binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm)
-    simulated = [n // 2 if m else n for n, m in zip(problem.full_shape, space.mirror)]
-    fine_voxels = FINE_FACTOR ** 3 * int(np.prod(simulated))
+    fine_voxels = FINE_FACTOR ** 3 * int(np.prod(space.grid_shape))  # the simulated part: half, quarter, octant
     if problem.source_mesh is not None:
         source_shape = grid_for(problem.source_mesh.bounds, space.dx_mm / FINE_FACTOR)[1]
         fine_voxels = max(fine_voxels, int(np.prod(source_shape)))
