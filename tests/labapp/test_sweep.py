@@ -227,7 +227,7 @@ def test_the_cluster_starts_the_costliest_designs_first(tmp_path):
 
     spec = parse_spec(SMALL + "[grid]\nresolution = [16, 24]\nmax_iter = [3, 6]\n")
     assert [expected_work(c) for c in spec.combinations] == [16**3 * 3, 16**3 * 6, 24**3 * 3, 24**3 * 6]
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster, \
             Client(cluster) as client:
         run_sweep(spec, tmp_path / "sweep", client, contact_sheet=False)
     starts = [line.split(" start ")[1].split(" on ")[0]
