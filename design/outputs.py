@@ -82,8 +82,9 @@ def software_versions() -> dict[str, str | None]:
     return versions
 
 
-def _percent(value: float | None) -> str:
-    return "-" if value is None else f"{value:.2%}"
+def percent_text(value: float | None, digits: int = 2) -> str:
+    """A summary's fraction as a percentage with ``digits`` decimals, "-" for a figure not computed (None)."""
+    return "-" if value is None else f"{value:.{digits}%}"
 
 
 def _rate_dev(tau_mm: np.ndarray, curve_mm3: np.ndarray, target_mm3: np.ndarray,
@@ -269,7 +270,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     save_report(out_dir / "report.png", target.tau_mm, target.released_mm3, density_curve,
                 binary_curve, fine_curve, rho_full, solid,
                 f"{target.source} | {space.name} | rel. RMSE density {summary['rel_rmse_density']:.2%}, "
-                f"binary {summary['rel_rmse_binary']:.2%} (finer grid {_percent(summary['rel_rmse_fine'])}) | "
+                f"binary {summary['rel_rmse_binary']:.2%} (finer grid {percent_text(summary['rel_rmse_fine'])}) | "
                 f"overhang {facts.overhang_fraction:.1%} | {iterations} it."
                 + (f" | preset {config.preset}" if config.preset else ""))
     path = out_dir / "summary.json"

@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from analysis import BenchCalibration
-    from design.outputs import enclosed_voids_text
+    from design.outputs import enclosed_voids_text, percent_text
     from design.problem import DesignConfig
     from labapp.simcal import load_simcal
     from labapp import jobs
@@ -163,10 +163,9 @@ def run(args: argparse.Namespace) -> int:
     s = physical or result.outputs.summary
     print(f"{result.status} after {result.iterations} evaluations ({s['seconds']:.1f} s, "
           f"{s['seconds_per_iteration'] or 0:.3f} s each)")
-    fine = "-" if s["rel_rmse_fine"] is None else f"{s['rel_rmse_fine']:.3%}"
     print(f"rel. RMSE: density {s['rel_rmse_density']:.3%}, binary solid {s['rel_rmse_binary']:.3%}, "
-          f"binary solid on a {s['fine_factor']}x finer grid {fine}")
-    dev = {k: "-" if v is None else f"{v:.2%}" for k, v in s["rate_dev_mid80"].items()}
+          f"binary solid on a {s['fine_factor']}x finer grid {percent_text(s['rel_rmse_fine'], 3)}")
+    dev = {k: percent_text(v) for k, v in s["rate_dev_mid80"].items()}
     print(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid {dev['binary']}, "
           f"on the finer grid {dev['fine']}")
     print(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
@@ -176,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
           f"{s['max_overhang_run_mm']:.2f} mm" + (f"; preset {s['preset']}" if s.get("preset") else ""))
     if s.get("ico"):
         ico = s["ico"]
-        share = "-" if ico["fab_time_share"] is None else f"{ico['fab_time_share']:.0%}"
+        share = percent_text(ico["fab_time_share"], 0)
         print(f"ICO J_fab {ico['J_fab']:.4g} of the start design's, {ico['layers']} layers, {share} of the time")
     if physical is not None:
         print(f"physical prediction ({s['simcal']['model']} model, {s['simcal']['seconds_per_mm']:.1f} s/mm): "

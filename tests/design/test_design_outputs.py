@@ -4,7 +4,7 @@ import trimesh
 
 from design.extract import revoxelize
 from design.objective import rel_rmse
-from design.outputs import FINE_FACTOR, fine_release, solid_release
+from design.outputs import FINE_FACTOR, fine_release, percent_text, solid_release
 
 
 def test_fine_release_of_a_turned_plate_is_closer_to_its_exact_release():
@@ -28,3 +28,8 @@ def test_fine_release_of_a_turned_plate_is_closer_to_its_exact_release():
 
 def test_fine_release_without_a_solid_is_zero():
     assert not np.any(fine_release(None, 0.5, np.zeros(3), (8, 8, 8), (True, True, True), 2.0, 0.01))
+
+
+def test_a_summary_fraction_prints_as_a_percentage_or_a_dash():
+    assert percent_text(0.012345) == "1.23%" and percent_text(0.012345, 3) == "1.234%"
+    assert percent_text(0.5, 0) == "50%" and percent_text(None) == "-"
