@@ -44,7 +44,7 @@ class FrameList:
         Contents of run.json ({} when absent).
     reference : Path or None
         The clear-water reference frame: run.json ``reference_file``, else ``reference.<image suffix>``
-        in a run folder (as ``labapp.storage`` writes it), else None.
+        in a run folder (as ``labapp.records.storage`` writes it), else None.
     warnings : list of str
     """
 

@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
-from design.connectivity import TAIL_SLOPE
-from design.objective import DesignObjective
-from design.problem import DesignConfig, Problem, prepare
+from design.fabrication.connectivity import TAIL_SLOPE
+from design.inverse.objective import DesignObjective
+from design.inverse.problem import DesignConfig, Problem, prepare
 
 
 def seconds(objective: DesignObjective, x: np.ndarray, repeats: int = 3) -> float:

@@ -64,7 +64,7 @@ def main() -> None:
     import skfmm
 
     from design import simulate
-    from design.forward import slowness
+    from design.forward.simulator import slowness
 
     repeats = 1 if args.quick else 3
     _fwd_grad(void_field(8), 0.1, np.zeros(1001))  # load the compiled kernels outside the timings

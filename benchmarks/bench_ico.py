@@ -66,7 +66,7 @@ SOLVERS = {"V-cycle": (1, 1, False), "W-cycle": (2, 2, False), "W + deflation": 
 @contextmanager
 def _solver(name: str):
     """Run the ICO term with one of `SOLVERS` (the multigrid module's constants, restored after)."""
-    import design.multigrid as mg
+    import design.fabrication.multigrid as mg
 
     saved = mg.CYCLE_INDEX, mg.COARSE_SWEEPS
     mg.CYCLE_INDEX, mg.COARSE_SWEEPS, deflate = SOLVERS[name]
@@ -77,7 +77,7 @@ def _solver(name: str):
 
 
 def _ico_runs(n: int, field: str = "void", deflate: bool = True):
-    from design.ico import IcoConfig, IcoTerm
+    from design.fabrication.ico import IcoConfig, IcoTerm
 
     rho = _quadrant(FIELDS[field](n))
     dx = 1.0 / n
@@ -98,7 +98,7 @@ def _peak_memory_child(n: int) -> None:
 
 
 def _coarsening_error(field: str, n: int = 64) -> None:
-    from design.ico import IcoConfig, incremental_compliance
+    from design.fabrication.ico import IcoConfig, incremental_compliance
 
     rho = _quadrant(FIELDS[field](n))
     start = np.full(rho.shape, float(rho.mean()))
@@ -121,7 +121,7 @@ def _coarsening_error(field: str, n: int = 64) -> None:
 
 
 def _tolerance_error(n: int = 64) -> None:
-    from design.ico import IcoConfig, incremental_compliance
+    from design.fabrication.ico import IcoConfig, incremental_compliance
 
     print(f"PCG tolerance error at {n}^3: a warm evaluation (as in a design run) against a 1e-10 solve:")
     print(f"{'field':>6} {'tol':>7} {'J rel. error':>12} {'grad rel. error (norm, max)':>28} {'iterations':>10}")
@@ -163,7 +163,7 @@ def main() -> None:
 
     import skfmm
 
-    from design.forward import slowness
+    from design.forward.simulator import slowness
 
     repeats = 1 if args.quick else 3
     _ico_runs(16)  # load the compiled kernels outside the timings

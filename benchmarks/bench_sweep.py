@@ -1,8 +1,8 @@
 """A sweep of 8 small designs on the local Dask cluster against the same 8 one after another in one process.
 
-Both go through `labapp.sweep.run_sweep` on the same spec (a 2 x 2 x 2 grid of w_binary, radius and
+Both go through `labapp.scaleout.sweep.run_sweep` on the same spec (a 2 x 2 x 2 grid of w_binary, radius and
 beta on the pill target, nfc, resolution 48, 300 evaluations; ``--quick``: resolution 24, 40 evaluations,
-one round), into fresh folders. A `LocalCluster` sized by `labapp.cluster` (one single-threaded worker
+one round), into fresh folders. A `LocalCluster` sized by `labapp.scaleout.cluster` (one single-threaded worker
 per core here) is started and warmed up (imports, compiled kernels), as this process is by a warm-up
 design. Then ``--rounds`` rounds (default 3) each run the sweep serially (``client=None``) and then on
 the running cluster, so that a change in the shared machine's load shows in one round, not in one side.
@@ -32,8 +32,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from labapp.sweep import run_sweep
-from labapp.sweepspec import parse_spec
+from labapp.scaleout.sweep import run_sweep
+from labapp.scaleout.sweepspec import parse_spec
 
 RESOLUTION, MAX_ITER, ROUNDS = 48, 300, 3
 """The benchmark's designs (small: their working set stays in cache) and its serial/cluster rounds."""
@@ -73,7 +73,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=ROUNDS, help=f"serial/cluster rounds (default {ROUNDS})")
     args = parser.parse_args()
 
-    from labapp.cluster import dask_client, design_memory_gb
+    from labapp.scaleout.cluster import dask_client, design_memory_gb
 
     resolution, max_iter, rounds = (24, 40, 1) if args.quick else (RESOLUTION, MAX_ITER, args.rounds)
     resolution = args.resolution or resolution

@@ -3,7 +3,7 @@
     python benchmarks/design_results.py RUN_DIR [RUN_DIR ...] [--figures docs/figures]
 
 For each run folder (written by `sfr design`) prints one markdown table row from summary.json; for
-analytic zero-order targets it also prints `design.rate.rate_deviation` of the achieved release
+analytic zero-order targets it also prints `design.inverse.rate.rate_deviation` of the achieved release
 rate over the middle 80% of the release, against the curve's own mean rate and against the
 target's constant rate (docs/results.md, "Zero-order"). Last line: ``runs: <count>``.
 """
@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from design.rate import rate_deviation, rate_deviation_vs_target
+from design.inverse.rate import rate_deviation, rate_deviation_vs_target
 
 
 def zero_order_deviation(curves: np.ndarray) -> dict[str, dict[str, float]]:
-    """`design.rate.rate_deviation` of the density and binary curves of a zero-order run.
+    """`design.inverse.rate.rate_deviation` of the density and binary curves of a zero-order run.
 
     ``own``: over each curve's own 10%-90% span against its own mean rate (summary.json's
     ``rate_dev_mid80``, the figure the requirement is judged by); ``vs_target``: over the target's

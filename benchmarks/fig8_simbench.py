@@ -20,10 +20,10 @@ SHAPES = ("sphere", "pill", "spinner_top", "csg", "polyhedron")
 
 def record_set(out: Path, interval_s: float) -> tuple[Path, Path]:
     """Bench calibration and one run per shape on the simulated bench; returns (set.csv, bench calibration)."""
-    from design.shapes import sample_shape
-    from labapp.clock import SteppedClock
-    from labapp.demo import TRUTH_RESOLUTION, simulated_calibration, simulated_run
-    from labapp.simbench import Material, sample_release
+    from design.geometry.shapes import sample_shape
+    from labapp.acquisition.clock import SteppedClock
+    from labapp.jobs.demo import TRUTH_RESOLUTION, simulated_calibration, simulated_run
+    from labapp.acquisition.simbench import Material, sample_release
 
     clock = SteppedClock()
     calibration, cal_path = simulated_calibration(out / "calibration", clock)
@@ -49,7 +49,7 @@ def main() -> None:
     parser.add_argument("--interval", type=float, default=60.0, help="frame interval of the runs, s")
     parser.add_argument("--docs", type=Path, default=Path(__file__).resolve().parents[1] / "docs" / "figures")
     args = parser.parse_args()
-    from labapp.evaluation import evaluate_models, markdown_table
+    from labapp.jobs.evaluate import evaluate_models, markdown_table
 
     start = time.perf_counter()
     if (args.out / "set").exists():

@@ -22,8 +22,8 @@ sys.path.insert(0, str(ROOT / "tests" / "design"))
 from test_forward_analytic import SHAPES, _centres, release_error  # noqa: E402
 
 from design import release_gradient, simulate  # noqa: E402
-from design.fmm import eikonal_residual, march  # noqa: E402
-from design.forward import slowness  # noqa: E402
+from design.forward.fmm import eikonal_residual, march  # noqa: E402
+from design.forward.simulator import slowness  # noqa: E402
 
 FIGURES = ROOT / "docs" / "figures"
 

@@ -5,7 +5,7 @@
 Prints one markdown table row per run from its summary.json (binary fit, overhang fraction and
 longest run, J_fab, time per evaluation and the ICO share of it), then the figure: for every
 target, the NFC and ICO solids as side views (projection along y, build direction up) with the
-overhanging voxels (`design.printability.overhangs`) in red. Last line: ``pairs: <count>``.
+overhanging voxels (`design.fabrication.printability.overhangs`) in red. Last line: ``pairs: <count>``.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from design.printability import overhangs
+from design.fabrication.printability import overhangs
 
 
 def row(run: Path) -> str:

@@ -15,7 +15,7 @@ out=$2
 resolution=${3:-128}
 space=${4:-extruded}
 python=${PYTHON:-python}
-design() { "$python" -m labapp.cli design --target "$source" --space "$space" --resolution "$resolution" "$@"; }
+design() { "$python" -m labapp.cli.main design --target "$source" --space "$space" --resolution "$resolution" "$@"; }
 now() { "$python" -c 'import time; print(time.time())'; }
 timed() {  # timed FOLDER ARGS...: run into FOLDER unless done; prints the wall seconds
     local folder=$1 start

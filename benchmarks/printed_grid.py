@@ -2,9 +2,9 @@
 
 Reads each run folder's ``design.stl``, ``density.npz`` and ``curves.csv`` (nothing is written into
 the folders), re-voxelises the mesh over the run's design domain on voxels 1, 2, ... times smaller
-than the design grid's (`design.outputs.fine_release`, the same function as the ``fine`` curve of
+than the design grid's (`design.files.outputs.fine_release`, the same function as the ``fine`` curve of
 `sfr design`) and prints one markdown row per run: the rate deviation over the solid's own middle
-80% (`design.rate.rate_deviation`) and the rel. RMSE against the run's target at each factor.
+80% (`design.inverse.rate.rate_deviation`) and the rel. RMSE against the run's target at each factor.
 Factor 1 reproduces the run's own binary solid. The rel. RMSE is against the run's ``target_mm3``,
 which for a mesh target is the source on the design grid; `sfr design`'s own ``rel_rmse_fine``
 compares with the source re-simulated on the finer grid too (``fine_target_mm3``).
@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from design.objective import rel_rmse
-from design.outputs import fine_release
-from design.rate import rate_deviation
+from design.inverse.objective import rel_rmse
+from design.files.outputs import fine_release
+from design.inverse.rate import rate_deviation
 
 
 def printed_figures(folder: Path, factors: list[int]) -> list[tuple[float, float]]:

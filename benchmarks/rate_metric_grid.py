@@ -1,6 +1,6 @@
 """How precisely the voxel simulator measures the rate deviation metric (docs/results.md).
 
-`design.rate.rate_deviation` judges a release on 20 sub-intervals of its 10%-90% span; for the
+`design.inverse.rate.rate_deviation` judges a release on 20 sub-intervals of its 10%-90% span; for the
 zero-order targets that span is about five voxels of tau at 128 voxels, so each sub-interval is a
 quarter of a voxel. This simulates a thin plate (16 x 16 mm, thickness c) whose exact release is
 known, ``C(t) = abc - (a - 2t)(b - 2t)(c - 2t)``, voxelised on grids of the zero-order runs' voxel
@@ -23,9 +23,9 @@ import trimesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from design.forward import simulate  # noqa: E402
-from design.rate import rate_deviation  # noqa: E402
-from design.voxelize import voxelize  # noqa: E402
+from design.forward.simulator import simulate  # noqa: E402
+from design.inverse.rate import rate_deviation  # noqa: E402
+from design.geometry.voxelize import voxelize  # noqa: E402
 
 DOMAIN_MM = 20.0
 """Edge of the zero-order runs' cubic domain, mm (its voxel at a given resolution)."""

@@ -1,10 +1,10 @@
 """Binary fit of finished design runs cut at rho = 1/2 and at the mass-preserving level (docs/results.md).
 
 Reads each run folder's ``density.npz`` and ``curves.csv`` (nothing is written into the folders),
-thresholds the full density at 1/2 (the paper's cut) and at `design.extract.mass_preserving_level`
-(the level `sfr design` extracts at), simulates both solids with `design.outputs.solid_release`, and prints one
+thresholds the full density at 1/2 (the paper's cut) and at `design.fabrication.extract.mass_preserving_level`
+(the level `sfr design` extracts at), simulates both solids with `design.files.outputs.solid_release`, and prints one
 markdown row per run: binary rel. RMSE, pieces and, for a target with a zero-order middle, the rate
-deviation over the solid's middle 80% (`design.rate.rate_deviation`).
+deviation over the solid's middle 80% (`design.inverse.rate.rate_deviation`).
 
     python benchmarks/recut_runs.py RUN_FOLDER [RUN_FOLDER ...]
 
@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from design.extract import count_pieces, mass_preserving_level
-from design.objective import rel_rmse
-from design.outputs import solid_release
-from design.rate import rate_deviation
+from design.fabrication.extract import count_pieces, mass_preserving_level
+from design.inverse.objective import rel_rmse
+from design.files.outputs import solid_release
+from design.inverse.rate import rate_deviation
 
 
 def recut(folder: Path) -> dict:

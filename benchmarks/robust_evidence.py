@@ -24,12 +24,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.robust_sources import BUILDERS, EXTRUSIONS, source  # noqa: E402
-from design.shapes import SAMPLE_SHAPES  # noqa: E402
+from design.geometry.shapes import SAMPLE_SHAPES  # noqa: E402
 
 def _run(code_root: Path, target: str, space: str, resolution: int, max_iter: int, out: Path) -> dict | None:
     if not (out / "summary.json").exists():
         env = dict(os.environ, PYTHONPATH=str(code_root))
-        cmd = [sys.executable, "-m", "labapp.cli", "design", "--target", target, "--space", space,
+        cmd = [sys.executable, "-m", "labapp.cli.main", "design", "--target", target, "--space", space,
                "--resolution", str(resolution), "--max-iter", str(max_iter), "--out", str(out)]
         proc = subprocess.run(cmd, env=env, cwd="/tmp", capture_output=True, text=True)
         if proc.returncode != 0 or not (out / "summary.json").exists():

@@ -15,7 +15,7 @@ equal area) every cross-section obeys s'(t) <= -1, with equality for a disc. Min
 RMSE of C against the target over all s(t) with s' <= -1 (s(0) and the extra shrink rate free, 100
 pieces) therefore bounds every extruded design of height h from below (in the continuum model). The
 script prints that bound, the best disc (s' = -1), and the best pixel disc on the design grid
-simulated by `design.forward.simulate` (the binary solids of the design runs are pixel shapes).
+simulated by `design.forward.simulator.simulate` (the binary solids of the design runs are pixel shapes).
 For the sphere it also compares with the exact release of a continuum sphere, 4/3 pi (R^3 - (R - t)^3).
 """
 from __future__ import annotations
@@ -25,11 +25,11 @@ import argparse
 import numpy as np
 from scipy.optimize import minimize
 
-from design.forward import simulate
-from design.objective import rel_rmse
-from design.problem import DesignConfig, prepare
-from design.shapes import sample_shape
-from design.spaces import BUILD_AXIS
+from design.forward.simulator import simulate
+from design.inverse.objective import rel_rmse
+from design.inverse.problem import DesignConfig, prepare
+from design.geometry.shapes import sample_shape
+from design.inverse.spaces import BUILD_AXIS
 
 PIECES = 100
 """Piecewise-constant extra shrink rates over [0, h/2] in the relaxation."""

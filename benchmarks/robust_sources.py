@@ -1,6 +1,6 @@
 """Source shapes for the robustness evidence (docs/results.md, "Shapes nobody tuned for").
 
-Writes closed meshes in mm, each scaled to the sample shapes' volume (`design.shapes.VOLUME_MM3`),
+Writes closed meshes in mm, each scaled to the sample shapes' volume (`design.geometry.shapes.VOLUME_MM3`),
 none of them shipped as a sample. Sources in use while the design defaults were chosen (`TUNING`):
 
 - ``stadium_tablet``: a stadium (rectangle with round ends) extruded, itself an extrusion;
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from design.shapes import VOLUME_MM3
+from design.geometry.shapes import VOLUME_MM3
 
 EXTRUSIONS = ("stadium_tablet", "disc_three_holes", "hex_prism", "ring", "slotted_box", "tube", "l_bracket",
               "asterisk")

@@ -3,10 +3,10 @@
     python benchmarks/void_openings.py RUN_DIR [RUN_DIR ...] [--figure docs/figures/NAME.png]
 
 For each run folder (written by `sfr design`): the printed solid of ``density.npz`` is simulated
-(eqs. 5-7); each enclosed void (`design.printability.enclosed_voids`) opens at the smallest
+(eqs. 5-7); each enclosed void (`design.fabrication.printability.enclosed_voids`) opens at the smallest
 dissolution time u among its voxels, printed in mm of tau and as a fraction of the binary solid's
 own 10%-90% span. Then the binary solid's rate on the 20 sub-intervals of that span, relative to its
-mean there (`design.rate.rate_deviation`'s windows). The figure draws those rates with each void's
+mean there (`design.inverse.rate.rate_deviation`'s windows). The figure draws those rates with each void's
 opening time marked.
 """
 from __future__ import annotations
@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from design.forward import simulate
-from design.rate import MID_HI, MID_INTERVALS, MID_LO
+from design.forward.simulator import simulate
+from design.inverse.rate import MID_HI, MID_INTERVALS, MID_LO
 
 
 def window_rates(tau: np.ndarray, curve: np.ndarray) -> tuple[float, float, np.ndarray]:

@@ -8,7 +8,7 @@ the operator and to scripts calling ``sfr``:
 - :class:`JobFailed` and every other :class:`LabError` (exit code 1): the input was fine but the job
   could not be completed (a device failed, a run ended ``failed``).
 
-The mapping of these and the other packages' errors to exit codes is in :func:`labapp.cli.exit_code`.
+The mapping of these and the other packages' errors to exit codes is in :func:`labapp.cli.main.exit_code`.
 """
 from __future__ import annotations
 

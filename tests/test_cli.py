@@ -2,7 +2,7 @@
 import subprocess
 import sys
 
-from labapp.cli import build_parser
+from labapp.cli.main import build_parser
 
 
 def test_every_command_module_is_complete():
@@ -12,5 +12,5 @@ def test_every_command_module_is_complete():
 
 
 def test_help_runs_as_a_process():
-    out = subprocess.run([sys.executable, "-m", "labapp.cli", "--help"], capture_output=True, text=True, check=True)
+    out = subprocess.run([sys.executable, "-m", "labapp.cli.main", "--help"], capture_output=True, text=True, check=True)
     assert "COMMAND" in out.stdout

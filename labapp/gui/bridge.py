@@ -14,9 +14,9 @@ from typing import Any
 
 from PySide6.QtCore import QObject, Signal
 
-from labapp.bench import PUBLISHED
-from labapp.engine import Engine
-from labapp.events import (CalibrationLevel, Done, EngineEvent, FrameStored, Message, Preview, Prompt, Reading,
+from labapp.acquisition.bench import PUBLISHED
+from labapp.acquisition.engine import Engine
+from labapp.acquisition.events import (CalibrationLevel, Done, EngineEvent, FrameStored, Message, Preview, Prompt, Reading,
                            StateChanged)
 
 log = logging.getLogger(__name__)
@@ -70,7 +70,7 @@ class EngineBridge(QObject):
 class LogBridge(QObject):
     """Log records of ``loggers`` at ``level`` and above (driver reconnects and retries, engine warnings) as
     the ``message(level, text)`` signal, delivered in the GUI thread; records also published as engine
-    events (``labapp.bench.PUBLISHED``) are skipped, they arrive through :class:`EngineBridge`."""
+    events (``labapp.acquisition.bench.PUBLISHED``) are skipped, they arrive through :class:`EngineBridge`."""
 
     message = Signal(str, str)
 

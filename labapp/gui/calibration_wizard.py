@@ -13,7 +13,7 @@ from PySide6.QtWidgets import (QDoubleSpinBox, QFileDialog, QFormLayout, QGroupB
                                QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget)
 
 from labapp.gui.bridge import BackgroundTask
-from labapp.simcal import SET_COLUMNS, calibrate_sim
+from labapp.jobs.calibrate_sim import SET_COLUMNS, calibrate_sim
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +88,7 @@ class CalibrationWizard(QWidget):
 
 class SimulationStep(QWidget):
     """The simulation step (paper section 4.3): runs with their meshes and weighed masses in a table,
-    ``labapp.simcal.calibrate_sim`` in the background, the leave-one-out figure, and "Make active".
+    ``labapp.jobs.calibrate_sim.calibrate_sim`` in the background, the leave-one-out figure, and "Make active".
 
     Emits ``simcal_activated(path)`` with the ``simcal.json`` the operator made active. ``bench_calibration``
     is a callable giving the active bench calibration's path (None: each run's own).
@@ -149,7 +149,7 @@ class SimulationStep(QWidget):
 
     def load_set(self, path: Path) -> None:
         """Fill the table from a ``run,mesh,object_mass_g`` file (paths made absolute)."""
-        from labapp.simcal import read_set
+        from labapp.jobs.calibrate_sim import read_set
 
         for row in read_set(path):
             self.add_row(row.run.resolve(), row.mesh.resolve(), row.object_mass_g)

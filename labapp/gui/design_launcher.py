@@ -13,12 +13,12 @@ import pyqtgraph as pg
 from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, QHBoxLayout, QLabel, QLineEdit, QPushButton,
                                QSpinBox, QVBoxLayout, QWidget)
 
-from design.outputs import enclosed_voids_text
+from design.files.outputs import enclosed_voids_text
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.sweep_panel import SweepPanel
-from labapp.simcal import SimCalFile, load_simcal
-from labapp.jobs import DESIGN_DEFAULTS, design_folder
-from labapp.jobs import design as design_job
+from labapp.jobs.calibrate_sim import SimCalFile, load_simcal
+from labapp.jobs.design import DESIGN_DEFAULTS, design_folder
+from labapp.jobs.design import design as design_job
 
 log = logging.getLogger(__name__)
 
@@ -27,7 +27,7 @@ NO_SIMCAL = ("no active simulation calibration: a measured run cannot become a t
 
 
 def read_curves(path: Path) -> dict[str, list[float]]:
-    """Columns of a design's ``curves.csv`` (`design.outputs.CURVE_COLUMNS`)."""
+    """Columns of a design's ``curves.csv`` (`design.files.outputs.CURVE_COLUMNS`)."""
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
     return {key: [float(r[key]) for r in rows] for key in (rows[0] if rows else {})}
@@ -53,7 +53,7 @@ def mid_slice(x, k: int, every: int = 5):
 
 
 class DesignLauncher(QWidget):
-    """Pick a run folder or a ``tau_mm,released_mm3`` CSV, run ``design.optimize.run_design`` off the GUI
+    """Pick a run folder or a ``tau_mm,released_mm3`` CSV, run ``design.inverse.optimize.run_design`` off the GUI
     thread with progress, show target vs achieved curves and save the STL."""
 
     def __init__(self, data_dir: Path, parent: QWidget | None = None) -> None:
@@ -159,7 +159,7 @@ class DesignLauncher(QWidget):
 
     def start(self) -> None:
         """Convert the source if it is a run, then run the design in the background."""
-        from design.problem import DesignConfig
+        from design.inverse.problem import DesignConfig
 
         source = Path(self.source.text().strip())
         if not source.exists():

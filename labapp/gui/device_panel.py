@@ -7,8 +7,8 @@ from PySide6.QtWidgets import (QComboBox, QFormLayout, QGroupBox, QHBoxLayout, Q
                                QVBoxLayout, QWidget)
 
 from drivers.camera.base import CameraSettings
-from labapp.devices import CAMERA_SPECS
-from labapp.events import Reading
+from labapp.acquisition.devices import CAMERA_SPECS
+from labapp.acquisition.events import Reading
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +72,7 @@ class DevicePanel(QWidget):
         layout.addStretch(1)
 
     def camera_spec(self) -> str:
-        """The chosen camera (``simulated`` or a spec of :data:`labapp.devices.CAMERA_SPECS`)."""
+        """The chosen camera (``simulated`` or a spec of :data:`labapp.acquisition.devices.CAMERA_SPECS`)."""
         return self.camera.currentText().strip()
 
     def hotplate_spec(self) -> str | None:
@@ -87,7 +87,7 @@ class DevicePanel(QWidget):
         return CameraSettings(val(self.aperture), val(self.shutter), val(self.iso), val(self.image_format))
 
     def show_reading(self, reading: Reading) -> None:
-        """Slot: show one hotplate reading (an engine :class:`labapp.events.Reading`)."""
+        """Slot: show one hotplate reading (an engine :class:`labapp.acquisition.events.Reading`)."""
         def fmt(v: float | None, spec: str) -> str:
             return "no probe" if v is None else format(v, spec)
         self.readouts["plate_c"].setText(fmt(reading.plate_c, ".1f"))

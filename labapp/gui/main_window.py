@@ -17,14 +17,14 @@ from PySide6.QtWidgets import (QDockWidget, QMainWindow, QMessageBox, QPlainText
                                QWidget)
 
 from analysis import BenchCalibration
-from labapp.bench import Bench
-from labapp.calseries import CalibrationProcedure, SeriesConfig
-from labapp.clock import make_clock
-from labapp.devices import make_bench
-from labapp import jobs
-from labapp.engine import Engine
+from labapp.acquisition.bench import Bench
+from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
+from labapp.acquisition.clock import make_clock
+from labapp.acquisition.devices import make_bench
+from labapp.jobs.run import new_run, resumable, resume_run
+from labapp.acquisition.engine import Engine
 from labapp.errors import UsageError
-from labapp.events import CalibrationLevel, Done, FrameStored, Preview, Prompt, StateChanged
+from labapp.acquisition.events import CalibrationLevel, Done, FrameStored, Preview, Prompt, StateChanged
 from labapp.gui.bridge import EngineBridge, LogBridge
 from labapp.gui.calibration_wizard import CalibrationWizard, parse_masses
 from labapp.gui.design_launcher import DesignLauncher
@@ -33,9 +33,9 @@ from labapp.gui.live_view import LiveView
 from labapp.gui.plots import PlotsPanel
 from labapp.gui.run_browser import RunBrowser
 from labapp.gui.run_controls import RunControls
-from labapp.procedures import PreviewProcedure
-from labapp.simbench import SimulatedBench, resume_clock
-from labapp.status import RunStatus
+from labapp.acquisition.procedures import PreviewProcedure
+from labapp.acquisition.simbench import SimulatedBench, resume_clock
+from labapp.acquisition.status import RunStatus
 
 log = logging.getLogger(__name__)
 
@@ -192,7 +192,7 @@ class MainWindow(QMainWindow):
             g = calibration.geometry
             self.live.set_geometry(g.x, g.y, g.size, g.grid, g.mirror_col)
         try:
-            proc = jobs.new_run(config, bench, self.data_dir, calibration)
+            proc = new_run(config, bench, self.data_dir, calibration)
         except UsageError as exc:
             self.on_message("error", f"cannot start: {exc}")
             return
@@ -204,7 +204,7 @@ class MainWindow(QMainWindow):
             self.on_message("warning", "the engine is busy; stop the current procedure first")
             return
         try:
-            simulated = bool(jobs.resumable(folder).meta.get("simulated"))
+            simulated = bool(resumable(folder).meta.get("simulated"))
             if simulated != (self.devices.camera_spec() == SIMULATED):
                 raise UsageError(f"{folder} was recorded on a {'simulated' if simulated else 'real'} bench; "
                                  f"choose {'the simulated' if simulated else 'a real'} camera in the device panel")
@@ -213,7 +213,7 @@ class MainWindow(QMainWindow):
                 if self.sim is not None:
                     self.sim.close()
                     self.sim = None
-            proc = jobs.resume_run(Path(folder), self.make_bench(), self._calibration())
+            proc = resume_run(Path(folder), self.make_bench(), self._calibration())
         except Exception as exc:
             self.on_message("error", f"cannot resume {folder}: {exc}")
             return

@@ -8,9 +8,9 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
-from labapp.curvefiles import PhysicalCurve, read_physical_curve
-from labapp.simcal import SimCalFile
-from labapp.targets import predict_mesh
+from labapp.records.curvefiles import PhysicalCurve, read_physical_curve
+from labapp.jobs.calibrate_sim import SimCalFile
+from labapp.jobs.physical import predict_mesh
 
 log = logging.getLogger(__name__)
 

@@ -12,14 +12,16 @@ from PySide6.QtWidgets import (QDoubleSpinBox, QHBoxLayout, QLabel, QLineEdit, Q
                                QTreeWidget, QTreeWidgetItem, QVBoxLayout, QWidget)
 
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
-from labapp import jobs
-from labapp.compare import Comparison, compare_curves
+from labapp.jobs.analyse import analyse_run
+from labapp.jobs.run import resumable
+from labapp.jobs.verify import verify as verify_folder
+from labapp.jobs.compare import Comparison, compare_curves
 from labapp.errors import UsageError
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.overlay import PhysicalOverlay
 from labapp.gui.plots import PlotsPanel
-from labapp.outpaths import ANALYSIS_SUBFOLDER
-from labapp.storage import StorageError, finalise_run, read_run
+from labapp.records.outpaths import ANALYSIS_SUBFOLDER
+from labapp.records.storage import StorageError, finalise_run, read_run
 
 log = logging.getLogger(__name__)
 
@@ -173,7 +175,7 @@ class RunBrowser(QWidget):
         window, order = self.window.value(), self.order.value()
 
         def work(progress):
-            return jobs.analyse_run(path, cal_path, path / ANALYSIS_SUBFOLDER, window_s=window, order=order,
+            return analyse_run(path, cal_path, path / ANALYSIS_SUBFOLDER, window_s=window, order=order,
                                     progress=lambda done, total: progress((done, total))).curve
         self.task = BackgroundTask(work, self)
         self.task.progress.connect(self._progress)
@@ -253,7 +255,7 @@ class RunBrowser(QWidget):
         if path is None:
             return
         try:
-            jobs.resumable(path)
+            resumable(path)
         except UsageError as exc:
             self.info.setText(str(exc))
             return
@@ -269,5 +271,5 @@ class RunBrowser(QWidget):
     def _verify(self) -> None:
         path = self.selected_path()
         if path is not None:
-            lines = jobs.verify(path).lines()
+            lines = verify_folder(path).lines()
             self.info.setText("\n".join(lines[:11] + lines[-1:]))

@@ -7,7 +7,7 @@ from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (QCheckBox, QDoubleSpinBox, QFileDialog, QFormLayout, QGridLayout, QGroupBox,
                                QHBoxLayout, QLineEdit, QPushButton, QVBoxLayout, QWidget)
 
-from labapp.procedures import RunConfig
+from labapp.acquisition.procedures import RunConfig
 
 log = logging.getLogger(__name__)
 

@@ -1,5 +1,5 @@
 """Sweep panel of the design launcher: a small grid of design settings on the local Dask cluster
-(`labapp.sweep.run_sweep`, the job behind `sfr sweep`), then its contact sheet and each design's report."""
+(`labapp.scaleout.sweep.run_sweep`, the job behind `sfr sweep`), then its contact sheet and each design's report."""
 from __future__ import annotations
 
 import csv
@@ -46,8 +46,8 @@ class SweepPanel(QGroupBox):
 
     def __init__(self, data_dir: Path, base_settings: Callable[[], tuple[str, dict, str | None]],
                  parent: QWidget | None = None) -> None:
-        from design.presets import PRESET_NAMES
-        from labapp.cluster import local_worker_count
+        from design.inverse.presets import PRESET_NAMES
+        from labapp.scaleout.cluster import local_worker_count
 
         super().__init__("Sweep (local Dask cluster)", parent)
         self.data_dir, self.base_settings = Path(data_dir), base_settings
@@ -96,8 +96,8 @@ class SweepPanel(QGroupBox):
         self._stop = threading.Event()
 
     def spec(self):
-        """The sweep spec of the fields (`labapp.sweepspec.SweepSpec`); raises ValueError naming a bad field."""
-        from labapp.sweepspec import parse_spec, spec_text
+        """The sweep spec of the fields (`labapp.scaleout.sweepspec.SweepSpec`); raises ValueError naming a bad field."""
+        from labapp.scaleout.sweepspec import parse_spec, spec_text
 
         target, fixed, simcal = self.base_settings()
         if not target:
@@ -110,9 +110,9 @@ class SweepPanel(QGroupBox):
 
     def start(self) -> None:
         """Run the sweep on a local cluster in the background."""
-        from labapp.cluster import dask_client
-        from labapp.storage import sanitize_name
-        from labapp.sweep import run_sweep
+        from labapp.scaleout.cluster import dask_client
+        from labapp.records.storage import sanitize_name
+        from labapp.scaleout.sweep import run_sweep
 
         try:
             spec = self.spec()
@@ -165,7 +165,7 @@ class SweepPanel(QGroupBox):
 
     def browse(self, sweep_dir: Path) -> None:
         """List a sweep's designs best first (the contact sheet's ranking) and show its contact sheet."""
-        from labapp.contact_sheet import rank
+        from labapp.figures.contact_sheet import rank
 
         self.sweep_dir = Path(sweep_dir)
         try:

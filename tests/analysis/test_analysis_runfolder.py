@@ -10,7 +10,7 @@ from PIL import Image
 
 import analysis.runfolder as runfolder
 from analysis import AnalysisError, CropGeometry, analyze_run, fit_bench_calibration, read_cells, read_frame_list
-from labapp.cli import main
+from labapp.cli.main import main
 
 BENCH = Path(__file__).resolve().parents[2] / "fixtures" / "bench"
 CROP = tuple(json.loads((BENCH / "calibration" / "truth.json").read_text())["crop"])

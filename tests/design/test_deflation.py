@@ -1,11 +1,11 @@
-"""Deflation of floating islands' rigid-body modes in the multigrid PCG (design.deflation)."""
+"""Deflation of floating islands' rigid-body modes in the multigrid PCG (design.fabrication.deflation)."""
 import numpy as np
 import pytest
 import scipy.sparse.linalg as sla
 
-from design.deflation import floating_islands, island_deflation
-from design.elasticity import assemble, modulus, self_weight
-from design.multigrid import hierarchy, pcg
+from design.fabrication.deflation import floating_islands, island_deflation
+from design.fabrication.elasticity import assemble, modulus, self_weight
+from design.fabrication.multigrid import hierarchy, pcg
 
 
 def _islands() -> np.ndarray:

@@ -1,7 +1,7 @@
 """`sfr design` end to end on a tiny grid, `--resume`, and the ico space with a preset."""
 import json
 
-from labapp.cli import main
+from labapp.cli.main import main
 
 
 def test_sfr_design_writes_a_run_and_resumes(tmp_path, capsys):

@@ -3,7 +3,7 @@ the mirror planes) for pieces with the bounded h, a direction for hollow and nes
 import numpy as np
 import pytest
 
-from design.connectivity import TAIL_SLOPE, Connectivity
+from design.fabrication.connectivity import TAIL_SLOPE, Connectivity
 from design.errors import DesignError
 
 

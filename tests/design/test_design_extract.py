@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.extract import LEVEL_RANGE, centred_iou, count_pieces, density_mesh, mass_preserving_level, revoxelize
+from design.fabrication.extract import LEVEL_RANGE, centred_iou, count_pieces, density_mesh, mass_preserving_level, revoxelize
 
 
 def _ball_density(n=20, radius=6.0):

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.multistart import coarse_resolution, perturbed_start, upsample
-from design.optimize import run_design
-from design.problem import MULTISTART_STARTS, DesignConfig
+from design.inverse.multistart import coarse_resolution, perturbed_start, upsample
+from design.inverse.optimize import run_design
+from design.inverse.problem import MULTISTART_STARTS, DesignConfig
 
 
 def test_upsample_keeps_a_linear_field_and_the_mirror_face():

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.filters import project
-from design.forward import simulate, total_time
-from design.objective import DesignObjective, rel_rmse
-from design.rate import rate_fit, rate_shape_fit
-from design.spaces import SpaceRequest, build_space
+from design.inverse.filters import project
+from design.forward.simulator import simulate, total_time
+from design.inverse.objective import DesignObjective, rel_rmse
+from design.inverse.rate import rate_fit, rate_shape_fit
+from design.inverse.spaces import SpaceRequest, build_space
 
 
 def _objective(name, request, w_fab=0.0, fab=None, w_rate=0.0, robust_eta=0.0, rate_span=(0.0, 1.0), w_conn=0.0):

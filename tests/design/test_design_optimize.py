@@ -6,9 +6,9 @@ import pytest
 import trimesh
 
 from design.errors import DesignError
-from design.optimize import run_design
-from design.problem import DesignConfig, prepare
-from design.shapes import sample_shape
+from design.inverse.optimize import run_design
+from design.inverse.problem import DesignConfig, prepare
+from design.geometry.shapes import sample_shape
 
 SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)
 
@@ -124,7 +124,7 @@ def test_a_run_stored_before_the_plane_term_and_the_tail_resumes_with_the_bounde
     resumed = json.loads((tmp_path / "summary.json").read_text())["config"]
     assert resumed["connect_planes"] is False and resumed["connect_tail"] == 0.0
     # the core term alone is the plane term's absence: a floating blob pays its volume once, not twice
-    from design.connectivity import Connectivity
+    from design.fabrication.connectivity import Connectivity
     blob = np.zeros((12, 12))
     blob[0:4, 0:4] = blob[8:11, 8:11] = 1.0
     core_only = Connectivity(blob.shape, (True, True), 0.5, planes=False, tail_slope=0.0)(blob, 1.0)[0]
@@ -133,7 +133,7 @@ def test_a_run_stored_before_the_plane_term_and_the_tail_resumes_with_the_bounde
 
 
 def test_a_release_over_within_one_sample_has_no_rate_deviation_instead_of_failing_the_outputs():
-    from design.outputs import _rate_dev
+    from design.files.outputs import _rate_dev
     tau = np.linspace(0.0, 1.0, 11)
     curve = np.full(11, 10.0)
     curve[0] = 0.0
@@ -143,9 +143,9 @@ def test_a_release_over_within_one_sample_has_no_rate_deviation_instead_of_faili
 
 
 def test_a_fine_check_over_its_voxel_budget_is_skipped_with_a_warning(tmp_path, monkeypatch):
-    import design.outputs
+    import design.files.outputs
 
-    monkeypatch.setattr(design.outputs, "FINE_MAX_VOXELS", 8 ** 3 * 8 - 1)  # the 16^3 nfc run's check is 8^3 * 8
+    monkeypatch.setattr(design.files.outputs, "FINE_MAX_VOXELS", 8 ** 3 * 8 - 1)  # the 16^3 nfc run's check is 8^3 * 8
     result = run_design(DesignConfig(max_iter=6, **SMALL), tmp_path / "run")
     summary = result.outputs.summary
     assert summary["rel_rmse_fine"] is None and summary["rate_dev_mid80"]["fine"] is None

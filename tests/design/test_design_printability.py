@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.printability import assess, enclosed_voids, narrowest_channel_mm, overhang_stats, overhangs, print_mass_g, prusa_profile
+from design.fabrication.printability import assess, enclosed_voids, narrowest_channel_mm, overhang_stats, overhangs, print_mass_g, prusa_profile
 
 
 def _hollow_ball(hole_vox: int, n: int = 40) -> np.ndarray:
@@ -109,7 +109,7 @@ def test_supports_follow_the_design_space():
 
 
 def test_enclosed_voids_phrase_reads_the_summary():
-    from design.outputs import enclosed_voids_text
+    from design.files.outputs import enclosed_voids_text
     assert enclosed_voids_text({"enclosed_voids": 0, "enclosed_void_mm3": 0.0}) == "no enclosed voids"
     assert enclosed_voids_text({"enclosed_voids": 2, "enclosed_void_mm3": 12.5}) == "2 enclosed voids, 12.5 mm^3"
     assert enclosed_voids_text({"pieces": 1}) == "enclosed voids not assessed"

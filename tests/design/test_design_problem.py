@@ -4,9 +4,9 @@ import pytest
 import trimesh
 
 from design.errors import DesignError
-from design.forward import simulate
-from design.problem import START_FILL, DesignConfig, prepare
-from design.targets import target_from_csv
+from design.forward.simulator import simulate
+from design.inverse.problem import START_FILL, DesignConfig, prepare
+from design.inverse.targets import target_from_csv
 
 
 def _long_curve(path, end_mm=15.0, final_mm3=900.0):
@@ -113,7 +113,7 @@ def test_connectivity_settings_must_not_be_negative(field, value):
 
 def test_a_source_in_separate_pieces_is_warned_about_unless_pieces_are_allowed(two_boxes_stl, caplog):
     path = two_boxes_stl
-    with caplog.at_level("WARNING", logger="design.problem"):
+    with caplog.at_level("WARNING", logger="design.inverse.problem"):
         problem = prepare(DesignConfig(target=str(path), resolution=16))
     assert len(problem.warnings) == 1 and "the source is 2 separate pieces" in problem.warnings[0]
     assert problem.warnings[0] in caplog.text

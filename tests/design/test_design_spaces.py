@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.spaces import (BUILD_AXIS, SPACE_CHOICES, SpaceRequest, available_spaces, build_space,
+from design.inverse.spaces import (BUILD_AXIS, SPACE_CHOICES, SpaceRequest, available_spaces, build_space,
                            nfc_space, register_space)
 
 

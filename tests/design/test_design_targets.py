@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.forward import simulate
-from design.targets import (SPHERE_AREA_COEF, Target, check_feasibility, constant_acceleration,
+from design.forward.simulator import simulate
+from design.inverse.targets import (SPHERE_AREA_COEF, Target, check_feasibility, constant_acceleration,
                             resample_monotone, target_from_csv, target_from_density)
 
 

@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg as sla
 
-from design.elasticity import (UNIFORM, apply_stencil, assemble, free_mask, gauss_seidel, hex8_stiffness, modulus,
+from design.fabrication.elasticity import (UNIFORM, apply_stencil, assemble, free_mask, gauss_seidel, hex8_stiffness, modulus,
                                self_weight, stencil)
 from design.errors import DesignError
-from design.multigrid import hierarchy, pcg, prolong, restrict
+from design.fabrication.multigrid import hierarchy, pcg, prolong, restrict
 
 
 def test_element_matrix_is_symmetric_with_six_rigid_modes():

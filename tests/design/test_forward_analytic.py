@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from design.forward import simulate
+from design.forward.simulator import simulate
 
 
 def _centres(n, half_width):

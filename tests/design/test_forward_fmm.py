@@ -5,7 +5,7 @@ import skfmm
 from scipy.ndimage import gaussian_filter
 
 from design.errors import DesignError
-from design.fmm import MarchBuffers, eikonal_residual, march, march_adjoint
+from design.forward.fmm import MarchBuffers, eikonal_residual, march, march_adjoint
 
 
 def _field(shape, seed):

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from design.forward import DesignError, release_gradient, simulate, total_time
+from design.forward.simulator import DesignError, release_gradient, simulate, total_time
 
 
 def _density(shape, seed):

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from design.release import ramp_release, ramp_release_vjp
+from design.forward.release import ramp_release, ramp_release_vjp
 
 
 def _literal(u, length, weight, tau):

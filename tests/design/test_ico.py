@@ -3,12 +3,12 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.forward import simulate, total_time
-from design.ico import IcoConfig, IcoTerm, incremental_compliance, layer_tops
-from design.objective import DesignObjective
-from design.presets import PRESET_NAMES, preset_values
-from design.problem import DesignConfig
-from design.spaces import SpaceRequest, build_space
+from design.forward.simulator import simulate, total_time
+from design.fabrication.ico import IcoConfig, IcoTerm, incremental_compliance, layer_tops
+from design.inverse.objective import DesignObjective
+from design.inverse.presets import PRESET_NAMES, preset_values
+from design.inverse.problem import DesignConfig
+from design.inverse.spaces import SpaceRequest, build_space
 
 
 @pytest.mark.parametrize("coarsen,law,mirror", [(1, "simp", (True, True)), (2, "ramp", (True, False)),
@@ -139,7 +139,7 @@ def test_presets_fill_unset_fields_and_name_themselves():
 
 
 def test_an_ico_domain_stands_the_source_on_the_plate():
-    from design.problem import prepare
+    from design.inverse.problem import prepare
 
     problem = prepare(DesignConfig(target="pill", space="ico", resolution=24, layers=4))
     layers = np.flatnonzero(problem.source_solid.any(axis=(0, 1)))

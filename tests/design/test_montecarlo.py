@@ -1,4 +1,4 @@
-"""design.montecarlo: the per-step probability of the Arrhenius law, seeds, convergence of the mean over
+"""design.montecarlo.erosion: the per-step probability of the Arrhenius law, seeds, convergence of the mean over
 seeds, closed cavities, mirror unfolding, and the tuned model against the analytic release of a sphere."""
 import math
 
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from design import DesignError
-from design.montecarlo import GAS_CONSTANT, MonteCarloParams, default_dt_s, erosion_times, simulate_mc
-from design.montecarlo_tuning import tune_mc, unit_runs
-from design.pipeline import input_grid
+from design.montecarlo.erosion import GAS_CONSTANT, MonteCarloParams, default_dt_s, erosion_times, simulate_mc
+from design.montecarlo.tuning import tune_mc, unit_runs
+from design.forward.pipeline import input_grid
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 """Shared fixtures of the labapp tests."""
 import pytest
 
-from labapp.demo import simulated_calibration
+from labapp.jobs.demo import simulated_calibration
 
 
 @pytest.fixture(scope="session")

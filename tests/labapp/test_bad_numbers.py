@@ -10,10 +10,10 @@ import trimesh
 
 from analysis import AnalysisError, BenchCalibration
 from design.errors import DesignError
-from design.meshio import load_mesh
-from design.targets import read_curve_csv
-from labapp.calseries import read_masses
-from labapp.cli import main
+from design.files.meshio import load_mesh
+from design.inverse.targets import read_curve_csv
+from labapp.acquisition.calseries import read_masses
+from labapp.cli.main import main
 from labapp.errors import UsageError
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"

@@ -5,10 +5,10 @@ import sys
 
 import pytest
 
-from labapp import cli
-from labapp.cli import WORKFLOW, main
+from labapp.cli import main as cli
+from labapp.cli.main import WORKFLOW, main
 
-SFR = [sys.executable, "-m", "labapp.cli"]
+SFR = [sys.executable, "-m", "labapp.cli.main"]
 
 
 def test_no_arguments_lists_the_commands_in_workflow_order(capsys):
@@ -38,7 +38,7 @@ def test_exit_codes_and_one_error_line(tmp_path, capsys):
 def test_an_unexpected_error_is_one_line_and_debug_shows_the_traceback(monkeypatch, capsys):
     def broken(args):
         raise KeyError("boom")
-    monkeypatch.setattr("labapp.commands.verify.run", broken)
+    monkeypatch.setattr("labapp.cli.commands.verify.run", broken)
     assert main(["verify", "x"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "internal error (KeyError: 'boom')" in err and "--debug" in err

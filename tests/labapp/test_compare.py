@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from labapp.cli import main
+from labapp.cli.main import main
 
 
 def _csv(path, t, grams, header="t_s,released_g"):
@@ -90,8 +90,8 @@ def test_a_designs_physical_prediction_carries_the_release_metrics(tmp_path):
     from pathlib import Path
 
     from analysis import SimCal
-    from labapp.simcal import SimCalFile
-    from labapp.targets import write_design_physical
+    from labapp.jobs.calibrate_sim import SimCalFile
+    from labapp.jobs.physical import write_design_physical
 
     tau = np.linspace(0, 2.0, 201)
     target = 1000 * (1 - (1 - tau / 2.0) ** 3)       # a sphere-like target, mm^3

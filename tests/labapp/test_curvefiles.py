@@ -1,10 +1,10 @@
-"""labapp.curvefiles: every physical curve file of the project through one reader, bad values named by row."""
+"""labapp.records.curvefiles: every physical curve file of the project through one reader, bad values named by row."""
 import json
 
 import numpy as np
 import pytest
 
-from labapp.curvefiles import CurveFileError, read_physical_curve
+from labapp.records.curvefiles import CurveFileError, read_physical_curve
 
 
 def _write(path, text):

@@ -7,7 +7,7 @@ import subprocess
 import sys
 
 from drivers.hotplate import heidolph
-from labapp.cli import main
+from labapp.cli.main import main
 from tests.drivers.scripted_port import ScriptedPort
 
 QUERIES = [(b"IN_PV_1\r\n", b"IN_PV_1 999.9\n\r"), (b"IN_PV_3\r\n", b"IN_PV_3 21.5\n\r"),
@@ -58,7 +58,7 @@ def test_missing_hotplate_port_is_one_line(tmp_path, capsys):
 
 def test_emulator_cleans_up_on_sigterm(tmp_path):
     env = dict(os.environ, HOME=str(tmp_path), XDG_CONFIG_HOME=str(tmp_path))
-    emu = subprocess.Popen([sys.executable, "-m", "labapp.cli", "emulate", "heidolph", "--seed", "0"],
+    emu = subprocess.Popen([sys.executable, "-m", "labapp.cli.main", "emulate", "heidolph", "--seed", "0"],
                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
     try:
         path = emu.stdout.readline().strip()

@@ -4,12 +4,12 @@ import json
 import numpy as np
 import pytest
 
-from design.montecarlo import MonteCarloParams
-from design.pipeline import simulate_mesh
-from design.shapes import sample_shape
-from labapp.cli import main
-from labapp.curvefiles import read_physical_curve
-from labapp.mcsim import McCalibration, load_mc_calibration, simulate_mc_job
+from design.montecarlo.erosion import MonteCarloParams
+from design.forward.pipeline import simulate_mesh
+from design.geometry.shapes import sample_shape
+from labapp.cli.main import main
+from labapp.records.curvefiles import read_physical_curve
+from labapp.jobs.simulate_mc import McCalibration, load_mc_calibration, simulate_mc_job
 
 SECONDS_PER_MM = 1500.0
 G_PER_MM3 = 1.3e-3
@@ -90,7 +90,7 @@ def test_sfr_simulate_model_mc_takes_a_calibration_and_refuses_the_forward_ones(
 
 
 def test_sfr_simulate_simcal_summary_carries_the_release_metrics(tmp_path):
-    from labapp.simcal import FORMAT, FORWARD_MODEL
+    from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL
 
     simcal = tmp_path / "simcal.json"
     simcal.write_text(json.dumps({"format": FORMAT, "forward_model": FORWARD_MODEL, "model": "constant",

@@ -2,10 +2,10 @@
 logging handler (headless)."""
 import logging
 
-from labapp.bench import PUBLISHED
-from labapp.clock import SteppedClock
-from labapp.engine import Engine
-from labapp.events import CalibrationLevel, FrameStored, Message
+from labapp.acquisition.bench import PUBLISHED
+from labapp.acquisition.clock import SteppedClock
+from labapp.acquisition.engine import Engine
+from labapp.acquisition.events import CalibrationLevel, FrameStored, Message
 from labapp.gui.bridge import EngineBridge, LogBridge
 
 
@@ -32,7 +32,7 @@ def test_driver_warnings_reach_the_event_log(qtbot):
     try:
         logging.getLogger("drivers.hotplate.heidolph").warning("link lost on %s; reconnect 1 of 3", "/dev/ttyUSB0")
         logging.getLogger("drivers.camera.gphoto").info("not shown: below warning")
-        logging.getLogger("labapp.bench").warning("shown once, as an engine event", extra={PUBLISHED: True})
+        logging.getLogger("labapp.acquisition.bench").warning("shown once, as an engine event", extra={PUBLISHED: True})
         qtbot.waitUntil(lambda: len(seen) == 1)
         assert seen == [("warning", "drivers.hotplate.heidolph: link lost on /dev/ttyUSB0; reconnect 1 of 3")]
     finally:
@@ -49,9 +49,9 @@ def test_live_plot_smooths_with_the_analysis_window(qtbot):
 
 
 def test_design_launcher_starts_from_the_cli_defaults_and_layout(qtbot, tmp_path):
-    from design.problem import DesignConfig
+    from design.inverse.problem import DesignConfig
     from labapp.gui.design_launcher import DesignLauncher
-    from labapp.jobs import design_folder
+    from labapp.jobs.design import design_folder
 
     launcher = DesignLauncher(tmp_path)
     qtbot.addWidget(launcher)

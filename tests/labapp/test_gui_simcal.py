@@ -6,11 +6,11 @@ import pytest
 
 pytest.importorskip("pytestqt")
 
-from design.shapes import sample_shape
+from design.geometry.shapes import sample_shape
 from labapp.gui.calibration_wizard import SimulationStep
 from labapp.gui.design_launcher import DesignLauncher
 from labapp.gui.run_browser import RunBrowser
-from labapp.simbench import Material, sample_release
+from labapp.acquisition.simbench import Material, sample_release
 
 
 @pytest.fixture(scope="module")

@@ -5,12 +5,12 @@ import subprocess
 import sys
 import time
 
-from labapp.storage import read_run, unrecorded_frames, verify_run
+from labapp.records.storage import read_run, unrecorded_frames, verify_run
 
 
 def _sfr_run(*args):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.Popen([sys.executable, "-m", "labapp.cli", "run", "--simulate", *args],
+    return subprocess.Popen([sys.executable, "-m", "labapp.cli.main", "run", "--simulate", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
 
 

@@ -4,9 +4,9 @@ import time
 
 import pytest
 
-from labapp.clock import ScaledClock, SteppedClock, WallClock, make_clock
-from labapp.engine import Engine
-from labapp.events import Done, Message, Prompt
+from labapp.acquisition.clock import ScaledClock, SteppedClock, WallClock, make_clock
+from labapp.acquisition.engine import Engine
+from labapp.acquisition.events import Done, Message, Prompt
 
 
 class Counting:

@@ -7,7 +7,7 @@ import numpy as np
 
 from labapp.gui.live_view import grid_segments, mirrored_x
 from labapp.gui.main_window import MainWindow
-from labapp.storage import read_run, verify_run
+from labapp.records.storage import read_run, verify_run
 
 FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures"
 

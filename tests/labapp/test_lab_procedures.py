@@ -8,14 +8,14 @@ import pytest
 
 from analysis import BenchCalibration, analyze_run
 from drivers.camera.base import DSLR_FRAME_BYTES, CameraError, CaptureMissed
-from labapp.bench import Bench
-from labapp.calseries import CalibrationProcedure, SeriesConfig
-from labapp.clock import SteppedClock
-from labapp.engine import Engine
-from labapp.events import FrameStored, Prompt, StateChanged
-from labapp.procedures import RunConfig, RunProcedure
-from labapp.simbench import SimulatedBench
-from labapp.storage import read_run, verify_run
+from labapp.acquisition.bench import Bench
+from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
+from labapp.acquisition.clock import SteppedClock
+from labapp.acquisition.engine import Engine
+from labapp.acquisition.events import FrameStored, Prompt, StateChanged
+from labapp.acquisition.procedures import RunConfig, RunProcedure
+from labapp.acquisition.simbench import SimulatedBench
+from labapp.records.storage import read_run, verify_run
 from tests.labapp.lab_fakes import SCENE, ModelHotplate, RenderCamera
 
 WATER_G = 500.0
@@ -113,7 +113,7 @@ def test_config_guards():
 
 
 def test_the_disk_check_before_a_run_uses_the_benchs_frame_size(tmp_path, calibration, monkeypatch):
-    monkeypatch.setattr("labapp.storage.free_bytes", lambda folder: 10**9)  # 1 GB free
+    monkeypatch.setattr("labapp.records.storage.free_bytes", lambda folder: 10**9)  # 1 GB free
     config = RunConfig(stable_step_s=30, keepalive_s=0.02, max_duration_s=3600)  # 328 frames at 11 s
     clock = SteppedClock(start_s=4e9)
     dslr = _bench(clock, _truth([None]))  # 15 MB a frame: 328 x 15 MB x 1.5 = 7.4 GB do not fit

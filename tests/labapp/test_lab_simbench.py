@@ -2,12 +2,12 @@
 import numpy as np
 import pytest
 
-from labapp.clock import SteppedClock
-from labapp.engine import Engine
-from labapp.procedures import RunConfig, RunProcedure
-from labapp.simbench import Material, SampleRelease, SimulatedBench, sample_release
-from labapp.events import FrameStored
-from labapp.storage import read_run, verify_run
+from labapp.acquisition.clock import SteppedClock
+from labapp.acquisition.engine import Engine
+from labapp.acquisition.procedures import RunConfig, RunProcedure
+from labapp.acquisition.simbench import Material, SampleRelease, SimulatedBench, sample_release
+from labapp.acquisition.events import FrameStored
+from labapp.records.storage import read_run, verify_run
 
 
 def _sphere(radius_mm=6.82):

@@ -6,7 +6,7 @@ import os
 import psutil
 import pytest
 
-from labapp.storage import (StorageError, check_disk_space, create_run, open_run, read_run, sanitize_name,
+from labapp.records.storage import (StorageError, check_disk_space, create_run, open_run, read_run, sanitize_name,
                             verify_run)
 
 

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from labapp.cli import main
-from labapp.outpaths import OutPathError, check_data_dir, check_out, folder_kind
-from labapp.storage import create_run
+from labapp.cli.main import main
+from labapp.records.outpaths import OutPathError, check_data_dir, check_out, folder_kind
+from labapp.records.storage import create_run
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"
 

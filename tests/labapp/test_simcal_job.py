@@ -11,11 +11,11 @@ import json
 import numpy as np
 import pytest
 
-from design.shapes import sample_shape
-from labapp.cli import main
+from design.geometry.shapes import sample_shape
+from labapp.cli.main import main
 from labapp.errors import UsageError
-from labapp.simcal import SimCalError, calibrate_sim, load_simcal
-from labapp.simbench import Material, sample_release
+from labapp.jobs.calibrate_sim import SimCalError, calibrate_sim, load_simcal
+from labapp.acquisition.simbench import Material, sample_release
 
 SHAPES = ("sphere", "pill", "spinner_top", "csg")
 MATERIAL = Material(1850.0, 1.24)
@@ -134,7 +134,7 @@ def test_simulate_with_simcal_writes_the_physical_curve_and_refuses_another_reso
 
 def _raise_through(argv):
     """Run a command's ``run`` directly so that its error is seen, not just its exit code."""
-    from labapp.cli import build_parser
+    from labapp.cli.main import build_parser
 
     args = build_parser().parse_args(argv)
     args._run(args)

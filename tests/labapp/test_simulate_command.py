@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from labapp.cli import main
+from labapp.cli.main import main
 
 
 def test_sample_shape_writes_csv_summary_and_plot(tmp_path):

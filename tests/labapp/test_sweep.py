@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from labapp.contact_sheet import printable, rank, top_view, views
-from labapp.outpaths import OutPathError
-from labapp.sweep import SweepError, folder_state, run_sweep
-from labapp.sweepspec import SpecError, combination_name, load_spec, parse_spec, spec_text
+from labapp.figures.contact_sheet import printable, rank, top_view, views
+from labapp.records.outpaths import OutPathError
+from labapp.scaleout.sweep import SweepError, folder_state, run_sweep
+from labapp.scaleout.sweepspec import SpecError, combination_name, load_spec, parse_spec, spec_text
 
 SMALL = 'target = "pill"\nspace = "extruded"\nresolution = 16\nmax_iter = 6\n'
 
@@ -77,7 +77,7 @@ def test_spec_text_round_trips():
 
 
 def test_a_measured_target_goes_through_the_simulation_calibration(tmp_path):
-    from labapp.simcal import FORMAT, FORWARD_MODEL
+    from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL
 
     (tmp_path / "simcal.json").write_text(json.dumps({
         "format": FORMAT, "forward_model": FORWARD_MODEL, "model": "constant", "seconds_per_mm": 1500.0,
@@ -136,8 +136,8 @@ def test_serial_sweep_records_failures_and_reruns_skip_done(tmp_path):
 
 
 def test_stopped_designs_resume_from_their_checkpoint(tmp_path):
-    from design.optimize import run_design
-    from labapp.sweep import prepare_sweep_dir
+    from design.inverse.optimize import run_design
+    from labapp.scaleout.sweep import prepare_sweep_dir
 
     spec = parse_spec(SMALL.replace("max_iter = 6", "max_iter = 12\ncheckpoint_every = 2"))
     out = prepare_sweep_dir(spec, tmp_path / "sweep")
@@ -205,7 +205,7 @@ def test_top_view_is_the_height_of_the_top_voxel():
 def test_local_workers_get_one_blas_thread_and_glibcs_own_malloc_thresholds():
     import os
 
-    from labapp.cluster import dask_client
+    from labapp.scaleout.cluster import dask_client
     with dask_client(workers=1) as client:
         env = next(iter(client.run(lambda: dict(os.environ)).values()))
     assert env["OMP_NUM_THREADS"] == env["OPENBLAS_NUM_THREADS"] == "1"
@@ -213,7 +213,7 @@ def test_local_workers_get_one_blas_thread_and_glibcs_own_malloc_thresholds():
 
 
 def test_a_second_local_cluster_takes_another_dashboard_port_without_a_warning(recwarn):
-    from labapp.cluster import dashboard_link, dask_client
+    from labapp.scaleout.cluster import dashboard_link, dask_client
     with dask_client(workers=1) as first, dask_client(workers=1) as second:
         links = dashboard_link(first), dashboard_link(second)
     assert links[0] and links[1] and links[0] != links[1]
@@ -223,7 +223,7 @@ def test_a_second_local_cluster_takes_another_dashboard_port_without_a_warning(r
 def test_the_cluster_starts_the_costliest_designs_first(tmp_path):
     from distributed import Client, LocalCluster
 
-    from labapp.sweep import expected_work
+    from labapp.scaleout.sweep import expected_work
 
     spec = parse_spec(SMALL + "[grid]\nresolution = [16, 24]\nmax_iter = [3, 6]\n")
     assert [expected_work(c) for c in spec.combinations] == [16**3 * 3, 16**3 * 6, 24**3 * 3, 24**3 * 6]

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from analysis import CropGeometry, fit_bench_calibration, read_cells
-from labapp.batch import analyse_many, output_names
-from labapp.cli import main
+from labapp.scaleout.batch import analyse_many, output_names
+from labapp.cli.main import main
 
 BENCH = Path(__file__).resolve().parents[2] / "fixtures" / "bench"
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from labapp.sweep import DONE_STATUSES
+from labapp.scaleout.sweep import DONE_STATUSES
 
 MAX_ITER = 150
 SPEC = f"""target = "sphere"
@@ -84,7 +84,7 @@ def test_sweep_survives_a_killed_worker(tmp_path):
                 ["-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny", "--host",
                  "127.0.0.1", "--worker-port", str(worker_port), "--no-dashboard", "--name", f"w{i}"])
             procs.append(proc)
-        sweep = _spawn(["-m", "labapp.cli", "sweep", str(spec), "--out", str(out), "--scheduler", address,
+        sweep = _spawn(["-m", "labapp.cli.main", "sweep", str(spec), "--out", str(out), "--scheduler", address,
                         "--workers", "2"])
         procs.append(sweep)
         # kill the worker of the first design to start, once that design has checkpointed
@@ -116,7 +116,7 @@ def folder_not_done(folder: Path) -> bool:
 def test_ctrl_c_checkpoints_running_designs(tmp_path):
     spec, out = tmp_path / "spec.toml", tmp_path / "sweep"
     spec.write_text(SPEC.replace("resolution = 32", "resolution = 48").replace(f"max_iter = {MAX_ITER}", "max_iter = 2000"))
-    cmd = ["-m", "labapp.cli", "sweep", str(spec), "--out", str(out), "--workers", "2"]
+    cmd = ["-m", "labapp.cli.main", "sweep", str(spec), "--out", str(out), "--workers", "2"]
     # a terminal's Ctrl-C: SIGINT to the whole process group (the command and its local workers)
     sweep = _spawn(cmd, start_new_session=True)
     try:

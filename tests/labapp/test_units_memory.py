@@ -6,10 +6,10 @@ from pathlib import Path
 import pytest
 import trimesh
 
-from labapp import meshunits
-from labapp.cli import main
+from labapp.jobs import meshunits
+from labapp.cli.main import main
 from labapp.errors import UsageError
-from labapp.meshunits import check_memory, size_warnings
+from labapp.jobs.meshunits import check_memory, size_warnings
 
 SPHERE = Path(__file__).resolve().parents[2] / "fixtures" / "shapes" / "sphere.stl"
 

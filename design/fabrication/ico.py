@@ -1,0 +1,263 @@
+"""The incremental-compliance fabrication term J_fab of section 3.6 and its gradient.
+
+The design is cut along the build direction (+z, array axis 2) into L layers. Partial design l
+holds layers 1..l and nothing above them; it stands on the build plate (z = 0, clamped) and
+carries its own weight, a body force along -z proportional to rho. With ``K_l(rho) u_l = f_l(rho)``
+
+    J_fab = 1/(2L) sum_l f_l . u_l                                                  (section 3.6)
+    dJ_fab/drho = 1/L sum_l [ (df_l/drho) . u_l - 1/2 u_l^T (dK_l/drho) u_l ]     (section 3.6)
+
+(compliance is self-adjoint: no adjoint solve). Elasticity (`design.fabrication.elasticity`) runs on the
+design grid coarsened by `IcoConfig.coarsen` per axis: an element's modulus is the mean of its
+voxels' E(rho) and its load the mean of their rho. The grid is padded with void up to a multiple
+of the factor. Quadrant symmetry: the reduced grid's index-0 faces in x and y are mirror planes.
+
+Units: E0 = 1 and unit specific weight, lengths in mm; `IcoTerm` divides by the value at the start
+design, so J_fab = 1 there at every resolution and domain size and w_f keeps its meaning.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from design.fabrication.deflation import island_deflation
+from design.fabrication.elasticity import E_MIN_RATIO, LAWS, POISSON_RATIO, element_energy, modulus, self_weight, \
+    self_weight_adjoint
+from design.errors import DesignError
+from design.fabrication.multigrid import PCG_TOL, Scratch, hierarchy, pcg
+
+log = logging.getLogger(__name__)
+
+DEFAULT_LAYERS = 8
+"""L, the number of partial designs (section 5.2)."""
+DEFAULT_COARSEN = 2
+"""Voxels per elasticity element edge (docs/results.md measures the error this causes)."""
+
+
+@dataclass(frozen=True)
+class IcoConfig:
+    """Settings of the incremental-compliance term.
+
+    Parameters
+    ----------
+    layers : int
+        L >= 1 partial designs.
+    coarsen : int
+        Design voxels per element edge (1 = elasticity on the design grid).
+    law : str
+        "simp" (p = 3, section 3.6) or "ramp" (q = 3).
+    poisson : float
+        Poisson's ratio.
+    e_min : float
+        Void modulus E_min / E0.
+    tol : float
+        PCG relative residual.
+    warm_start : bool
+        Start each layer's solve from its solution at the previous evaluation.
+    deflate : bool
+        Deflate the near-rigid modes of floating solid islands in PCG (`design.fabrication.deflation`).
+    """
+
+    layers: int = DEFAULT_LAYERS
+    coarsen: int = DEFAULT_COARSEN
+    law: str = "simp"
+    poisson: float = POISSON_RATIO
+    e_min: float = E_MIN_RATIO
+    tol: float = PCG_TOL
+    warm_start: bool = True
+    deflate: bool = True
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.layers <= 256 or not 1 <= self.coarsen <= 8:
+            raise DesignError(f"ICO needs layers in [1, 256] and coarsen in [1, 8]; got {self.layers}, {self.coarsen}")
+        if self.law not in LAWS:
+            raise DesignError(f"stiffness law must be one of {LAWS}, got {self.law!r}")
+        if not 0 < self.e_min < 1 or not 0 < self.tol < 1 or not -1 < self.poisson < 0.5:
+            raise DesignError(f"need 0 < e_min < 1, 0 < tol < 1, -1 < poisson < 0.5; got {self.e_min}, "
+                              f"{self.tol}, {self.poisson}")
+
+
+@dataclass(frozen=True)
+class IcoResult:
+    """One evaluation of J_fab (unnormalised).
+
+    Attributes
+    ----------
+    value : float
+        J_fab = 1/(2L) sum_l f_l . u_l (E0 = 1, unit specific weight, mm).
+    grad : ndarray of float, shape of rho
+        dJ_fab/drho.
+    compliances : (L,) ndarray of float
+        f_l . u_l per partial design.
+    iterations : (L,) ndarray of int
+        PCG iterations per layer.
+    seconds : float
+    """
+
+    value: float
+    grad: np.ndarray
+    compliances: np.ndarray
+    iterations: np.ndarray
+    seconds: float
+
+
+def layer_tops(nz: int, layers: int) -> list[int]:
+    """Element rows held by each partial design: ``round(l nz / L)``, l = 1..L."""
+    if layers > nz:
+        raise DesignError(f"{layers} layers need at least as many elasticity elements along z, got {nz}; "
+                          f"use fewer layers or a finer grid")
+    return [int(round(l * nz / layers)) for l in range(1, layers + 1)]
+
+
+def _blocks(a: np.ndarray, c: int) -> np.ndarray:
+    """(Z, Y, X) voxels -> (Z/c, Y/c, X/c) block means."""
+    z, y, x = a.shape
+    return a.reshape(z // c, c, y // c, c, x // c, c).mean(axis=(1, 3, 5))
+
+
+def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = IcoConfig(), *,
+                           mirror: tuple[bool, bool] = (True, True),
+                           warm: list[np.ndarray] | None = None,
+                           scratch: list[Scratch] | None = None) -> tuple[IcoResult, list[np.ndarray]]:
+    """J_fab and its gradient for a reduced density grid.
+
+    Parameters
+    ----------
+    rho : (X, Y, Z) ndarray of float in [0, 1]
+        Density, array axis 2 the build direction, z = 0 on the build plate.
+    dx_mm : float
+        Voxel edge, mm.
+    config : IcoConfig
+    mirror : (bool, bool)
+        Mirror planes at the index-0 faces of x and y.
+    warm : list of ndarrays, optional
+        Per-layer solutions of a previous call on the same grid (initial guesses). With them the
+        layers are independent and solved concurrently, one thread per core; without them in
+        sequence, each from the solution of the layer below.
+    scratch : list of Scratch, optional
+        Memory for the solver, one per thread, kept from earlier calls (fresh memory costs page faults).
+
+    Returns
+    -------
+    IcoResult
+    solutions : list of (nz_l + 1, ny + 1, nx + 1, 3) ndarrays
+        Per-layer displacements (z, y, x order), for the next call's ``warm``.
+    """
+    t0 = time.perf_counter()
+    c = config.coarsen
+    zyx = np.ascontiguousarray(np.asarray(rho, dtype=float).transpose(2, 1, 0))
+    pad = [(0, -n % c) for n in zyx.shape]
+    zyx = np.pad(zyx, pad)  # void beyond the far faces and above the top
+    e_vox, de_vox = modulus(zyx, config.law, config.e_min)
+    e_mod, load = _blocks(e_vox, c), _blocks(zyx, c)
+    h = (c * dx_mm,) * 3
+    volume = h[0] ** 3
+    tops = layer_tops(e_mod.shape[0], config.layers)
+    forces = [self_weight(load[:top], volume) for top in tops]
+    memories = list(scratch or []) + [Scratch() for _ in range(len(tops) - len(scratch or []))]
+
+    def solve(l: int, u0: np.ndarray | None, scratch: Scratch) -> tuple[np.ndarray, int, np.ndarray]:
+        """Partial design l: displacements, PCG iterations, element energies at unit modulus."""
+        levels = hierarchy(e_mod[:tops[l]], h, config.poisson, *mirror, scratch=scratch)
+        fine = levels[0]
+        deflation = island_deflation(fine.e_mod, h, fine.s, fine.free) if config.deflate else None
+        u, its = pcg(levels, forces[l], u0, config.tol, deflation=deflation)
+        energy = np.empty((tops[l],) + e_mod.shape[1:])
+        element_energy(levels[0].ke, u, energy)
+        return u, its, energy
+
+    results = []
+    if warm is not None and [w.shape for w in warm] == [f.shape for f in forces]:
+        # independent solves: one thread per core, each with its share of the layers, largest first
+        # (the kernels release the GIL)
+        queues: list[list[int]] = [[] for _ in range(min(len(tops), os.cpu_count() or 1))]
+        for l in np.argsort(tops, kind="stable")[::-1]:
+            min(queues, key=lambda q: sum(tops[i] for i in q)).append(int(l))
+
+        def run(queue: list[int], memory: Scratch) -> list[tuple[int, tuple]]:
+            return [(l, solve(l, warm[l], memory)) for l in queue]
+
+        with ThreadPoolExecutor(len(queues)) as pool:
+            done = dict(pair for part in pool.map(run, queues, memories[:len(queues)]) for pair in part)
+        results = [done[l] for l in range(len(tops))]
+    else:
+        for l, top in enumerate(tops):
+            prev = results[-1][0] if results else None  # the layer below, its top row continued upward
+            u0 = None if prev is None else np.concatenate([prev, np.repeat(prev[-1:], top + 1 - prev.shape[0], axis=0)])
+            results.append(solve(l, u0, memories[0]))
+    g_load, g_e = np.zeros_like(load), np.zeros_like(e_mod)
+    compliances, iterations = np.zeros(len(tops)), np.zeros(len(tops), dtype=int)
+    for l, (top, (u, its, energy)) in enumerate(zip(tops, results)):  # summed in layer order: deterministic
+        compliances[l], iterations[l] = float(np.vdot(forces[l], u)), its
+        g_load[:top] += self_weight_adjoint(u, load[:top].shape, volume)
+        g_e[:top] -= 0.5 * energy
+    solutions = [u for u, _, _ in results]
+    L = len(tops)
+    value = compliances.sum() / (2.0 * L)
+    # chain to voxels: d(block mean)/d voxel = 1/c^3
+    up = np.ones((c, c, c)) / c ** 3
+    g_vox = np.kron(g_load / L, up) + np.kron(g_e / L, up) * de_vox
+    grad = g_vox[:rho.shape[2], :rho.shape[1], :rho.shape[0]].transpose(2, 1, 0)
+    return IcoResult(value, np.ascontiguousarray(grad), compliances, iterations, time.perf_counter() - t0), solutions
+
+
+class IcoTerm:
+    """J_fab of section 3.6 as a design space's fabrication term, normalised by its start value.
+
+    Keeps each layer's solution for the next evaluation's warm start, and for reports the time
+    (``seconds``), the number of evaluations and the PCG iterations per layer summed over them.
+
+    Parameters
+    ----------
+    dx_mm : float
+        Voxel edge, mm.
+    config : IcoConfig
+    mirror : (bool, bool)
+        Mirror planes of the reduced grid in x and y.
+    """
+
+    name = "ICO"
+
+    def __init__(self, dx_mm: float, config: IcoConfig = IcoConfig(), mirror: tuple[bool, bool] = (True, True)):
+        self.dx_mm = float(dx_mm)
+        self.config = config
+        self.mirror = mirror
+        self.reference: float | None = None
+        self.last: IcoResult | None = None
+        self.seconds = 0.0
+        self.evaluations = 0
+        self.iterations = np.zeros(config.layers, dtype=int)
+        self._warm: list[np.ndarray] | None = None
+        self._scratch = [Scratch() for _ in range(min(config.layers, os.cpu_count() or 1))]
+
+    def evaluate(self, rho: np.ndarray) -> IcoResult:
+        """Unnormalised J_fab and gradient; updates the warm-start solutions and the timing."""
+        warm = self._warm if self.config.warm_start else None
+        result, self._warm = incremental_compliance(rho, self.dx_mm, self.config, mirror=self.mirror, warm=warm,
+                                                    scratch=self._scratch)
+        self.last = result
+        self.seconds += result.seconds
+        self.evaluations += 1
+        self.iterations += result.iterations
+        log.debug("ICO %.6g, PCG iterations %s, %.3f s", result.value, result.iterations.tolist(), result.seconds)
+        return result
+
+    def normalise_at(self, rho: np.ndarray) -> float:
+        """Set the reference (the start design's J_fab) that later values are divided by; returns it."""
+        value = self.evaluate(rho).value
+        if not value > 0:
+            raise DesignError(f"the start design has no incremental compliance ({value}); it holds no material")
+        self.reference = value
+        return value
+
+    def __call__(self, rho: np.ndarray) -> tuple[float, np.ndarray]:
+        """J_fab / J_fab(start) and its gradient with respect to ``rho``."""
+        if self.reference is None:
+            raise DesignError("the ICO term has no reference value: call normalise_at(start density) first")
+        result = self.evaluate(rho)
+        return result.value / self.reference, result.grad / self.reference

@@ -1,0 +1,278 @@
+"""Everything a finished (or stopped) design run writes into its folder.
+
+``design.stl`` (+ requested formats), ``density.npz``, ``curves.csv``
+(`CURVE_COLUMNS`), ``history.csv``, ``report.png``,
+``design.ini`` (PrusaSlicer profile) and ``summary.json``.
+
+The binary solid is the printed mesh re-voxelised on the design grid, as the paper plots it (Fig. 6).
+On that grid a rate measured over a short window (`design.inverse.rate.rate_deviation`) is off by a few
+points (docs/results.md, "How precisely a 128-voxel grid measures the rate deviation"), so the
+printed mesh is also re-simulated on a grid `FINE_FACTOR` times finer: the ``fine`` curve and
+figures, the closer estimate of what the print releases. A mesh target (the source's release on the
+design grid) is re-simulated there too, so that the fine figures compare like with like.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import platform
+from dataclasses import asdict, dataclass
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from design.errors import DesignError
+from design.fabrication.extract import centred_iou, count_pieces, density_mesh, mass_preserving_level, revoxelize
+from design.forward.simulator import simulate
+from design.inverse.objective import DesignObjective, rel_rmse
+from design.fabrication.printability import assess, prusa_profile
+from design.inverse.rate import rate_deviation, rate_deviation_vs_target
+from design.files.report import save_report
+from design.geometry.voxelize import grid_for, voxelize
+
+log = logging.getLogger(__name__)
+
+HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "fab_seconds", "grad_norm", "seconds")
+"""``fab_seconds``: time of that evaluation's J_fab (the ICO solves), s; ``seconds``: run time so far, s."""
+CURVE_COLUMNS = ("tau_mm", "target_mm3", "density_mm3", "binary_mm3", "fine_mm3", "fine_target_mm3")
+"""``fine_target_mm3``: the target on the finer grid: a mesh target's source re-simulated there, else the
+target itself."""
+FINE_FACTOR = 2
+"""The ``fine`` curve re-simulates the printed mesh on voxels this many times smaller than the design's."""
+FINE_MAX_VOXELS = 2 ** 25
+"""Largest simulated grid of the ``fine`` check: its solve holds about 165 bytes a voxel (2.8 GB
+measured for 256^3), so a larger one (beyond an nfc design at 256 or an extruded one at 256) is
+skipped with a warning rather than risk the end of a long run."""
+
+
+@dataclass(frozen=True)
+class DesignOutputs:
+    """Paths and headline numbers of a run's outputs."""
+
+    summary_path: Path
+    summary: dict
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _csv(columns: tuple[str, ...], rows: np.ndarray) -> str:
+    body = "\n".join(",".join(f"{v:.10g}" for v in row) for row in rows)
+    return ",".join(columns) + "\n" + body + ("\n" if len(rows) else "")
+
+
+SOFTWARE_PACKAGES = ("shape-from-release", "numpy", "scipy", "scikit-fmm", "nlopt", "numba")
+"""Packages whose versions a summary records: the design's figures move with the numerical libraries'
+build (docs/results.md, "Best of three starts, and the figures on this build")."""
+
+
+def software_versions() -> dict[str, str | None]:
+    """Python's and `SOFTWARE_PACKAGES`' versions (None for a package that is not installed)."""
+    versions: dict[str, str | None] = {"python": platform.python_version()}
+    for name in SOFTWARE_PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return versions
+
+
+def percent_text(value: float | None, digits: int = 2) -> str:
+    """A summary's fraction as a percentage with ``digits`` decimals, "-" for a figure not computed (None)."""
+    return "-" if value is None else f"{value:.{digits}%}"
+
+
+def _rate_dev(tau_mm: np.ndarray, curve_mm3: np.ndarray, target_mm3: np.ndarray,
+              vs_target: bool) -> float | None:
+    """`rate_deviation` of an achieved curve: over its own middle 80% against its own mean rate, or
+    (``vs_target``) over the target's middle 80% against the target's mean rate there. None when the
+    curve does not rise (a grey design without a solid) or rises from 10% to 90% within one tau sample
+    (no middle 80% to measure), and for a curve not computed (NaN)."""
+    if not curve_mm3[-1] > curve_mm3[0]:
+        return None
+    if not vs_target:
+        try:
+            return rate_deviation(tau_mm, curve_mm3)
+        except DesignError:  # the only error left for a rising curve: a middle 80% within one tau sample
+            return None
+    return rate_deviation_vs_target(tau_mm, curve_mm3, target_mm3)
+
+
+def _ico_summary(objective: DesignObjective, rho: np.ndarray, rows: np.ndarray, seconds: float) -> dict | None:
+    """The ICO term's value at the output density and its share of the run time (None without J_fab)."""
+    term = objective.space.fab_term
+    if term is None or not objective.w_fab > 0:
+        return None
+    value, _ = term(rho)
+    config = term.config
+    fab_seconds = float(rows[:, HISTORY_COLUMNS.index("fab_seconds")].sum())
+    return {"J_fab": value, "J_fab_start": term.reference, "w_fab": objective.w_fab, "layers": config.layers,
+            "coarsen": config.coarsen, "law": config.law, "poisson": config.poisson,
+            "pcg_iterations_mean": (term.iterations / max(term.evaluations, 1)).round(2).tolist(),
+            "fab_seconds": fab_seconds,
+            "fab_time_share": fab_seconds / seconds if seconds > 0 else None}
+
+
+def enclosed_voids_text(summary: dict) -> str:
+    """The enclosed-void fact of a run's summary as a phrase ("no enclosed voids", "2 enclosed voids, 12.5 mm^3")."""
+    count = summary.get("enclosed_voids")
+    if count is None:  # a summary written before the fact was recorded
+        return "enclosed voids not assessed"
+    if count == 0:
+        return "no enclosed voids"
+    return f"{count} enclosed void{'s' if count > 1 else ''}, {summary['enclosed_void_mm3']:.4g} mm^3"
+
+
+def solid_release(solid: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], total_time_mm: float,
+                  dtau_mm: float) -> np.ndarray:
+    """Released volume of a full (unfolded) binary solid, simulated on its reduced grid, mm^3 per tau sample."""
+    half = tuple(slice(n // 2 if m else 0, None) for n, m in zip(solid.shape, mirror))
+    return simulate(solid[half].astype(float), dx_mm, mirror=tuple(mirror), total_time_mm=total_time_mm,
+                    dtau_mm=dtau_mm).released_mm3
+
+
+def fine_release(mesh, dx_mm: float, origin_mm: np.ndarray, full_shape: tuple[int, int, int],
+                 mirror: tuple[bool, ...], total_time_mm: float, dtau_mm: float,
+                 factor: int = FINE_FACTOR) -> np.ndarray:
+    """Released volume of a printed mesh re-voxelised on voxels `factor` times smaller than the design
+    grid's (same domain: `dx_mm`, `origin_mm`, `full_shape`, `mirror`), mm^3 per tau sample; zeros
+    for ``mesh`` None (no solid extracted)."""
+    shape = tuple(factor * n for n in full_shape)
+    fine_dx = dx_mm / factor
+    solid = (revoxelize(mesh, fine_dx, origin_mm, shape) if mesh is not None else np.zeros(shape, dtype=bool))
+    return solid_release(solid, fine_dx, mirror, total_time_mm, dtau_mm)
+
+
+def fine_source_release(mesh, dx_mm: float, total_time_mm: float, dtau_mm: float,
+                        factor: int = FINE_FACTOR) -> np.ndarray:
+    """Released volume of a source mesh on voxels `factor` times smaller than `dx_mm`, over its own
+    bounding box and without mirror planes (a source need not be symmetric), mm^3 per tau sample."""
+    fine_dx = dx_mm / factor
+    solid = voxelize(mesh, fine_dx).astype(float)
+    return simulate(solid, fine_dx, total_time_mm=total_time_mm, dtau_mm=dtau_mm).released_mm3
+
+
+def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
+                  history: list[list[float]], config, *, status: str, session_seconds: float) -> DesignOutputs:
+    """Extract, re-simulate, assess and write every output of a design run.
+
+    Parameters
+    ----------
+    out_dir : Path
+    problem : design.inverse.problem.Problem
+    objective : DesignObjective
+    best_x : ndarray of float, variable shape
+        The best design variables found.
+    history : list of rows with `HISTORY_COLUMNS`
+    config : design.inverse.problem.DesignConfig
+    status : str
+    session_seconds : float
+        Wall time of this session (resumes add up through the history's seconds column).
+    """
+    space, target = problem.space, problem.target
+    rho = objective.density(best_x)
+    dtau_mm = target.total_time_mm / (target.tau_mm.size - 1)
+    # only the curves are kept: a Release holds its solve's work arrays (~300 MB at 128^3)
+    density_curve = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
+                             dtau_mm=dtau_mm).released_mm3
+    rho_full = space.unfold(rho)
+    warnings: list[str] = list(problem.warnings)
+    level = mass_preserving_level(rho_full)
+    if np.any(rho_full >= level):
+        mesh = density_mesh(rho_full, space.dx_mm, problem.origin_mm, level=level)
+        mesh.export(out_dir / "design.stl")
+        for fmt in config.formats:
+            mesh.export(out_dir / f"design.{fmt}")
+        solid = revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape)
+    else:  # a run stopped very early may still be grey everywhere
+        mesh = None
+        solid = np.zeros(problem.full_shape, dtype=bool)
+        warnings.append(f"no density reaches the extraction level {level:.3f} yet: no solid extracted "
+                        "(design.stl not written)")
+    binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm)
+    fine_voxels = FINE_FACTOR ** 3 * int(np.prod(space.grid_shape))  # the simulated part: half, quarter, octant
+    if problem.source_mesh is not None:
+        source_shape = grid_for(problem.source_mesh.bounds, space.dx_mm / FINE_FACTOR)[1]
+        fine_voxels = max(fine_voxels, int(np.prod(source_shape)))
+    fine_grid = (space.dx_mm, problem.origin_mm, problem.full_shape, space.mirror, target.total_time_mm, dtau_mm)
+    fine_target = target.released_mm3
+    if fine_voxels <= FINE_MAX_VOXELS:
+        fine_curve = fine_release(mesh, *fine_grid)
+        if problem.source_mesh is not None:  # a mesh target is the source's release on the design grid
+            fine_target = fine_source_release(problem.source_mesh, space.dx_mm, target.total_time_mm, dtau_mm)
+    else:
+        fine_curve = np.full_like(binary_curve, np.nan)
+        warnings.append(f"the printed solid was not re-simulated on a {FINE_FACTOR}x finer grid: {fine_voxels} "
+                        f"voxels, more than {FINE_MAX_VOXELS}")
+    pieces = count_pieces(solid)
+    if pieces > 1:
+        warnings.append(f"the solid has {pieces} separate pieces")
+    facts = assess(solid, space.dx_mm, warn_channel_mm=config.warn_channel_mm)
+    warnings += list(facts.warnings)
+    np.savez_compressed(out_dir / "density.npz", rho_hat=best_x, rho=rho, rho_full=rho_full, solid=solid,
+                        dx_mm=space.dx_mm, origin_mm=problem.origin_mm, mirror=np.array(space.mirror))
+    curves = np.column_stack([target.tau_mm, target.released_mm3, density_curve, binary_curve, fine_curve,
+                              fine_target])
+    _write_text(out_dir / "curves.csv", _csv(CURVE_COLUMNS, curves))
+    rows = np.array(history, dtype=float).reshape(-1, len(HISTORY_COLUMNS))
+    _write_text(out_dir / "history.csv", _csv(HISTORY_COLUMNS, rows))
+    # NFC designs may overhang; ICO and extruded ones print without supports (section 3.6)
+    _write_text(out_dir / "design.ini", prusa_profile(out_dir.name, supports=space.name == "nfc"))
+    achieved = (("density", density_curve, target.released_mm3), ("binary", binary_curve, target.released_mm3),
+                ("fine", fine_curve, fine_target))
+    iterations = len(history)
+    seconds = float(history[-1][-1]) if history else 0.0
+    summary = {
+        "status": status,
+        "target": target.source,
+        "space": space.name,
+        "rel_rmse_density": rel_rmse(density_curve, target.released_mm3),
+        "rel_rmse_binary": rel_rmse(binary_curve, target.released_mm3),
+        "rel_rmse_fine": rel_rmse(fine_curve, fine_target) if np.all(np.isfinite(fine_curve)) else None,
+        "fine_factor": FINE_FACTOR,
+        "rate_dev_mid80": {name: _rate_dev(target.tau_mm, curve, goal, False) for name, curve, goal in achieved},
+        "rate_dev_mid80_vs_target": {name: _rate_dev(target.tau_mm, curve, goal, True)
+                                     for name, curve, goal in achieved},
+        "iterations": iterations,
+        "seconds": seconds,
+        "seconds_per_iteration": seconds / iterations if iterations else None,
+        "session_seconds": session_seconds,
+        "pieces": pieces,
+        "extraction_level": level,
+        "volume_mm3": facts.volume_mm3,
+        "print_mass_g": facts.mass_g,
+        "min_channel_mm": facts.min_channel_mm,
+        "enclosed_voids": facts.enclosed_voids,
+        "enclosed_void_mm3": facts.enclosed_void_mm3,
+        "overhang_fraction": facts.overhang_fraction,
+        "max_overhang_run_mm": facts.max_overhang_run_mm,
+        "preset": config.preset,
+        "ico": _ico_summary(objective, rho, rows, seconds),
+        "iou_with_source": (centred_iou(problem.source_solid, solid)
+                            if problem.source_solid is not None else None),
+        "target_final_mm3": target.final_mm3,
+        "total_time_mm": target.total_time_mm,
+        "dx_mm": space.dx_mm,
+        "full_shape": list(problem.full_shape),
+        "reduced_shape": list(space.grid_shape),
+        "feasible": problem.feasibility.feasible,
+        "warnings": warnings,
+        "software": software_versions(),
+        "config": asdict(config),
+    }
+    for w in warnings:
+        log.warning("%s", w)
+    save_report(out_dir / "report.png", target.tau_mm, target.released_mm3, density_curve,
+                binary_curve, fine_curve, rho_full, solid,
+                f"{target.source} | {space.name} | rel. RMSE density {summary['rel_rmse_density']:.2%}, "
+                f"binary {summary['rel_rmse_binary']:.2%} (finer grid {percent_text(summary['rel_rmse_fine'])}) | "
+                f"overhang {facts.overhang_fraction:.1%} | {iterations} it."
+                + (f" | preset {config.preset}" if config.preset else ""))
+    path = out_dir / "summary.json"
+    _write_text(path, json.dumps(summary, indent=2))
+    return DesignOutputs(path, summary)

@@ -1,0 +1,107 @@
+"""One-call simulation of a mesh or an input file: voxelise, then simulate (what `sfr simulate` runs)."""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from design._validate import check_positive
+from design.errors import DesignError
+from design.forward.simulator import Release, simulate
+from design.files.meshio import DENSITY_SUFFIXES, checked_mesh, load_density, load_mesh
+from design.geometry.shapes import sample_shape
+from design.geometry.voxelize import voxelize
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RESOLUTION = 64
+"""Voxels along the longest bounding-box side when neither resolution nor voxel size is given."""
+SAMPLE_PREFIX = "sample:"
+_AXES = "xyz"
+
+
+def parse_symmetry(symmetry: str, ndim: int = 3) -> tuple[bool, ...]:
+    """Mirror flags from axis letters, e.g. ``"xz"`` -> (True, False, True); axis a is x, y, z."""
+    letters = symmetry.lower()
+    unknown = set(letters) - set(_AXES[:ndim])
+    if unknown:
+        raise DesignError(f"symmetry {symmetry!r} names unknown axes {sorted(unknown)}; use letters of {_AXES[:ndim]!r}")
+    return tuple(axis in letters for axis in _AXES[:ndim])
+
+
+def mesh_grid(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel_size_mm: float | None = None,
+              symmetry: str = "") -> tuple[np.ndarray, float, tuple[bool, ...]]:
+    """Voxelise a closed mesh at its voxel centres (parameters as for :func:`simulate_mesh`).
+
+    Returns
+    -------
+    rho : (X, Y, Z) ndarray of float in {0, 1}
+    dx_mm : float
+    mirror : tuple of bool
+    """
+    mesh = checked_mesh(mesh)
+    if resolution is not None and voxel_size_mm is not None:
+        raise DesignError("give either resolution or voxel_size_mm, not both")
+    if voxel_size_mm is None:
+        n = DEFAULT_RESOLUTION if resolution is None else int(resolution)
+        if n < 2:
+            raise DesignError(f"resolution must be >= 2 voxels, got {resolution}")
+        dx = float(mesh.extents.max()) / n
+    else:
+        dx = check_positive("voxel_size_mm", voxel_size_mm)
+    mirror = parse_symmetry(symmetry)
+    rho = voxelize(mesh, dx, mirror=mirror).astype(np.float64)
+    log.info("voxelised to %s voxels of %.4g mm (mirror %s)", rho.shape, dx, mirror)
+    return rho, dx, mirror
+
+
+def simulate_mesh(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel_size_mm: float | None = None,
+                  symmetry: str = "") -> Release:
+    """Voxelise a closed mesh at its voxel centres and simulate its release.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Watertight mesh, mm.
+    resolution : int, optional
+        Voxels along the longest bounding-box side (default 64 when `voxel_size_mm` is not given).
+    voxel_size_mm : float, optional
+        Voxel edge length, mm; exclusive with `resolution`.
+    symmetry : str
+        Axis letters (``"x"``, ``"xy"``, ``"xyz"``) with a mirror plane through the bounding-box centre;
+        only the half/quadrant/octant above the planes is simulated. Use it only for shapes that are
+        symmetric about those planes.
+
+    Returns
+    -------
+    Release
+        Its `released_mm3` is always the full object's (mirror copies included).
+    """
+    rho, dx, mirror = mesh_grid(mesh, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)
+    return simulate(rho, dx, mirror=mirror)
+
+
+def input_grid(spec: str, *, resolution: int | None = None, voxel_size_mm: float | None = None,
+               symmetry: str = "") -> tuple[np.ndarray, float, tuple[bool, ...]]:
+    """The density grid of ``sample:NAME``, a mesh file or a density array file.
+
+    For a density array (``.npy`` needs `voxel_size_mm`; ``.npz`` stores ``dx_mm``), the array is the
+    simulated grid itself and `symmetry` puts mirror planes at the index-0 faces of the named axes.
+
+    Returns
+    -------
+    rho : ndarray of float in [0, 1]
+    dx_mm : float
+    mirror : tuple of bool
+    """
+    if spec.startswith(SAMPLE_PREFIX):
+        return mesh_grid(sample_shape(spec[len(SAMPLE_PREFIX):]), resolution=resolution,
+                         voxel_size_mm=voxel_size_mm, symmetry=symmetry)
+    if Path(spec).suffix.lower() in DENSITY_SUFFIXES:
+        if resolution is not None:
+            raise DesignError(f"{spec}: --resolution applies to meshes; a density array has its own grid")
+        rho, dx = load_density(spec, voxel_size_mm)
+        return rho, dx, parse_symmetry(symmetry, rho.ndim)
+    return mesh_grid(load_mesh(spec), resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)

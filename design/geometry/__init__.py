@@ -1,0 +1,1 @@
+"""Geometry: sample shapes and exact voxelisation of closed meshes."""

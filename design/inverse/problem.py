@@ -1,0 +1,576 @@
+"""Setting up an inverse-design problem: configuration, domain, design space and target curve.
+
+A target spec is one of: a sample shape name (`design.geometry.shapes.SAMPLE_SHAPES`), a mesh file
+(.stl/.obj/.ply/.off/.3mf), a ``tau_mm,released_mm3`` CSV, or an analytic family
+``zero-order[:final=F,duration=D]`` / ``accel:q=Q[,final=F,duration=D]`` with F the total release
+as a fraction of the domain volume and D the release's end as a fraction of T (Fig. 7).
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from design.fabrication.connectivity import TAIL_SLOPE
+from design.errors import DesignError
+from design.fabrication.extract import count_pieces
+from design.fabrication.ico import DEFAULT_COARSEN, DEFAULT_LAYERS, IcoConfig
+from design.inverse.lbfgs import LINE_SEARCHES
+from design.forward.simulator import total_time
+from design.files.meshio import load_mesh
+from design.inverse.presets import preset_values
+from design.inverse.rate import RATE_SPAN_MIN_VOX, middle_span_mm
+from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
+from design.inverse.spaces import BUILD_AXIS, SPACE_CHOICES, DesignSpace, SpaceRequest, build_space
+from design.inverse.targets import (Feasibility, Target, check_feasibility, constant_acceleration, curve_end_mm,
+                            read_curve_csv, target_from_csv, target_from_mesh)
+from design.geometry.voxelize import voxelize
+
+log = logging.getLogger(__name__)
+
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf")
+DEFAULT_DOMAIN_MM = 20.0
+"""Edge of the cubic domain used when the target has no source mesh and no --domain-mm, mm."""
+CSV_HORIZON_MARGIN = 1.1
+"""A CSV target's default cube has a half-edge (about its horizon T) this much above the curve's end."""
+
+# Hyperparameters per design space (Tables 1-2 of the paper: w_b 20-50, r 4-5, beta 3 for the
+# source-shape designs of Fig. 6). NFC uses the ICO column without the ICO term.
+SPACE_DEFAULTS: dict[str, dict[str, float]] = {
+    "nfc": {"w_binary": 20.0, "beta": 3.0, "beta_final": 12.0},
+    "extruded": {"w_binary": 30.0, "beta": 3.0, "beta_final": 12.0},
+    "ico": {"w_binary": 30.0, "beta": 3.0, "w_fab": 3000.0},
+}
+"""The ICO w_f weighs J_fab normalised to 1 at the start design (`design.fabrication.ico`); 3000 is measured in
+docs/results.md (ICO section); the paper's Table 1 values (50-200) come with its own normalisation.
+NFC and extruded designs raise beta from 3 to 12 over the run: at a fixed beta 3, holes and columns
+narrower than the smoothing radius stay grey, the density's release fits while the printed solid's
+does not (docs/results.md, "Beta continuation by default"); a ``beta_final`` equal to ``beta`` keeps
+it fixed. Extruded designs weigh J_binary 30 rather than 20: at 20 a design can keep pin-holes narrower
+than the radius grey, which the printed solid opens (the csg block: solid 3.7% against a density fit
+of 0.5%); 30 and 40 measured in docs/results.md ("The line search of nlopt's LD_LBFGS by default")."""
+DEFAULT_RADIUS_MM = 1.0
+"""Smoothing radius r when none is given, mm: the paper's r = 4 voxels on the sample shapes at
+resolution 64 (dx 0.25-0.32 mm) are 1.0-1.3 mm; fixed in mm so that the minimum feature (about r, five
+0.2 mm print lines, section 4.1) does not shrink as the resolution grows."""
+W_CONNECT = 5.0
+"""Default weight of the connectivity penalty J_conn (`design.fabrication.connectivity`); measured against 2 and
+20 on extruded designs (docs/results.md, "Shapes nobody tuned for")."""
+START_FILL = 2.0 / 3.0
+"""Density of the compact start of an extruded design (`start_region`): a target without a source starts
+at it, and a start is hollowed only as far as its band still holds the target's volume at it."""
+MULTISTART_STARTS = 4
+MULTISTART_MIN_RESOLUTION = 128
+MULTISTART_SPACES = ("nfc", "extruded")
+"""Default multi-start (`DesignConfig.starts`): 4 seeded starts at half the resolution, then the best
+refined, for nfc and extruded designs of a source shape at resolution 128 or finer. Measured against
+one start given the same wall time on 15 sources (docs/results.md, "Multi-start"): at 128 it wins in
+both spaces; at 64 (starts at 32, where the 1 mm radius is about one voxel) it loses in the extruded
+space. Curve targets keep one start: on the zero-order settings it helped four and set back two well
+beyond their documented figures. ICO is not measured."""
+OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
+"""`DesignConfig.optimizer` choices: `design.inverse.lbfgs` (default) and three nlopt algorithms."""
+ANALYTIC_W_RATE = 1.0
+"""Default weight of the rate-fit term J_rate for analytic (zero-order / accel) targets; 0 for the
+others, whose curves come from shapes or measurements (see docs/results.md, "Zero-order")."""
+ANALYTIC_DEFAULTS: dict[str, dict[str, float]] = {
+    "nfc": {"robust_eta": 0.1, "beta_final": 64.0},
+    "extruded": {"robust_eta": 0.1, "beta_final": 64.0, "w_connect": 10.0},
+}
+"""Defaults for analytic targets, per design space, over `SPACE_DEFAULTS` and `W_CONNECT`: the robust
+formulation's threshold offset (0, one design as in the paper, for the other targets; it needs
+w_rate > 0), the final beta of the continuation and, for extruded designs, the connectivity weight.
+With one design and beta 3 -> 12, designs of analytic curves kept holes narrower than the smoothing
+radius grey: the density released like the target while the printed solid, whose contour opens them,
+was up to 11.6% off (500 evaluations). In the extruded space the robust formulation at the weight 5
+split a nested zero-order target into five pieces; 10 keeps it and every measured extruded target one
+piece. Measured on six analytic targets and the nested one (docs/results.md, "Analytic targets: the
+robust formulation and beta 64 by default"). ICO is not measured and keeps its defaults."""
+
+
+@dataclass(frozen=True)
+class DesignConfig:
+    """Everything a design run depends on; stored as ``config.json`` in the run folder.
+
+    Parameters
+    ----------
+    target : str
+        Target spec (see module docstring).
+    space : str
+        Design space name ("nfc", "extruded", "ico").
+    resolution : int
+        Voxels along the full domain's longest side (even, >= 8).
+    domain_mm : tuple of 3 float or None
+        Full domain size (x, y, z), mm; None = the source's bounding box plus ``margin`` on every
+        side (cubic for nfc), or a `DEFAULT_DOMAIN_MM` cube for targets without a source.
+    height_mm : float or None
+        Extrusion height, mm (extruded only); None = ``height_fraction`` of the domain's longest
+        side if given, else the source's height, else the domain's.
+    height_fraction : float or None
+        Extrusion height as a fraction of the domain's longest side (set by the paper presets).
+    preset : str or None
+        ``paper:NAME``: hyperparameters of the paper's Table 1 or 2 (`design.inverse.presets`) for the
+        fields left None; explicit values win.
+    w_binary, radius_vox, beta : float or None
+        Eq. (4) hyperparameters; None = the preset's, else `SPACE_DEFAULTS` (resolved and stored
+        explicitly). The
+        smoothing radius r is in voxels; give it in mm with ``radius_mm`` instead.
+    radius_mm : float or None
+        Smoothing radius r in mm (exclusive with ``radius_vox``); with neither,
+        `DEFAULT_RADIUS_MM`. Converted to voxels of the design grid (at least 1) by `prepare`.
+    allow_pieces : bool
+        Drop the connectivity penalty: the design may fall apart into pieces (as in the paper).
+    w_connect : float or None
+        Weight of the connectivity penalty J_conn (`design.fabrication.connectivity`) unless ``allow_pieces``;
+        None = `ANALYTIC_DEFAULTS` for analytic targets, else `W_CONNECT`.
+    connect_planes : bool
+        J_conn also measures paths to the mirror planes (its plane term); runs stored before the
+        term resume without it.
+    connect_tail : float
+        Slope of J_conn's tail (`design.fabrication.connectivity.TAIL_SLOPE`); runs stored before the tail
+        resume without it (0).
+    starts : int or None
+        Seeded starts run at half the resolution before the best is refined at full resolution
+        (`design.inverse.multistart`); 1 = a single run from the start design. None = `MULTISTART_STARTS` for
+        nfc and extruded designs of a source shape at resolution `MULTISTART_MIN_RESOLUTION` or
+        finer, else 1.
+    w_fab : float or None
+        Weight w_f of the space's fabrication term (ico only; None = preset or `SPACE_DEFAULTS`,
+        0 for spaces without one).
+    layers : int
+        L, partial designs of the ICO term (section 3.6).
+    ico_coarsen : int
+        Design voxels per elasticity element edge of the ICO term (`design.fabrication.ico`).
+    stiffness_law : str
+        "simp" (p = 3) or "ramp" (q = 3) moduli of the ICO term.
+    rate_window_vox : float
+        Finite-difference span of J_rate's rates, voxel edges (rounded to whole tau samples).
+    beta_final : float or None
+        Beta continuation: raise beta geometrically from ``beta`` to ``beta_final`` over
+        `design.inverse.optimize.BETA_STAGES` equal stages of the run; equal to ``beta``: fixed, as in the
+        paper. None = the preset's, else `ANALYTIC_DEFAULTS` for analytic targets, else
+        `SPACE_DEFAULTS` (at least ``beta``), else fixed.
+    w_rate : float or None
+        Weight of the rate-fit term J_rate (`design.inverse.rate`); None = `ANALYTIC_W_RATE` for analytic
+        targets, 0 (eq. 4 as in the paper) otherwise.
+    rate_span : (float, float)
+        J_rate compares rates only between the times the target reaches these fractions of its
+        final release (`design.inverse.rate`); (0, 1) = the whole curve.
+    robust_eta : float or None
+        Threshold offset d of the robust formulation (`design.inverse.objective`): the designs projected at
+        1/2 - d and 1/2 + d must release with the target's rate profile too; 0 = off (as in the
+        paper). Three simulations per evaluation; needs w_rate > 0. None = `ANALYTIC_DEFAULTS` for
+        analytic targets whose w_rate > 0, else 0.
+    max_iter : int
+        Maximum objective evaluations (paper: 500).
+    optimizer : str
+        One of `OPTIMIZERS` (see `design.inverse.optimize`).
+    ftol_rel, xtol_rel : float
+        Relative tolerances on J and on the variables (0 disables; by default only the
+        iteration limit and a stalled line search end a run).
+    lbfgs_memory : int
+        L-BFGS correction pairs m (memory O(m N)).
+    line_search : str
+        The "lbfgs" optimiser's line-search rule, one of `design.inverse.lbfgs.LINE_SEARCHES`: "luksan"
+        (default; nlopt LD_LBFGS's rule) or "strong-wolfe".
+    bounds : str
+        "cosine" (rho_hat = (1 - cos z) / 2, unconstrained L-BFGS) or "box" (nlopt box bounds, not
+        with the "lbfgs" optimiser); see `design.inverse.optimize`.
+    checkpoint_every : int
+        Evaluations between checkpoints.
+    margin : float
+        Empty space around a source mesh, as a fraction of its largest extent.
+    warn_channel_mm : float
+        Warn when the narrowest open channel is below this, mm.
+    allow_infeasible : bool
+        Optimise even when the feasibility check fails.
+    samples : int
+        Points of the tau grid (1001 gives dtau = T/1000, section 3.4).
+    formats : tuple of str
+        Mesh formats to export besides STL ("3mf", "obj").
+    """
+
+    target: str
+    space: str = "nfc"
+    resolution: int = 64
+    domain_mm: tuple[float, float, float] | None = None
+    height_mm: float | None = None
+    height_fraction: float | None = None
+    preset: str | None = None
+    w_binary: float | None = None
+    radius_vox: float | None = None
+    radius_mm: float | None = None
+    allow_pieces: bool = False
+    w_connect: float | None = None
+    connect_planes: bool = True
+    connect_tail: float = TAIL_SLOPE
+    starts: int | None = None
+    beta: float | None = None
+    w_fab: float | None = None
+    layers: int = DEFAULT_LAYERS
+    ico_coarsen: int = DEFAULT_COARSEN
+    stiffness_law: str = "simp"
+    beta_final: float | None = None
+    rate_window_vox: float = 1.0
+    w_rate: float | None = None
+    rate_span: tuple[float, float] = (0.05, 0.95)
+    robust_eta: float | None = None
+    max_iter: int = 500
+    optimizer: str = "lbfgs"
+    ftol_rel: float = 0.0
+    xtol_rel: float = 0.0
+    lbfgs_memory: int = 10
+    line_search: str = LINE_SEARCHES[0]
+    bounds: str = "cosine"
+    checkpoint_every: int = 10
+    margin: float = 0.25
+    warn_channel_mm: float = 1.0
+    allow_infeasible: bool = False
+    samples: int = 1001
+    formats: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.space not in SPACE_CHOICES:
+            raise DesignError(f"space must be one of {SPACE_CHOICES}, got {self.space!r}")
+        presets = [preset_values(self.preset, self.space)] if self.preset is not None else []
+        is_analytic = _parse_analytic(self.target) is not None
+        analytic = ANALYTIC_DEFAULTS.get(self.space, {}) if is_analytic else {}
+        space_defaults = {**SPACE_DEFAULTS.get(self.space, {}), **analytic}
+        space_defaults.pop("robust_eta", None)  # resolved below, once w_rate is known
+        for values in presets + [space_defaults, {"w_fab": 0.0, "w_connect": W_CONNECT}]:
+            for key, value in values.items():
+                if getattr(self, key) is None and not (key == "radius_vox" and self.radius_mm is not None):
+                    object.__setattr__(self, key, max(value, self.beta) if key == "beta_final" else value)
+        if self.w_fab < 0 or (self.w_fab > 0 and self.space != "ico"):
+            raise DesignError(f"w_fab must be >= 0, and only the ico space has a fabrication term; got "
+                              f"{self.w_fab} for space {self.space!r}")
+        if self.height_fraction is not None and not 0 < self.height_fraction <= 1:
+            raise DesignError(f"height_fraction must be in (0, 1], got {self.height_fraction}")
+        IcoConfig(self.layers, self.ico_coarsen, self.stiffness_law)  # checks the ICO settings
+        if self.w_rate is None:
+            object.__setattr__(self, "w_rate", ANALYTIC_W_RATE if is_analytic else 0.0)
+        if self.w_rate < 0 or not 0 < self.rate_window_vox <= 64:
+            raise DesignError(f"w_rate must be >= 0 and rate_window_vox in (0, 64]; got {self.w_rate}, "
+                              f"{self.rate_window_vox}")
+        if len(self.rate_span) != 2 or not 0.0 <= self.rate_span[0] < self.rate_span[1] <= 1.0:
+            raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {self.rate_span}")
+        if self.robust_eta is None:
+            object.__setattr__(self, "robust_eta", analytic.get("robust_eta", 0.0) if self.w_rate > 0 else 0.0)
+        if not 0.0 <= self.robust_eta <= 0.4:
+            raise DesignError(f"robust_eta must be in [0, 0.4], got {self.robust_eta}")
+        if self.robust_eta > 0 and not self.w_rate > 0:
+            raise DesignError("the robust formulation compares release rates: it needs w_rate > 0")
+        if self.resolution < 8 or self.resolution % 2:
+            raise DesignError(f"resolution must be an even number >= 8 voxels, got {self.resolution}")
+        if self.domain_mm is not None and (len(self.domain_mm) != 3 or min(self.domain_mm) <= 0):
+            raise DesignError(f"domain must be three positive sizes in mm, got {self.domain_mm}")
+        if self.height_mm is not None and not self.height_mm > 0:
+            raise DesignError(f"extrusion height must be > 0 mm, got {self.height_mm}")
+        if self.w_binary is not None and self.w_binary < 0:
+            raise DesignError(f"w_binary must be >= 0, got {self.w_binary}")
+        if self.radius_vox is not None and not 1.0 <= self.radius_vox <= 32.0:
+            raise DesignError(f"smoothing radius must be in [1, 32] voxels, got {self.radius_vox}")
+        if self.radius_vox is not None and self.radius_mm is not None:
+            raise DesignError(f"give the smoothing radius in voxels ({self.radius_vox}) or in mm "
+                              f"({self.radius_mm}), not both")
+        if self.radius_mm is not None and not self.radius_mm > 0:
+            raise DesignError(f"smoothing radius must be > 0 mm, got {self.radius_mm}")
+        if not self.w_connect >= 0:
+            raise DesignError(f"w_connect must be >= 0, got {self.w_connect}")
+        if not self.connect_tail >= 0:
+            raise DesignError(f"connect_tail must be >= 0, got {self.connect_tail}")
+        if self.starts is None:
+            multi = (self.space in MULTISTART_SPACES and self.resolution >= MULTISTART_MIN_RESOLUTION
+                     and _is_shape_target(self.target))
+            object.__setattr__(self, "starts", MULTISTART_STARTS if multi else 1)
+        if not 1 <= self.starts <= 64:
+            raise DesignError(f"starts must be in [1, 64], got {self.starts}")
+        if self.beta is not None and not 0 < self.beta <= 64:
+            raise DesignError(f"beta must be in (0, 64], got {self.beta}")
+        if self.beta_final is not None and not self.beta <= self.beta_final <= 64:
+            raise DesignError(f"beta_final must be in [beta, 64] = [{self.beta}, 64], got {self.beta_final}")
+        if self.max_iter < 1 or self.checkpoint_every < 1 or not 1 <= self.lbfgs_memory <= 100:
+            raise DesignError(f"need max_iter >= 1, checkpoint_every >= 1, lbfgs_memory in [1, 100]; got "
+                              f"{self.max_iter}, {self.checkpoint_every}, {self.lbfgs_memory}")
+        if not 0 <= self.margin <= 2 or not self.warn_channel_mm > 0 or self.samples < 3:
+            raise DesignError(f"need margin in [0, 2], warn_channel_mm > 0, samples >= 3; got {self.margin}, "
+                              f"{self.warn_channel_mm}, {self.samples}")
+        if self.bounds not in ("cosine", "box"):
+            raise DesignError(f"bounds must be 'cosine' or 'box', got {self.bounds!r}")
+        if self.optimizer not in OPTIMIZERS:
+            raise DesignError(f"optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
+        if self.line_search not in LINE_SEARCHES:
+            raise DesignError(f"line_search must be one of {LINE_SEARCHES}, got {self.line_search!r}")
+        if self.optimizer == "lbfgs" and self.bounds != "cosine":
+            raise DesignError("the 'lbfgs' optimiser is unconstrained: it needs bounds='cosine' (box bounds: "
+                              "choose an nlopt optimizer)")
+        bad = set(self.formats) - {"3mf", "obj"}
+        if bad:
+            raise DesignError(f"extra mesh formats must be among 3mf, obj; got {sorted(bad)}")
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A prepared design problem.
+
+    Attributes
+    ----------
+    space : DesignSpace
+    target : Target
+    feasibility : Feasibility
+    dx_mm : float
+    origin_mm : (3,) ndarray of float
+        Corner of the full design grid, mm (voxel i spans origin + [i, i+1) dx).
+    full_shape : tuple of 3 int
+        Voxels of the full (unfolded) simulated object.
+    source_solid : ndarray of bool or None
+        The source mesh voxelised on the full design grid (for the recovery check).
+    radius_vox : float
+        Smoothing radius r on this grid, voxels (`DesignConfig.radius_vox` or its ``radius_mm``).
+    start_region : ndarray of bool or None
+        Where the start design holds material (`start_region`); None = the whole domain.
+    warnings : tuple of str
+        What is known about the source and the target before the run (`source_warnings`,
+        `rate_resolution_warnings`); logged when the problem is prepared and kept in the run's summary.
+    source_mesh : trimesh.Trimesh or None
+        The source mesh of a mesh target, mm (re-simulated on a finer grid for the outputs' check).
+    """
+
+    space: DesignSpace
+    target: Target
+    feasibility: Feasibility
+    dx_mm: float
+    origin_mm: np.ndarray
+    full_shape: tuple[int, int, int]
+    source_solid: np.ndarray | None
+    radius_vox: float
+    start_region: np.ndarray | None = None
+    warnings: tuple[str, ...] = ()
+    source_mesh: trimesh.Trimesh | None = None
+
+
+def source_warnings(source_solid: np.ndarray | None, allow_pieces: bool) -> tuple[str, ...]:
+    """Warnings about a voxelised source: several separate pieces where the design must be one."""
+    if source_solid is None or allow_pieces:
+        return ()
+    pieces = count_pieces(source_solid)
+    if pieces < 2:
+        return ()
+    return (f"the source is {pieces} separate pieces and the design is held to one piece, so it cannot take "
+            "the source's own shape; allow pieces (--allow-pieces) to let it",)
+
+
+def rate_resolution_warnings(target: Target, dx_mm: float, w_rate: float, resolution: int) -> tuple[str, ...]:
+    """Warnings about a rate-fitted target whose middle 80% spans too few voxels of tau to be measured.
+
+    Below `design.inverse.rate.RATE_SPAN_MIN_VOX` the grid's own error in the rate deviation reaches several
+    points; the warning names the resolution at which the span reaches it.
+    """
+    if not w_rate > 0 or not target.final_mm3 > 0:
+        return ()
+    lo, hi = middle_span_mm(target.tau_mm, target.released_mm3)
+    span_vox = (hi - lo) / dx_mm
+    if span_vox >= RATE_SPAN_MIN_VOX:
+        return ()
+    needed = _even_ceil(resolution * RATE_SPAN_MIN_VOX / span_vox)
+    return (f"the target's middle 80% (10% to 90% released) spans {span_vox:.1f} voxels of tau at resolution "
+            f"{resolution}: too few to measure a release rate to better than a few points, so the design's rate "
+            f"deviation is that uncertain; at about resolution {needed} it spans {RATE_SPAN_MIN_VOX:g}",)
+
+
+def _parse_analytic(spec: str) -> tuple[float, float, float] | None:
+    head, _, tail = spec.partition(":")
+    if head not in ("zero-order", "accel"):
+        return None
+    params = {"q": 1.0, "final": 0.15, "duration": 0.2}
+    for item in filter(None, tail.split(",")):
+        key, _, value = item.partition("=")
+        if key not in params:
+            raise DesignError(f"unknown analytic target parameter {key!r} in {spec!r}; use q, final, duration")
+        try:
+            params[key] = float(value)
+        except ValueError as exc:
+            raise DesignError(f"bad value {value!r} for {key} in target {spec!r}") from exc
+    if head == "zero-order":
+        params["q"] = 1.0
+    return params["q"], params["final"], params["duration"]
+
+
+def _is_shape_target(spec: str) -> bool:
+    """Whether a target spec names a source shape (a sample shape or a mesh file), not a curve."""
+    return spec in SAMPLE_SHAPES or Path(spec).suffix.lower() in MESH_SUFFIXES
+
+
+def _source_mesh(spec: str):
+    if spec in SAMPLE_SHAPES:
+        return sample_shape(spec)
+    path = Path(spec)
+    if _is_shape_target(spec):
+        if not path.exists():
+            raise DesignError(f"target mesh {path} does not exist")
+        return load_mesh(path)
+    return None
+
+
+def _even_ceil(x: float) -> int:
+    return max(2, 2 * int(np.ceil(x / 2.0 - 1e-9)))
+
+
+def _curve_target(config: DesignConfig, analytic: tuple[float, float, float] | None, t_mm: float,
+                  box_volume_mm3: float, box_time_mm: float) -> Target:
+    """The CSV or analytic target on the tau grid up to ``t_mm``; analytic fractions of the domain box."""
+    if analytic is None:
+        return target_from_csv(config.target, t_mm, config.samples)
+    q, final, duration = analytic
+    if not 0 < final <= 1 or not 0 < duration <= 1:
+        raise DesignError(f"analytic final and duration are fractions in (0, 1], got {final}, {duration}")
+    if duration * box_time_mm > t_mm:
+        raise DesignError(f"the release lasts {duration * box_time_mm:.4g} mm but the design domain dissolves by "
+                          f"T = {t_mm:.4g} mm; raise the extrusion height to at least {2 * duration * box_time_mm:.4g} mm")
+    return constant_acceleration(t_mm, final * box_volume_mm3, duration * box_time_mm, q, config.samples)
+
+
+def extrusion_height_mm(target: Target, dx_mm: float) -> float:
+    """Default extrusion height for a target without a source shape, mm.
+
+    As tall as a cube of the target's volume (a compact dose form), but at least twice the release's
+    duration plus a voxel on each face: the top and bottom faces dissolve inwards at unit speed, so a
+    shorter extrusion would be gone before the target's release ends.
+    """
+    end = curve_end_mm(target.tau_mm, target.released_mm3)
+    return max(target.final_mm3 ** (1.0 / 3.0), 2.0 * end + 2.0 * dx_mm)
+
+
+def start_region(space: DesignSpace, target: Target, half_extent_mm: np.ndarray | None,
+                 radius_mm: float) -> np.ndarray | None:
+    """Where an extruded design starts with material (`DesignObjective.uniform_start`), or None (everywhere).
+
+    The outline is the source's footprint (its bounding box plus a voxel), or for a target without a
+    source a centred square. Spreading the start over the whole domain footprint, as for the other
+    spaces, leaves an extruded design far from the compact part and lets it split into one piece per
+    quadrant (docs/results.md).
+
+    When the extrusion is taller than twice the target's release end D, the start leaves out the
+    outline's core deeper than 2 D from its edge. A point of a prism dissolves at min(in-plane distance
+    to the nearest edge, distance to the top or bottom face), so the part's material must lie within D
+    of an in-plane edge for its release to end by D; the band that remains has that width between the
+    outline and the hole, and a start that holds the core solid gives the design a core that the
+    projection then keeps (a ring's central hole never opens; docs/results.md). The hole is cut only
+    as far as the band that remains holds the target's volume at density `START_FILL`, and not at all
+    when its half-width would be below the smoothing radius (the filter would keep it a grey pin-hole
+    that the printed solid opens). A target without a source starts in the square that holds its
+    volume at `START_FILL` throughout, so it has no room for a hole: a square ring start with the
+    core's connectivity penalty closes up instead (docs/results.md).
+
+    Returns
+    -------
+    ndarray of bool, variable shape, or None
+    """
+    if not space.extruded:
+        return None
+    dx = space.dx_mm
+    height_mm = space.grid_shape[BUILD_AXIS] * dx
+    end_mm = curve_end_mm(target.tau_mm, target.released_mm3)
+    need_cells = target.final_mm3 / (START_FILL * height_mm * dx * dx * space.multiplicity)
+    if half_extent_mm is None:
+        side = np.sqrt(target.final_mm3 / (height_mm * START_FILL))
+        half = np.array([0.5 * side, 0.5 * side])
+    else:
+        half = np.array([half_extent_mm[ax] for ax in range(3) if ax != BUILD_AXIS]) + dx
+    half = np.minimum(half, np.asarray(space.var_shape, float) * dx)  # within the domain
+    centres = [(np.arange(n) + 0.5) * dx for n in space.var_shape]
+    depth = np.minimum.outer(half[0] - centres[0], half[1] - centres[1])  # to the outline's edge, mm
+    region = depth > 0
+    if end_mm < 0.5 * height_mm - 0.5 * dx:  # the faces alone do not dissolve the core in time
+        inside = np.sort(depth[region])
+        width = 2.0 * end_mm + 0.5 * dx
+        if np.count_nonzero(inside <= width) < need_cells:
+            width = inside[min(int(np.ceil(need_cells)), inside.size - 1)]
+        if inside[-1] - width >= radius_mm:
+            region &= depth <= width
+    return region if region.any() and not region.all() else None
+
+
+def _radius_vox(config: DesignConfig, dx_mm: float) -> float:
+    """The smoothing radius in voxels of edge ``dx_mm``: as given, or from mm (at least 1 voxel)."""
+    if config.radius_vox is not None:
+        return float(config.radius_vox)
+    radius_mm = DEFAULT_RADIUS_MM if config.radius_mm is None else config.radius_mm
+    radius = max(1.0, radius_mm / dx_mm)
+    if radius > 64.0:
+        raise DesignError(f"smoothing radius {radius_mm} mm is {radius:.1f} voxels of {dx_mm:.4g} mm; the filter "
+                          f"takes at most 64 (lower the resolution or the radius)")
+    return radius
+
+
+def prepare(config: DesignConfig) -> Problem:
+    """Build the design space, the target on its tau grid, and the feasibility report."""
+    mesh = _source_mesh(config.target)
+    analytic = None if mesh is not None else _parse_analytic(config.target)
+    if mesh is None and analytic is None and not config.target.lower().endswith(".csv"):
+        raise DesignError(f"target {config.target!r} is neither a sample shape ({', '.join(SAMPLE_SHAPES)}), "
+                          f"a mesh file ({', '.join(MESH_SUFFIXES)}), a .csv curve, nor zero-order/accel:q=..")
+    lo = hi = None
+    if mesh is not None:
+        lo, hi = np.asarray(mesh.bounds[0], float), np.asarray(mesh.bounds[1], float)
+    if config.domain_mm is not None:
+        size = np.asarray(config.domain_mm, float)
+    elif mesh is not None:
+        size = (hi - lo) + 2.0 * config.margin * float(np.max(hi - lo))
+        if config.space == "ico":  # the part stands on the build plate: no margin below it (section 3.6)
+            size[BUILD_AXIS] -= config.margin * float(np.max(hi - lo))
+        if config.space == "nfc":
+            size = np.full(3, size.max())
+    elif analytic is None:  # a CSV curve: a cube whose horizon T holds the whole release
+        tau, c = read_curve_csv(config.target)
+        size = np.full(3, max(DEFAULT_DOMAIN_MM, CSV_HORIZON_MARGIN * 2.0 * curve_end_mm(tau, c)))
+    else:
+        size = np.full(3, DEFAULT_DOMAIN_MM)
+    dx = float(size.max()) / config.resolution
+    full = [_even_ceil(s / dx - 1e-9) for s in size]
+    # analytic fractions refer to the whole domain box, whatever the extrusion height
+    box_volume = float(np.prod(full)) * dx ** 3
+    box_time = total_time(tuple(n // 2 for n in full), dx, (True, True, True))
+    height_vox = None
+    if config.space == "extruded":
+        height = config.height_mm or (config.height_fraction * float(size.max()) if config.height_fraction else None)
+        height = height or (float(hi[BUILD_AXIS] - lo[BUILD_AXIS]) if mesh is not None else extrusion_height_mm(
+            _curve_target(config, analytic, box_time, box_volume, box_time), dx))
+        if height is not None:
+            height_vox = max(1, int(round(height / dx)))
+            full[BUILD_AXIS] = max(full[BUILD_AXIS], height_vox)
+    ico = IcoConfig(config.layers, config.ico_coarsen, config.stiffness_law)
+    space: DesignSpace = build_space(config.space, SpaceRequest(tuple(full), dx, height_vox, ico))
+    sim_full = list(space.grid_shape)
+    for ax, mir in enumerate(space.mirror):
+        sim_full[ax] *= 2 if mir else 1
+    sim_full = tuple(sim_full)
+    centre = 0.5 * (lo + hi) if mesh is not None else np.zeros(3)
+    origin = centre - 0.5 * dx * np.asarray(sim_full, float)
+    if config.space == "ico" and mesh is not None:
+        origin[BUILD_AXIS] = lo[BUILD_AXIS]  # the source's base on the plate, z = 0 of the grid
+    t_total = total_time(space.grid_shape, dx, space.mirror)
+    domain_volume = float(np.prod(sim_full)) * dx ** 3
+    source_solid = None
+    if mesh is not None:
+        target = target_from_mesh(mesh, dx, t_total, f"mesh:{config.target}", config.samples, origin_mm=origin,
+                                  shape=sim_full)
+        source_solid = voxelize(mesh, dx, origin_mm=origin, shape=sim_full) > 0.5
+    else:
+        target = _curve_target(config, analytic, t_total, box_volume, box_time)
+    ext = np.asarray(sim_full, float) * dx
+    area = 2.0 * float(ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2])
+    feasibility = check_feasibility(target, domain_volume, dx_mm=dx, domain_area_mm2=area)
+    log.info("design grid %s (reduced %s), dx = %.4g mm, T = %.4g mm; %s", sim_full, space.grid_shape, dx,
+             t_total, feasibility.text())
+    half_mm = 0.5 * (hi - lo) if mesh is not None else None
+    radius_vox = _radius_vox(config, dx)
+    warnings = (source_warnings(source_solid, config.allow_pieces)
+                + rate_resolution_warnings(target, dx, config.w_rate, config.resolution))
+    for warning in warnings:
+        log.warning("%s", warning)
+    return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, radius_vox,
+                   start_region(space, target, half_mm, radius_vox * dx), warnings, mesh)

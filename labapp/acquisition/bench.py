@@ -1,0 +1,204 @@
+"""The devices of one bench and the steps every procedure shares (connect, heat, capture, shut down)."""
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from drivers.camera.base import DSLR_FRAME_BYTES, Camera, CameraError, CameraSettings, Capture, CaptureMissed
+from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
+from labapp.acquisition.engine import Engine
+from labapp.errors import LabError
+from labapp.acquisition.events import Message, Reading, StateChanged
+from labapp.acquisition.monitor import HotplateMonitor
+from labapp.records.storage import RunFolder
+
+log = logging.getLogger(__name__)
+_LEVELS = {"info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
+PUBLISHED = "published_as_event"
+"""Attribute set on log records that are also published as engine events."""
+
+
+class ProcedureError(LabError):
+    """A procedure cannot go on (bath never stable, camera gone for good); the message says why."""
+
+
+@dataclass
+class Bench:
+    """A camera, an optional hotplate, and hooks through which a simulated bench follows the procedure.
+
+    ``on_drop(t_unix_s)`` is called when the object goes in (time zero, also again on resume);
+    ``on_add_mass(total_g)`` when a calibration step adds filament (cumulative mass). ``frame_bytes`` is
+    what one capture takes on disk, bytes, for the disk-space check before a run.
+    """
+
+    camera: Camera
+    hotplate: Hotplate | None = None
+    camera_settings: CameraSettings = field(default_factory=CameraSettings)
+    simulated: bool = False
+    on_drop: Callable[[float], None] | None = None
+    on_add_mass: Callable[[float], None] | None = None
+    description: str = ""
+    frame_bytes: int = DSLR_FRAME_BYTES
+
+
+class BenchSession:
+    """The live connection to a bench during one procedure: devices, hotplate monitor and run-folder logging.
+
+    Every ``note`` goes both to the run's ``events.log`` and to the engine's subscribers; notes made before
+    the run folder exists (while connecting) are written to it by :meth:`attach`.
+    """
+
+    def __init__(self, bench: Bench, engine: Engine, run: RunFolder | None, keepalive_s: float = 2.0) -> None:
+        self.bench, self.engine, self.run = bench, engine, run
+        self.keepalive_s = keepalive_s
+        self.monitor: HotplateMonitor | None = None
+        self.t0_unix_s: float | None = None
+        self.camera_failures = 0
+        self.last_error = ""
+        self._pending: list[tuple[str, str, str]] = []
+
+    def attach(self, run: RunFolder) -> None:
+        """Log into ``run`` from now on, starting with the notes made before it existed."""
+        self.run = run
+        for level, kind, message in self._pending:
+            run.event(level, kind, message, self.t_s())
+        self._pending.clear()
+
+    def t_s(self, t_unix_s: float | None = None) -> float | None:
+        """Seconds since the drop (None before it)."""
+        if self.t0_unix_s is None:
+            return None
+        return (self.engine.clock.now() if t_unix_s is None else t_unix_s) - self.t0_unix_s
+
+    def note(self, level: str, kind: str, message: str) -> None:
+        """Record an event in ``events.log`` and publish it (``info``, ``warning`` or ``error``)."""
+        # also published as a Message event: marked so that the GUI's log handler does not show it twice
+        log.log(_LEVELS.get(level, logging.INFO), "%s: %s", kind, message, extra={PUBLISHED: True})
+        if level in ("warning", "error"):
+            self.last_error = message
+        if self.run is not None:
+            self.run.event(level, kind, message, self.t_s())
+        else:
+            self._pending.append((level, kind, message))
+        self.engine.emit(Message(level if level in ("info", "warning", "error") else "info", message, topic=kind))
+
+    def connect(self, setpoint_c: float | None, speed_rpm: float | None) -> None:
+        """Connect and configure the camera; connect the hotplate, set it up and start heating."""
+        self.engine.emit(StateChanged("connecting"))
+        self.bench.camera.connect()
+        outcome = self.bench.camera.configure(self.bench.camera_settings)
+        self.note("info", "camera", f"camera connected ({self.bench.description or type(self.bench.camera).__name__}); "
+                  f"settings: {outcome}")
+        hp = self.bench.hotplate
+        if hp is None:
+            return
+        hp.connect()
+        # poll every keepalive_s of procedure time, so that on an accelerated clock the reading logged with a
+        # frame is as recent as on the real bench (the serial link itself bounds the rate)
+        poll_s = max(self.keepalive_s / max(self.engine.clock.speed, 1.0), min(self.keepalive_s, 0.05))
+        self.monitor = HotplateMonitor(hp, self.note, poll_s=poll_s, on_reading=self._publish_reading)
+        if setpoint_c is not None:
+            self.monitor.command(hp.set_temperature, setpoint_c)
+            self.monitor.command(hp.start_heating)
+        if speed_rpm is not None:
+            self.monitor.command(hp.set_speed, speed_rpm)
+        self.monitor.poll()
+        self.monitor.start()
+        self.note("info", "hotplate", "hotplate connected" + ("" if setpoint_c is None else
+                  f"; setpoint {setpoint_c} C, {speed_rpm} rpm, heating on"))
+
+    def _publish_reading(self, reading: HotplateReading) -> None:
+        self.engine.emit(Reading(reading.plate_c, reading.probe_c, reading.speed_rpm, reading.setpoint_c,
+                                 reading.setpoint_rpm, reading.heating, reading.stirring, self.t_s()))
+
+    def wait_stable(self, setpoint_c: float, tolerance_c: float, hold_s: float, timeout_s: float,
+                    step_s: float) -> None:
+        """Wait until the bath holds the setpoint (see :meth:`HotplateMonitor.wait_stable`).
+
+        Raises
+        ------
+        ProcedureError
+            If it does not within ``timeout_s`` (s, procedure clock).
+        """
+        if self.monitor is None:
+            return
+        self.engine.emit(StateChanged("heating", setpoint_c=setpoint_c))
+        clock = self.engine.clock
+        ok = self.monitor.wait_stable(setpoint_c, tolerance_c, hold_s, timeout_s, step_s, clock.now,
+                                      lambda dt: clock.sleep(dt, self.engine.should_stop), self.engine.should_stop)
+        if self.engine.should_stop():
+            return
+        if not ok:
+            last = self.monitor.latest
+            raise ProcedureError(f"bath did not reach {setpoint_c} +/- {tolerance_c} C for {hold_s} s within "
+                                 f"{timeout_s} s (last reading: {last})")
+        self.note("info", "stable", f"bath stable at {setpoint_c} +/- {tolerance_c} C for {hold_s:.0f} s")
+
+    def start_stirring(self, speed_rpm: float | None = None, timeout_s: float = 120.0, step_s: float = 2.0) -> None:
+        """Switch the stirrer on (no-op without a hotplate); with ``speed_rpm``, wait until the measured
+        speed is within 5 % of it (at most ``timeout_s``, s on the procedure clock; a warning if not)."""
+        if self.monitor is None:
+            return
+        self.monitor.command(self.bench.hotplate.start_stirring)
+        self.note("info", "stirring", "stirring on")
+        if speed_rpm is None:
+            return
+        clock = self.engine.clock
+        deadline = clock.now() + timeout_s
+        while not self.engine.should_stop():
+            reading = self.monitor.poll()
+            if reading is not None and abs(reading.speed_rpm - speed_rpm) <= 0.05 * speed_rpm:
+                self.note("info", "stirring", f"stirring steady at {reading.speed_rpm:.0f} rpm")
+                return
+            if clock.now() >= deadline:
+                self.note("warning", "stirring", f"stirrer not at {speed_rpm:.0f} rpm after {timeout_s:.0f} s "
+                          f"(last reading: {reading}); going on")
+                return
+            clock.sleep(step_s, self.engine.should_stop)
+
+    def capture(self) -> Capture | None:
+        """One capture; a missed or failed frame is logged and returns None, the camera is re-initialised
+        after three failures in a row."""
+        try:
+            cap = self.bench.camera.capture()
+        except CaptureMissed as exc:
+            self.camera_failures += 1
+            self.note("warning", "camera-missed", f"frame missed: {exc}")
+            return None
+        except CameraError as exc:
+            self.camera_failures += 1
+            self.note("warning", "camera-error", f"capture failed: {exc}")
+            if self.camera_failures >= 3:
+                self._reinit_camera()
+            return None
+        self.camera_failures = 0
+        return cap
+
+    def _reinit_camera(self) -> None:
+        try:
+            self.bench.camera.close()
+            self.bench.camera.connect()
+            self.bench.camera.configure(self.bench.camera_settings)
+            self.note("info", "camera", "camera re-initialised after repeated failures")
+            self.camera_failures = 0
+        except CameraError as exc:
+            self.note("warning", "camera-error", f"camera re-initialisation failed: {exc}")
+
+    def close(self) -> None:
+        """Heating and stirring off, devices closed; every step best effort and logged."""
+        if self.monitor is not None:
+            self.monitor.stop()
+            for step in (self.bench.hotplate.stop_heating, self.bench.hotplate.stop_stirring):
+                try:
+                    self.monitor.command(step)
+                except HotplateError as exc:
+                    self.note("warning", "hotplate", f"{step.__name__} failed: {exc}")
+            self.note("info", "hotplate", "heating and stirring switched off")
+        for device in (self.bench.hotplate, self.bench.camera):
+            if device is None:
+                continue
+            try:
+                device.close()
+            except (CameraError, HotplateError, OSError) as exc:
+                self.note("warning", "close", f"closing {type(device).__name__} failed: {exc}")

@@ -1,0 +1,295 @@
+"""The release-measurement run (paper section 4.2) as a procedure the engine walks.
+
+connect -> heat and wait until stable -> stir -> reference frame -> the operator drops the object (time
+zero) -> a frame every ``interval_s`` with plate/probe temperature and stirring speed, each analysed live
+-> stop on request, on steady state or at ``max_duration_s`` -> heating off. A run reopened after a crash
+(:meth:`RunProcedure.resume`) records the gap and continues into the same folder.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from analysis import BenchCalibration
+from labapp.acquisition.bench import Bench, BenchSession, ProcedureError
+from labapp.acquisition.engine import Engine
+from labapp.errors import UsageError
+from labapp.acquisition.events import FrameStored, Preview, StateChanged
+from labapp.acquisition.live import LiveAnalyzer, is_steady
+from labapp.records.storage import RunFolder, check_disk_space, create_run, free_bytes, open_run, read_run
+
+log = logging.getLogger(__name__)
+
+_STATUS = {"complete": "complete", "stopped": "stopped", "aborted": "aborted", "failed": "failed"}
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Settings of one release run (stored in ``run.json``). Times in s, temperatures in C, masses in g."""
+
+    name: str = "run"
+    interval_s: float = 11.0
+    setpoint_c: float = 70.0
+    speed_rpm: float = 150.0
+    tolerance_c: float = 0.5
+    hold_s: float = 120.0
+    heat_timeout_s: float = 2 * 3600.0
+    stable_step_s: float = 5.0
+    max_duration_s: float = 4 * 3600.0
+    stop_on_steady: bool = True
+    min_duration_s: float = 1800.0
+    water_g: float = 500.0
+    object_mass_g: float | None = None
+    object_name: str = ""
+    notes: str = ""
+    auto_drop: bool = False
+    keepalive_s: float = 2.0
+    frame_bytes_estimate: int | None = None
+    low_space_bytes: int = 2_000_000_000
+
+    def __post_init__(self) -> None:
+        positive = ("interval_s", "hold_s", "heat_timeout_s", "stable_step_s", "max_duration_s", "water_g",
+                    "keepalive_s", "frame_bytes_estimate")
+        for key in positive:
+            if getattr(self, key) is not None and not getattr(self, key) > 0:
+                raise UsageError(f"RunConfig.{key} must be > 0, got {getattr(self, key)}")
+        if not 0 <= self.setpoint_c <= 150:
+            raise UsageError(f"RunConfig.setpoint_c must be in [0, 150] C, got {self.setpoint_c}")
+        if not 0 <= self.speed_rpm <= 1400:
+            raise UsageError(f"RunConfig.speed_rpm must be in [0, 1400] rpm, got {self.speed_rpm}")
+        if not self.tolerance_c > 0:
+            raise UsageError(f"RunConfig.tolerance_c must be > 0 C, got {self.tolerance_c}")
+        if self.object_mass_g is not None and not self.object_mass_g > 0:
+            raise UsageError(f"RunConfig.object_mass_g must be > 0 g, got {self.object_mass_g}")
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RunConfig:
+        """Rebuild a config stored in ``run.json`` (unknown keys ignored)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in data.items() if k in names})
+
+
+def _calibration_bytes(calibration: BenchCalibration) -> bytes:
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "calibration.json"
+        calibration.save(path)
+        return path.read_bytes()
+
+
+def _geometry_meta(calibration: BenchCalibration | None) -> dict[str, Any]:
+    if calibration is None:
+        return {}
+    g = calibration.geometry
+    return {"crop": {"x": g.x, "y": g.y, "size": g.size}, "grid": g.grid, "mirror_col": g.mirror_col,
+            "reduce": calibration.reduce}
+
+
+class RunProcedure:
+    """One release run into a new run folder under ``data_dir`` (or resumed into an existing one).
+
+    Parameters
+    ----------
+    config : RunConfig
+    bench : Bench
+        Camera, hotplate and (simulation) hooks.
+    data_dir : Path
+        Where the run folder is created; nothing is written outside it.
+    calibration : BenchCalibration, optional
+        Enables live analysis (concentration per frame) and the steady-state stop.
+    """
+
+    name = "run"
+
+    def __init__(self, config: RunConfig, bench: Bench, data_dir: Path,
+                 calibration: BenchCalibration | None = None) -> None:
+        self.config, self.bench, self.data_dir = config, bench, Path(data_dir)
+        self.calibration = calibration
+        self.resume_path: Path | None = None
+        self.run: RunFolder | None = None
+        self.session: BenchSession | None = None
+        self.analyzer = LiveAnalyzer(calibration) if calibration is not None else None
+        self.t_s: list[float] = []
+        self.conc: list[float] = []
+
+    @classmethod
+    def resume(cls, folder: Path, bench: Bench, calibration: BenchCalibration | None = None) -> RunProcedure:
+        """A procedure continuing the run in ``folder`` with its stored settings (and stored calibration)."""
+        snap = read_run(folder)
+        config = RunConfig.from_dict(snap.meta.get("config", {}))
+        cal_file = Path(folder) / "calibration.json"
+        if calibration is None and cal_file.is_file():
+            calibration = BenchCalibration.load(cal_file)
+        proc = cls(config, bench, Path(folder).parent, calibration)
+        proc.resume_path = Path(folder)
+        return proc
+
+    # -- engine hooks ------------------------------------------------------------------------------------
+    def startup(self, engine: Engine) -> None:
+        """Connect the devices, then open the run folder (new or resumed): a bench that cannot be reached
+        leaves no new folder behind and an interrupted run untouched."""
+        cfg = self.config
+        n_frames = math.ceil(cfg.max_duration_s / cfg.interval_s)
+        if self.resume_path is None:
+            self.data_dir.mkdir(parents=True, exist_ok=True)
+            check_disk_space(self.data_dir, cfg.frame_bytes_estimate or self.bench.frame_bytes, n_frames)
+        self.session = BenchSession(self.bench, engine, None, keepalive_s=cfg.keepalive_s)
+        self.session.connect(cfg.setpoint_c, cfg.speed_rpm)
+        if self.resume_path is not None:
+            self.run = open_run(self.resume_path)
+        else:
+            meta = dict(kind="run", config=dataclasses.asdict(cfg), water_g=cfg.water_g,
+                        object_mass_g=cfg.object_mass_g, object_name=cfg.object_name, notes=cfg.notes,
+                        interval_s=cfg.interval_s, simulated=self.bench.simulated, bench=self.bench.description,
+                        **_geometry_meta(self.calibration))
+            self.run = create_run(self.data_dir, cfg.name, meta)
+            if self.calibration is not None:
+                self.run.add_file("calibration.json", _calibration_bytes(self.calibration))
+        engine.emit(StateChanged("opened", folder=str(self.run.path), resumed=self.resume_path is not None))
+        self.session.t0_unix_s = self.run.meta.get("t0_unix_s")
+        self.session.attach(self.run)
+        self.t_s = [f.t_s for f in self.run.frames]
+        self.conc = [math.nan] * len(self.t_s)
+
+    def execute(self, engine: Engine) -> None:
+        """Heat, reference, drop (unless resuming after the drop), then acquire until a stop criterion."""
+        cfg, session, run = self.config, self.session, self.run
+        if "reference.jpg" in run.meta.get("files", {}):
+            self._use_reference()
+        if session.t0_unix_s is None:
+            session.wait_stable(cfg.setpoint_c, cfg.tolerance_c, cfg.hold_s, cfg.heat_timeout_s, cfg.stable_step_s)
+            if engine.should_stop():
+                return
+            session.start_stirring(cfg.speed_rpm)  # the reference shows the stirred bath
+            if "reference.jpg" not in run.meta.get("files", {}):
+                self._capture_reference(engine)
+            engine.emit(StateChanged("waiting-drop"))
+            dropped = engine.ask("drop", "Drop the object into the beaker, then confirm.",
+                                 auto=True if cfg.auto_drop else None)
+            if not dropped or engine.should_stop():
+                return
+            session.t0_unix_s = engine.clock.now()
+            run.update(t0_unix_s=session.t0_unix_s)
+            session.note("info", "drop", "object dropped: time zero")
+        else:
+            session.start_stirring(cfg.speed_rpm)
+            last = run.frames[-1].t_s if run.frames else 0.0
+            run.add_gap(last, session.t_s(), "acquisition interrupted; resumed into the same folder")
+        if self.bench.on_drop is not None:
+            self.bench.on_drop(session.t0_unix_s)
+        self._acquire(engine)
+
+    def shutdown(self, engine: Engine, outcome: str) -> None:
+        """Heating off, devices closed, final status written (always runs)."""
+        if self.session is not None:
+            self.session.close()
+        if self.run is not None:
+            if outcome == "failed" and engine.error is not None:
+                self.run.event("error", "failed", f"{type(engine.error).__name__}: {engine.error}")
+            self.run.finish(_STATUS[outcome])
+            self.run.close()
+
+    # -- steps -------------------------------------------------------------------------------------------
+    def _capture_reference(self, engine: Engine) -> None:
+        cap = self.session.capture() or self.session.capture()
+        if cap is None:
+            raise ProcedureError("no reference frame: the camera failed twice")
+        self.run.add_file("reference.jpg", cap.data)
+        self.run.update(reference_file="reference.jpg", reference_t_unix_s=cap.t_unix_s)
+        self.session.note("info", "reference", "reference frame (clear water) captured")
+        self._use_reference()
+
+    def _use_reference(self) -> None:
+        if self.analyzer is None:
+            return
+        try:
+            self.analyzer.set_reference(self.run.path / "reference.jpg")
+        except Exception as exc:
+            self.session.note("warning", "reference", f"reference frame unusable for live analysis "
+                              f"({type(exc).__name__}: {exc}); the calibration's zero level is used")
+
+    def _acquire(self, engine: Engine) -> None:
+        cfg, session, clock = self.config, self.session, engine.clock
+        engine.emit(StateChanged("acquiring", folder=str(self.run.path), t0_unix_s=session.t0_unix_s))
+        slot = math.floor(max(session.t_s(), 0.0) / cfg.interval_s) + (1 if self.run.frames else 0)
+        while not engine.should_stop():
+            clock.sleep(session.t0_unix_s + slot * cfg.interval_s - clock.now(), engine.should_stop)
+            if engine.should_stop():
+                return
+            self._frame(engine)
+            slot = max(slot + 1, math.ceil(session.t_s() / cfg.interval_s))
+            if session.t_s() >= cfg.max_duration_s:
+                session.note("info", "max-duration", f"maximum duration {cfg.max_duration_s:.0f} s reached")
+                return
+            if cfg.stop_on_steady and is_steady(self.t_s, self.conc, cfg.min_duration_s):
+                session.note("info", "steady", f"steady state reached at t={self.t_s[-1]:.0f} s")
+                return
+
+    def _frame(self, engine: Engine) -> None:
+        session, run = self.session, self.run
+        cap = session.capture()
+        if cap is None:
+            return
+        index = len(run.frames)
+        suffix = Path(cap.file_name).suffix.lower() or ".jpg"
+        name = f"frame_{index:06d}{suffix}"
+        reading = session.monitor.latest if session.monitor is not None and session.monitor.link_ok else None
+        t_s = cap.t_unix_s - session.t0_unix_s
+        record = run.add_frame(name, cap.data, t_s, cap.t_unix_s,
+                               reading.plate_c if reading else None, reading.probe_c if reading else None,
+                               reading.speed_rpm if reading else None)
+        for extra_name, data in cap.extra.items():
+            run.add_file(f"frame_{index:06d}{Path(extra_name).suffix.lower()}", data)
+        conc = unc = math.nan
+        if self.analyzer is not None:
+            try:
+                point = self.analyzer.analyze(run.path / name)
+                conc, unc = point.conc_g_per_kg, point.uncertainty_g_per_kg
+            except Exception as exc:
+                session.note("warning", "analysis", f"{name}: could not analyse ({type(exc).__name__}: {exc}); "
+                             "the frame is kept, the run goes on")
+        self.t_s.append(t_s)
+        self.conc.append(conc)
+        engine.emit(FrameStored(index, name, str(run.path / name), t_s, len(run.frames), capture_t_unix_s=cap.t_unix_s,
+                                conc_g_per_kg=conc, uncertainty_g_per_kg=unc,
+                                released_g=conc * self.config.water_g / 1000.0 if not math.isnan(conc) else math.nan,
+                                plate_c=record.plate_c, probe_c=record.probe_c, speed_rpm=record.speed_rpm,
+                                last_error=session.last_error))
+        if index % 25 == 0 and free_bytes(run.path) < self.config.low_space_bytes:
+            session.note("warning", "disk-space", f"disk space low: {free_bytes(run.path) / 1e9:.2f} GB free")
+
+
+
+class PreviewProcedure:
+    """Connect the bench, publish one frame (``preview`` event with the image bytes) and one reading, close.
+
+    Nothing is stored and the hotplate is not switched on: the device panel's "connect" check.
+    """
+
+    name = "preview"
+
+    def __init__(self, bench: Bench) -> None:
+        self.bench = bench
+        self.session: BenchSession | None = None
+
+    def startup(self, engine: Engine) -> None:
+        """Connect camera and hotplate (no setpoints)."""
+        self.session = BenchSession(self.bench, engine, None)
+        self.session.connect(None, None)
+
+    def execute(self, engine: Engine) -> None:
+        """One frame, one reading."""
+        cap = self.session.capture()
+        if cap is not None:
+            engine.emit(Preview(cap.data, cap.file_name, cap.t_unix_s))
+        if self.session.monitor is not None:
+            self.session.monitor.poll()
+
+    def shutdown(self, engine: Engine, outcome: str) -> None:
+        """Close the devices."""
+        if self.session is not None:
+            self.session.close()

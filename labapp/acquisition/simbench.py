@@ -1,0 +1,266 @@
+"""The simulated bench: SimulatedCamera + Heidolph emulator + a dissolving sample object, on one clock.
+
+The object's release comes from the forward simulator (``design.forward.simulator``) and is mapped to physical units
+by a hidden material (:class:`Material`, drawn from a seed): its dissolution rate (s per mm of tau) and
+print density differ from any constant of the code, and every printed object deviates from the material by
+a few percent (its own seeded draw), as real prints do. Nothing in the calibration reads them: the
+simulation-to-bench calibration (``sfr calibrate-sim``) has to recover them from the images. A sample
+object keeps its truth in :attr:`SampleRelease.truth` for tests and the demo's ``truth.json``.
+
+Everything runs on the engine's clock: the camera renders the concentration at ``clock.now()``, and the
+emulated plate's thermal model runs at the same speed (``ScaledClock``) or on the clock itself
+(``SteppedClock``, whose time jumps, so the plate's "PC Err" connection check is disabled there).
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from drivers.camera import SimulatedCamera
+from drivers.camera.base import Capture, CameraSettings
+from drivers.hotplate import HeidolphHotplate
+from drivers.sim import BenchScene
+from drivers.sim.heidolph_emulator import HeidolphEmulator
+from labapp.acquisition.bench import Bench
+from labapp.acquisition.clock import Clock, ScaledClock, SteppedClock, WallClock
+from labapp.records.storage import FRAMES_CSV, read_run
+
+log = logging.getLogger(__name__)
+
+WATER_G = 500.0
+"""Water in the beaker, g (paper section 4.2)."""
+SCENE = BenchScene(width=960, height=640, water_g=WATER_G)
+"""The simulated bench picture: the renderer's default scene at 960 x 640 px (renders in about half the time
+of its 1200 x 800 default; the analysis works in full-resolution px either way)."""
+MATERIAL_SEED = 20221206
+"""Seed of the simulated bench's material draw."""
+
+
+@dataclass(frozen=True)
+class Material:
+    """The simulated bench's hidden material.
+
+    Attributes
+    ----------
+    seconds_per_mm : float
+        Dissolution: seconds per mm of dissolved depth (tau).
+    density_g_per_cm3 : float
+        Print density.
+    rate_spread, density_spread : float
+        Relative standard deviation of each printed object's rate and density around the material's.
+    """
+
+    seconds_per_mm: float
+    density_g_per_cm3: float
+    rate_spread: float = 0.015
+    density_spread: float = 0.02
+
+    @classmethod
+    def draw(cls, seed: int = MATERIAL_SEED) -> Material:
+        """A material with a rate of 1000-2400 s/mm (a ~1.7 g object dissolves in 1.5-3.5 h) and a print
+        density of 1.15-1.45 g/cm^3."""
+        rng = np.random.default_rng(seed)
+        return cls(float(rng.uniform(1000.0, 2400.0)), float(rng.uniform(1.15, 1.45)))
+
+    def printed(self, index: int, seed: int = MATERIAL_SEED) -> tuple[float, float]:
+        """The ``index``-th printed object's own (seconds_per_mm, g_per_mm3)."""
+        rng = np.random.default_rng([seed, index])
+        rate, dens = rng.standard_normal(2)
+        return (float(self.seconds_per_mm * (1.0 + self.rate_spread * rate)),
+                float(self.density_g_per_cm3 * 1e-3 * (1.0 + self.density_spread * dens)))
+
+
+@dataclass(frozen=True, eq=False)
+class SampleRelease:
+    """A dissolving object's cumulative release in physical units.
+
+    Attributes
+    ----------
+    name : str
+    t_s : (K,) ndarray of float, s since the drop
+    released_g : (K,) ndarray of float, g
+    truth : dict
+        Hidden ground truth of the simulated object (``seconds_per_mm``, ``g_per_mm3``, ``volume_mm3``,
+        ``mass_g``); for tests and the demo's ``truth.json``, never for the calibration.
+    """
+
+    name: str
+    t_s: np.ndarray
+    released_g: np.ndarray
+    truth: dict = field(default_factory=dict)
+
+    @property
+    def mass_g(self) -> float:
+        """Total mass released when fully dissolved, g."""
+        return float(self.released_g[-1])
+
+    @property
+    def duration_s(self) -> float:
+        """Time to dissolve completely, s."""
+        return float(self.t_s[-1])
+
+    def conc_g_per_kg(self, t_since_drop_s: float, water_g: float = WATER_G) -> float:
+        """Concentration at a time after the drop (0 before it), g/kg."""
+        if t_since_drop_s <= 0:
+            return 0.0
+        return float(np.interp(t_since_drop_s, self.t_s, self.released_g)) / (water_g / 1000.0)
+
+    @classmethod
+    def from_simulation(cls, name: str, tau_mm: np.ndarray, released_mm3: np.ndarray, seconds_per_mm: float,
+                        g_per_mm3: float) -> SampleRelease:
+        """Map a simulated curve (tau in mm, released mm^3) to s and g with an object's own scales."""
+        vol = np.asarray(released_mm3, float)
+        truth = {"seconds_per_mm": seconds_per_mm, "g_per_mm3": g_per_mm3, "volume_mm3": float(vol[-1]),
+                 "mass_g": float(vol[-1] * g_per_mm3)}
+        return cls(name, np.asarray(tau_mm, float) * seconds_per_mm, vol * g_per_mm3, truth)
+
+
+def sample_release(shape: str = "pill", index: int = 0, resolution: int = 48,
+                   material: Material | None = None) -> SampleRelease:
+    """Simulate the ``index``-th print of a shipped sample object in the bench's hidden material.
+
+    Parameters
+    ----------
+    shape : str
+        A name of ``design.geometry.shapes.SAMPLE_SHAPES`` (each 1326 mm^3).
+    index : int
+        Which print: each has its own few-percent deviation of rate and density.
+    resolution : int
+        Voxels along the longest side for the forward simulation.
+    material : Material, optional
+        Default :meth:`Material.draw`.
+    """
+    from design.forward.pipeline import simulate_mesh
+    from design.geometry.shapes import sample_shape
+
+    material = material or Material.draw()
+    seconds_per_mm, g_per_mm3 = material.printed(index)
+    release = simulate_mesh(sample_shape(shape), resolution=resolution)
+    log.info("sample %s #%d: %.3f g, dissolves in %.0f s", shape, index, release.released_mm3[-1] * g_per_mm3,
+             release.tau_mm[-1] * seconds_per_mm)
+    return SampleRelease.from_simulation(shape, release.tau_mm, release.released_mm3, seconds_per_mm, g_per_mm3)
+
+
+class _ClockedCamera:
+    """The SimulatedCamera reporting capture times on the engine's clock (it stamps wall time itself)."""
+
+    def __init__(self, camera: SimulatedCamera, clock: Clock) -> None:
+        self.camera, self.clock = camera, clock
+
+    def connect(self) -> None:
+        self.camera.connect()
+
+    def configure(self, settings: CameraSettings) -> dict[str, str]:
+        return self.camera.configure(settings)
+
+    def capture(self) -> Capture:
+        cap = self.camera.capture()
+        return dataclasses.replace(cap, t_unix_s=self.clock.now())
+
+    def close(self) -> None:
+        self.camera.close()
+
+
+class SimulatedBench:
+    """A complete simulated bench on ``clock``; :meth:`bench` hands it to any procedure.
+
+    Parameters
+    ----------
+    clock : Clock
+        The engine's clock.
+    release : SampleRelease, optional
+        The object that dissolves after the drop (default: :func:`sample_release` of ``sample``).
+    sample : str
+        Shipped sample shape simulated when ``release`` is None.
+    scene : BenchScene
+        What the camera sees (default :data:`SCENE`).
+    with_hotplate : bool
+        Start the Heidolph emulator on a pseudo-terminal and talk to it with the real driver.
+    seed : int
+        Seed of image noise and plate read-out noise.
+    """
+
+    def __init__(self, clock: Clock, release: SampleRelease | None = None, sample: str = "pill",
+                 scene: BenchScene | None = None, with_hotplate: bool = True, seed: int = 0) -> None:
+        self.clock = clock
+        self.release = release if release is not None else sample_release(sample)
+        self.scene = scene or SCENE
+        self.t_drop: float | None = None
+        self.added_mass_g = 0.0
+        self.camera = SimulatedCamera(lambda _t: self.conc_at(self.clock.now()), self.scene, seed=seed,
+                                      clock=clock.now, deadline_s=2.0)
+        self.emulator: HeidolphEmulator | None = None
+        self.hotplate: HeidolphHotplate | None = None
+        if with_hotplate:
+            if isinstance(clock, SteppedClock):
+                self.emulator = HeidolphEmulator(clock=clock.now, watchdog_s=1e12, seed=seed)
+            else:
+                speed = clock.speed if isinstance(clock, ScaledClock) else 1.0
+                self.emulator = HeidolphEmulator(speed=speed, seed=seed)
+            self.hotplate = HeidolphHotplate(self.emulator.start(), keep_alive=False)
+
+    @staticmethod
+    def default_crop() -> tuple[int, int, int]:
+        """The default scene's crop (x, y, size), px."""
+        return SCENE.default_crop()
+
+    def conc_at(self, t_unix_s: float) -> float:
+        """True concentration in the beaker at a clock time, g/kg (calibration additions + the object)."""
+        conc = self.added_mass_g / (self.scene.water_g / 1000.0)
+        if self.t_drop is not None:
+            conc += self.release.conc_g_per_kg(t_unix_s - self.t_drop, self.scene.water_g)
+        return conc
+
+    def drop(self, t_unix_s: float) -> None:
+        """The object goes in at ``t_unix_s`` (clock time)."""
+        self.t_drop = t_unix_s
+
+    def add_mass(self, total_g: float) -> None:
+        """Calibration: the cumulative dissolved filament mass is now ``total_g`` g."""
+        self.added_mass_g = total_g
+
+    def bench(self) -> Bench:
+        """The devices and hooks, for a procedure."""
+        return Bench(_ClockedCamera(self.camera, self.clock), self.hotplate, CameraSettings(), simulated=True,
+                     on_drop=self.drop, on_add_mass=self.add_mass,
+                     description=f"simulated bench ({self.release.name}, {self.release.mass_g:.2f} g, "
+                                 f"x{self.clock.speed:g} time)",
+                     frame_bytes=3 * self.scene.width * self.scene.height)  # a JPEG is below its raw RGB
+
+    # -- faults ------------------------------------------------------------------------------------------
+    def camera_busy(self, n: int = 1) -> None:
+        """The next ``n`` captures fail as a busy camera would."""
+        self.camera.inject_busy(n)
+
+    def corrupt_frames(self, n: int = 1) -> None:
+        """The next ``n`` frames arrive truncated."""
+        self.camera.inject_corrupt(n)
+
+    def drop_hotplate_link(self, down_s: float) -> None:
+        """The hotplate's serial link goes dead for ``down_s`` s (emulator clock)."""
+        if self.emulator is not None:
+            self.emulator.drop_link(down_s)
+
+    def close(self) -> None:
+        """Stop the emulator (the procedure has closed the driver already)."""
+        if self.emulator is not None:
+            self.emulator.stop()
+            self.emulator = None
+
+
+def resume_clock(folder: Path, speed: float | None) -> Clock:
+    """The clock a simulated run continues on after a crash: simulated time went on while the process was
+    down (downtime x speed after the last frame); real runs use the wall clock."""
+    if speed is None or speed == 1:
+        return WallClock()
+    snap = read_run(folder)
+    last = snap.frames[-1].t_unix_s if snap.frames else snap.meta.get("t0_unix_s", time.time())
+    down_wall_s = max(time.time() - (folder / FRAMES_CSV).stat().st_mtime, 0.0)
+    start = last + (down_wall_s * speed if math.isfinite(speed) else 0.0)
+    return SteppedClock(start) if math.isinf(speed) else ScaledClock(speed, start_s=start)

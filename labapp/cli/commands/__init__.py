@@ -1,0 +1,1 @@
+"""Subcommands of `sfr`, one module each (discovered by `labapp.cli.main`)."""

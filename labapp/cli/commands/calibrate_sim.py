@@ -1,0 +1,61 @@
+"""`sfr calibrate-sim`: calibrate the simulator against measured runs (paper section 4.3)."""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from labapp.cli.argtypes import nonnegative_float, positive_int
+
+log = logging.getLogger(__name__)
+
+NAME = "calibrate-sim"
+HELP = "fit seconds per mm and grams per mm^3 from measured runs and their meshes (simcal.json, loo.csv, simcal.png)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of `sfr calibrate-sim`."""
+    from analysis.simcal import DEFAULT_MAX_OFFSET_S
+    from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION
+
+    parser.add_argument("set_csv", metavar="SET.csv",
+                        help="columns run,mesh,object_mass_g; run = run folder or curve CSV, paths relative to "
+                             "the file; an empty mass is read from the run's run.json")
+    parser.add_argument("--calibration", help="bench calibration JSON for the run folders (default: each run's own)")
+    parser.add_argument("--out", required=True, help="output folder (must not hold a calibration yet)")
+    parser.add_argument("--model", default="auto", choices=("auto", "constant", "saturation"),
+                        help="model used for prediction: constant rate, Appendix B's saturating bath, or auto "
+                             "(the lower leave-one-out error; both are always reported)")
+    parser.add_argument("--resolution", type=positive_int, default=DEFAULT_RESOLUTION,
+                        help=f"voxels along each mesh's longest side (default {DEFAULT_RESOLUTION})")
+    parser.add_argument("--max-offset-s", type=nonnegative_float, default=DEFAULT_MAX_OFFSET_S,
+                        help=f"bound on each run's drop-time offset, s (default {DEFAULT_MAX_OFFSET_S:g}; 0 = none)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Calibrate, print the leave-one-out table and where the files are."""
+    from labapp.jobs.calibrate_sim import calibrate_sim
+
+    done = calibrate_sim(args.set_csv, args.calibration, args.out, model=args.model, resolution=args.resolution,
+                        max_offset_s=args.max_offset_s,
+                        progress=lambda f, m: print(f"[{100 * f:3.0f}%] {m}", file=sys.stderr, flush=True))
+    print_summary(done.doc)
+    out = Path(args.out)
+    print(f"wrote {out / 'simcal.json'}, {out / 'loo.csv'}, {out / 'simcal.png'}")
+    return 0
+
+
+def print_summary(doc: dict) -> None:
+    """The fitted scales and the leave-one-out table of both models."""
+    sat = doc["saturation_g_per_kg"]
+    print(f"model {doc['model']}: {doc['seconds_per_mm']:.1f} s per mm of tau, {doc['g_per_mm3'] * 1000:.4f} g/cm^3"
+          + ("" if sat is None else f", c_sat {sat:.3g} g/kg") + f", resolution {doc['resolution']}")
+    models = list(doc["models"])
+    print("leave-one-out rel. RMSE (% of weighed mass):")
+    print(f"  {'run':40s} " + " ".join(f"{m:>11s}" for m in models))
+    for i, row in enumerate(doc["loo"]):
+        name = Path(row["run"]).name
+        print(f"  {name:40.40s} " + " ".join(f"{100 * doc['models'][m]['loo'][i]['rel_rmse']:10.2f}%" for m in models))
+    print(f"  {'mean':40s} " + " ".join(f"{100 * doc['models'][m]['loo_rel_rmse_mean']:10.2f}%" for m in models))
+

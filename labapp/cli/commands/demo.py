@@ -1,0 +1,58 @@
+"""`sfr demo`: a complete simulated bench session without a screen (the README's first command)."""
+from __future__ import annotations
+
+import argparse
+import logging
+
+from labapp.cli.argtypes import positive_float
+
+log = logging.getLogger(__name__)
+
+NAME = "demo"
+HELP = ("the whole loop on the simulated bench: calibration series, runs of sample objects, calibrate-sim, a run "
+        "of a further object, a design from its measured curve, one picture")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of `sfr demo`."""
+    parser.add_argument("--out", default="sfr-demo", help="output folder (default ./sfr-demo); a new "
+                        "sub-folder per demo session")
+    parser.add_argument("--sample", default="pill", help="the further object, whose measured curve is the design "
+                        "target (pill or polyhedron; sphere, spinner_top and csg are the calibration set)")
+    parser.add_argument("--interval", type=positive_float, default=11.0, help="frame interval of the further object's run, s "
+                        "(default 11, the paper's)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the session, printing progress; end with where the results are."""
+    import time
+
+    from labapp.jobs.demo import run_demo
+    from labapp.records.outpaths import check_data_dir
+    from labapp.records.storage import sanitize_name
+
+    out = check_data_dir(args.out) / time.strftime(f"%Y%m%d-%H%M%S_{sanitize_name(args.sample)}")
+    print(f"sfr demo: measure -> calibrate -> design on the simulated bench, in {out}", flush=True)
+    if not args.verbose:   # the injected faults are the point of the run's event log, not of the terminal
+        logging.getLogger().setLevel(logging.ERROR)
+    r = run_demo(out, sample=args.sample, interval_s=args.interval, progress=lambda s: print(s, flush=True))
+    print()
+    print(f"done in {r.wall_s:.0f} s (wall)")
+    print(f"  time scale            {r.seconds_per_mm:.1f} s/mm calibrated, {r.true_seconds_per_mm:.1f} s/mm hidden "
+          f"truth ({100 * (r.seconds_per_mm / r.true_seconds_per_mm - 1):+.1f}%)")
+    print(f"  print density         {r.density_g_per_cm3:.4f} g/cm^3 calibrated, {r.true_density_g_per_cm3:.4f} "
+          f"hidden truth ({100 * (r.density_g_per_cm3 / r.true_density_g_per_cm3 - 1):+.1f}%)")
+    print("  leave-one-out         " + ", ".join(f"{name} {100 * e:.2f}%" for name, e in r.loo)
+          + " (RMS error / weighed mass)")
+    print(f"  '{args.sample}' predicted from its mesh: {100 * r.rel_rmse_prediction:.2f}% RMS of its measured final "
+          f"mass ({r.n_frames} frames, {r.duration_s / 3600:.2f} h, {r.faults_logged} warnings in its event log)")
+    print(f"  design for its measured curve: predicted within {100 * r.rel_rmse_design:.2f}% RMS")
+    print("results:")
+    print(f"  bench calibration     {r.calibration_path}")
+    print(f"  simulation calib.     {r.simcal_path}  (loo.csv, simcal.png beside it)")
+    print(f"  run folder            {r.run_dir}   (sfr verify {r.run_dir})")
+    print(f"  measured curve        {r.curve_csv}")
+    print(f"  design                {r.design_dir}")
+    print(f"  picture               {r.figure}")
+    print(f"  summary               {r.summary_path}  (hidden truth: {r.out_dir / 'truth.json'})")
+    return 0

@@ -1,0 +1,122 @@
+"""`sfr simulate`: the release curve of a mesh, a sample shape or a density array."""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from labapp.cli.argtypes import nonnegative_float, positive_float, positive_int
+from labapp.jobs.meshunits import MM_PER_UNIT
+
+log = logging.getLogger(__name__)
+
+NAME = "simulate"
+HELP = "simulate the release curve of a mesh (STL/OBJ/PLY/OFF/3MF), sample:NAME or a density .npy/.npz"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("input", metavar="INPUT",
+                        help="mesh file (mm unless --units), density array (.npz with rho and dx_mm, or .npy with --voxel-size), "
+                             "or sample:NAME (sphere, pill, spinner_top, csg, polyhedron)")
+    size = parser.add_mutually_exclusive_group()
+    size.add_argument("--resolution", type=positive_int, metavar="N",
+                      help="voxels along the longest bounding-box side (default 64)")
+    size.add_argument("--voxel-size", type=positive_float, metavar="MM", help="voxel edge length in mm")
+    parser.add_argument("--units", default="mm", choices=tuple(MM_PER_UNIT),
+                        help="units of the mesh file's coordinates (default mm); a size implausible for a printed "
+                             "object is warned about with the likely unit")
+    parser.add_argument("--symmetry", default="", metavar="AXES",
+                        help="mirror planes through the bounding-box centre on these axes, e.g. xyz: simulates "
+                             "one half/quadrant/octant; the curve is still the full object's")
+    parser.add_argument("--out", default="simulation", metavar="DIR", help="output folder (default ./simulation)")
+    parser.add_argument("--simcal", metavar="SIMCAL.json",
+                        help="simulation calibration (sfr calibrate-sim): also write release_physical.csv "
+                             "(t_s,released_g,conc_g_per_kg) and release_physical.png; simulates at its resolution")
+    parser.add_argument("--water-g", type=positive_float, help="bath water for the physical curve, g (default: the "
+                        "calibration's)")
+    parser.add_argument("--model", choices=("forward", "mc"), default="forward",
+                        help="forward: the fast-marching model (default); mc: the kinetic Monte Carlo baseline "
+                             "(release.csv in seconds with the spread over seeds, release_physical.csv)")
+    parser.add_argument("--seeds", type=positive_int, default=4, help="--model mc: runs averaged (default 4)")
+    parser.add_argument("--mc-calibration", metavar="MC.json",
+                        help="--model mc: tuned (A, E_a) from sfr evaluate; without it --mc-a and --mc-ea")
+    parser.add_argument("--mc-a", type=positive_float, metavar="PER_S",
+                        help="--model mc without a calibration: pre-exponential factor A, 1/s (default 1: time "
+                             "in units of 1/A)")
+    parser.add_argument("--mc-ea", type=nonnegative_float, metavar="J_PER_MOL",
+                        help="--model mc without a calibration: activation energy per solid neighbour, J/mol "
+                             "(default 5000)")
+
+
+def _progress(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def _run_mc(args: argparse.Namespace) -> int:
+    """``--model mc``: the Monte Carlo job with a tuned calibration or explicit (A, E_a)."""
+    from design.montecarlo.erosion import MonteCarloParams
+    from labapp.errors import UsageError
+    from labapp.jobs.simulate_mc import McCalibration, load_mc_calibration, simulate_mc_job
+
+    if args.simcal:
+        raise UsageError("--simcal calibrates the forward model; the Monte Carlo model takes --mc-calibration")
+    if args.mc_calibration:
+        if args.mc_a is not None or args.mc_ea is not None:
+            raise UsageError("give either --mc-calibration or --mc-a/--mc-ea, not both")
+        calibration = load_mc_calibration(args.mc_calibration)
+        if args.resolution is None and args.voxel_size is None:
+            args.resolution = calibration.resolution
+    else:
+        calibration = McCalibration(MonteCarloParams(1.0 if args.mc_a is None else args.mc_a,
+                                                     5000.0 if args.mc_ea is None else args.mc_ea))
+        print("sfr simulate: no --mc-calibration: times are in units of 1/A; tune (A, E_a) with sfr evaluate",
+              file=sys.stderr)
+    result = simulate_mc_job(args.input, args.out, calibration, resolution=args.resolution,
+                             voxel_size_mm=args.voxel_size, symmetry=args.symmetry, units=args.units,
+                             seeds=args.seeds, water_g=args.water_g, progress=_progress)
+    s = result.summary
+    print(f"Monte Carlo: {s['physical']['mass_g']:.3f} g released over {s['physical']['duration_s'] / 3600:.2f} h, "
+          f"spread over {len(s['seeds'])} seeds up to {s['spread_max_g']:.4f} g ({calibration.describe()}), "
+          f"{s['seconds']:.2f} s -> {result.out}")
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    import numpy as np
+
+    if args.model == "mc":
+        return _run_mc(args)
+
+    from labapp.jobs.compare import release_summary
+    from labapp.jobs.simulate import simulate as simulate_job
+    from labapp.jobs.calibrate_sim import check_resolution, load_simcal
+    from labapp.jobs.physical import write_release_physical
+
+    simcal = None
+    if args.simcal:
+        simcal = load_simcal(args.simcal)
+        if args.voxel_size is not None:
+            print(f"sfr simulate: {args.simcal} holds for resolution {simcal.resolution}; drop --voxel-size",
+                  file=sys.stderr)
+            return 2
+        args.resolution = check_resolution(simcal, args.resolution)
+    result = simulate_job(args.input, args.out, resolution=args.resolution, voxel_size_mm=args.voxel_size,
+                          symmetry=args.symmetry, units=args.units, progress=_progress)
+    release, summary, out = result.release, result.summary, result.out
+    seconds = summary["seconds"]
+    if simcal is not None:
+        physical = write_release_physical(release.tau_mm, release.released_mm3, simcal, out, args.water_g,
+                                          title=args.input)
+        grams = np.loadtxt(physical, delimiter=",", skiprows=1)
+        summary["physical"] = {"simcal": str(simcal.path), "model": simcal.cal.model,
+                               "mass_g": float(grams[-1, 1]), "duration_s": float(grams[-1, 0]),
+                               "water_g": args.water_g or simcal.water_g,
+                               "release": release_summary(grams[:, 0], grams[:, 1], None, "prediction")}
+        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        print(f"predicted: {grams[-1, 1]:.3f} g released over {grams[-1, 0] / 3600:.2f} h "
+              f"({simcal.describe()}) -> {physical}")
+    print(f"volume {release.volume_mm3:.1f} mm^3, T = {release.total_time_mm:.3f} mm, {summary['voxels']:,} voxels, "
+          f"{seconds:.2f} s -> {out}")
+    return 0

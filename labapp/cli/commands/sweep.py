@@ -1,0 +1,76 @@
+"""`sfr sweep`: a grid of design settings for one target, each combination an `sfr design` run folder,
+on a local Dask cluster or an existing scheduler (docs/scale.md)."""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from labapp.cli.argtypes import positive_int
+
+log = logging.getLogger(__name__)
+
+NAME = "sweep"
+HELP = "run a grid of design settings (TOML spec) on a local Dask cluster or a scheduler; sweep.csv + contact sheet"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of `sfr sweep`."""
+    parser.add_argument("spec", help="sweep spec, TOML: target, fixed settings, [grid] lists, [[points]] (docs/scale.md)")
+    parser.add_argument("--out", required=True, help="sweep folder (a rerun skips finished combinations and resumes "
+                                                      "the others)")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="tcp://HOST:PORT of a running Dask scheduler "
+                                                               "(default: a local cluster on this machine)")
+    parser.add_argument("--workers", type=positive_int, metavar="N",
+                        help="local cluster: worker processes (default: one per core, as many as memory holds); "
+                             "with --scheduler: wait for N workers before starting")
+
+
+def _fmt_eta(seconds: float | None) -> str:
+    if seconds is None:
+        return "ETA -"
+    return f"ETA {seconds / 60:.1f} min" if seconds >= 60 else f"ETA {seconds:.0f} s"
+
+
+def progress_printer():
+    """Progress on stderr: one rewritten line on a terminal, else a line whenever the counts change."""
+    tty, last = sys.stderr.isatty(), [None]
+
+    def show(p) -> None:
+        counts = (p.done, p.failed, p.running, p.left)
+        line = (f"{p.done} done ({p.failed} failed), {p.running} running, {p.left} left, {_fmt_eta(p.eta_s)}")
+        if tty:
+            print("\r" + line + "   ", end="", file=sys.stderr, flush=True)
+        elif counts != last[0]:
+            print(line, file=sys.stderr, flush=True)
+        last[0] = counts
+    return show
+
+
+def run(args: argparse.Namespace) -> int:
+    """Check the spec and --out, start or join the cluster, run the sweep, print where the results are."""
+    from labapp.scaleout.cluster import dashboard_link, dask_client, design_memory_gb
+    from labapp.scaleout.sweep import prepare_sweep_dir, run_sweep
+    from labapp.scaleout.sweepspec import load_spec
+
+    spec = load_spec(args.spec)
+    out = prepare_sweep_dir(spec, args.out)
+    memory = max(design_memory_gb(c.config.resolution, c.config.space) for c in spec.combinations)
+    with dask_client(args.scheduler, workers=args.workers, task_memory_gb=memory) as client:
+        n = len(client.scheduler_info()["workers"])
+        where = args.scheduler or "a local cluster"
+        print(f"sweep of {len(spec.combinations)} combinations into {out} on {where} ({n} workers, "
+              f"~{memory:.2f} GB per design)", file=sys.stderr)
+        link = dashboard_link(client)
+        if link:
+            print(f"Dask dashboard: {link}", file=sys.stderr)
+        result = run_sweep(spec, out, client, on_progress=progress_printer())
+    if sys.stderr.isatty():
+        print(file=sys.stderr)
+    for name in result.failed:
+        print(f"failed: {name} (see {out / 'failed' / (name + '.txt')})", file=sys.stderr)
+    print(f"wrote {result.table}" + (f", {result.contact_sheet}" if result.contact_sheet else ""))
+    if result.stopped:
+        print(f"stopped: running designs were checkpointed; rerun the same command to resume", file=sys.stderr)
+        return 130
+    return 1 if result.failed else 0

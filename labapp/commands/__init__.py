@@ -1,1 +1,0 @@
-"""Subcommands of `sfr`, one module each (discovered by `labapp.cli`)."""

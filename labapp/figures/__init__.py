@@ -1,0 +1,1 @@
+"""Figures the jobs draw: the measured release curve and a sweep's contact sheet."""

@@ -1,0 +1,169 @@
+"""A sweep's contact sheet: each design's release fit and a top view, best first.
+
+Ranking (`rank`, documented in docs/scale.md): finished designs before unfinished ones, failures last;
+among finished designs the printable ones first (one piece, no channel narrower than the run's
+``warn_channel_mm``), as fabricability is the criterion hyperparameters are tuned for (section 5.2);
+then by the binary design's fit error (relative RMSE of its simulated release), smallest first.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+TILES_PER_ROW = 3
+MAX_PIXELS = 16000
+"""Longest side of the contact sheet, pixels: large sweeps get a lower resolution."""
+FINISHED = ("converged", "max_iter", "stalled")
+
+
+def _curves(folder: Path) -> dict[str, np.ndarray] | None:
+    try:
+        with open(folder / "curves.csv", newline="") as fh:
+            rows = list(csv.DictReader(fh))
+    except OSError:
+        return None
+    return {k: np.array([float(r[k]) for r in rows]) for k in (rows[0] if rows else {})} or None
+
+
+def summary_row(folder: Path) -> dict:
+    """sweep.csv fields from a design run folder (empty when it has no ``summary.json`` yet)."""
+    try:
+        s = json.loads((Path(folder) / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    row = {key: s.get(key) for key in ("status", "rel_rmse_density", "rel_rmse_binary", "rel_rmse_fine", "pieces",
+                                       "min_channel_mm", "enclosed_void_mm3", "print_mass_g", "iterations", "seconds",
+                                       "overhang_fraction", "rel_rmse_physical")}
+    row["warn_channel_mm"] = s.get("config", {}).get("warn_channel_mm")
+    for curve in ("binary", "fine"):
+        row[f"rate_dev_{curve}"] = (s.get("rate_dev_mid80") or {}).get(curve)
+    curves = _curves(Path(folder))
+    if curves is not None:
+        row["rmse_mm3"] = float(np.sqrt(np.mean((curves["binary_mm3"] - curves["target_mm3"]) ** 2)))
+    return {k: ("" if v is None else v) for k, v in row.items()}
+
+
+def _number(value) -> float | None:
+    """A table value (number, numeric text, or "" / None for none)."""
+    return None if value in ("", None) else float(value)
+
+
+def printable(row: dict) -> bool:
+    """One piece and no channel below the run's warning width (rows from summaries or sweep.csv)."""
+    channel, limit = _number(row.get("min_channel_mm")), _number(row.get("warn_channel_mm"))
+    narrow = channel is not None and limit is not None and channel < limit
+    return _number(row.get("pieces")) == 1 and not narrow
+
+
+def rank(rows: list[dict]) -> list[dict]:
+    """Rows best first (module docstring)."""
+    def key(row):
+        status = row.get("status")
+        group = 0 if status in FINISHED else 2 if status == "failed" else 1
+        error = _number(row.get("rel_rmse_binary"))
+        return group, not printable(row), math.inf if error is None else error
+    return sorted(rows, key=key)
+
+
+def top_view(solid: np.ndarray, axis: int) -> np.ndarray:
+    """Height map of a solid seen from +axis: the top solid voxel's height + 1 per column, 0 where empty.
+
+    Parameters
+    ----------
+    solid : (X, Y, Z) ndarray of bool
+    axis : int
+        The viewing (build) axis.
+
+    Returns
+    -------
+    (rows, cols) ndarray of int, voxels
+    """
+    solid = np.moveaxis(solid, axis, -1)
+    n = solid.shape[-1]
+    top = n - np.argmax(solid[..., ::-1], axis=-1)
+    return np.where(solid.any(axis=-1), top, 0)
+
+
+def views(solid: np.ndarray, build_axis: int) -> np.ndarray:
+    """The top view (along the build axis) and a side view beside it, two voxels apart (0 = empty).
+
+    Parameters
+    ----------
+    solid : (X, Y, Z) ndarray of bool
+    build_axis : int
+
+    Returns
+    -------
+    (rows, cols) ndarray of int, voxels
+    """
+    side_axis = next(a for a in range(3) if a != build_axis and a != 0) if build_axis != 0 else 1
+    top, side = top_view(solid, build_axis), top_view(solid, side_axis)
+    if top.shape[0] != side.shape[0]:
+        return top
+    return np.concatenate([top, np.zeros((top.shape[0], 2), dtype=top.dtype), side], axis=1)
+
+
+def _picture(folder: Path) -> np.ndarray | None:
+    from design.inverse.spaces import BUILD_AXIS
+
+    try:
+        with np.load(folder / "density.npz") as data:
+            return views(data["solid"].astype(bool), BUILD_AXIS)
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def _label(rank_no: int, row: dict) -> str:
+    err = row.get("rel_rmse_binary")
+    fit = f"fit {float(err):.1%}" if err not in ("", None) else row.get("error", "")[:40] or "no result"
+    channel = row.get("min_channel_mm")
+    facts = f"{row.get('pieces', '-')} pc, ch {float(channel):.2f} mm" if channel not in ("", None) else \
+        f"{row.get('pieces', '-')} pc"
+    return f"#{rank_no} {row['name']}\n{row.get('status')} | {fit} | {facts}"
+
+
+def draw_contact_sheet(rows: list[dict], path: str | Path, sweep_dir: str | Path | None = None) -> Path:
+    """Draw ranked rows (sweep.csv rows with ``folder`` relative to `sweep_dir`, default: beside `path`)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    base = Path(sweep_dir) if sweep_dir is not None else path.parent
+    n_rows = math.ceil(len(rows) / TILES_PER_ROW)
+    width_in, height_in = 5.0 * TILES_PER_ROW, 2.6 * n_rows
+    dpi = min(90.0, MAX_PIXELS / max(width_in, height_in))
+    fig, axes = plt.subplots(n_rows, 2 * TILES_PER_ROW, figsize=(width_in, height_in), dpi=dpi, squeeze=False,
+                             gridspec_kw={"width_ratios": [1.4, 1.2] * TILES_PER_ROW})
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    for i, row in enumerate(rows):
+        curve_ax, pic_ax = axes[i // TILES_PER_ROW, 2 * (i % TILES_PER_ROW):2 * (i % TILES_PER_ROW) + 2]
+        curve_ax.set_axis_on()
+        curve_ax.set_title(_label(i + 1, row), fontsize=7, loc="left")
+        curve_ax.tick_params(labelsize=6)
+        folder = base / row["folder"]
+        curves = _curves(folder)
+        if curves is not None:
+            curve_ax.plot(curves["tau_mm"], curves["target_mm3"], "-", color="g", lw=1.5)
+            curve_ax.plot(curves["tau_mm"], curves["binary_mm3"], "--", color="m", lw=1.2)
+        picture = _picture(folder)
+        if picture is not None:
+            pic_ax.imshow(np.ma.masked_equal(picture, 0), cmap="viridis", origin="lower",
+                          interpolation="nearest")
+    fig.suptitle("sweep: target (green) vs binary design (magenta dashed), tau (mm) vs released (mm^3); "
+                 "top view | side view, coloured by height", fontsize=8)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.3 / height_in))
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp)
+    plt.close(fig)
+    tmp.replace(path)
+    return path

@@ -1,0 +1,99 @@
+"""Analyse a run: a run folder or a plain image folder to its release curve (`sfr analyze RUN`)."""
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from labapp.records.outpaths import ANALYSIS_SUBFOLDER, check_out
+
+
+
+@dataclass(frozen=True)
+class AnalysisOutputs:
+    """What :func:`analyse_run` wrote: the curve (an ``analysis.RunCurve``) and the files."""
+
+    curve: Any
+    out: Path
+    files: tuple[Path, ...]
+
+
+def analyse_run(run: str | Path, calibration: str | Path, out: str | Path | None = None, *,
+                interval_s: float | None = None, water_g: float | None = None, window_s: float | None = None,
+                order: int | None = None, workers: int | None = None, reduce: int | None = None,
+                plot: bool = True, progress: Callable[[int, int], None] | None = None) -> AnalysisOutputs:
+    """Analyse a run folder or a plain image folder into ``curve.csv``, ``cells.csv``, ``summary.json`` (with
+    MDT, DE and the ranked model fits of the release) and ``curve.png``.
+
+    Parameters
+    ----------
+    run : path
+        Run folder or plain image folder.
+    calibration : path
+        Bench calibration JSON.
+    out : path, optional
+        Output folder (default ``RUN/analysis``); it also holds the cell cache.
+    window_s, order : optional
+        Savitzky-Golay window (s) and order (defaults: ``analysis.curve.DEFAULT_WINDOW_S``/``DEFAULT_ORDER``).
+    progress : callable, optional
+        ``progress(done, total)`` frames.
+
+    Raises
+    ------
+    UsageError
+        For an ``--out`` that would overwrite something.
+    analysis.AnalysisError
+        For unreadable frames, manifests or calibrations (the message names them).
+    """
+    from analysis import BenchCalibration, analyze_run, write_cells_csv, write_curve_csv
+    from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
+
+    run = Path(run)
+    default_out = run / ANALYSIS_SUBFOLDER
+    out = Path(out) if out is not None else default_out
+    inputs = [calibration] if out.resolve() == default_out.resolve() else [calibration, run]
+    out = check_out(out, "analysis", inputs)
+    cal = BenchCalibration.load(calibration)
+    out.mkdir(parents=True, exist_ok=True)
+    curve = analyze_run(run, cal, interval_s=interval_s, workers=workers, progress=progress, reduce=reduce,
+                        cache_dir=out, water_g=water_g,
+                        window_s=DEFAULT_WINDOW_S if window_s is None else window_s,
+                        order=DEFAULT_ORDER if order is None else order)
+    files = [out / "curve.csv", out / "cells.csv", out / "summary.json"]
+    write_curve_csv(curve, files[0])
+    write_cells_csv(curve, files[1])
+    files[2].write_text(json.dumps(_analysis_summary(curve, run), indent=2) + "\n")
+    if plot:
+        files.append(out / "curve.png")
+        _plot_curve(curve, files[-1])
+    return AnalysisOutputs(curve, out, tuple(files))
+
+
+def _analysis_summary(curve, run: Path) -> dict[str, Any]:
+    """``summary.json`` of an analysis: the run's totals and its release metrics (MDT, DE, model fits)."""
+    from labapp.jobs.compare import release_summary
+
+    return {"run": str(run), "frames": len(curve.files), "duration_s": float(curve.t_s[-1] - curve.t_s[0]),
+            "water_g": curve.water_g, "object_mass_g": curve.object_mass_g,
+            "final_released_g": float(curve.released_g[-1]),
+            "release": release_summary(curve.t_s, curve.released_g, curve.object_mass_g, str(run))}
+
+
+def _plot_curve(curve, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from labapp.figures.release_plot import draw_release
+
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=120)
+    draw_release(ax, curve)
+    ax.set_xlabel("time (min)")
+    ax.legend(loc="lower right")
+    ax.set_title("release curve (linearised sRGB, mirror-normalised)")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -1,0 +1,393 @@
+"""The simulation-to-bench calibration as a job: measured runs + meshes -> ``simcal.json`` (paper section 4.3).
+
+:func:`calibrate_sim` is what ``sfr calibrate-sim`` and the GUI's calibration wizard call: it reads a set
+file (``run,mesh,object_mass_g``), reads every run's physical curve (:mod:`labapp.records.curvefiles`), simulates
+every mesh with the forward model (``design.forward.pipeline``), fits both calibration models and their
+leave-one-out predictions (:mod:`analysis.simcal`) and writes ``simcal.json``, ``loo.csv`` and
+``simcal.png``. :func:`load_simcal` reads the file back for ``sfr simulate --simcal`` and
+``sfr design --simcal`` (:mod:`labapp.jobs.physical`).
+"""
+from __future__ import annotations
+
+import csv
+import datetime as _dt
+import json
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, SimCal, fit_simcal, leave_one_out
+from analysis.simcal import DEFAULT_MAX_OFFSET_S, MODELS
+from labapp.records.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
+from labapp.errors import UsageError
+from labapp.records.outpaths import check_out
+from labapp.records.storage import atomic_write, sha256_file
+
+log = logging.getLogger(__name__)
+
+FORMAT = "sfr-simcal/1"
+"""``format`` of ``simcal.json``."""
+FORWARD_MODEL = "design.forward.simulator: fast marching, eqs. 2-10"
+"""The simulator a calibration holds for; a file naming another is refused."""
+DEFAULT_RESOLUTION = 64
+"""Voxels along each mesh's longest side when calibrating (``sfr simulate``'s default)."""
+SET_COLUMNS = ("run", "mesh", "object_mass_g")
+Progress = Callable[[float, str], None]
+
+
+class SimCalError(UsageError):
+    """A set file, run, mesh or calibration file that cannot be used; the message names it."""
+
+
+@dataclass(frozen=True)
+class SetRow:
+    """One line of a calibration set file (row 1 = first data row)."""
+
+    row: int
+    run: Path
+    mesh: Path
+    object_mass_g: float | None
+    water_g: float | None = None
+
+
+@dataclass(frozen=True)
+class SimCalFile:
+    """A loaded ``simcal.json``.
+
+    Attributes
+    ----------
+    cal : analysis.SimCal
+        The map used for prediction (the file's ``model``).
+    resolution : int
+        Voxels along the longest side the calibration meshes were simulated at.
+    voxel_size_mm : float
+        Median voxel edge of those simulations, mm.
+    water_g : float
+        Water mass of the calibration runs (median), g: the default bath for predictions.
+    path : Path
+    """
+
+    cal: SimCal
+    resolution: int
+    voxel_size_mm: float
+    water_g: float
+    path: Path
+
+    def describe(self) -> str:
+        """One line for reports and GUI labels."""
+        sat = "" if self.cal.saturation_g_per_kg is None else f", c_sat {self.cal.saturation_g_per_kg:.3g} g/kg"
+        return (f"{self.path.name}: {self.cal.model} model, {self.cal.seconds_per_mm:.1f} s/mm, "
+                f"{self.cal.g_per_mm3 * 1000:.4g} g/cm^3{sat}, resolution {self.resolution}")
+
+
+@dataclass(frozen=True)
+class SimCalRun:
+    """What :func:`calibrate_sim` made.
+
+    Attributes
+    ----------
+    doc : dict
+        The content of ``simcal.json``.
+    loo : tuple of analysis.LooShape
+        The chosen model's leave-one-out predictions, in set order.
+    path : Path
+        ``simcal.json``.
+    """
+
+    doc: dict
+    loo: tuple[LooShape, ...]
+    path: Path
+
+
+def read_set(path: str | Path) -> list[SetRow]:
+    """Read a calibration set file: columns ``run,mesh,object_mass_g`` (and optionally ``water_g``), paths
+    relative to the file.
+
+    Raises
+    ------
+    SimCalError
+        Missing columns, a missing run or mesh (file and row named), a mass that is not a positive number.
+    """
+    path = Path(path)
+    try:
+        with open(path, newline="") as fh:
+            reader = csv.DictReader(fh)
+            header = [h.strip() for h in reader.fieldnames or []]
+            rows = list(reader)
+    except OSError as exc:
+        raise SimCalError(f"{path}: cannot read the set file ({exc.strerror or exc})") from exc
+    missing = [c for c in SET_COLUMNS if c not in header]
+    if missing:
+        raise SimCalError(f"{path}: no column {', '.join(missing)}; expected {','.join(SET_COLUMNS)}")
+    out = []
+    for i, row in enumerate(rows, start=1):
+        row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
+        run, mesh = path.parent / row["run"], path.parent / row["mesh"]
+        for what, p in (("run", run), ("mesh", mesh)):
+            if not row[what] or not p.exists():
+                raise SimCalError(f"{path}: row {i}: {what} {row[what]!r} does not exist (looked for {p})")
+        grams = {}
+        for column in ("object_mass_g", "water_g"):
+            text = row.get(column, "")
+            if not text:
+                continue
+            try:
+                grams[column] = float(text)
+            except ValueError:
+                grams[column] = math.nan
+            if not (math.isfinite(grams[column]) and grams[column] > 0):
+                raise SimCalError(f"{path}: row {i}: {column} {text!r} is not a positive number of grams")
+        out.append(SetRow(i, run, mesh, grams.get("object_mass_g"), grams.get("water_g")))
+    if len(out) < 2:
+        raise SimCalError(f"{path}: {len(out)} runs; a calibration needs at least 2 (4 or more recommended)")
+    return out
+
+
+def _simulate(mesh_path: Path, resolution: int):
+    from design.errors import DesignError
+    from design.files.meshio import load_mesh
+    from design.forward.pipeline import mesh_grid
+    from design.forward.simulator import simulate
+
+    try:
+        rho, dx, mirror = mesh_grid(load_mesh(mesh_path), resolution=resolution)
+        release = simulate(rho, dx, mirror=mirror)
+    except DesignError as exc:
+        raise SimCalError(f"{mesh_path}: {exc}") from exc
+    return release.tau_mm, release.released_mm3, dx
+
+
+def _check_out(out_dir: Path, inputs: list) -> None:
+    check_out(out_dir, "simcal", inputs, replace=False)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SimCalError(f"cannot create {out_dir}: {exc.strerror or exc}") from exc
+
+
+def _loo_summary(loo: tuple[LooShape, ...], rows: list[SetRow]) -> list[dict]:
+    return [{"run": str(r.run), "mesh": str(r.mesh), "rel_rmse": s.rel_rmse,
+             "seconds_per_mm": s.cal.seconds_per_mm,
+             "saturation_g_per_kg": s.cal.saturation_g_per_kg} for s, r in zip(loo, rows)]
+
+
+def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out_dir: str | Path, *,
+                  model: str = "auto", resolution: int = DEFAULT_RESOLUTION,
+                  max_offset_s: float = DEFAULT_MAX_OFFSET_S, progress: Progress | None = None) -> SimCalRun:
+    """Calibrate the simulator against measured runs and write ``simcal.json``, ``loo.csv``, ``simcal.png``.
+
+    Parameters
+    ----------
+    set_csv : str or Path
+        ``run,mesh,object_mass_g`` rows; ``run`` is a run folder or a curve CSV, paths relative to the file;
+        an empty mass is taken from the run's ``run.json``.
+    bench_calibration : str or Path or None
+        Bench calibration JSON to analyse run folders with (None: each run's own ``calibration.json``).
+    out_dir : str or Path
+        Output folder; refused if it already holds a calibration.
+    model : {'auto', 'constant', 'saturation'}
+        The model used for prediction; ``auto`` fits both and takes the one with the lower mean
+        leave-one-out error (both are reported); a named model is the only one fitted.
+    resolution : int
+        Voxels along each mesh's longest side.
+    max_offset_s : float
+        Bound on each run's drop-time offset, s.
+    progress : callable, optional
+        ``progress(fraction, message)``.
+
+    Returns
+    -------
+    SimCalRun
+
+    Raises
+    ------
+    SimCalError
+        Bad set file, run, mesh or calibration, with the file and row named.
+    """
+    say = progress or (lambda fraction, message: None)
+    if model not in ("auto",) + MODELS:
+        raise SimCalError(f"model {model!r} is not one of auto, {', '.join(MODELS)}")
+    if not 8 <= resolution <= 512:
+        raise SimCalError(f"resolution {resolution} is outside 8..512 voxels")
+    set_csv, out_dir = Path(set_csv), Path(out_dir)
+    rows = read_set(set_csv)
+    _check_out(out_dir, [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)])
+    bench = None
+    if bench_calibration is not None:
+        try:
+            bench = BenchCalibration.load(bench_calibration)
+        except (AnalysisError, OSError, ValueError, KeyError) as exc:
+            raise SimCalError(f"{bench_calibration}: not a bench calibration ({exc})") from exc
+    shapes, curves, dxs = [], [], []
+    n = len(rows)
+    for k, row in enumerate(rows):
+        where = f"{set_csv.name} row {row.row}"
+        say(0.6 * k / n, f"{where}: reading {row.run.name} and simulating {row.mesh.name} ...")
+        try:
+            curve = read_physical_curve(row.run, calibration=bench)
+        except CurveFileError as exc:
+            raise SimCalError(f"{where}: {exc}") from exc
+        mass = row.object_mass_g or curve.object_mass_g
+        if mass is None:
+            raise SimCalError(f"{where}: object_mass_g is empty and {row.run} records no weighed mass")
+        water = row.water_g or curve.water_g or (bench.water_g if bench is not None else None)
+        if water is None:
+            raise SimCalError(f"{where}: {row.run} records no water mass; give it in a water_g column or give "
+                              "the bench calibration")
+        tau, vol, dx = _simulate(row.mesh, resolution)
+        keep = curve.t_s >= 0
+        try:
+            shapes.append(ShapeRun(f"{where} ({row.run.name}, {row.mesh.name})", tau, vol, curve.t_s[keep],
+                                   curve.released_g[keep], float(mass), float(water)))
+        except AnalysisError as exc:
+            raise SimCalError(str(exc)) from exc
+        curves.append(curve)
+        dxs.append(dx)
+    fits, loos = {}, {}
+    models = MODELS if model == "auto" else (model,)
+    for j, name in enumerate(models):
+        base, span = 0.6 + 0.35 * j / len(models), 0.35 / len(models)
+        say(base, f"fitting the {name} model to all {n} runs ...")
+        fits[name] = fit_simcal(shapes, name, max_offset_s=max_offset_s)
+        loos[name] = leave_one_out(shapes, name, max_offset_s=max_offset_s,
+                                   progress=lambda done, total, name=name, base=base, span=span: say(
+                                       base + span * done / total, f"{name} model: left {done} of {total} out"))
+    mean_loo = {m: float(np.mean([s.rel_rmse for s in loos[m]])) for m in models}
+    chosen = min(models, key=mean_loo.get)
+    fit = fits[chosen]
+    doc = {
+        "format": FORMAT,
+        "forward_model": FORWARD_MODEL,
+        "model": chosen,
+        "seconds_per_mm": fit.cal.seconds_per_mm,
+        "g_per_mm3": fit.cal.g_per_mm3,
+        "density_g_per_cm3": fit.cal.g_per_mm3 * 1000.0,
+        "saturation_g_per_kg": fit.cal.saturation_g_per_kg,
+        "water_g": float(np.median([s.water_g for s in shapes])),
+        "resolution": resolution,
+        "voxel_size_mm": float(np.median(dxs)),
+        "loss": fit.loss,
+        "loo": _loo_summary(loos[chosen], rows),
+        "loo_rel_rmse_mean": mean_loo[chosen],
+        "models": {m: {"seconds_per_mm": fits[m].cal.seconds_per_mm,
+                       "saturation_g_per_kg": fits[m].cal.saturation_g_per_kg, "loss": fits[m].loss,
+                       "loo_rel_rmse_mean": mean_loo[m], "loo": _loo_summary(loos[m], rows)} for m in models},
+        "shapes": [{"run": str(r.run), "mesh": str(r.mesh), "object_mass_g": s.mass_g, "water_g": s.water_g,
+                    "volume_mm3": s.volume_mm3, "g_per_mm3": g, "offset_s": o, "loss": L,
+                    "measured_until_s": float(s.t_s[-1]),
+                    "measured_fraction": float(np.max(s.released_g) / s.mass_g)}
+                   for r, s, g, o, L in zip(rows, shapes, fit.g_per_mm3_per_shape, fit.offsets_s,
+                                            fit.loss_per_shape)],
+        "max_offset_s": max_offset_s,
+        "inputs_sha256": _input_hashes(set_csv, bench_calibration, rows),
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+    say(0.96, f"writing {out_dir} ...")
+    atomic_write(out_dir / "simcal.json", (json.dumps(doc, indent=2) + "\n").encode())
+    lines = ["run,mesh,model,rel_rmse,seconds_per_mm_without_it"]
+    for m in models:
+        lines += [f"{r.run},{r.mesh},{m},{s.rel_rmse:.6f},{s.cal.seconds_per_mm:.3f}" for s, r in zip(loos[m], rows)]
+    atomic_write(out_dir / "loo.csv", ("\n".join(lines) + "\n").encode())
+    plot_loo(loos[chosen], [f"{r.run.name}\n{r.mesh.name}" for r in rows], out_dir / "simcal.png",
+             f"leave-one-out predictions ({chosen} model, {fit.cal.seconds_per_mm:.0f} s/mm, "
+             f"{fit.cal.g_per_mm3 * 1000:.3f} g/cm^3)")
+    say(1.0, f"{chosen} model: {fit.cal.seconds_per_mm:.1f} s/mm, mean leave-one-out error "
+             f"{100 * mean_loo[chosen]:.2f}% of the weighed mass")
+    return SimCalRun(doc, loos[chosen], out_dir / "simcal.json")
+
+
+def _input_hashes(set_csv: Path, bench_calibration, rows: list[SetRow]) -> dict[str, str]:
+    files = [set_csv] + ([Path(bench_calibration)] if bench_calibration is not None else [])
+    for r in rows:
+        files.append(r.mesh)
+        if r.run.is_dir():
+            files += [p for p in (r.run / "frames.csv", r.run / "run.json", r.run / "calibration.json") if p.is_file()]
+        else:
+            files.append(r.run)
+    return {str(p): sha256_file(p) for p in files}
+
+
+def plot_loo(loo: tuple[LooShape, ...], labels: list[str], path: Path, title: str) -> None:
+    """Each shape's measured release against its leave-one-out prediction, grams over hours (Fig. 8)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cols = min(len(loo), 3)
+    nrows = math.ceil(len(loo) / cols)
+    fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols, 3.2 * nrows), dpi=110, squeeze=False,
+                             sharey=True)
+    for ax, s, label in zip(axes.flat, loo, labels):
+        ax.plot(s.t_s / 3600.0, s.measured_g, color="C0", lw=2, label="measured")
+        ax.plot(s.t_s / 3600.0, s.predicted_g, "--", color="C3", lw=1.5, label="predicted (left out)")
+        ax.set_title(f"{label}\nrel. RMSE {100 * s.rel_rmse:.2f}%", fontsize=8)
+        ax.set_xlabel("time (h)")
+        ax.grid(alpha=0.3)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("released (g)")
+    for ax in list(axes.flat)[len(loo):]:
+        ax.axis("off")
+    axes[0, 0].legend(loc="lower right", fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def load_simcal(path: str | Path) -> SimCalFile:
+    """Read ``simcal.json``, refusing a file of another format, forward model or calibration model.
+
+    Raises
+    ------
+    SimCalError
+        Naming the file and the field.
+    """
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise SimCalError(f"{path}: cannot read a simulation calibration ({exc})") from exc
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        found = doc.get("format") if isinstance(doc, dict) else None
+        raise SimCalError(f"{path}: format {found!r} is not {FORMAT!r}; make one with sfr calibrate-sim")
+    if doc.get("forward_model") != FORWARD_MODEL:
+        raise SimCalError(f"{path}: calibrated for the simulator {doc.get('forward_model')!r}, this one is "
+                          f"{FORWARD_MODEL!r}; recalibrate with sfr calibrate-sim")
+    if doc.get("model") not in MODELS:
+        raise SimCalError(f"{path}: model {doc.get('model')!r} is not one of {', '.join(MODELS)}")
+    try:
+        cal = SimCal(doc["model"], float(doc["seconds_per_mm"]), float(doc["g_per_mm3"]),
+                     None if doc.get("saturation_g_per_kg") is None else float(doc["saturation_g_per_kg"]))
+        resolution, dx, water = int(doc["resolution"]), float(doc["voxel_size_mm"]), float(doc["water_g"])
+    except (KeyError, TypeError, ValueError, AnalysisError) as exc:
+        raise SimCalError(f"{path}: bad or missing field ({exc})") from exc
+    if not (resolution > 0 and dx > 0 and water > 0):
+        raise SimCalError(f"{path}: resolution, voxel_size_mm and water_g must be positive")
+    return SimCalFile(cal, resolution, dx, water, path)
+
+
+def check_resolution(simcal: SimCalFile, resolution: int | None) -> int:
+    """The resolution to simulate at: the calibration's, or ``resolution`` if it is the same.
+
+    Raises
+    ------
+    SimCalError
+        If ``resolution`` differs: the time scale holds for the grid it was fitted on.
+    """
+    if resolution is not None and resolution != simcal.resolution:
+        raise SimCalError(f"{simcal.path} was calibrated at resolution {simcal.resolution}, not {resolution}: "
+                          f"drop --resolution or recalibrate at {resolution}")
+    return simcal.resolution
+
+
+def curve_of(path: str | Path, bench_calibration=None) -> PhysicalCurve:
+    """A physical curve for a design target or an overlay, as a :class:`SimCalError` on bad input."""
+    try:
+        return read_physical_curve(path, calibration=bench_calibration)
+    except CurveFileError as exc:
+        raise SimCalError(str(exc)) from exc

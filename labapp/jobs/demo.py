@@ -1,0 +1,284 @@
+"""The headless demo: the whole measure -> calibrate -> design loop on the simulated bench, on an instant clock.
+
+1. a calibration series (bench calibration, paper section 4.2);
+2. short release runs of three sample objects (a frame a minute, bath already hot; one in 400 g of water);
+3. ``calibrate-sim`` on them: seconds per mm, grams per mm^3 and the leave-one-out table (section 4.3);
+4. a release run of a further object at the paper's 11 s per frame, with a camera-busy error, a corrupt
+   frame and a hotplate link drop injected on purpose, and its offline analysis;
+5. an inverse design whose target is that object's measured curve, predicted in grams over hours;
+6. one picture: the leave-one-out predictions, and the further object measured, predicted from its mesh
+   and designed.
+
+The bench's material is hidden (:class:`labapp.acquisition.simbench.Material`); ``truth.json`` beside the results
+records it for comparison and nothing in the loop reads it. Simulated time is driven, never slept.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from analysis import BenchCalibration, analyze_run, write_cells_csv, write_curve_csv
+from drivers.sim import BenchScene
+from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
+from labapp.acquisition.clock import SteppedClock
+from labapp.acquisition.engine import Engine
+from labapp.acquisition.events import EngineEvent, FrameStored
+from labapp.acquisition.procedures import RunConfig, RunProcedure
+from labapp.acquisition.simbench import SCENE, WATER_G, Material, SampleRelease, SimulatedBench, sample_release
+from labapp.records.storage import read_run, verify_run
+
+log = logging.getLogger(__name__)
+
+CAL_MASSES_G = (0.25, 0.5, 0.875, 1.25, 1.75, 2.25)
+"""Cumulative filament masses of the simulated calibration series, g (up to above a sample's ~1.8 g)."""
+CALIBRATION_SHAPES = ("sphere", "spinner_top", "csg")
+"""Sample objects of the simulation calibration set (the further object is any other)."""
+CALIBRATION_WATER_G = (WATER_G, 400.0, WATER_G)
+"""Water of each calibration run, g: one run in less water shows that water masses may differ."""
+TRUTH_RESOLUTION = 80
+"""Voxels along the longest side of the simulated bench's own (hidden) forward simulations."""
+
+
+@dataclass(frozen=True)
+class DemoResult:
+    """Where the demo put things and its headline numbers."""
+
+    out_dir: Path
+    calibration_path: Path
+    simcal_path: Path
+    run_dir: Path
+    curve_csv: Path
+    design_dir: Path
+    figure: Path
+    summary_path: Path
+    loo: tuple[tuple[str, float], ...]
+    seconds_per_mm: float
+    true_seconds_per_mm: float
+    density_g_per_cm3: float
+    true_density_g_per_cm3: float
+    rel_rmse_prediction: float
+    rel_rmse_design: float
+    n_frames: int
+    duration_s: float
+    faults_logged: int
+    wall_s: float
+
+
+def simulated_calibration(out_dir: Path, clock: SteppedClock | None = None,
+                          scene: BenchScene = SCENE) -> tuple[BenchCalibration, Path]:
+    """Run a simulated calibration series into ``out_dir`` on an instant clock; returns the calibration and its file.
+
+    Every piece of filament has dissolved before its frame is taken, so the calibration scene has no
+    intrusions (objects or bubbles in the crop); the run's scene keeps them.
+    """
+    clock = clock or SteppedClock()
+    no_object = SampleRelease("none", np.array([0.0, 1.0]), np.zeros(2))
+    sim = SimulatedBench(clock, release=no_object, scene=dataclasses.replace(scene, intrusion_probability=0.0))
+    try:
+        config = SeriesConfig(crop=sim.scene.default_crop(), water_g=WATER_G, masses_g=CAL_MASSES_G,
+                              settle_s=600.0, stable_step_s=60.0, reduce=2)
+        proc = CalibrationProcedure(config, sim.bench(), out_dir)
+        outcome = Engine(clock).run(proc)
+    finally:
+        sim.close()
+    if proc.calibration_path is None:
+        raise RuntimeError(f"the simulated calibration series ended '{outcome}' without a calibration; "
+                           f"see {proc.run.path / 'events.log'}")
+    return BenchCalibration.load(proc.calibration_path), proc.calibration_path
+
+
+def _inject_faults(sim: SimulatedBench) -> Callable[[EngineEvent], None]:
+    """A subscriber that injects one fault of each kind during the run (the event log must show them)."""
+    def on_event(event: EngineEvent) -> None:
+        if not isinstance(event, FrameStored):
+            return
+        index = event.index
+        if index == 60:
+            sim.camera_busy(1)
+        elif index == 120:
+            sim.corrupt_frames(1)
+        elif index == 180:
+            sim.drop_hotplate_link(900.0)
+    return on_event
+
+
+def simulated_run(clock: SteppedClock, calibration: BenchCalibration, release: SampleRelease, data_dir: Path,
+                  *, interval_s: float, water_g: float = WATER_G, faults: bool = False, hotplate: bool = True,
+                  progress: Callable[[str], None] = lambda text: None) -> Path:
+    """One release run of a simulated object until steady state; returns its run folder.
+
+    The run records the object's weighed mass (its true mass to 0.1 mg) and the water, as an operator would.
+    Without ``hotplate`` the bath is taken as already at temperature (no emulator, no heating phase).
+    """
+    sim = SimulatedBench(clock, release=release, scene=dataclasses.replace(SCENE, water_g=water_g),
+                         with_hotplate=hotplate)
+    try:
+        config = RunConfig(name=f"demo-{release.name}", interval_s=interval_s,
+                           max_duration_s=release.duration_s + 3600.0, stop_on_steady=True,
+                           min_duration_s=0.5 * release.duration_s, water_g=water_g,
+                           object_mass_g=round(release.mass_g, 4), object_name=release.name, auto_drop=True,
+                           stable_step_s=60.0, notes="sfr demo: simulated bench")
+        proc = RunProcedure(config, sim.bench(), data_dir, calibration)
+        engine = Engine(clock)
+        if faults:
+            engine.subscribe(_inject_faults(sim))
+        engine.subscribe(lambda e: progress(f"  frame {e.index:4d}  t={e.t_s / 60:6.1f} min  "
+                                            f"{e.conc_g_per_kg:.3f} g/kg")
+                         if isinstance(e, FrameStored) and e.index % 100 == 0 else None)
+        outcome = engine.run(proc)
+    finally:
+        sim.close()
+    if outcome not in ("complete", "stopped"):
+        raise RuntimeError(f"the simulated run ended '{outcome}': {engine.error}; see {proc.run.path / 'events.log'}")
+    return proc.run.path
+
+
+def run_demo(out_dir: Path, sample: str = "pill", interval_s: float = 11.0, calibration_interval_s: float = 60.0,
+             resolution: int = 48, design_resolution: int = 40, design_iterations: int = 120,
+             material: Material | None = None, progress: Callable[[str], None] = lambda text: None) -> DemoResult:
+    """The whole loop; ``progress(text)`` gets one line per step.
+
+    Parameters
+    ----------
+    out_dir : Path
+    sample : str
+        The further object whose measured curve is the design target (not one of
+        :data:`CALIBRATION_SHAPES`).
+    interval_s, calibration_interval_s : float
+        Frame interval of the further object's run and of the calibration runs, s.
+    resolution : int
+        Voxels along each mesh's longest side for the simulation calibration.
+    design_resolution, design_iterations : int
+        Inverse design grid and evaluation budget.
+    material : Material, optional
+        The bench's hidden material (default: :meth:`Material.draw`).
+    """
+    from design.forward.pipeline import simulate_mesh
+    from design.inverse.problem import DesignConfig
+    from design.geometry.shapes import sample_shape
+    from labapp.records.curvefiles import read_physical_curve
+    from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
+    from labapp.jobs.physical import design_from_target
+
+    if sample in CALIBRATION_SHAPES:
+        raise ValueError(f"the further object {sample!r} must not be one of the calibration set "
+                         f"{', '.join(CALIBRATION_SHAPES)}")
+    start = time.monotonic()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    material = material or Material.draw()
+    clock = SteppedClock()
+    progress("1. calibration series: clear water + 6 filament additions at 70 C ...")
+    calibration, cal_path = simulated_calibration(out_dir / "calibration", clock)
+    progress(f"   {cal_path}")
+
+    meshes = out_dir / "meshes"
+    meshes.mkdir(exist_ok=True)
+    truths, set_rows = {}, ["run,mesh,object_mass_g"]
+    progress(f"2. short runs of {len(CALIBRATION_SHAPES)} sample objects ({calibration_interval_s:g} s per frame) ...")
+    for index, (shape, water) in enumerate(zip(CALIBRATION_SHAPES, CALIBRATION_WATER_G)):
+        release = sample_release(shape, index=index, resolution=TRUTH_RESOLUTION, material=material)
+        sample_shape(shape).export(meshes / f"{shape}.stl")
+        run_dir = simulated_run(clock, calibration, release, out_dir / "runs", interval_s=calibration_interval_s,
+                                water_g=water, hotplate=False)
+        truths[shape] = release.truth
+        set_rows.append(f"{run_dir.relative_to(out_dir)},meshes/{shape}.stl,")
+        progress(f"   {shape}: {len(read_run(run_dir).frames)} frames, {release.mass_g:.3f} g in {water:g} g water "
+                 f"-> {run_dir.name}")
+    set_csv = out_dir / "calibration_set.csv"
+    set_csv.write_text("\n".join(set_rows) + "\n")
+
+    progress(f"3. calibrate-sim {set_csv.name} (resolution {resolution}, leave-one-out) ...")
+    cal_run = calibrate_sim(set_csv, cal_path, out_dir / "simcal", resolution=resolution,
+                            progress=lambda f, m: progress(f"   {m}"))
+    simcal = load_simcal(cal_run.path)
+    loo = tuple((Path(row["mesh"]).stem, row["rel_rmse"]) for row in cal_run.doc["loo"])
+    for name, error in loo:
+        progress(f"   leave-one-out {name:12s} rel. RMSE {100 * error:.2f}% of the weighed mass")
+
+    progress(f"4. release run of a further object, '{sample}' ({interval_s:g} s per frame; faults injected: "
+             "camera busy, corrupt frame, hotplate link drop) ...")
+    release = sample_release(sample, index=len(CALIBRATION_SHAPES), resolution=TRUTH_RESOLUTION, material=material)
+    truths[sample] = release.truth
+    sample_shape(sample).export(meshes / f"{sample}.stl")
+    run_dir = simulated_run(clock, calibration, release, out_dir / "runs", interval_s=interval_s, faults=True,
+                            progress=progress)
+    curve = analyze_run(run_dir, calibration, cache_dir=run_dir / "analysis")
+    analysis_dir = out_dir / "analysis"
+    analysis_dir.mkdir(exist_ok=True)
+    write_curve_csv(curve, analysis_dir / "curve.csv")
+    write_cells_csv(curve, analysis_dir / "cells.csv")
+    snap = read_run(run_dir)
+    faults = sum(1 for line in snap.events() if "\tWARNING\t" in line)
+    progress(f"   {len(curve.t_s)} frames over {curve.t_s[-1] / 3600:.2f} h, {faults} warnings in the event log")
+
+    progress(f"5. design from the measured curve (nfc, {design_resolution}^3, {design_iterations} evaluations) ...")
+    config = DesignConfig(target=str(analysis_dir / "curve.csv"), space="nfc", resolution=design_resolution,
+                          max_iter=design_iterations, allow_infeasible=True)
+    design_dir = out_dir / "design"
+    result, physical = design_from_target(config, design_dir, simcal=simcal)
+
+    measured = read_physical_curve(analysis_dir / "curve.csv")
+    sim = simulate_mesh(sample_shape(sample), resolution=simcal.resolution)
+    predicted = simcal.cal.to_physical(sim.tau_mm, sim.released_mm3, measured.t_s, measured.water_g or WATER_G)
+    rel_pred = float(np.sqrt(np.mean((predicted - measured.released_g) ** 2)) / measured.released_g.max())
+    figure = out_dir / "demo.png"
+    designed = np.genfromtxt(design_dir / "curves_physical.csv", delimiter=",", names=True)
+    _plot(cal_run, measured, predicted, designed, sample, figure)
+
+    truth = {"material": dataclasses.asdict(material), "objects": truths,
+             "note": "hidden ground truth of the simulated bench; no step of the loop reads this file"}
+    (out_dir / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    true_rate = float(np.mean([t["seconds_per_mm"] for t in truths.values()]))
+    true_density = float(np.mean([t["g_per_mm3"] for t in truths.values()])) * 1000.0
+    result_ = DemoResult(out_dir, cal_path, simcal.path, run_dir, analysis_dir / "curve.csv", design_dir, figure,
+                         out_dir / "summary.json", loo, simcal.cal.seconds_per_mm, true_rate,
+                         simcal.cal.g_per_mm3 * 1000.0, true_density, rel_pred, physical["rel_rmse_physical"],
+                         len(curve.t_s), float(curve.t_s[-1]), faults, time.monotonic() - start)
+    summary = {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(result_).items()}
+    summary["verify_ok"] = verify_run(run_dir).ok
+    summary["design_status"] = result.status
+    summary["print_mass_g"] = physical["print_mass_g"]
+    summary["min_channel_mm"] = physical["min_channel_mm"]
+    result_.summary_path.write_text(json.dumps(summary, indent=2) + "\n")
+    return result_
+
+
+def _plot(run, measured, predicted: np.ndarray, designed, sample: str, path: Path) -> None:
+    """Left: the calibration set measured vs leave-one-out predicted; right: the further object measured,
+    predicted from its mesh, and the design's predicted release."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    doc = run.doc
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.6), dpi=110)
+    for i, (shape, row) in enumerate(zip(run.loo, doc["loo"])):
+        name = Path(row["mesh"]).stem
+        left.plot(shape.t_s / 3600, shape.measured_g, color=f"C{i}", lw=2, label=f"{name}: measured")
+        left.plot(shape.t_s / 3600, shape.predicted_g, "--", color="k", lw=1,
+                  label=f"{name}: left-out prediction ({100 * shape.rel_rmse:.1f}%)")
+    left.set_title(f"calibration: {doc['seconds_per_mm']:.0f} s/mm, {doc['g_per_mm3'] * 1000:.3f} g/cm$^3$ "
+                   f"({doc['model']} model)", fontsize=10)
+    right.plot(measured.t_s / 3600, measured.released_g, color="C0", lw=2.5, label=f"{sample}: measured")
+    right.plot(measured.t_s / 3600, predicted, "--", color="C3", lw=1.5, label=f"{sample}: predicted from its mesh")
+    right.plot(designed["t_s"] / 3600, designed["design_released_g"], "-", color="C2", lw=1.5,
+               label="design for the measured curve (predicted)")
+    right.set_title("a further object, and a design from its measured curve", fontsize=10)
+    for ax in (left, right):
+        ax.set_xlabel("time since drop (h)")
+        ax.set_ylabel("released (g)")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="lower right", fontsize=7)
+    fig.suptitle("sfr demo: measure -> calibrate -> design on the simulated bench (hidden material)", fontsize=11)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -1,0 +1,277 @@
+"""Physical curves into and out of the simulator through a simulation calibration (``simcal.json``).
+
+- a measured curve (grams over seconds) becomes an inverse-design target in simulation units
+  (:func:`write_target_csv`);
+- a simulated release becomes ``release_physical.csv`` (:func:`write_release_physical`);
+- a finished design gets ``curves_physical.csv``, ``rel_rmse_physical`` and a report in grams over hours
+  (:func:`write_design_physical`).
+
+There is no other bridge: without a calibration, a physical curve cannot become a target.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import logging
+import os
+from pathlib import Path
+
+import numpy as np
+
+from labapp.jobs.compare import prediction_metrics
+from labapp.records.curvefiles import CURVE_FILES, PhysicalCurve
+from labapp.jobs.calibrate_sim import SimCalError, SimCalFile
+from labapp.records.storage import atomic_write
+
+log = logging.getLogger(__name__)
+
+TARGET_CSV = "target_from_measurement.csv"
+"""The simulation-units target a physical curve becomes, written into the design folder."""
+_PREDICTION_SAMPLES = 600
+
+
+def is_physical(spec: str | Path) -> bool:
+    """Whether a design target names a physical curve: a run or curve folder, or a CSV with ``t_s``."""
+    path = Path(spec)
+    if path.is_dir():
+        return (path / "frames.csv").is_file() or any((path / n).is_file() for n in CURVE_FILES)
+    if path.suffix.lower() != ".csv" or not path.is_file():
+        return False
+    try:
+        with open(path, newline="") as fh:
+            header = [h.strip() for h in next(csv.reader(fh), [])]
+    except (OSError, UnicodeDecodeError):
+        return False
+    return "t_s" in header
+
+
+def write_target_csv(curve: PhysicalCurve, simcal: SimCalFile, out_csv: Path) -> Path:
+    """Write a measured curve as a ``tau_mm,released_mm3`` target through the calibration.
+
+    The curve is taken from the drop on (t >= 0), starts at (0, 0) and is made non-decreasing; water is
+    the run's own when it records one, else the calibration's.
+    """
+    t = np.asarray(curve.t_s, float)
+    keep = t > 0
+    t = np.concatenate([[0.0], t[keep]])
+    grams = np.concatenate([[0.0], np.maximum.accumulate(np.clip(curve.released_g[keep], 0.0, None))])
+    tau, vol = simcal.cal.to_simulation(t, grams, curve.water_g or simcal.water_g)
+    rows = "tau_mm,released_mm3\n" + "".join(f"{a:.6f},{b:.5f}\n" for a, b in zip(tau, vol))
+    atomic_write(Path(out_csv), rows.encode())
+    log.info("target %s from %s: %d points, %.1f mm^3 over %.3f mm", out_csv, curve.source, len(tau), vol[-1], tau[-1])
+    return Path(out_csv)
+
+
+def physical_times(simcal: SimCalFile, tau_mm: np.ndarray, released_mm3: np.ndarray, water_g: float) -> np.ndarray:
+    """Uniform times from 0 to when the simulated curve ends (its full dissolution), s."""
+    end = simcal.cal.clock_s(tau_mm, np.asarray(released_mm3, float) * simcal.cal.g_per_mm3, water_g)[-1]
+    return np.linspace(0.0, end, _PREDICTION_SAMPLES)
+
+
+def write_release_physical(tau_mm: np.ndarray, released_mm3: np.ndarray, simcal: SimCalFile, out_dir: Path,
+                           water_g: float | None = None, title: str = "") -> Path:
+    """``release_physical.csv`` (``t_s,released_g,conc_g_per_kg``) and ``release_physical.png``.
+
+    Parameters
+    ----------
+    tau_mm, released_mm3 : (K,) ndarray of float
+        A simulated release.
+    simcal : SimCalFile
+    out_dir : Path
+    water_g : float, optional
+        Bath water, g (default: the calibration's).
+    """
+    water = water_g or simcal.water_g
+    t = physical_times(simcal, tau_mm, released_mm3, water)
+    grams = simcal.cal.to_physical(tau_mm, released_mm3, t, water)
+    rows = "t_s,released_g,conc_g_per_kg\n" + "".join(f"{a:.2f},{b:.6f},{b / water * 1000.0:.6f}\n"
+                                                     for a, b in zip(t, grams))
+    path = Path(out_dir) / "release_physical.csv"
+    atomic_write(path, rows.encode())
+    plot_physical(path.with_suffix(".png"), [(t, grams, "predicted release", "-")],
+                   f"predicted release {title}\n{simcal.describe()}")
+    return path
+
+
+def plot_physical(path: Path, series: list[tuple[np.ndarray, np.ndarray, str, str]], title: str,
+                  band: tuple[np.ndarray, np.ndarray, np.ndarray, str] | None = None) -> None:
+    """Draw released grams over hours: ``series`` of (t_s, g, label, line style), and an optional shaded
+    ``band`` (t_s, low g, high g, label)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
+    if band is not None:
+        t, low, high, label = band
+        ax.fill_between(np.asarray(t) / 3600.0, low, high, color="C2", alpha=0.25, label=label)
+    for t, g, label, style in series:
+        ax.plot(np.asarray(t) / 3600.0, g, style, lw=1.8, label=label)
+    ax.set_xlabel("time since drop (h)")
+    ax.set_ylabel("released (g)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def write_design_physical(design_dir: Path, simcal: SimCalFile, target: PhysicalCurve | None = None) -> dict:
+    """The physical prediction of a finished design: ``curves_physical.csv``, summary fields, ``report.png``.
+
+    ``curves_physical.csv`` has ``t_s,target_released_g,design_released_g``: the measured target at its own
+    times (or the simulated target mapped through the calibration), and the printable binary solid's
+    predicted release (mass from ``g_per_mm3``). ``summary.json`` gains ``rel_rmse_physical`` (RMS of the
+    difference over the target's final grams), ``print_mass_g`` at the calibrated density, ``simcal`` and
+    ``release_metrics`` (MDT, DE and model fits of design and target, f2 of the design against the target);
+    the simulation-units report is kept as ``report_simulation.png`` and ``report.png`` shows grams over
+    hours.
+
+    Returns
+    -------
+    dict
+        The updated summary.
+
+    Raises
+    ------
+    SimCalError
+        If the design folder has no ``curves.csv`` or ``summary.json``.
+    """
+    design_dir = Path(design_dir)
+    try:
+        data = np.genfromtxt(design_dir / "curves.csv", delimiter=",", names=True)
+        summary = json.loads((design_dir / "summary.json").read_text())
+    except (OSError, ValueError) as exc:
+        raise SimCalError(f"{design_dir}: no finished design to predict ({exc})") from exc
+    tau, binary = np.asarray(data["tau_mm"], float), np.asarray(data["binary_mm3"], float)
+    water = (target.water_g if target is not None else None) or simcal.water_g
+    cal = simcal.cal
+    if target is not None:
+        t, target_g = target.t_s[target.t_s >= 0], target.released_g[target.t_s >= 0]
+    else:
+        target_mm3 = np.asarray(data["target_mm3"], float)
+        t = physical_times(simcal, tau, target_mm3, water)
+        target_g = cal.to_physical(tau, target_mm3, t, water)
+    design_g = cal.to_physical(tau, binary, t, water) if binary[-1] > 0 else np.zeros_like(t)
+    rows = "t_s,target_released_g,design_released_g\n" + "".join(
+        f"{a:.2f},{b:.6f},{c:.6f}\n" for a, b, c in zip(t, target_g, design_g))
+    atomic_write(design_dir / "curves_physical.csv", rows.encode())
+    final = float(np.max(target_g)) if np.max(target_g) > 0 else 1.0
+    summary["rel_rmse_physical"] = float(np.sqrt(np.mean((design_g - target_g) ** 2)) / final)
+    summary["print_mass_g"] = float(summary.get("volume_mm3") or binary[-1]) * cal.g_per_mm3
+    summary["print_mass_basis"] = f"calibrated density {cal.g_per_mm3 * 1000:.4g} g/cm^3 ({simcal.path})"
+    summary["simcal"] = {"path": str(simcal.path), "model": cal.model, "seconds_per_mm": cal.seconds_per_mm,
+                         "g_per_mm3": cal.g_per_mm3, "saturation_g_per_kg": cal.saturation_g_per_kg,
+                         "water_g": water}
+    summary["release_metrics"] = prediction_metrics(t, target_g, design_g)
+    atomic_write(design_dir / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
+    report, kept = design_dir / "report.png", design_dir / "report_simulation.png"
+    if report.exists() and not kept.exists():
+        os.replace(report, kept)
+    label = "measured target" if target is not None else "target"
+    channel = summary.get("min_channel_mm")
+    plot_physical(report, [(t, target_g, label, "-"), (t, design_g, "design (printed solid, predicted)", "--")],
+                   f"rel. RMSE {100 * summary['rel_rmse_physical']:.2f}% of final, print mass "
+                   f"{summary['print_mass_g']:.3f} g, narrowest channel "
+                   f"{'none' if channel is None else format(channel, '.2f') + ' mm'}\n{simcal.describe()}")
+    return summary
+
+
+def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None = None, bench_calibration=None,
+                       on_iteration=None, should_stop=None, resume: bool = False):
+    """Run (or resume) an inverse design whose target may be a physical curve; the job behind ``sfr design``
+    and the GUI's design launcher.
+
+    Parameters
+    ----------
+    config : design.inverse.problem.DesignConfig or None
+        Its ``target`` may be a measured curve (a run folder, ``curve.csv`` or any ``t_s,released_g`` CSV):
+        it then becomes ``target_from_measurement.csv`` in ``out_dir`` through ``simcal``. None to resume.
+    out_dir : str or Path
+        The design folder.
+    simcal : SimCalFile, optional
+        Required for a physical target; with any target it adds the physical prediction.
+    bench_calibration : analysis.BenchCalibration, optional
+        For a run folder target (default: the run's own ``calibration.json``).
+    on_iteration, should_stop, resume
+        As in ``design.inverse.optimize.run_design``.
+
+    Returns
+    -------
+    result : design.inverse.optimize.DesignResult
+    summary : dict or None
+        The summary with the physical prediction (None without ``simcal``).
+
+    Raises
+    ------
+    SimCalError
+        A physical target without a calibration, or an unreadable target.
+    """
+    import dataclasses
+
+    from design.inverse.optimize import run_design
+    from labapp.jobs.calibrate_sim import curve_of
+
+    out_dir = Path(out_dir)
+    record = out_dir / "target_measured.json"
+    measured: PhysicalCurve | None = None
+    if config is not None and is_physical(config.target):
+        if simcal is None:
+            raise SimCalError(f"target {config.target} is a physical curve (grams over seconds): give the "
+                              "simulation calibration (--simcal simcal.json, made by sfr calibrate-sim) that maps "
+                              "it to simulation units")
+        if (out_dir / "config.json").exists() and not resume:
+            raise SimCalError(f"{out_dir} already holds a design run; resume it or choose another folder")
+        measured = curve_of(config.target, bench_calibration)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        target_csv = write_target_csv(measured, simcal, out_dir / TARGET_CSV)
+        _write_measured(record, measured)
+        config = dataclasses.replace(config, target=str(target_csv.resolve()))
+    elif resume and record.is_file():
+        measured = _read_measured(record)
+    result = run_design(config, out_dir, on_iteration=on_iteration, should_stop=should_stop, resume=resume)
+    summary = write_design_physical(result.out_dir, simcal, measured) if simcal is not None else None
+    return result, summary
+
+
+def _write_measured(path: Path, curve: PhysicalCurve) -> None:
+    doc = {"source": curve.source, "water_g": curve.water_g, "object_mass_g": curve.object_mass_g,
+           "t_s": [float(v) for v in curve.t_s], "released_g": [float(v) for v in curve.released_g]}
+    atomic_write(path, json.dumps(doc).encode())
+
+
+def _read_measured(path: Path) -> PhysicalCurve:
+    doc = json.loads(path.read_text())
+    return PhysicalCurve(np.asarray(doc["t_s"], float), np.asarray(doc["released_g"], float),
+                         doc.get("object_mass_g"), doc.get("water_g"), doc["source"])
+
+
+def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A mesh's predicted release in physical units: simulated at the calibration's resolution, mapped.
+
+    Parameters
+    ----------
+    mesh : str or Path
+        Mesh file (mm) or ``sample:NAME``.
+    simcal : SimCalFile
+    water_g : float, optional
+        Bath water, g (default: the calibration's).
+
+    Returns
+    -------
+    t_s, released_g : (Q,) ndarray of float
+    """
+    from design.errors import DesignError
+    from design.forward.simulator import simulate
+    from design.forward.pipeline import input_grid
+
+    try:
+        rho, dx, mirror = input_grid(str(mesh), resolution=simcal.resolution)
+        release = simulate(rho, dx, mirror=mirror)
+    except DesignError as exc:
+        raise SimCalError(f"{mesh}: {exc}") from exc
+    water = water_g or simcal.water_g
+    t = physical_times(simcal, release.tau_mm, release.released_mm3, water)
+    return t, simcal.cal.to_physical(release.tau_mm, release.released_mm3, t, water)
