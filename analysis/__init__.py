@@ -2,16 +2,30 @@
 per-cell Beer-Lambert calibration, concentration estimates, smoothing, run-folder analysis, the
 simulation-to-bench calibration (section 4.3), and the release-profile metrics of dissolution testing
 (f1/f2, MDT, DE, model fits)."""
-from analysis.calibration import (BenchCalibration, ConcentrationEstimate, estimate_concentration,
-                                  fit_bench_calibration, reanchor_t0, reference_offset)
+from analysis.calibration import (
+                                  BenchCalibration,
+                                  ConcentrationEstimate,
+                                  estimate_concentration,
+                                  fit_bench_calibration,
+                                  reanchor_t0,
+                                  reference_offset,
+)
 from analysis.capture_time import capture_time
 from analysis.curve import smooth_curve, steady_state
 from analysis.decode import decode_image
 from analysis.errors import AnalysisError
 from analysis.frames import FrameList, read_frame_list
 from analysis.geometry import CropGeometry, cell_transmittance, default_geometry, read_cells
-from analysis.profile import (F2Interval, ReleaseProfile, Similarity, bootstrap_f2, dissolution_efficiency,
-                              mean_dissolution_time, mean_profile, similarity)
+from analysis.profile import (
+                                  F2Interval,
+                                  ReleaseProfile,
+                                  Similarity,
+                                  bootstrap_f2,
+                                  dissolution_efficiency,
+                                  mean_dissolution_time,
+                                  mean_profile,
+                                  similarity,
+)
 from analysis.release_models import ModelFit, best_fit, fit_release_models
 from analysis.runfolder import RunCurve, analyze_run, write_cells_csv, write_curve_csv
 from analysis.simcal import LooShape, ShapeRun, SimCal, SimCalFit, fit_simcal, leave_one_out

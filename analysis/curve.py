@@ -6,14 +6,11 @@ distort it; on uniform samples it equals ``scipy.signal.savgol_filter(..., mode=
 """
 from __future__ import annotations
 
-import logging
 import math
 
 import numpy as np
 
 from analysis.errors import AnalysisError
-
-log = logging.getLogger(__name__)
 
 DEFAULT_WINDOW_S = 330.0    # 30 frames at the paper's 11 s interval
 DEFAULT_ORDER = 2

@@ -11,15 +11,12 @@ from __future__ import annotations
 
 import functools
 import io
-import logging
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from analysis.errors import AnalysisError
-
-log = logging.getLogger(__name__)
 
 RAW_SUFFIXES = frozenset({".nef", ".nrw", ".cr2", ".cr3", ".crw", ".dng", ".arw", ".orf", ".rw2", ".raf", ".pef",
                           ".srw", ".raw"})

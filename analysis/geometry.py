@@ -8,7 +8,6 @@ geometric mean, so that a Beer-Lambert law per channel stays an exact exponentia
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,8 +15,6 @@ import numpy as np
 
 from analysis.decode import check_reduce, decode_encoded, srgb_to_linear_lut
 from analysis.errors import AnalysisError
-
-log = logging.getLogger(__name__)
 
 _FLOOR = np.float32(1e-6)  # linear light floor; keeps a black pixel from dividing by zero
 

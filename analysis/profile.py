@@ -19,7 +19,6 @@ whose f1/f2 are None.
 """
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -27,8 +26,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from analysis.errors import AnalysisError
-
-log = logging.getLogger(__name__)
 
 CUTOFF_PCT = 85.0
 """Percent released after which at most one time point may enter f1/f2."""

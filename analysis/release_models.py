@@ -19,7 +19,6 @@ others only when that is the whole curve; otherwise it is listed after them, unr
 """
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -29,8 +28,6 @@ from scipy.optimize import least_squares
 
 from analysis.errors import AnalysisError
 from analysis.profile import ReleaseProfile
-
-log = logging.getLogger(__name__)
 
 KP_LIMIT_PCT = 60.0
 """Korsmeyer-Peppas is fitted on the points up to this percent released."""

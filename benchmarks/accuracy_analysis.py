@@ -18,8 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from analysis import (CropGeometry, analyze_run, estimate_concentration, fit_bench_calibration, read_cells,
-                      smooth_curve)
+from analysis import CropGeometry, analyze_run, estimate_concentration, fit_bench_calibration, read_cells, smooth_curve
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "fixtures" / "bench"

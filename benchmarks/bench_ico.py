@@ -33,9 +33,8 @@ import time
 from contextlib import contextmanager
 
 import numpy as np
-from scipy.ndimage import gaussian_filter
-
 from bench_forward import void_field
+from scipy.ndimage import gaussian_filter
 
 
 def _quadrant(rho_full: np.ndarray) -> np.ndarray:

@@ -22,8 +22,8 @@ def record_set(out: Path, interval_s: float) -> tuple[Path, Path]:
     """Bench calibration and one run per shape on the simulated bench; returns (set.csv, bench calibration)."""
     from design.geometry.shapes import sample_shape
     from labapp.acquisition.clock import SteppedClock
-    from labapp.jobs.demo import TRUTH_RESOLUTION, simulated_calibration, simulated_run
     from labapp.acquisition.simbench import Material, sample_release
+    from labapp.jobs.demo import TRUTH_RESOLUTION, simulated_calibration, simulated_run
 
     clock = SteppedClock()
     calibration, cal_path = simulated_calibration(out / "calibration", clock)

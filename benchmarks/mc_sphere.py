@@ -28,9 +28,9 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from design.forward.pipeline import input_grid
     from design.montecarlo.erosion import simulate_mc
     from design.montecarlo.tuning import tune_mc, unit_runs
-    from design.forward.pipeline import input_grid
 
     t = np.linspace(0, T_END_S, 601)
     analytic = 1 - np.clip(1 - t / T_END_S, 0, None) ** 3

@@ -33,9 +33,9 @@ from pathlib import Path
 import numpy as np
 
 from design.errors import DesignError
+from design.geometry.shapes import SAMPLE_SHAPES
 from design.inverse.optimize import run_design
 from design.inverse.problem import DesignConfig
-from design.geometry.shapes import SAMPLE_SHAPES
 
 ZERO_ORDER = "zero-order:final=0.3,duration=0.1"
 """The zero-order target of docs/results.md ("Zero-order")."""

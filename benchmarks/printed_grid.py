@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from design.inverse.objective import rel_rmse
 from design.files.outputs import fine_release
+from design.inverse.objective import rel_rmse
 from design.inverse.rate import rate_deviation
 
 

@@ -24,8 +24,8 @@ import trimesh
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from design.forward.simulator import simulate  # noqa: E402
-from design.inverse.rate import rate_deviation  # noqa: E402
 from design.geometry.voxelize import voxelize  # noqa: E402
+from design.inverse.rate import rate_deviation  # noqa: E402
 
 DOMAIN_MM = 20.0
 """Edge of the zero-order runs' cubic domain, mm (its voxel at a given resolution)."""

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from design.fabrication.extract import count_pieces, mass_preserving_level
-from design.inverse.objective import rel_rmse
 from design.files.outputs import solid_release
+from design.inverse.objective import rel_rmse
 from design.inverse.rate import rate_deviation
 
 

@@ -26,6 +26,7 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.robust_sources import BUILDERS, EXTRUSIONS, source  # noqa: E402
 from design.geometry.shapes import SAMPLE_SHAPES  # noqa: E402
 
+
 def _run(code_root: Path, target: str, space: str, resolution: int, max_iter: int, out: Path) -> dict | None:
     if not (out / "summary.json").exists():
         env = dict(os.environ, PYTHONPATH=str(code_root))

@@ -26,9 +26,9 @@ import numpy as np
 from scipy.optimize import minimize
 
 from design.forward.simulator import simulate
+from design.geometry.shapes import sample_shape
 from design.inverse.objective import rel_rmse
 from design.inverse.problem import DesignConfig, prepare
-from design.geometry.shapes import sample_shape
 from design.inverse.spaces import BUILD_AXIS
 
 PIECES = 100

@@ -1,14 +1,11 @@
 """Input checks shared by the public functions of `design` (validate once, at the boundary)."""
 from __future__ import annotations
 
-import logging
 import math
 
 import numpy as np
 
 from design.errors import DesignError
-
-log = logging.getLogger(__name__)
 
 
 def _where(source: str | None) -> str:

@@ -1,10 +1,6 @@
 """The base exception of the `design` package."""
 from __future__ import annotations
 
-import logging
-
-log = logging.getLogger(__name__)
-
 
 class DesignError(Exception):
     """Invalid input or a broken invariant in the simulator or optimiser (`design` package)."""

@@ -12,10 +12,6 @@ The mapping of these and the other packages' errors to exit codes is in :func:`l
 """
 from __future__ import annotations
 
-import logging
-
-log = logging.getLogger(__name__)
-
 __all__ = ["EXIT_FAILED", "EXIT_OK", "EXIT_USAGE", "JobFailed", "LabError", "UsageError"]
 
 EXIT_OK = 0

@@ -53,14 +53,10 @@ plane p's face.
 """
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 
 from design.errors import DesignError
 from design.forward.fmm import MarchBuffers, march, march_adjoint
-
-log = logging.getLogger(__name__)
 
 CORE_ALLOWANCE = 0.5
 """Free detour of a solid path to the core, as a fraction of the straight (all-solid) distance."""

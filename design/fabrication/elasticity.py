@@ -21,15 +21,11 @@ compute element energies.
 """
 from __future__ import annotations
 
-import logging
-
 import numba
 import numpy as np
 import scipy.sparse as sp
 
 from design.errors import DesignError
-
-log = logging.getLogger(__name__)
 
 POISSON_RATIO = 0.3
 """Poisson's ratio of the printed material (a typical value for printed thermoplastics)."""

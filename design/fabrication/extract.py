@@ -15,8 +15,6 @@ optimisation), within `LEVEL_RANGE` around 1/2.
 """
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 import trimesh
 from scipy import ndimage
@@ -24,8 +22,6 @@ from skimage.measure import marching_cubes
 
 from design.errors import DesignError
 from design.geometry.voxelize import voxelize
-
-log = logging.getLogger(__name__)
 
 LEVEL_GAP = 1e-3
 """Densities within this of the iso-level are moved this far from it, each on its own side, and the

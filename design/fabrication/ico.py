@@ -25,10 +25,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from design.fabrication.deflation import island_deflation
-from design.fabrication.elasticity import E_MIN_RATIO, LAWS, POISSON_RATIO, element_energy, modulus, self_weight, \
-    self_weight_adjoint
 from design.errors import DesignError
+from design.fabrication.deflation import island_deflation
+from design.fabrication.elasticity import (
+    E_MIN_RATIO,
+    LAWS,
+    POISSON_RATIO,
+    element_energy,
+    modulus,
+    self_weight,
+    self_weight_adjoint,
+)
 from design.fabrication.multigrid import PCG_TOL, Scratch, hierarchy, pcg
 
 log = logging.getLogger(__name__)

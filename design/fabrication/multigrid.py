@@ -33,9 +33,9 @@ import numba
 import numpy as np
 import scipy.sparse.linalg as sla
 
+from design.errors import DesignError
 from design.fabrication.deflation import Deflation
 from design.fabrication.elasticity import UNIFORM, apply_stencil, assemble, free_mask, gauss_seidel, hex8_stiffness, stencil
-from design.errors import DesignError
 
 log = logging.getLogger(__name__)
 

@@ -11,15 +11,12 @@ axis 2, z = 0 on the build plate), the one the ICO space designs for (section 3.
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
 
 from design.errors import DesignError
-
-log = logging.getLogger(__name__)
 
 PRINT_DENSITY_G_PER_CM3 = 1.32
 """Average density of the paper's prints (section 4.1)."""

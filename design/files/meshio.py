@@ -1,7 +1,6 @@
 """Loading simulation inputs from disk: triangle meshes (mm) and density arrays, with clear errors."""
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import numpy as np
@@ -9,8 +8,6 @@ import trimesh
 
 from design._validate import check_density, check_positive
 from design.errors import DesignError
-
-log = logging.getLogger(__name__)
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf")
 DENSITY_SUFFIXES = (".npy", ".npz")

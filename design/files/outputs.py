@@ -25,12 +25,12 @@ import numpy as np
 
 from design.errors import DesignError
 from design.fabrication.extract import centred_iou, count_pieces, density_mesh, mass_preserving_level, revoxelize
-from design.forward.simulator import simulate
-from design.inverse.objective import DesignObjective, rel_rmse
 from design.fabrication.printability import assess, prusa_profile
-from design.inverse.rate import rate_deviation, rate_deviation_vs_target
 from design.files.report import save_report
+from design.forward.simulator import simulate
 from design.geometry.voxelize import grid_for, voxelize
+from design.inverse.objective import DesignObjective, rel_rmse
+from design.inverse.rate import rate_deviation, rate_deviation_vs_target
 
 log = logging.getLogger(__name__)
 

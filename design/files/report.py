@@ -5,14 +5,11 @@ threads and headless runs.
 """
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-
-log = logging.getLogger(__name__)
 
 
 def _rate(tau: np.ndarray, c: np.ndarray, points: int = 100) -> tuple[np.ndarray, np.ndarray]:

@@ -10,15 +10,12 @@ g = 1 - C / C_cap, so the remapping and its derivative are exact for the sampled
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import numpy as np
 
 from design._validate import check_positive
 from design.errors import DesignError
-
-log = logging.getLogger(__name__)
 
 _SERIES = 1e-3
 """|g_k - g_k+1| / (g_k + g_k+1) below which the log-mean uses its series (error < 1e-12)."""

@@ -23,15 +23,12 @@ of a 128^3 grid afresh costs 0.25-0.4 s of page faults per solve on this machine
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 
 from design.errors import DesignError
-
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)

@@ -9,8 +9,8 @@ import trimesh
 
 from design._validate import check_positive
 from design.errors import DesignError
-from design.forward.simulator import Release, simulate
 from design.files.meshio import DENSITY_SUFFIXES, checked_mesh, load_density, load_mesh
+from design.forward.simulator import Release, simulate
 from design.geometry.shapes import sample_shape
 from design.geometry.voxelize import voxelize
 

@@ -9,12 +9,8 @@ O(N + K).
 """
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 from numba import njit
-
-log = logging.getLogger(__name__)
 
 
 @njit(cache=True, nogil=True)

@@ -1,15 +1,11 @@
 """Procedural sample shapes: closed meshes in mm, each scaled to the same ~1.75 g print (section 5.1)."""
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 import trimesh
 
 from design.errors import DesignError
 from design.fabrication.printability import PRINT_DENSITY_G_PER_CM3
-
-log = logging.getLogger(__name__)
 
 PRINT_MASS_G = 1.75
 """Mass of every sample print, g (the paper's forward-model shapes weigh ~1.75 g)."""

@@ -6,7 +6,6 @@ back to the design variables ``rho_hat``.
 """
 from __future__ import annotations
 
-import logging
 import os
 from dataclasses import dataclass, field
 
@@ -14,8 +13,6 @@ import numpy as np
 from scipy import fft as sfft
 
 from design.errors import DesignError
-
-log = logging.getLogger(__name__)
 
 
 def fft_workers() -> int:

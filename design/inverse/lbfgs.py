@@ -6,8 +6,9 @@ what an iteration needs, on arrays allocated once:
 
 - the search direction ``d = -H g`` by the two-loop recursion (Nocedal and Wright, *Numerical
   Optimization*, 2nd ed., algorithm 7.4) written in place into ``d``, one fused pass per stored pair
-  (``d += a x`` and the next pair's dot product with the updated ``d``), over the stored pairs ``s_i = x_{i+1} - x_i``, ``y_i = g_{i+1} - g_i`` (ring buffers of ``memory``
-  rows), ``H_0 = gamma I`` with ``gamma = s^T y / y^T y`` of the newest pair (their eq. 7.20);
+  (``d += a x`` and the next pair's dot product with the updated ``d``), over the stored pairs
+  ``s_i = x_{i+1} - x_i``, ``y_i = g_{i+1} - g_i`` (ring buffers of ``memory`` rows),
+  ``H_0 = gamma I`` with ``gamma = s^T y / y^T y`` of the newest pair (their eq. 7.20);
 - a line search along ``d`` by one of two rules (`LINE_SEARCHES`, `LbfgsSettings.line_search`):
 
   - "luksan" (the default): the rule of Luksan and Vlcek's PLIS, which nlopt's LD_LBFGS runs

@@ -25,23 +25,20 @@ object size; rescaling to the paper's size lets its weights (Tables 1-2) carry o
 """
 from __future__ import annotations
 
-import logging
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from design.fabrication.connectivity import TAIL_SLOPE, Connectivity
 from design.errors import DesignError
-from design.inverse.filters import SmoothingFilter, project, project_adjoint, project_inverse
+from design.fabrication.connectivity import TAIL_SLOPE, Connectivity
+from design.fabrication.printability import PRINT_DENSITY_G_PER_CM3
 from design.forward.fmm import MarchBuffers
 from design.forward.simulator import Release, release_gradient, simulate
-from design.fabrication.printability import PRINT_DENSITY_G_PER_CM3
-from design.inverse.rate import rate_fit, rate_shape_fit, release_duration
 from design.geometry.shapes import PRINT_MASS_G
+from design.inverse.filters import SmoothingFilter, project, project_adjoint, project_inverse
+from design.inverse.rate import rate_fit, rate_shape_fit, release_duration
 from design.inverse.spaces import DesignSpace
-
-log = logging.getLogger(__name__)
 
 REFERENCE_MASS_MM3 = PRINT_MASS_G * 1000.0 / PRINT_DENSITY_G_PER_CM3
 """Final release the objective is normalised to, mm^3 (1.75 g at 1.32 g/cm^3)."""

@@ -44,9 +44,9 @@ import nlopt
 import numpy as np
 
 from design.errors import DesignError
+from design.files.outputs import HISTORY_COLUMNS, DesignOutputs, write_outputs
 from design.inverse.lbfgs import CONVERGED, STALLED, Lbfgs, LbfgsSettings
 from design.inverse.objective import DesignObjective
-from design.files.outputs import HISTORY_COLUMNS, DesignOutputs, write_outputs
 from design.inverse.problem import DesignConfig, Problem, prepare
 
 log = logging.getLogger(__name__)

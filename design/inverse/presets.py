@@ -12,11 +12,7 @@ the domain's longest side, ``h / 256``, so it keeps its physical meaning at any 
 """
 from __future__ import annotations
 
-import logging
-
 from design.errors import DesignError
-
-log = logging.getLogger(__name__)
 
 PAPER_RESOLUTION = 256
 """Voxels per side of the paper's design grids (section 5.2)."""

@@ -14,20 +14,28 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from design.fabrication.connectivity import TAIL_SLOPE
 from design.errors import DesignError
+from design.fabrication.connectivity import TAIL_SLOPE
 from design.fabrication.extract import count_pieces
 from design.fabrication.ico import DEFAULT_COARSEN, DEFAULT_LAYERS, IcoConfig
-from design.inverse.lbfgs import LINE_SEARCHES
-from design.forward.simulator import total_time
 from design.files.meshio import load_mesh
+from design.forward.simulator import total_time
+from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
+from design.geometry.voxelize import voxelize
+from design.inverse.lbfgs import LINE_SEARCHES
 from design.inverse.presets import preset_values
 from design.inverse.rate import RATE_SPAN_MIN_VOX, middle_span_mm
-from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.inverse.spaces import BUILD_AXIS, SPACE_CHOICES, DesignSpace, SpaceRequest, build_space
-from design.inverse.targets import (Feasibility, Target, check_feasibility, constant_acceleration, curve_end_mm,
-                            read_curve_csv, target_from_csv, target_from_mesh)
-from design.geometry.voxelize import voxelize
+from design.inverse.targets import (
+    Feasibility,
+    Target,
+    check_feasibility,
+    constant_acceleration,
+    curve_end_mm,
+    read_curve_csv,
+    target_from_csv,
+    target_from_mesh,
+)
 
 log = logging.getLogger(__name__)
 

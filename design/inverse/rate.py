@@ -19,13 +19,9 @@ release.
 """
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 
 from design.errors import DesignError
-
-log = logging.getLogger(__name__)
 
 MID_LO, MID_HI = 0.1, 0.9
 """The middle 80% of a release: from 10% to 90% of its final mass."""

@@ -8,7 +8,6 @@ registry (`register_space` adds more); "ico" carries the incremental-compliance 
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from typing import Callable, Protocol
 
@@ -16,8 +15,6 @@ import numpy as np
 
 from design.errors import DesignError
 from design.fabrication.ico import IcoConfig, IcoTerm, layer_tops
-
-log = logging.getLogger(__name__)
 
 BUILD_AXIS = 2
 """Array axis of the print's build direction (mesh z); extrusion replicates along it."""

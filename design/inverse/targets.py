@@ -6,7 +6,6 @@ section 3.4), in simulation units: tau in mm dissolved, released amount in mm^3 
 from __future__ import annotations
 
 import csv
-import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,8 +15,6 @@ from scipy.interpolate import PchipInterpolator
 from design.errors import DesignError
 from design.forward.simulator import simulate
 from design.geometry.voxelize import voxelize
-
-log = logging.getLogger(__name__)
 
 SPHERE_AREA_COEF = (36.0 * np.pi) ** (1.0 / 3.0)
 """Surface area of a sphere of volume V is ``SPHERE_AREA_COEF * V**(2/3)``."""

@@ -20,7 +20,6 @@ Mirror planes are unfolded: the full object is simulated, so the copies erode in
 """
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -31,8 +30,6 @@ from numba import njit
 from design._validate import check_density, check_mirror, check_positive
 from design.errors import DesignError
 from design.forward.simulator import DEFAULT_STEPS
-
-log = logging.getLogger(__name__)
 
 GAS_CONSTANT = 8.314462618
 """Molar gas constant R, J/(mol K)."""

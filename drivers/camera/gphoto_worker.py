@@ -10,10 +10,7 @@ libgphoto2 error, or ``("err", message)`` for anything else.
 """
 from __future__ import annotations
 
-import logging
 from multiprocessing.connection import Connection
-
-log = logging.getLogger(__name__)
 
 SETTING_WIDGETS: dict[str, tuple[str, ...]] = {
     "aperture": ("aperture", "f-number"),

@@ -1,7 +1,6 @@
 """`SimulatedCamera`: bench frames rendered from any concentration curve, in accelerated time."""
 from __future__ import annotations
 
-import logging
 import time
 from typing import Callable
 
@@ -9,8 +8,6 @@ import numpy as np
 
 from drivers.camera.base import CameraError, CameraSettings, Capture, CaptureMissed
 from drivers.sim.bench_scene import BenchScene, render_jpeg
-
-log = logging.getLogger(__name__)
 
 
 class SimulatedCamera:

@@ -17,7 +17,6 @@ Arrays are (row, col, channel) with channels in RGB order; linear values are in 
 from __future__ import annotations
 
 import functools
-import logging
 import math
 from dataclasses import dataclass
 
@@ -25,8 +24,6 @@ import cv2
 import numpy as np
 
 from drivers.errors import DriverError
-
-log = logging.getLogger(__name__)
 
 __all__ = ["BenchScene", "Intrusion", "SceneError", "render_linear", "render_frame", "render_jpeg", "srgb_encode"]
 

@@ -8,10 +8,7 @@ probe the plate itself is regulated. The stirrer ramps to its setpoint at ``ramp
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, replace
-
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)

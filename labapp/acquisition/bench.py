@@ -8,9 +8,9 @@ from dataclasses import dataclass, field
 from drivers.camera.base import DSLR_FRAME_BYTES, Camera, CameraError, CameraSettings, Capture, CaptureMissed
 from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
 from labapp.acquisition.engine import Engine
-from labapp.errors import LabError
 from labapp.acquisition.events import Message, Reading, StateChanged
 from labapp.acquisition.monitor import HotplateMonitor
+from labapp.errors import LabError
 from labapp.records.storage import RunFolder
 
 log = logging.getLogger(__name__)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,11 +21,9 @@ from PIL import Image
 from analysis import BenchCalibration, CropGeometry, decode_image, fit_bench_calibration, read_cells
 from labapp.acquisition.bench import Bench, BenchSession
 from labapp.acquisition.engine import Engine
-from labapp.errors import UsageError
 from labapp.acquisition.events import CalibrationLevel, StateChanged
+from labapp.errors import UsageError
 from labapp.records.storage import RunFolder, atomic_write, create_run
-
-log = logging.getLogger(__name__)
 
 CALIBRATION_FILE = "bench_calibration.json"
 MASSES_CSV = "masses.csv"

@@ -6,13 +6,10 @@ sleeping), while the real bench uses ``WallClock``. Times are seconds since the 
 """
 from __future__ import annotations
 
-import logging
 import threading
 import time
 from collections.abc import Callable
 from typing import Protocol
-
-log = logging.getLogger(__name__)
 
 _SLICE_S = 0.05  # wall-clock granularity at which a sleep notices a stop request
 

@@ -2,14 +2,11 @@
 or picked in the GUI's device panel."""
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 from drivers.camera.base import CameraSettings
 from labapp.acquisition.bench import Bench
 from labapp.errors import UsageError
-
-log = logging.getLogger(__name__)
 
 CAMERA_SPECS = "gphoto2 | gphoto2:MODEL | gphoto2:MODEL@PORT | folder:PATH"
 

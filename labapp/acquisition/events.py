@@ -7,12 +7,9 @@ concentrations in g/kg, masses in g.
 """
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass, field
 from typing import Literal
-
-log = logging.getLogger(__name__)
 
 __all__ = ["CalibrationLevel", "Done", "EngineEvent", "FrameStored", "Message", "Preview", "Prompt", "Reading",
            "StateChanged"]

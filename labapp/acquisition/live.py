@@ -1,7 +1,6 @@
 """Live analysis of frames as they arrive: cells -> concentration with the active bench calibration."""
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -10,8 +9,6 @@ import numpy as np
 
 from analysis import BenchCalibration, estimate_concentration, read_cells, smooth_curve, steady_state
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
-
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,6 @@ zero) -> a frame every ``interval_s`` with plate/probe temperature and stirring 
 from __future__ import annotations
 
 import dataclasses
-import logging
 import math
 import tempfile
 from dataclasses import dataclass
@@ -18,12 +17,10 @@ from typing import Any
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench, BenchSession, ProcedureError
 from labapp.acquisition.engine import Engine
-from labapp.errors import UsageError
 from labapp.acquisition.events import FrameStored, Preview, StateChanged
 from labapp.acquisition.live import LiveAnalyzer, is_steady
+from labapp.errors import UsageError
 from labapp.records.storage import RunFolder, check_disk_space, create_run, free_bytes, open_run, read_run
-
-log = logging.getLogger(__name__)
 
 _STATUS = {"complete": "complete", "stopped": "stopped", "aborted": "aborted", "failed": "failed"}
 
@@ -261,7 +258,6 @@ class RunProcedure:
                                 last_error=session.last_error))
         if index % 25 == 0 and free_bytes(run.path) < self.config.low_space_bytes:
             session.note("warning", "disk-space", f"disk space low: {free_bytes(run.path) / 1e9:.2f} GB free")
-
 
 
 class PreviewProcedure:

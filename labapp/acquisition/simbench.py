@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.camera import SimulatedCamera
-from drivers.camera.base import Capture, CameraSettings
+from drivers.camera.base import CameraSettings, Capture
 from drivers.hotplate import HeidolphHotplate
 from drivers.sim import BenchScene
 from drivers.sim.heidolph_emulator import HeidolphEmulator

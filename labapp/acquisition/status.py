@@ -1,13 +1,10 @@
 """A one-line summary of a running procedure, built from engine events (CLI status line and GUI status bar)."""
 from __future__ import annotations
 
-import logging
 import math
 import threading
 
 from labapp.acquisition.events import Done, EngineEvent, FrameStored, Message, Prompt, Reading, StateChanged
-
-log = logging.getLogger(__name__)
 
 
 def hms(t_s: float | None) -> str:

@@ -7,10 +7,7 @@ message naming what was expected (argparse prefixes the option name and exits wi
 from __future__ import annotations
 
 import argparse
-import logging
 import math
-
-log = logging.getLogger(__name__)
 
 __all__ = ["finite_float", "nonnegative_float", "nonnegative_int", "positive_float", "positive_int"]
 

@@ -21,8 +21,6 @@ import traceback
 from labapp.cli import commands
 from labapp.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, LabError
 
-log = logging.getLogger(__name__)
-
 #: The commands in the order of a lab's workflow (bench set-up, measurement, simulation and design,
 #: then the tools); commands not named here are listed after them, alphabetically.
 WORKFLOW = ("devices", "calibrate-bench", "run", "verify", "analyze", "calibrate-sim", "simulate", "design",

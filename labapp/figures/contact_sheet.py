@@ -9,13 +9,10 @@ from __future__ import annotations
 
 import csv
 import json
-import logging
 import math
 from pathlib import Path
 
 import numpy as np
-
-log = logging.getLogger(__name__)
 
 TILES_PER_ROW = 3
 MAX_PIXELS = 16000

@@ -16,8 +16,17 @@ from PySide6.QtCore import QObject, Signal
 
 from labapp.acquisition.bench import PUBLISHED
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import (CalibrationLevel, Done, EngineEvent, FrameStored, Message, Preview, Prompt, Reading,
-                           StateChanged)
+from labapp.acquisition.events import (
+    CalibrationLevel,
+    Done,
+    EngineEvent,
+    FrameStored,
+    Message,
+    Preview,
+    Prompt,
+    Reading,
+    StateChanged,
+)
 
 log = logging.getLogger(__name__)
 

@@ -2,20 +2,29 @@
 save) and the simulation step (measured runs + their meshes -> ``simcal.json``, made active)."""
 from __future__ import annotations
 
-import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 from PySide6.QtCore import Signal
 from PySide6.QtGui import QPixmap
-from PySide6.QtWidgets import (QDoubleSpinBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit,
-                               QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (
+    QDoubleSpinBox,
+    QFileDialog,
+    QFormLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
 
 from labapp.gui.bridge import BackgroundTask
 from labapp.jobs.calibrate_sim import SET_COLUMNS, calibrate_sim
-
-log = logging.getLogger(__name__)
 
 
 def parse_masses(text: str) -> tuple[float, ...]:

@@ -4,14 +4,24 @@ the STL."""
 from __future__ import annotations
 
 import csv
-import logging
 import shutil
 import threading
 from pathlib import Path
 
 import pyqtgraph as pg
-from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QFormLayout, QHBoxLayout, QLabel, QLineEdit, QPushButton,
-                               QSpinBox, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (
+    QCheckBox,
+    QComboBox,
+    QFileDialog,
+    QFormLayout,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QSpinBox,
+    QVBoxLayout,
+    QWidget,
+)
 
 from design.files.outputs import enclosed_voids_text
 from labapp.gui.bridge import BackgroundTask
@@ -19,8 +29,6 @@ from labapp.gui.sweep_panel import SweepPanel
 from labapp.jobs.calibrate_sim import SimCalFile, load_simcal
 from labapp.jobs.design import DESIGN_DEFAULTS, design_folder
 from labapp.jobs.design import design as design_job
-
-log = logging.getLogger(__name__)
 
 NO_SIMCAL = ("no active simulation calibration: a measured run cannot become a target until one is made "
              "(calibration wizard, simulation step) and made active")

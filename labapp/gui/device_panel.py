@@ -1,16 +1,11 @@
 """Device panel: pick the camera and hotplate (real ports or simulated), camera settings, connect, readouts."""
 from __future__ import annotations
 
-import logging
-
-from PySide6.QtWidgets import (QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QPushButton,
-                               QVBoxLayout, QWidget)
+from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QPushButton, QVBoxLayout, QWidget
 
 from drivers.camera.base import CameraSettings
 from labapp.acquisition.devices import CAMERA_SPECS
 from labapp.acquisition.events import Reading
-
-log = logging.getLogger(__name__)
 
 SIMULATED = "simulated"
 NO_HOTPLATE = "none"

@@ -5,14 +5,10 @@ coordinates: x = column, y = row (pyqtgraph row-major), pixels.
 """
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
-
-log = logging.getLogger(__name__)
 
 
 def grid_segments(x: float, y: float, size: float, grid: int) -> tuple[np.ndarray, np.ndarray]:

@@ -6,25 +6,25 @@ Every button calls the same Qt-free pieces the CLI uses (``Engine``, ``RunProced
 from __future__ import annotations
 
 import dataclasses
-import logging
 import math
 from pathlib import Path
 
 import cv2
 import numpy as np
 from PySide6.QtCore import Qt, QTimer
-from PySide6.QtWidgets import (QDockWidget, QMainWindow, QMessageBox, QPlainTextEdit, QSplitter, QTabWidget,
-                               QWidget)
+from PySide6.QtWidgets import QDockWidget, QMainWindow, QMessageBox, QPlainTextEdit, QSplitter, QTabWidget, QWidget
 
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench
 from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
 from labapp.acquisition.clock import make_clock
 from labapp.acquisition.devices import make_bench
-from labapp.jobs.run import new_run, resumable, resume_run
 from labapp.acquisition.engine import Engine
-from labapp.errors import UsageError
 from labapp.acquisition.events import CalibrationLevel, Done, FrameStored, Preview, Prompt, StateChanged
+from labapp.acquisition.procedures import PreviewProcedure
+from labapp.acquisition.simbench import SimulatedBench, resume_clock
+from labapp.acquisition.status import RunStatus
+from labapp.errors import UsageError
 from labapp.gui.bridge import EngineBridge, LogBridge
 from labapp.gui.calibration_wizard import CalibrationWizard, parse_masses
 from labapp.gui.design_launcher import DesignLauncher
@@ -33,11 +33,7 @@ from labapp.gui.live_view import LiveView
 from labapp.gui.plots import PlotsPanel
 from labapp.gui.run_browser import RunBrowser
 from labapp.gui.run_controls import RunControls
-from labapp.acquisition.procedures import PreviewProcedure
-from labapp.acquisition.simbench import SimulatedBench, resume_clock
-from labapp.acquisition.status import RunStatus
-
-log = logging.getLogger(__name__)
+from labapp.jobs.run import new_run, resumable, resume_run
 
 UI_MS = 100
 

@@ -1,18 +1,15 @@
 """Overlay of release curves in physical units: several runs and simulated predictions, grams over hours."""
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
-from labapp.records.curvefiles import PhysicalCurve, read_physical_curve
 from labapp.jobs.calibrate_sim import SimCalFile
 from labapp.jobs.physical import predict_mesh
-
-log = logging.getLogger(__name__)
+from labapp.records.curvefiles import PhysicalCurve, read_physical_curve
 
 
 def run_curve(run: Path) -> PhysicalCurve:

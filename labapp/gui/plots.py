@@ -5,7 +5,6 @@ timer only when something changed, so a fast simulated run never floods the even
 """
 from __future__ import annotations
 
-import logging
 import math
 
 import numpy as np
@@ -15,8 +14,6 @@ from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from analysis import smooth_curve
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
-
-log = logging.getLogger(__name__)
 
 REDRAW_MS = 100
 

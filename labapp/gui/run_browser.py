@@ -8,18 +8,28 @@ import time
 from pathlib import Path
 
 from PySide6.QtCore import Signal
-from PySide6.QtWidgets import (QDoubleSpinBox, QHBoxLayout, QLabel, QLineEdit, QPushButton, QSpinBox,
-                               QTreeWidget, QTreeWidgetItem, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (
+    QDoubleSpinBox,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QSpinBox,
+    QTreeWidget,
+    QTreeWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
 
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
-from labapp.jobs.analyse import analyse_run
-from labapp.jobs.run import resumable
-from labapp.jobs.verify import verify as verify_folder
-from labapp.jobs.compare import Comparison, compare_curves
 from labapp.errors import UsageError
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.overlay import PhysicalOverlay
 from labapp.gui.plots import PlotsPanel
+from labapp.jobs.analyse import analyse_run
+from labapp.jobs.compare import Comparison, compare_curves
+from labapp.jobs.run import resumable
+from labapp.jobs.verify import verify as verify_folder
 from labapp.records.outpaths import ANALYSIS_SUBFOLDER
 from labapp.records.storage import StorageError, finalise_run, read_run
 

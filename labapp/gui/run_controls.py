@@ -1,15 +1,22 @@
 """Run controls: the run's settings, start / object dropped / stop / abort, and the active calibration."""
 from __future__ import annotations
 
-import logging
-
 from PySide6.QtCore import Signal
-from PySide6.QtWidgets import (QCheckBox, QDoubleSpinBox, QFileDialog, QFormLayout, QGridLayout, QGroupBox,
-                               QHBoxLayout, QLineEdit, QPushButton, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (
+    QCheckBox,
+    QDoubleSpinBox,
+    QFileDialog,
+    QFormLayout,
+    QGridLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QLineEdit,
+    QPushButton,
+    QVBoxLayout,
+    QWidget,
+)
 
 from labapp.acquisition.procedures import RunConfig
-
-log = logging.getLogger(__name__)
 
 
 def _spin(value: float, lo: float, hi: float, decimals: int = 1, suffix: str = "") -> QDoubleSpinBox:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import logging
 import threading
 import time
 from pathlib import Path
@@ -11,12 +10,23 @@ from typing import Callable
 
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QPixmap
-from PySide6.QtWidgets import (QComboBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit,
-                               QListWidget, QPushButton, QScrollArea, QSpinBox, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (
+    QComboBox,
+    QFileDialog,
+    QFormLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QListWidget,
+    QPushButton,
+    QScrollArea,
+    QSpinBox,
+    QVBoxLayout,
+    QWidget,
+)
 
 from labapp.gui.bridge import BackgroundTask
-
-log = logging.getLogger(__name__)
 
 SHEET_ITEM = "contact sheet (ranked)"
 
@@ -110,8 +120,8 @@ class SweepPanel(QGroupBox):
 
     def start(self) -> None:
         """Run the sweep on a local cluster in the background."""
-        from labapp.scaleout.cluster import dask_client
         from labapp.records.storage import sanitize_name
+        from labapp.scaleout.cluster import dask_client
         from labapp.scaleout.sweep import run_sweep
 
         try:

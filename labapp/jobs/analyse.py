@@ -10,7 +10,6 @@ from typing import Any
 from labapp.records.outpaths import ANALYSIS_SUBFOLDER, check_out
 
 
-
 @dataclass(frozen=True)
 class AnalysisOutputs:
     """What :func:`analyse_run` wrote: the curve (an ``analysis.RunCurve``) and the files."""

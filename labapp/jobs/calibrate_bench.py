@@ -8,7 +8,6 @@ from labapp.errors import UsageError
 from labapp.records.outpaths import check_out
 
 
-
 def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = 500.0,
                      crop: tuple[int, int, int] | None = None, grid: int = 10, mirror_col: float | None = None,
                      mirror: bool = True, reduce: int = 1, camera: dict[str, str] | None = None):

@@ -12,7 +12,6 @@ from __future__ import annotations
 import csv
 import datetime as _dt
 import json
-import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -22,12 +21,10 @@ import numpy as np
 
 from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, SimCal, fit_simcal, leave_one_out
 from analysis.simcal import DEFAULT_MAX_OFFSET_S, MODELS
-from labapp.records.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
 from labapp.errors import UsageError
+from labapp.records.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
 from labapp.records.outpaths import check_out
 from labapp.records.storage import atomic_write, sha256_file
-
-log = logging.getLogger(__name__)
 
 FORMAT = "sfr-simcal/1"
 """``format`` of ``simcal.json``."""

@@ -6,7 +6,6 @@ are expressed in percent of its weighed mass (its final release when the mass is
 """
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -15,12 +14,18 @@ from pathlib import Path
 import numpy as np
 
 from analysis.errors import AnalysisError
-from analysis.profile import (F2Interval, ReleaseProfile, Similarity, bootstrap_f2, dissolution_efficiency,
-                              mean_dissolution_time, mean_profile, similarity)
+from analysis.profile import (
+    F2Interval,
+    ReleaseProfile,
+    Similarity,
+    bootstrap_f2,
+    dissolution_efficiency,
+    mean_dissolution_time,
+    mean_profile,
+    similarity,
+)
 from analysis.release_models import ModelFit, best_fit, fit_release_models
 from labapp.records.curvefiles import PhysicalCurve, read_physical_curve
-
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, eq=False)

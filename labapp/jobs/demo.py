@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -33,8 +32,6 @@ from labapp.acquisition.events import EngineEvent, FrameStored
 from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.acquisition.simbench import SCENE, WATER_G, Material, SampleRelease, SimulatedBench, sample_release
 from labapp.records.storage import read_run, verify_run
-
-log = logging.getLogger(__name__)
 
 CAL_MASSES_G = (0.25, 0.5, 0.875, 1.25, 1.75, 2.25)
 """Cumulative filament masses of the simulated calibration series, g (up to above a sample's ~1.8 g)."""
@@ -161,11 +158,11 @@ def run_demo(out_dir: Path, sample: str = "pill", interval_s: float = 11.0, cali
         The bench's hidden material (default: :meth:`Material.draw`).
     """
     from design.forward.pipeline import simulate_mesh
-    from design.inverse.problem import DesignConfig
     from design.geometry.shapes import sample_shape
-    from labapp.records.curvefiles import read_physical_curve
+    from design.inverse.problem import DesignConfig
     from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
     from labapp.jobs.physical import design_from_target
+    from labapp.records.curvefiles import read_physical_curve
 
     if sample in CALIBRATION_SHAPES:
         raise ValueError(f"the further object {sample!r} must not be one of the calibration set "

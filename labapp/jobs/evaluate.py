@@ -17,7 +17,6 @@ the forward calibration in ``simcal/`` and the Monte Carlo calibration tuned on 
 from __future__ import annotations
 
 import json
-import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -31,8 +30,6 @@ from design.montecarlo.tuning import DEFAULT_EA_J_PER_MOL, tune_mc, unit_runs
 from labapp.jobs.simulate_mc import calibration_doc
 from labapp.records.outpaths import check_out
 from labapp.records.storage import atomic_write
-
-log = logging.getLogger(__name__)
 
 MODEL_NAMES = ("forward", "mc")
 """The two predictions of each object: the forward model (leave-one-out) and the Monte Carlo model."""

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from labapp.jobs.calibrate_sim import SimCalError, SimCalFile
 from labapp.jobs.compare import prediction_metrics
 from labapp.records.curvefiles import CURVE_FILES, PhysicalCurve
-from labapp.jobs.calibrate_sim import SimCalError, SimCalFile
 from labapp.records.storage import atomic_write
 
 log = logging.getLogger(__name__)
@@ -264,8 +264,8 @@ def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = N
     t_s, released_g : (Q,) ndarray of float
     """
     from design.errors import DesignError
-    from design.forward.simulator import simulate
     from design.forward.pipeline import input_grid
+    from design.forward.simulator import simulate
 
     try:
         rho, dx, mirror = input_grid(str(mesh), resolution=simcal.resolution)

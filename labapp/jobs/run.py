@@ -7,7 +7,6 @@ from labapp.errors import UsageError
 from labapp.records.outpaths import check_data_dir
 
 
-
 def new_run(config, bench, data_dir: str | Path, calibration=None):
     """A :class:`labapp.acquisition.procedures.RunProcedure` for a new run in ``data_dir`` (checked, nothing written).
 

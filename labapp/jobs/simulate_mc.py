@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -24,19 +23,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from design.fabrication.printability import PRINT_DENSITY_G_PER_CM3
 from design.montecarlo.erosion import DEFAULT_SEEDS, MonteCarloParams, simulate_mc
 from design.montecarlo.tuning import McTuning
-from design.fabrication.printability import PRINT_DENSITY_G_PER_CM3
-from labapp.errors import UsageError
-from labapp.records.outpaths import check_out
 from labapp.acquisition.simbench import WATER_G
-from labapp.records.storage import atomic_write
+from labapp.errors import UsageError
 from labapp.jobs.physical import plot_physical
+from labapp.records.outpaths import check_out
+from labapp.records.storage import atomic_write
 
 if TYPE_CHECKING:
     from labapp.jobs.simulate import SimulationOutputs
 
-log = logging.getLogger(__name__)
 
 FORMAT = "sfr-mc-calibration/1"
 """``format`` of ``mc.json``."""

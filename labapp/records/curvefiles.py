@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import csv
 import json
-import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,8 +26,6 @@ from pathlib import Path
 import numpy as np
 
 from labapp.errors import UsageError
-
-log = logging.getLogger(__name__)
 
 CURVE_FILES = ("curve.csv", "release_physical.csv", "curves_physical.csv")
 """The physical curve files the project writes, looked for in that order inside a folder."""

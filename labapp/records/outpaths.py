@@ -24,13 +24,10 @@ output adds one line there.
 from __future__ import annotations
 
 import json
-import logging
 from collections.abc import Iterable
 from pathlib import Path
 
 from labapp.errors import UsageError
-
-log = logging.getLogger(__name__)
 
 __all__ = ["KINDS", "OutPathError", "check_data_dir", "check_out", "folder_kind"]
 

@@ -115,8 +115,8 @@ def _stop_poller(event_name: str | None) -> Callable[[], bool] | None:
 
 def _design(combo: Combination, folder: Path, resume: bool, should_stop) -> str:
     """Start or resume the combination's design through the job `sfr design` runs; returns its status."""
-    from labapp.jobs.design import design
     from labapp.jobs.calibrate_sim import load_simcal
+    from labapp.jobs.design import design
 
     simcal = load_simcal(combo.simcal) if combo.simcal else None
     result, _ = design(None if resume else combo.config, folder, resume=resume, simcal=simcal,

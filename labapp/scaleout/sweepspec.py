@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import logging
 import re
 import tomllib
 import types
@@ -35,8 +34,6 @@ from pathlib import Path
 from design.errors import DesignError
 from design.inverse.problem import DesignConfig
 from labapp.errors import UsageError
-
-log = logging.getLogger(__name__)
 
 PRESET_KEY = "preset"
 SPEC_ONLY_KEYS = ("target", "simcal", "grid", "points")

@@ -2,8 +2,15 @@
 import numpy as np
 import pytest
 
-from analysis import (AnalysisError, BenchCalibration, CropGeometry, estimate_concentration,
-                      fit_bench_calibration, reanchor_t0, reference_offset)
+from analysis import (
+    AnalysisError,
+    BenchCalibration,
+    CropGeometry,
+    estimate_concentration,
+    fit_bench_calibration,
+    reanchor_t0,
+    reference_offset,
+)
 
 GEOMETRY = CropGeometry(0, 0, 40, grid=4)
 LEVELS = np.repeat([0.0, 1.0, 2.0, 3.0, 4.0], 2)

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from analysis import AnalysisError
-from analysis.profile import (ReleaseProfile, bootstrap_f2, dissolution_efficiency, f1_f2,
-                              mean_dissolution_time, similarity)
+from analysis.profile import ReleaseProfile, bootstrap_f2, dissolution_efficiency, f1_f2, mean_dissolution_time, similarity
 
 # Tsong, Hammerstrom, Sathe and Shah, "Statistical assessment of mean differences between two dissolution
 # data sets", Drug Inf. J. 30:1105-1112 (1996), table 1: % released of 6 reference and 6 test tablets.

@@ -3,8 +3,8 @@ the mirror planes) for pieces with the bounded h, a direction for hollow and nes
 import numpy as np
 import pytest
 
-from design.fabrication.connectivity import TAIL_SLOPE, Connectivity
 from design.errors import DesignError
+from design.fabrication.connectivity import TAIL_SLOPE, Connectivity
 
 
 def _grid(shape):

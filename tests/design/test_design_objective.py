@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.inverse.filters import project
 from design.forward.simulator import simulate, total_time
+from design.inverse.filters import project
 from design.inverse.objective import DesignObjective, rel_rmse
 from design.inverse.rate import rate_fit, rate_shape_fit
 from design.inverse.spaces import SpaceRequest, build_space

@@ -6,9 +6,9 @@ import pytest
 import trimesh
 
 from design.errors import DesignError
+from design.geometry.shapes import sample_shape
 from design.inverse.optimize import run_design
 from design.inverse.problem import DesignConfig, prepare
-from design.geometry.shapes import sample_shape
 
 SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)
 
@@ -16,8 +16,8 @@ SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkp
 def test_sphere_run_writes_every_output_and_fits(tmp_path):
     result = run_design(DesignConfig(max_iter=80, formats=("3mf", "obj"), **SMALL), tmp_path / "run")
     out = tmp_path / "run"
-    for name in ("design.stl", "design.3mf", "design.obj", "density.npz", "curves.csv", "report.png", "history.csv", "summary.json",
-                 "design.ini", "config.json", "checkpoint.npz"):
+    for name in ("design.stl", "design.3mf", "design.obj", "density.npz", "curves.csv", "report.png", "history.csv",
+                 "summary.json", "design.ini", "config.json", "checkpoint.npz"):
         assert (out / name).exists(), name
     summary = json.loads((out / "summary.json").read_text())
     for key in ("rel_rmse_density", "rel_rmse_binary", "iterations", "seconds", "seconds_per_iteration",

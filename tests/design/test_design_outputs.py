@@ -3,8 +3,8 @@ import numpy as np
 import trimesh
 
 from design.fabrication.extract import revoxelize
-from design.inverse.objective import rel_rmse
 from design.files.outputs import FINE_FACTOR, fine_release, percent_text, solid_release
+from design.inverse.objective import rel_rmse
 
 
 def test_fine_release_of_a_turned_plate_is_closer_to_its_exact_release():

@@ -3,7 +3,15 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.fabrication.printability import assess, enclosed_voids, narrowest_channel_mm, overhang_stats, overhangs, print_mass_g, prusa_profile
+from design.fabrication.printability import (
+    assess,
+    enclosed_voids,
+    narrowest_channel_mm,
+    overhang_stats,
+    overhangs,
+    print_mass_g,
+    prusa_profile,
+)
 
 
 def _hollow_ball(hole_vox: int, n: int = 40) -> np.ndarray:

@@ -6,8 +6,15 @@ from design.errors import DesignError
 from design.inverse.objective import DesignObjective
 from design.inverse.optimize import run_design
 from design.inverse.problem import ANALYTIC_DEFAULTS, ANALYTIC_W_RATE, SPACE_DEFAULTS, W_CONNECT, DesignConfig
-from design.inverse.rate import (lag_rate, lag_rate_adjoint, rate_deviation, rate_deviation_vs_target, rate_fit,
-                         rate_shape_fit, release_duration)
+from design.inverse.rate import (
+    lag_rate,
+    lag_rate_adjoint,
+    rate_deviation,
+    rate_deviation_vs_target,
+    rate_fit,
+    rate_shape_fit,
+    release_duration,
+)
 from design.inverse.spaces import SpaceRequest, build_space
 
 

@@ -3,8 +3,15 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.inverse.spaces import (BUILD_AXIS, SPACE_CHOICES, SpaceRequest, available_spaces, build_space,
-                           nfc_space, register_space)
+from design.inverse.spaces import (
+    BUILD_AXIS,
+    SPACE_CHOICES,
+    SpaceRequest,
+    available_spaces,
+    build_space,
+    nfc_space,
+    register_space,
+)
 
 
 def test_nfc_is_an_octant():

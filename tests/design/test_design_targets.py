@@ -4,8 +4,15 @@ import pytest
 
 from design.errors import DesignError
 from design.forward.simulator import simulate
-from design.inverse.targets import (SPHERE_AREA_COEF, Target, check_feasibility, constant_acceleration,
-                            resample_monotone, target_from_csv, target_from_density)
+from design.inverse.targets import (
+    SPHERE_AREA_COEF,
+    Target,
+    check_feasibility,
+    constant_acceleration,
+    resample_monotone,
+    target_from_csv,
+    target_from_density,
+)
 
 
 def test_zero_order_target_has_constant_rate_then_stops():

@@ -3,9 +3,18 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg as sla
 
-from design.fabrication.elasticity import (UNIFORM, apply_stencil, assemble, free_mask, gauss_seidel, hex8_stiffness, modulus,
-                               self_weight, stencil)
 from design.errors import DesignError
+from design.fabrication.elasticity import (
+    UNIFORM,
+    apply_stencil,
+    assemble,
+    free_mask,
+    gauss_seidel,
+    hex8_stiffness,
+    modulus,
+    self_weight,
+    stencil,
+)
 from design.fabrication.multigrid import hierarchy, pcg, prolong, restrict
 
 

@@ -3,8 +3,7 @@ import numpy as np
 import pytest
 
 from design import DesignError
-from design.forward.concentration import (Saturation, release_at_times, release_at_times_vjp, remap_time,
-                                  remap_time_vjp)
+from design.forward.concentration import Saturation, release_at_times, release_at_times_vjp, remap_time, remap_time_vjp
 
 SAT = Saturation(rate_mm_per_s=2e-4, capacity_mm3=2000.0)
 

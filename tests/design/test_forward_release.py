@@ -15,7 +15,7 @@ def _cases():
     rng = np.random.default_rng(2)
     u = rng.uniform(0.0, 3.0, 200)
     length = rng.uniform(1e-7, 0.5, 200)
-    u[:5] = [0.0113, 0.2037, 2.5013, 3.4011, 1.00042]  # off the tau grid (kinks); ramps starting before 0, ending after the last sample
+    u[:5] = [0.0113, 0.2037, 2.5013, 3.4011, 1.00042]  # off the tau grid (kinks)
     length[:5] = [0.3, 0.25, 1.0, 0.5, 1e-6]
     weight = rng.uniform(0.0, 2.0, 200)
     weight[7] = 0.0

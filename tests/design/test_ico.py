@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.forward.simulator import simulate, total_time
 from design.fabrication.ico import IcoConfig, IcoTerm, incremental_compliance, layer_tops
+from design.forward.simulator import simulate, total_time
 from design.inverse.objective import DesignObjective
 from design.inverse.presets import PRESET_NAMES, preset_values
 from design.inverse.problem import DesignConfig

@@ -12,8 +12,18 @@ from scipy.optimize import minimize as scipy_minimize
 from scipy.optimize import rosen, rosen_der
 
 from design.errors import DesignError
-from design.inverse.lbfgs import (CONVERGED, CURVATURE_C2, LINE_SEARCHES, SEARCH, STALLED, STEP, Lbfgs, LbfgsSettings,
-                          _model_step, minimize)
+from design.inverse.lbfgs import (
+    CONVERGED,
+    CURVATURE_C2,
+    LINE_SEARCHES,
+    SEARCH,
+    STALLED,
+    STEP,
+    Lbfgs,
+    LbfgsSettings,
+    _model_step,
+    minimize,
+)
 from design.inverse.optimize import run_design
 from design.inverse.problem import DesignConfig
 

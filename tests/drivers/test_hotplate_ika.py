@@ -6,7 +6,6 @@ import serial
 
 from drivers.hotplate import IKA_RCT, HeidolphHotplate, HotplateConfig, HotplateError, NamurHotplate
 from drivers.sim.heidolph_emulator import HeidolphEmulator
-
 from tests.drivers.scripted_port import scripted_plates
 
 FAST = HotplateConfig(timeout_s=0.3, backoff_s=0.1, retries=1)

@@ -2,7 +2,6 @@
 import pytest
 
 from drivers.hotplate import HEIDOLPH_HEI_TEC, HotplateConfig, HotplateError
-
 from tests.drivers.scripted_port import scripted_plates
 
 FAST = HotplateConfig(timeout_s=0.2, backoff_s=0.1, retries=1)

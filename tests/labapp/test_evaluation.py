@@ -4,12 +4,12 @@ import json
 import numpy as np
 import pytest
 
-from design.montecarlo.erosion import MonteCarloParams
 from design.forward.pipeline import simulate_mesh
 from design.geometry.shapes import sample_shape
+from design.montecarlo.erosion import MonteCarloParams
 from labapp.cli.main import main
-from labapp.records.curvefiles import read_physical_curve
 from labapp.jobs.simulate_mc import McCalibration, load_mc_calibration, simulate_mc_job
+from labapp.records.curvefiles import read_physical_curve
 
 SECONDS_PER_MM = 1500.0
 G_PER_MM3 = 1.3e-3

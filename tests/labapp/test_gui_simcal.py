@@ -7,10 +7,10 @@ import pytest
 pytest.importorskip("pytestqt")
 
 from design.geometry.shapes import sample_shape
+from labapp.acquisition.simbench import Material, sample_release
 from labapp.gui.calibration_wizard import SimulationStep
 from labapp.gui.design_launcher import DesignLauncher
 from labapp.gui.run_browser import RunBrowser
-from labapp.acquisition.simbench import Material, sample_release
 
 
 @pytest.fixture(scope="module")

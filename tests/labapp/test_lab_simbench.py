@@ -4,9 +4,9 @@ import pytest
 
 from labapp.acquisition.clock import SteppedClock
 from labapp.acquisition.engine import Engine
+from labapp.acquisition.events import FrameStored
 from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.acquisition.simbench import Material, SampleRelease, SimulatedBench, sample_release
-from labapp.acquisition.events import FrameStored
 from labapp.records.storage import read_run, verify_run
 
 

@@ -6,8 +6,7 @@ import os
 import psutil
 import pytest
 
-from labapp.records.storage import (StorageError, check_disk_space, create_run, open_run, read_run, sanitize_name,
-                            verify_run)
+from labapp.records.storage import StorageError, check_disk_space, create_run, open_run, read_run, sanitize_name, verify_run
 
 
 def _run_with_frames(tmp_path, n=3):

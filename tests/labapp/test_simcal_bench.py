@@ -6,10 +6,10 @@ import json
 import pytest
 
 from design.geometry.shapes import sample_shape
-from labapp.cli.main import main
 from labapp.acquisition.clock import SteppedClock
-from labapp.jobs.demo import simulated_run
 from labapp.acquisition.simbench import Material, sample_release
+from labapp.cli.main import main
+from labapp.jobs.demo import simulated_run
 
 
 def test_images_to_simcal_recover_the_hidden_material(tmp_path, sim_calibration):

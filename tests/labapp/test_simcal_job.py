@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from design.geometry.shapes import sample_shape
+from labapp.acquisition.simbench import Material, sample_release
 from labapp.cli.main import main
 from labapp.errors import UsageError
 from labapp.jobs.calibrate_sim import SimCalError, calibrate_sim, load_simcal
-from labapp.acquisition.simbench import Material, sample_release
 
 SHAPES = ("sphere", "pill", "spinner_top", "csg")
 MATERIAL = Material(1850.0, 1.24)

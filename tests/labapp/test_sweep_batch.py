@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from analysis import CropGeometry, fit_bench_calibration, read_cells
-from labapp.scaleout.batch import analyse_many, output_names
 from labapp.cli.main import main
+from labapp.scaleout.batch import analyse_many, output_names
 
 BENCH = Path(__file__).resolve().parents[2] / "fixtures" / "bench"
 

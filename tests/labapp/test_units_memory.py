@@ -6,9 +6,9 @@ from pathlib import Path
 import pytest
 import trimesh
 
-from labapp.jobs import meshunits
 from labapp.cli.main import main
 from labapp.errors import UsageError
+from labapp.jobs import meshunits
 from labapp.jobs.meshunits import check_memory, size_warnings
 
 SPHERE = Path(__file__).resolve().parents[2] / "fixtures" / "shapes" / "sphere.stl"

@@ -3,12 +3,9 @@ folders at once (on a local Dask cluster or a scheduler) to one summary table (`
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 
 from labapp.cli.argtypes import nonnegative_int, positive_float, positive_int
-
-log = logging.getLogger(__name__)
 
 NAME = "analyze"
 HELP = ("turn a run folder or image folder into a release curve (curve.csv, cells.csv, summary.json, curve.png); "
@@ -79,10 +76,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_batch(args: argparse.Namespace) -> int:
     """Many runs: the analysis job on Dask workers, one row each in ``--out/batch_summary.csv``."""
-    from labapp.scaleout.batch import TASK_MEMORY_GB, analyse_many
-    from labapp.scaleout.cluster import dashboard_link, dask_client
     from labapp.cli.commands.sweep import progress_printer
     from labapp.errors import UsageError
+    from labapp.scaleout.batch import TASK_MEMORY_GB, analyse_many
+    from labapp.scaleout.cluster import dashboard_link, dask_client
 
     if not args.out:
         raise UsageError("a batch of runs (several runs, --reference or --scheduler) needs --out: the folder that "

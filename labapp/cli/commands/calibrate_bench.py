@@ -2,11 +2,8 @@
 from __future__ import annotations
 
 import argparse
-import logging
 
 from labapp.cli.argtypes import finite_float, positive_float, positive_int
-
-log = logging.getLogger(__name__)
 
 NAME = "calibrate-bench"
 HELP = "fit the bench calibration (transmittance vs concentration per cell) from a masses.csv image series"

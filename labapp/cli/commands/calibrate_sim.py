@@ -2,13 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 from pathlib import Path
 
 from labapp.cli.argtypes import nonnegative_float, positive_int
-
-log = logging.getLogger(__name__)
 
 NAME = "calibrate-sim"
 HELP = "fit seconds per mm and grams per mm^3 from measured runs and their meshes (simcal.json, loo.csv, simcal.png)"

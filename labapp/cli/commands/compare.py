@@ -2,11 +2,8 @@
 from __future__ import annotations
 
 import argparse
-import logging
 
 from labapp.cli.argtypes import nonnegative_int, positive_float
-
-log = logging.getLogger(__name__)
 
 NAME = "compare"
 HELP = "compare two release curves as dissolution testing does: f1/f2, MDT, DE, model fits (A is the reference)"
@@ -48,8 +45,8 @@ def run(args: argparse.Namespace) -> int:
     """Compare, then print the table or the JSON; draw the picture with --plot."""
     import json
 
-    from labapp.jobs.compare import compare_curves, format_table, plot_comparison
     from labapp.errors import UsageError
+    from labapp.jobs.compare import compare_curves, format_table, plot_comparison
     from labapp.records.outpaths import check_out
 
     a = [p for p in args.a.split(",") if p]

@@ -6,8 +6,6 @@ import logging
 
 from labapp.cli.argtypes import positive_float
 
-log = logging.getLogger(__name__)
-
 NAME = "demo"
 HELP = ("the whole loop on the simulated bench: calibration series, runs of sample objects, calibrate-sim, a run "
         "of a further object, a design from its measured curve, one picture")

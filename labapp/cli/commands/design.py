@@ -122,9 +122,9 @@ def run(args: argparse.Namespace) -> int:
     from analysis import BenchCalibration
     from design.files.outputs import enclosed_voids_text, percent_text
     from design.inverse.problem import DesignConfig
+    from labapp.errors import UsageError
     from labapp.jobs.calibrate_sim import load_simcal
     from labapp.jobs.design import design as design_job
-    from labapp.errors import UsageError
 
     try:
         if args.resume:

@@ -2,11 +2,8 @@
 from __future__ import annotations
 
 import argparse
-import logging
 
 from labapp.cli.argtypes import positive_float
-
-log = logging.getLogger(__name__)
 
 NAME = "devices"
 HELP = "list cameras and serial ports; --probe PORT asks a port for a Heidolph reply (read-only queries)"

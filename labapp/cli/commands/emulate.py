@@ -2,12 +2,9 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import time
 
 from labapp.cli.argtypes import nonnegative_float, positive_float
-
-log = logging.getLogger(__name__)
 
 NAME = "emulate"
 HELP = "run a device emulator (prints its device path first; Ctrl-C or SIGTERM ends it and removes it)"

@@ -2,12 +2,9 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 
 from labapp.cli.argtypes import positive_int
-
-log = logging.getLogger(__name__)
 
 NAME = "evaluate"
 HELP = ("measured vs forward model (leave-one-out) vs Monte Carlo on a calibration set, with f2 and RMS "

@@ -2,11 +2,8 @@
 from __future__ import annotations
 
 import argparse
-import logging
 
 from labapp.cli.argtypes import nonnegative_float, positive_float
-
-log = logging.getLogger(__name__)
 
 NAME = "lab"
 HELP = "start the bench GUI; --simulate runs it on the simulated camera, hotplate emulator and sample object"

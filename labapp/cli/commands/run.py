@@ -7,8 +7,6 @@ import logging
 
 from labapp.cli.argtypes import finite_float, nonnegative_float, positive_float
 
-log = logging.getLogger(__name__)
-
 NAME = "run"
 HELP = "acquire a release run (real bench or --simulate) with a live status line; --resume continues one"
 
@@ -76,12 +74,12 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from analysis import BenchCalibration
-    from labapp.jobs.run import resumable, resume_run, new_run
     from labapp.acquisition.clock import make_clock
-    from labapp.errors import UsageError
-    from labapp.records.outpaths import check_data_dir
     from labapp.acquisition.procedures import RunConfig
     from labapp.acquisition.status import RunStatus
+    from labapp.errors import UsageError
+    from labapp.jobs.run import new_run, resumable, resume_run
+    from labapp.records.outpaths import check_data_dir
 
     if not args.verbose:
         logging.getLogger().setLevel(logging.WARNING)

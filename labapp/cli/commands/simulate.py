@@ -2,13 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 
 from labapp.cli.argtypes import nonnegative_float, positive_float, positive_int
 from labapp.jobs.meshunits import MM_PER_UNIT
-
-log = logging.getLogger(__name__)
 
 NAME = "simulate"
 HELP = "simulate the release curve of a mesh (STL/OBJ/PLY/OFF/3MF), sample:NAME or a density .npy/.npz"
@@ -89,10 +86,10 @@ def run(args: argparse.Namespace) -> int:
     if args.model == "mc":
         return _run_mc(args)
 
-    from labapp.jobs.compare import release_summary
-    from labapp.jobs.simulate import simulate as simulate_job
     from labapp.jobs.calibrate_sim import check_resolution, load_simcal
+    from labapp.jobs.compare import release_summary
     from labapp.jobs.physical import write_release_physical
+    from labapp.jobs.simulate import simulate as simulate_job
 
     simcal = None
     if args.simcal:

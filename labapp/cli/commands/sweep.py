@@ -3,12 +3,9 @@ on a local Dask cluster or an existing scheduler (docs/scale.md)."""
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 
 from labapp.cli.argtypes import positive_int
-
-log = logging.getLogger(__name__)
 
 NAME = "sweep"
 HELP = "run a grid of design settings (TOML spec) on a local Dask cluster or a scheduler; sweep.csv + contact sheet"
@@ -71,6 +68,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"failed: {name} (see {out / 'failed' / (name + '.txt')})", file=sys.stderr)
     print(f"wrote {result.table}" + (f", {result.contact_sheet}" if result.contact_sheet else ""))
     if result.stopped:
-        print(f"stopped: running designs were checkpointed; rerun the same command to resume", file=sys.stderr)
+        print("stopped: running designs were checkpointed; rerun the same command to resume", file=sys.stderr)
         return 130
     return 1 if result.failed else 0

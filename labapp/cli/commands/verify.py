@@ -4,9 +4,6 @@ plain image folder."""
 from __future__ import annotations
 
 import argparse
-import logging
-
-log = logging.getLogger(__name__)
 
 NAME = "verify"
 HELP = "check a run folder against its manifests (missing, altered, unlisted files, damaged manifests)"
