@@ -1,7 +1,7 @@
 """Seconds per iteration of inverse design against one scikit-fmm forward solve on the same grid.
 
 For each reduced grid N^3 (nfc, octant symmetry: the full design is (2N)^3) this runs `sfr design`'s
-engine (`design.inverse.optimize.run_design`, default optimiser and checkpoints) on a zero-order target in a
+engine (`design.files.rundir.run_design`, default optimiser and checkpoints) on a zero-order target in a
 20 mm cube, with the objective of eq. (4) plus J_rate as in earlier runs (r = 4 voxels, no
 connectivity term). After a warm-up (the L-BFGS memory fills; its step cost grows with the stored pairs), it
 alternates, for ``--rounds`` rounds, a block of design iterations (one checkpoint interval, so every
@@ -37,12 +37,13 @@ from pathlib import Path
 import numpy as np
 import skfmm
 
+import design.files.rundir
 import design.inverse.objective
 import design.inverse.optimize
+from design.files.rundir import run_design
 from design.inverse.filters import SmoothingFilter
 from design.inverse.lbfgs import Lbfgs
 from design.inverse.objective import DesignObjective
-from design.inverse.optimize import run_design
 from design.inverse.problem import DesignConfig
 
 PARTS = ("evaluate", "gradient", "optimiser", "checkpoint", "writer")
@@ -113,8 +114,8 @@ def bench(n_reduced: int, warmup: int, rounds: int, block: int, solves: int, opt
         patches.enter_context(_timed(SmoothingFilter, "adjoint", totals, "gradient"))
         patches.enter_context(_timed(Lbfgs, "tell", totals, "optimiser"))
         patches.enter_context(_timed(design.inverse.optimize._Run, "checkpoint", totals, "checkpoint"))
-        patches.enter_context(_timed(design.inverse.optimize._Run, "wait_checkpoint", totals, "checkpoint"))
-        patches.enter_context(_timed(design.inverse.optimize, "_atomic_save_npz", totals, "writer"))
+        patches.enter_context(_timed(design.files.rundir.CheckpointFile, "wait", totals, "checkpoint"))
+        patches.enter_context(_timed(design.files.rundir, "_atomic_save_npz", totals, "writer"))
         run_design(config, Path(tmp) / "run", on_iteration=on_iteration)
     for r in per_round:
         r["objective"] = r.pop("evaluate") - r["gradient"]

@@ -28,7 +28,7 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from design.forward.pipeline import input_grid
+    from design.files.pipeline import input_grid
     from design.montecarlo.erosion import simulate_mc
     from design.montecarlo.tuning import tune_mc, unit_runs
 

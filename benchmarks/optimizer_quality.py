@@ -1,7 +1,7 @@
 """Design quality of two optimisers on the same problems and evaluation budget (docs/benchmarks.md).
 
 For every target (the shipped sample shapes in the nfc and extruded spaces, and a zero-order
-curve) this runs `design.inverse.optimize.run_design` once per optimiser and start with the same
+curve) this runs `design.files.rundir.run_design` once per optimiser and start with the same
 configuration and ``--max-iter`` evaluations, keeping each run folder under ``--out``, and prints
 one markdown row: evaluations used, best J, rel. RMSE of the density's and of the binary solid's
 release curve (the fit judged), the binary solid's final release against the target's (its mass
@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from design.errors import DesignError
+from design.files.rundir import run_design
 from design.geometry.shapes import SAMPLE_SHAPES
-from design.inverse.optimize import run_design
 from design.inverse.problem import DesignConfig
 
 ZERO_ORDER = "zero-order:final=0.3,duration=0.1"

@@ -25,10 +25,11 @@ import argparse
 import numpy as np
 from scipy.optimize import minimize
 
+from design.files.targets_io import load_problem
 from design.forward.simulator import simulate
 from design.geometry.shapes import sample_shape
 from design.inverse.objective import rel_rmse
-from design.inverse.problem import DesignConfig, prepare
+from design.inverse.problem import DesignConfig
 from design.inverse.spaces import BUILD_AXIS
 
 PIECES = 100
@@ -89,7 +90,7 @@ def main() -> None:
     parser.add_argument("--target", default="sphere", help="source shape or mesh (default sphere)")
     parser.add_argument("--resolution", type=int, default=128)
     args = parser.parse_args()
-    problem = prepare(DesignConfig(target=args.target, space="extruded", resolution=args.resolution))
+    problem = load_problem(DesignConfig(target=args.target, space="extruded", resolution=args.resolution))
     tau, target = problem.target.tau_mm, problem.target.released_mm3
     h = problem.space.grid_shape[BUILD_AXIS] * problem.dx_mm
     print(f"{args.target}, extruded, resolution {args.resolution}: h = {h:.4g} mm, T = {tau[-1]:.4g} mm, "

@@ -17,9 +17,7 @@ import numpy as np
 from scipy import ndimage
 
 from design.errors import DesignError
-
-PRINT_DENSITY_G_PER_CM3 = 1.32
-"""Average density of the paper's prints (section 4.1)."""
+from design.material import PRINT_DENSITY_G_PER_CM3
 
 
 @dataclass(frozen=True)

@@ -30,12 +30,11 @@ from design.files.report import save_report
 from design.forward.simulator import simulate
 from design.geometry.voxelize import grid_for, voxelize
 from design.inverse.objective import DesignObjective, rel_rmse
+from design.inverse.optimize import HISTORY_COLUMNS
 from design.inverse.rate import rate_deviation, rate_deviation_vs_target
 
 log = logging.getLogger(__name__)
 
-HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "fab_seconds", "grad_norm", "seconds")
-"""``fab_seconds``: time of that evaluation's J_fab (the ICO solves), s; ``seconds``: run time so far, s."""
 CURVE_COLUMNS = ("tau_mm", "target_mm3", "density_mm3", "binary_mm3", "fine_mm3", "fine_target_mm3")
 """``fine_target_mm3``: the target on the finer grid: a mesh target's source re-simulated there, else the
 target itself."""

@@ -5,7 +5,7 @@ import numpy as np
 import trimesh
 
 from design.errors import DesignError
-from design.fabrication.printability import PRINT_DENSITY_G_PER_CM3
+from design.material import PRINT_DENSITY_G_PER_CM3
 
 PRINT_MASS_G = 1.75
 """Mass of every sample print, g (the paper's forward-model shapes weigh ~1.75 g)."""

@@ -7,20 +7,21 @@ refined there from that start. Every run is an ordinary resumable design folder:
 ``OUT/starts/NN``, the refinement in ``OUT`` itself, so an interrupted multi-start resumes where it
 stopped (finished starts are not run again). The whole costs about ``1 + N / 8`` single nfc runs of
 the same iteration limit (``1 + N / 4`` extruded).
+
+`coarse_start` decides which starts run and which is refined; the folders are `CoarseRuns`' business
+(`design.files.rundir` keeps them).
 """
 from __future__ import annotations
 
-import json
 import logging
-from dataclasses import replace
-from pathlib import Path
-from typing import Callable
+from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 from scipy import ndimage
 
 from design.inverse.objective import DesignObjective
-from design.inverse.optimize import IterationCallback, run_design, with_phase
+from design.inverse.optimize import IterationCallback, StartDesign, with_phase
 from design.inverse.problem import DesignConfig, Problem
 
 log = logging.getLogger(__name__)
@@ -38,8 +39,13 @@ def coarse_resolution(resolution: int) -> int:
     return min(resolution, max(MIN_COARSE_RESOLUTION, 2 * (resolution // 4)))
 
 
-def perturbed_start(seed: int) -> Callable[[DesignObjective, Problem], np.ndarray]:
-    """A `design.inverse.optimize.run_design` start: the default start plus smooth noise seeded by ``seed``."""
+def start_name(k: int) -> str:
+    """The name of coarse start ``k`` (its folder's, ``starts/NN``)."""
+    return f"{k:02d}"
+
+
+def perturbed_start(seed: int) -> StartDesign:
+    """A run's start design: the default start plus smooth noise seeded by ``seed``."""
 
     def start(objective: DesignObjective, problem: Problem) -> np.ndarray:
         x = objective.uniform_start(problem.start_region)
@@ -70,65 +76,77 @@ def upsample(x_coarse: np.ndarray, dx_coarse_mm: float, shape: tuple[int, ...], 
     return np.clip(ndimage.map_coordinates(x_coarse, coords, order=1, mode="nearest"), 0.0, 1.0)
 
 
-def _best_value(folder: Path) -> float:
-    """The lowest J in a finished run's history."""
-    history = np.loadtxt(folder / "history.csv", delimiter=",", skiprows=1, ndmin=2)
-    return float(history[:, 1].min())
+class CoarseRuns(Protocol):
+    """The coarse runs of a multi-start, each a resumable design run (`design.files.rundir` keeps them in folders)."""
+
+    def finished(self, k: int) -> bool:
+        """Whether start ``k`` has finished (its outputs are written)."""
+
+    def run(self, k: int, config: DesignConfig, start: StartDesign, on_iteration: IterationCallback | None) -> str:
+        """Run (or resume) start ``k`` with ``config`` from ``start``; returns the run's status."""
+
+    def best_value(self, k: int) -> float:
+        """The lowest J of finished start ``k``."""
 
 
-def coarse_start(config: DesignConfig, out_dir: str | Path, *, on_iteration: IterationCallback | None = None,
-                 should_stop: Callable[[], bool] | None = None) -> Callable[[DesignObjective, Problem], np.ndarray] | None:
-    """Run ``config.starts`` coarse seeded starts and return the start of the full-resolution run.
+@dataclass(frozen=True)
+class CoarseChoice:
+    """The outcome of the coarse starts: their resolution, the one refined and each one's lowest J."""
 
-    Called by `design.inverse.optimize.run_design` for a new (or not yet started) run with ``starts > 1``.
+    coarse_resolution: int
+    refined: int
+    best_values: tuple[float, ...]
+
+
+def coarse_start(config: DesignConfig, runs: CoarseRuns, *,
+                 on_iteration: IterationCallback | None = None) -> CoarseChoice | None:
+    """Run ``config.starts`` coarse seeded starts and choose the one the full-resolution run refines.
+
+    Called by `design.files.rundir.run_design` for a new (or not yet started) run with ``starts > 1``.
 
     Parameters
     ----------
     config : DesignConfig
         The full-resolution run; every coarse start uses it at `coarse_resolution`, with the same
         iteration limit and a single start.
-    out_dir : str or Path
-        The full-resolution run's folder; the starts go to ``out_dir/starts/NN`` and the choice to
-        ``out_dir/multistart.json``.
-    on_iteration, should_stop : callable, optional
-        As for `design.inverse.optimize.run_design`, passed to every coarse run.
+    runs : CoarseRuns
+        Runs the starts not finished yet (a finished start is not run again).
+    on_iteration : callable, optional
+        As for `design.files.rundir.run_design`, passed to every coarse run with its phase.
 
     Returns
     -------
-    callable or None
-        ``start(objective, problem)``: the best coarse design (lowest J) interpolated onto the full
-        grid; None when `should_stop` ended a coarse run (the caller then stops at once too).
+    CoarseChoice or None
+        The start with the lowest J (the first of equals); None when `should_stop` ended a coarse run
+        (the caller then stops at once too). `refine_start` makes its design the full run's start.
 
     Raises
     ------
     KeyboardInterrupt
         When a coarse run was interrupted (Ctrl-C); resuming continues with that start.
     """
-    out_dir = Path(out_dir)
     coarse = replace(config, resolution=coarse_resolution(config.resolution), starts=1)
-    results = []
+    values = []
     for k in range(config.starts):
-        folder = out_dir / "starts" / f"{k:02d}"
-        if not (folder / "summary.json").exists():
+        if not runs.finished(k):
             phase = f"coarse start {k + 1} of {config.starts} at resolution {coarse.resolution}"
             log.info(phase)
-            resume = (folder / "config.json").exists()
-            result = run_design(None if resume else coarse, folder, on_iteration=with_phase(on_iteration, phase),
-                                should_stop=should_stop, resume=resume, start=perturbed_start(k))
-            if result.status == "interrupted":
+            status = runs.run(k, coarse, perturbed_start(k), with_phase(on_iteration, phase))
+            if status == "interrupted":
                 raise KeyboardInterrupt
-            if result.status == "stopped":
+            if status == "stopped":
                 return None
-        results.append((_best_value(folder), folder))
-    best_value, best_folder = min(results, key=lambda r: r[0])
-    log.info("refining start %s (J = %.6g at resolution %d)", best_folder.name, best_value, coarse.resolution)
-    (out_dir / "multistart.json").write_text(json.dumps(
-        {"coarse_resolution": coarse.resolution, "refined": best_folder.name,
-         "best_J": {folder.name: value for value, folder in results}}, indent=2))
-    with np.load(best_folder / "density.npz") as data:
-        x_coarse, dx_coarse = data["rho_hat"], float(data["dx_mm"])
+        values.append(runs.best_value(k))
+    best = min(range(len(values)), key=values.__getitem__)
+    log.info("refining start %s (J = %.6g at resolution %d)", start_name(best), values[best], coarse.resolution)
+    return CoarseChoice(coarse.resolution, best, tuple(values))
 
-    def refine_start(objective: DesignObjective, problem: Problem) -> np.ndarray:
-        return upsample(x_coarse, dx_coarse, objective.space.var_shape, problem.dx_mm)
 
-    return refine_start
+def refine_start(x_coarse: np.ndarray, dx_coarse_mm: float) -> StartDesign:
+    """The full-resolution run's start: coarse design variables ``x_coarse`` (voxel edge ``dx_coarse_mm``)
+    interpolated onto its grid (`upsample`)."""
+
+    def start(objective: DesignObjective, problem: Problem) -> np.ndarray:
+        return upsample(x_coarse, dx_coarse_mm, objective.space.var_shape, problem.dx_mm)
+
+    return start

@@ -32,13 +32,13 @@ import numpy as np
 
 from design.errors import DesignError
 from design.fabrication.connectivity import TAIL_SLOPE, Connectivity
-from design.fabrication.printability import PRINT_DENSITY_G_PER_CM3
 from design.forward.fmm import MarchBuffers
 from design.forward.simulator import Release, release_gradient, simulate
 from design.geometry.shapes import PRINT_MASS_G
 from design.inverse.filters import SmoothingFilter, project, project_adjoint, project_inverse
 from design.inverse.rate import rate_fit, rate_shape_fit, release_duration
 from design.inverse.spaces import DesignSpace
+from design.material import PRINT_DENSITY_G_PER_CM3
 
 REFERENCE_MASS_MM3 = PRINT_MASS_G * 1000.0 / PRINT_DENSITY_G_PER_CM3
 """Final release the objective is normalised to, mm^3 (1.75 g at 1.32 g/cm^3)."""

@@ -1,9 +1,10 @@
-"""The optimiser loop of inverse design: a resumable run in a folder (sections 3.3-3.4, 5.2).
+"""The optimiser loop of inverse design: a resumable minimisation of eq. (4) (sections 3.3-3.4, 5.2).
 
-`run_design` prepares the problem (`design.inverse.problem`), starts from the uniform density of
-section 5.2 (or a checkpoint), minimises eq. (4), checkpoints every few evaluations, and on any stop
-(convergence, iteration limit, `should_stop`, Ctrl-C) writes the outputs of the best design found
-(`design.files.outputs`).
+`optimise` starts from the uniform density of section 5.2 (or a start design, or a `Checkpoint`),
+minimises eq. (4), hands a `Checkpoint` to a `CheckpointStore` every few evaluations, and on any stop
+(convergence, iteration limit, `should_stop`, Ctrl-C) returns the best design found. It reads and writes
+no file: the run folder (configuration, checkpoints, outputs) is `design.files.rundir`, whose
+`run_design` is the public entry.
 
 Optimisers (`DesignConfig.optimizer`): "lbfgs" (default), the lean L-BFGS of `design.inverse.lbfgs`, whose
 step costs a small fraction of an evaluation and whose whole state goes into every checkpoint, so a
@@ -31,23 +32,17 @@ most `MAX_RESTARTS` times per beta stage.
 """
 from __future__ import annotations
 
-import json
 import logging
-import os
-import threading
 import time
-from dataclasses import asdict, dataclass, fields
-from pathlib import Path
-from typing import Callable
+from dataclasses import dataclass, field
+from typing import Callable, Protocol
 
 import nlopt
 import numpy as np
 
-from design.errors import DesignError
-from design.files.outputs import HISTORY_COLUMNS, DesignOutputs, write_outputs
 from design.inverse.lbfgs import CONVERGED, STALLED, Lbfgs, LbfgsSettings
 from design.inverse.objective import DesignObjective
-from design.inverse.problem import DesignConfig, Problem, prepare
+from design.inverse.problem import DesignConfig, Problem
 
 log = logging.getLogger(__name__)
 
@@ -68,66 +63,88 @@ RESTART_GAIN = 1e-3
 """Relative decrease of J a session must achieve for another restart to be tried."""
 BETA_STAGES = 4
 """Stages of the beta continuation (`DesignConfig.beta_final`)."""
+HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "fab_seconds", "grad_norm", "seconds")
+"""One row per evaluation: ``fab_seconds`` is the time of that evaluation's J_fab (the ICO solves), s;
+``seconds`` the run time so far, s."""
+
+
 @dataclass(frozen=True)
-class DesignResult:
-    """What a design run returns.
+class Checkpoint:
+    """What a run resumes from (``checkpoint.npz``, `design.files.rundir`).
 
     Attributes
     ----------
-    out_dir : Path
+    x : (N,) ndarray of float
+        The last evaluated design variables rho_hat, flat.
+    best_x : (N,) ndarray of float
+        The best design variables of the current beta stage, flat.
+    best_value : float
+        J at ``best_x``.
+    stage : int
+        The beta stage the run continues with (`beta_stages`).
+    history : (M, len(HISTORY_COLUMNS)) ndarray of float
+        Every evaluation so far.
+    lbfgs : dict of str to ndarray
+        The "lbfgs" optimiser's state (`design.inverse.lbfgs.Lbfgs.state`) when a trial point is pending,
+        else empty.
+    """
+
+    x: np.ndarray
+    best_x: np.ndarray
+    best_value: float
+    stage: int
+    history: np.ndarray
+    lbfgs: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+class CheckpointStore(Protocol):
+    """Where `optimise` keeps its checkpoints (`design.files.rundir.CheckpointFile` writes ``checkpoint.npz``).
+
+    ``save(checkpoint, wait=False)`` may write while the next evaluation runs: the arrays are handed over
+    as they are, not copied, and `optimise` calls ``wait()`` before the optimiser changes them; ``wait()``
+    raises what a pending write raised.
+    """
+
+    def save(self, checkpoint: Checkpoint, *, wait: bool = True) -> None: ...
+
+    def wait(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What `optimise` returns.
+
+    Attributes
+    ----------
     status : str
-        "converged", "max_iter", "stalled" (nlopt's line search gave up, restarts exhausted),
+        "converged", "max_iter", "stalled" (the line search gave up, restarts exhausted),
         "stopped" (should_stop) or "interrupted" (Ctrl-C).
     iterations : int
         Objective evaluations over all sessions of the run (resumes included).
     best_value : float
-    outputs : DesignOutputs
+    best_x : ndarray of float, variable shape
+        The best design variables found.
+    history : list of rows with `HISTORY_COLUMNS`
+    session_seconds : float
+        Wall time of this session.
     """
 
-    out_dir: Path
     status: str
     iterations: int
     best_value: float
-    outputs: DesignOutputs
-
-
-def _atomic_save_npz(path: Path, **arrays) -> None:
-    """Write arrays to ``path`` via a temporary file and a rename, so a crash leaves the old file.
-
-    Uncompressed: zlib took 1.2 s for the two 17 MB design-variable arrays of a 128^3 design,
-    0.12 s per evaluation at the default checkpoint interval; writing them plainly takes 0.05 s.
-    """
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, **arrays)
-    os.replace(tmp, path)
-
-
-def _load_config(out_dir: Path) -> DesignConfig:
-    try:
-        data = json.loads((out_dir / "config.json").read_text())
-    except (OSError, ValueError) as exc:
-        raise DesignError(f"cannot resume: no readable config.json in {out_dir}: {exc}") from exc
-    names = {f.name for f in fields(DesignConfig)}
-    data = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names}
-    data.setdefault("rate_span", (0.0, 1.0))  # runs stored before the option compared the whole curve
-    data.setdefault("optimizer", "LD_LBFGS")  # and were optimised with nlopt's L-BFGS
-    data.setdefault("allow_pieces", True)  # runs stored without the option had no connectivity term
-    data.setdefault("connect_planes", False)  # and runs stored before the plane term measured the core only
-    data.setdefault("connect_tail", 0.0)  # and before the tail, without it
-    data.setdefault("line_search", "strong-wolfe")  # the "lbfgs" optimiser's only rule before the option
-    if data.get("beta_final") is None:  # stored resolved: None always meant a fixed beta
-        data["beta_final"] = data.get("beta")
-    return DesignConfig(**data)
+    best_x: np.ndarray
+    history: list[list[float]]
+    session_seconds: float
 
 
 class _Run:
     """State of one optimisation session: best design, history, checkpoints, stop reason."""
 
-    def __init__(self, objective: DesignObjective, out_dir: Path, config: DesignConfig, start: int,
+    def __init__(self, objective: DesignObjective, store: CheckpointStore, config: DesignConfig, start: int,
                  history: list[list[float]], on_iteration: IterationCallback | None,
                  should_stop: Callable[[], bool] | None) -> None:
         self.objective = objective
-        self.out_dir = out_dir
+        self.store = store
         self.config = config
         self.k = start
         self.history = history
@@ -142,8 +159,6 @@ class _Run:
         self.lbfgs: Lbfgs | None = None  # the "lbfgs" optimiser with a pending trial point
         self.stage = 0  # index of the beta stage a resume continues with
         self.terms: dict = {}
-        self._writer: threading.Thread | None = None  # the checkpoint being written
-        self._writer_error: BaseException | None = None
         self.t0 = time.perf_counter() - (history[-1][-1] if history else 0.0)
         self.session_t0 = time.perf_counter()
         self.session_start = start
@@ -199,7 +214,7 @@ class _Run:
         the evaluation in the history and the best design."""
         x = self.to_x(z) if self.cosine else z.copy()  # a new array: kept as last_x/best_x as it is
         ev = self.objective.evaluate(x.reshape(self.objective.space.var_shape))
-        self.wait_checkpoint()  # the optimiser's update, after this returns, changes the saved arrays
+        self.store.wait()  # the optimiser's update, after this returns, changes the saved arrays
         if grad.size:
             if self.cosine:  # chain rule of to_x
                 np.multiply(ev.grad.ravel(), np.sin(z), out=grad)
@@ -227,43 +242,21 @@ class _Run:
             self.on_iteration(self.k, self.last_x, self.terms)
 
     def checkpoint(self, wait: bool = True) -> None:
-        """Save current and best variables, the history, the stage and the "lbfgs" optimiser's
-        state (when a trial is pending), atomically.
+        """Hand the current and best variables, the history, the stage and the "lbfgs" optimiser's
+        state (when a trial is pending) to the store.
 
-        With ``wait=False`` the file is written by a thread while the next evaluation runs (the
-        optimiser's 2 m N doubles took 0.4-2.3 s to write at 128^3 on the shared machine). The
-        arrays are saved as they are, not copied: the evaluation only reads them and writes the
-        trial gradient, which is not saved, and `evaluate` waits for the writer before returning
-        to the optimiser.
+        With ``wait=False`` the store may write while the next evaluation runs (the optimiser's 2 m N
+        doubles took 0.4-2.3 s to write at 128^3 on the shared machine). The arrays are handed over as
+        they are, not copied: the evaluation only reads them and writes the trial gradient, which is not
+        saved, and `evaluate` waits for the store before returning to the optimiser.
         """
-        self.wait_checkpoint()
+        self.store.wait()
         if self.last_x is None:
             return
-        state = {} if self.lbfgs is None else {f"lbfgs_{k}": v for k, v in self.lbfgs.state().items()}
-        arrays = dict(x=self.last_x, best_x=self.best_x, best_value=self.best_value, stage=self.stage,
-                      history=np.array(self.history, dtype=float).reshape(-1, len(HISTORY_COLUMNS)), **state)
-        path = self.out_dir / "checkpoint.npz"
-        if wait:
-            _atomic_save_npz(path, **arrays)
-            return
-
-        def write() -> None:
-            try:
-                _atomic_save_npz(path, **arrays)
-            except BaseException as exc:  # noqa: BLE001 -- re-raised in the run's thread by wait_checkpoint
-                self._writer_error = exc
-
-        self._writer = threading.Thread(target=write, name="checkpoint", daemon=True)
-        self._writer.start()
-
-    def wait_checkpoint(self) -> None:
-        """Wait for a checkpoint being written; raise its error, if any."""
-        if self._writer is None:
-            return
-        self._writer.join()
-        self._writer, error, self._writer_error = None, self._writer_error, None
-        if error is not None:
-            raise DesignError(f"cannot write checkpoint {self.out_dir / 'checkpoint.npz'}: {error}") from error
+        state = {} if self.lbfgs is None else dict(self.lbfgs.state())
+        self.store.save(Checkpoint(x=self.last_x, best_x=self.best_x, best_value=self.best_value, stage=self.stage,
+                                   history=np.array(self.history, dtype=float).reshape(-1, len(HISTORY_COLUMNS)),
+                                   lbfgs=state), wait=wait)
 
 
 def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> str:
@@ -372,93 +365,63 @@ def _stage(run: _Run, start: np.ndarray, stage_end: int) -> str:
     return status
 
 
-def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration: IterationCallback | None = None,
-               should_stop: Callable[[], bool] | None = None, resume: bool = False,
-               start: StartDesign | None = None) -> DesignResult:
-    """Run (or resume) an inverse design in ``out_dir``.
+def build_objective(problem: Problem, config: DesignConfig) -> DesignObjective:
+    """The objective of eq. (4) for a prepared problem and its run's settings."""
+    return DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
+                           radius_vox=problem.radius_vox, beta=config.beta, w_binary=config.w_binary,
+                           w_fab=config.w_fab, w_rate=config.w_rate, robust_eta=config.robust_eta,
+                           rate_span=tuple(config.rate_span),
+                           w_conn=0.0 if config.allow_pieces else config.w_connect,
+                           conn_planes=config.connect_planes, conn_tail=config.connect_tail,
+                           rate_lag=max(1, round(config.rate_window_vox * problem.space.dx_mm * (config.samples - 1)
+                                                 / problem.target.total_time_mm)))
+
+
+def optimise(objective: DesignObjective, problem: Problem, config: DesignConfig, store: CheckpointStore, *,
+             saved: Checkpoint | None = None, start: StartDesign | None = None,
+             on_iteration: IterationCallback | None = None,
+             should_stop: Callable[[], bool] | None = None) -> Outcome:
+    """Minimise eq. (4) through the beta stages of ``config``, from ``saved`` or a start design.
 
     Parameters
     ----------
-    config : DesignConfig or None
-        The run's settings; None with ``resume=True`` reuses the stored ``config.json``.
-    out_dir : str or Path
-        The run folder; must not hold a run unless resuming.
-    on_iteration : callable, optional
-        ``on_iteration(k, x, terms)`` after every evaluation; ``terms`` holds J, J_fit,
-        J_binary, J_fab, grad_norm, seconds and eta_s (upper bound from the iteration limit), and
-        in a multi-start run ``phase`` (which coarse start, or the refinement).
-    should_stop : callable, optional
-        Polled before every evaluation; True stops cleanly (best design still written).
-    resume : bool
-        Continue from ``checkpoint.npz``: exactly where the run stopped with the "lbfgs" optimiser;
-        with nlopt's, from the last evaluated design with an empty memory.
+    objective : DesignObjective
+        `build_objective` of the problem; its beta follows the stages.
+    problem : Problem
+    config : DesignConfig
+    store : CheckpointStore
+        Receives a `Checkpoint` every ``config.checkpoint_every`` evaluations and at the end.
+    saved : Checkpoint, optional
+        Continue from it: exactly where the run stopped with the "lbfgs" optimiser; with nlopt's, from
+        the last evaluated design with an empty memory.
     start : callable, optional
         ``start(objective, problem)`` returns the start variables of a new run (variable shape);
         default the uniform start of section 5.2 (`DesignObjective.uniform_start`).
+    on_iteration : callable, optional
+        ``on_iteration(k, x, terms)`` after every evaluation; ``terms`` holds J, J_fit, J_binary,
+        J_fab, grad_norm, seconds and eta_s (upper bound from the iteration limit).
+    should_stop : callable, optional
+        Polled before every evaluation; True stops cleanly.
 
     Returns
     -------
-    DesignResult
-
-    Raises
-    ------
-    DesignError
-        On an invalid configuration, an infeasible target, or a resume mismatch.
+    Outcome
     """
-    out_dir = Path(out_dir)
-    if resume:
-        stored = _load_config(out_dir)
-        if config is not None and config != stored:
-            raise DesignError(f"cannot resume {out_dir} with a different configuration; stored: {stored}")
-        config = stored
-    else:
-        if config is None:
-            raise DesignError("a configuration is required to start a new design run")
-        if (out_dir / "config.json").exists():
-            raise DesignError(f"{out_dir} already holds a design run; resume it or choose another folder")
-        out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "config.json").write_text(json.dumps(asdict(config), indent=2))
-    problem = prepare(config)
-    (out_dir / "feasibility.txt").write_text(problem.feasibility.text() + "\n")
-    if not problem.feasibility.feasible and not config.allow_infeasible:
-        raise DesignError(problem.feasibility.text())
-    objective = DesignObjective(problem.space, problem.target.released_mm3, problem.target.total_time_mm,
-                                radius_vox=problem.radius_vox, beta=config.beta, w_binary=config.w_binary,
-                                w_fab=config.w_fab, w_rate=config.w_rate, robust_eta=config.robust_eta,
-                                rate_span=tuple(config.rate_span),
-                                w_conn=0.0 if config.allow_pieces else config.w_connect,
-                                conn_planes=config.connect_planes, conn_tail=config.connect_tail,
-                                rate_lag=max(1, round(config.rate_window_vox * problem.space.dx_mm * (config.samples - 1)
-                                                      / problem.target.total_time_mm)))
-    history: list[list[float]] = []
-    ckpt = out_dir / "checkpoint.npz"
-    saved: dict[str, np.ndarray] = {}
-    if resume and ckpt.exists():
-        with np.load(ckpt) as data:
-            saved = {name: data[name] for name in data.files}
-        # histories stored before the fab_seconds column get it as zeros
-        history = [list(r) if len(r) == len(HISTORY_COLUMNS) else [*r[:5], 0.0, *r[5:]]
-                   for r in saved["history"]]
-        log.info("resuming %s at evaluation %d", out_dir, len(history))
-    if not saved and start is None and config.starts > 1:  # coarse-to-fine multi-start
-        from design.inverse.multistart import coarse_start
-        start = coarse_start(config, out_dir, on_iteration=on_iteration, should_stop=should_stop)
-    if config.starts > 1:
-        on_iteration = with_phase(on_iteration, f"refinement at resolution {config.resolution}")
-    if saved:
-        x0 = saved["x"].reshape(problem.space.var_shape)
+    history: list[list[float]] = [] if saved is None else [list(r) for r in saved.history]
+    if saved is not None:
+        x0 = saved.x.reshape(problem.space.var_shape)
     elif start is not None:
         x0 = np.asarray(start(objective, problem), dtype=float).reshape(problem.space.var_shape)
     else:
         x0 = objective.uniform_start(problem.start_region)
-    run = _Run(objective, out_dir, config, len(history), history, on_iteration, should_stop)
+    run = _Run(objective, store, config, len(history), history, on_iteration, should_stop)
     lbfgs_state = None
-    if saved:
-        run.best_x = saved["best_x"].ravel().copy()
-        run.best_value = float(saved.get("best_value", run.best_value))
-        run.stage = int(saved.get("stage", 0))
+    if saved is not None:
+        run.best_x = saved.best_x.ravel().copy()
+        run.best_value = float(saved.best_value)
+        run.stage = int(saved.stage)
         if config.optimizer == "lbfgs":  # its run continues from its saved state, else from the best
-            lbfgs_state = {k[len("lbfgs_"):]: v for k, v in saved.items() if k.startswith("lbfgs_")} or None
+            lbfgs_state = dict(saved.lbfgs) or None
             x0 = run.best_x.reshape(problem.space.var_shape)
     status = "max_iter" if run.k >= config.max_iter else "stalled"  # when no stage is left to run
     start, resume_stage = x0.ravel().copy(), run.stage
@@ -484,7 +447,4 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     run.checkpoint()
     run.lbfgs = None  # its 2 m N doubles are not needed for the outputs
     best = (run.best_x if run.best_x is not None else x0.ravel()).reshape(problem.space.var_shape)
-    outputs = write_outputs(out_dir, problem, objective, best, history, config, status=status,
-                            session_seconds=time.perf_counter() - run.session_t0)
-    log.info("design %s after %d evaluations: %s", status, run.k, outputs.summary_path)
-    return DesignResult(out_dir, status, run.k, float(run.best_value), outputs)
+    return Outcome(status, run.k, float(run.best_value), best, history, time.perf_counter() - run.session_t0)

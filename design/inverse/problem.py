@@ -18,7 +18,6 @@ from design.errors import DesignError
 from design.fabrication.connectivity import TAIL_SLOPE
 from design.fabrication.extract import count_pieces
 from design.fabrication.ico import DEFAULT_COARSEN, DEFAULT_LAYERS, IcoConfig
-from design.files.meshio import load_mesh
 from design.forward.simulator import total_time
 from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.geometry.voxelize import voxelize
@@ -32,8 +31,7 @@ from design.inverse.targets import (
     check_feasibility,
     constant_acceleration,
     curve_end_mm,
-    read_curve_csv,
-    target_from_csv,
+    target_from_curve,
     target_from_mesh,
 )
 
@@ -412,14 +410,26 @@ def _is_shape_target(spec: str) -> bool:
     return spec in SAMPLE_SHAPES or Path(spec).suffix.lower() in MESH_SUFFIXES
 
 
-def _source_mesh(spec: str):
+def target_file(spec: str) -> str | None:
+    """What file a target spec names: "mesh" (a mesh file), "csv" (a ``tau_mm,released_mm3`` curve) or None
+    (a sample shape or an analytic family, which need no file)."""
+    if spec in SAMPLE_SHAPES:
+        return None
+    if _is_shape_target(spec):
+        return "mesh"
+    if _parse_analytic(spec) is None and spec.lower().endswith(".csv"):
+        return "csv"
+    return None
+
+
+def _source_mesh(spec: str, mesh: trimesh.Trimesh | None) -> trimesh.Trimesh | None:
+    """The source shape of a sample-shape or mesh-file target (the latter as loaded), else None."""
     if spec in SAMPLE_SHAPES:
         return sample_shape(spec)
-    path = Path(spec)
     if _is_shape_target(spec):
-        if not path.exists():
-            raise DesignError(f"target mesh {path} does not exist")
-        return load_mesh(path)
+        if mesh is None:
+            raise DesignError(f"target {spec!r} is a mesh file: load it with design.files.targets_io.load_problem")
+        return mesh
     return None
 
 
@@ -427,11 +437,12 @@ def _even_ceil(x: float) -> int:
     return max(2, 2 * int(np.ceil(x / 2.0 - 1e-9)))
 
 
-def _curve_target(config: DesignConfig, analytic: tuple[float, float, float] | None, t_mm: float,
-                  box_volume_mm3: float, box_time_mm: float) -> Target:
+def _curve_target(config: DesignConfig, analytic: tuple[float, float, float] | None,
+                  curve: tuple[np.ndarray, np.ndarray] | None, t_mm: float, box_volume_mm3: float,
+                  box_time_mm: float) -> Target:
     """The CSV or analytic target on the tau grid up to ``t_mm``; analytic fractions of the domain box."""
     if analytic is None:
-        return target_from_csv(config.target, t_mm, config.samples)
+        return target_from_curve(*curve, t_mm, config.samples, source=config.target)
     q, final, duration = analytic
     if not 0 < final <= 1 or not 0 < duration <= 1:
         raise DesignError(f"analytic final and duration are fractions in (0, 1], got {final}, {duration}")
@@ -514,13 +525,32 @@ def _radius_vox(config: DesignConfig, dx_mm: float) -> float:
     return radius
 
 
-def prepare(config: DesignConfig) -> Problem:
-    """Build the design space, the target on its tau grid, and the feasibility report."""
-    mesh = _source_mesh(config.target)
+def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
+            curve: tuple[np.ndarray, np.ndarray] | None = None) -> Problem:
+    """Build the design space, the target on its tau grid, and the feasibility report.
+
+    Parameters
+    ----------
+    config : DesignConfig
+    mesh : trimesh.Trimesh, optional
+        The source mesh of a mesh-file target (`target_file` "mesh"), mm, as loaded.
+    curve : (tau_mm, released_mm3) of (N,) ndarrays of float, optional
+        The columns of a CSV target (`target_file` "csv"), as written.
+        `design.files.targets_io.load_problem` reads both from the target's file and calls this.
+
+    Raises
+    ------
+    DesignError
+        On a target spec that names nothing known, a file target without its contents, or a problem
+        the settings cannot build.
+    """
+    mesh = _source_mesh(config.target, mesh)
     analytic = None if mesh is not None else _parse_analytic(config.target)
     if mesh is None and analytic is None and not config.target.lower().endswith(".csv"):
         raise DesignError(f"target {config.target!r} is neither a sample shape ({', '.join(SAMPLE_SHAPES)}), "
                           f"a mesh file ({', '.join(MESH_SUFFIXES)}), a .csv curve, nor zero-order/accel:q=..")
+    if mesh is None and analytic is None and curve is None:
+        raise DesignError(f"target {config.target!r} is a CSV file: read it with design.files.targets_io.load_problem")
     lo = hi = None
     if mesh is not None:
         lo, hi = np.asarray(mesh.bounds[0], float), np.asarray(mesh.bounds[1], float)
@@ -533,7 +563,7 @@ def prepare(config: DesignConfig) -> Problem:
         if config.space == "nfc":
             size = np.full(3, size.max())
     elif analytic is None:  # a CSV curve: a cube whose horizon T holds the whole release
-        tau, c = read_curve_csv(config.target)
+        tau, c = curve
         size = np.full(3, max(DEFAULT_DOMAIN_MM, CSV_HORIZON_MARGIN * 2.0 * curve_end_mm(tau, c)))
     else:
         size = np.full(3, DEFAULT_DOMAIN_MM)
@@ -546,7 +576,7 @@ def prepare(config: DesignConfig) -> Problem:
     if config.space == "extruded":
         height = config.height_mm or (config.height_fraction * float(size.max()) if config.height_fraction else None)
         height = height or (float(hi[BUILD_AXIS] - lo[BUILD_AXIS]) if mesh is not None else extrusion_height_mm(
-            _curve_target(config, analytic, box_time, box_volume, box_time), dx))
+            _curve_target(config, analytic, curve, box_time, box_volume, box_time), dx))
         if height is not None:
             height_vox = max(1, int(round(height / dx)))
             full[BUILD_AXIS] = max(full[BUILD_AXIS], height_vox)
@@ -568,7 +598,7 @@ def prepare(config: DesignConfig) -> Problem:
                                   shape=sim_full)
         source_solid = voxelize(mesh, dx, origin_mm=origin, shape=sim_full) > 0.5
     else:
-        target = _curve_target(config, analytic, t_total, box_volume, box_time)
+        target = _curve_target(config, analytic, curve, t_total, box_volume, box_time)
     ext = np.asarray(sim_full, float) * dx
     area = 2.0 * float(ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2])
     feasibility = check_feasibility(target, domain_volume, dx_mm=dx, domain_area_mm2=area)

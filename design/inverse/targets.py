@@ -5,9 +5,7 @@ section 3.4), in simulation units: tau in mm dissolved, released amount in mm^3 
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
@@ -85,42 +83,6 @@ def resample_monotone(tau_mm: np.ndarray, released_mm3: np.ndarray, grid_mm: np.
     return np.asarray(out, dtype=float)
 
 
-def read_curve_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """The ``tau_mm`` and ``released_mm3`` columns of a target CSV, as written (no resampling).
-
-    Raises
-    ------
-    DesignError
-        If the file cannot be read, a row lacks a finite number in either column (the message names the
-        row and column), or a time is listed twice.
-    """
-    path = Path(path)
-    try:
-        with path.open(newline="") as fh:
-            rows = list(csv.DictReader(fh))
-    except OSError as exc:
-        raise DesignError(f"cannot read a tau_mm,released_mm3 curve from {path}: {exc}") from exc
-    values = []
-    for line, row in enumerate(rows, start=2):
-        pair = []
-        for key in ("tau_mm", "released_mm3"):
-            try:
-                pair.append(float(row[key]))
-            except (KeyError, TypeError, ValueError):
-                raise DesignError(f"{path} row {line}, {key}: {row.get(key)!r} is not a number; expected a "
-                                  "tau_mm,released_mm3 curve") from None
-            if not np.isfinite(pair[-1]):
-                raise DesignError(f"{path} row {line}, {key}: {row[key]!r}; expected a finite number")
-        if values and pair[0] == values[-1][0]:
-            raise DesignError(f"{path} row {line}: tau_mm {pair[0]:g} is listed twice (rows {line - 1} and {line}); "
-                              "give each time once")
-        values.append(pair)
-    tau, c = (np.array(col, dtype=float) for col in zip(*values)) if values else (np.array([]), np.array([]))
-    if tau.size < 2:
-        raise DesignError(f"{path}: a target curve needs >= 2 rows, got {tau.size}")
-    return tau, c
-
-
 def curve_end_mm(tau_mm: np.ndarray, released_mm3: np.ndarray) -> float:
     """When a cumulative curve reaches its final value (its last rise), mm."""
     c = np.asarray(released_mm3, dtype=float)
@@ -128,25 +90,36 @@ def curve_end_mm(tau_mm: np.ndarray, released_mm3: np.ndarray) -> float:
     return float(tau_mm[min(rising[-1] + 1, c.size - 1)]) if rising.size else float(tau_mm[0])
 
 
-def target_from_csv(path: str | Path, total_time_mm: float, samples: int = 1001) -> Target:
-    """Read a ``tau_mm,released_mm3`` CSV and resample it onto the design grid.
+def target_from_curve(tau_mm: np.ndarray, released_mm3: np.ndarray, total_time_mm: float, samples: int = 1001, *,
+                      source: str) -> Target:
+    """A measured or tabulated ``tau_mm,released_mm3`` curve resampled onto the design grid.
+
+    Parameters
+    ----------
+    tau_mm, released_mm3 : (N,) ndarrays of float
+        The curve as written (`design.files.targets_io.read_curve_csv`).
+    total_time_mm : float
+        The design's horizon T, mm.
+    samples : int
+    source : str
+        Where the curve comes from (a CSV path): names it in errors; the target's source is ``csv:SOURCE``.
 
     Raises
     ------
     DesignError
-        If the curve is unreadable or not monotone, or if it still rises after the horizon T: no
-        design in the domain releases anything after T (the all-solid domain is dissolved by then),
-        and cutting the curve at T would understate its total.
+        If the curve is not monotone, or if it still rises after the horizon T: no design in the domain
+        releases anything after T (the all-solid domain is dissolved by then), and cutting the curve at T
+        would understate its total.
     """
-    tau, c = read_curve_csv(path)
+    tau, c = tau_mm, released_mm3
     end = curve_end_mm(tau, c)
     if end > total_time_mm:
         at_t = float(np.interp(total_time_mm, tau, c, left=0.0))
-        raise DesignError(f"{path}: the curve rises until tau = {end:.4g} mm (to {c[-1]:.4g} mm^3), past the "
+        raise DesignError(f"{source}: the curve rises until tau = {end:.4g} mm (to {c[-1]:.4g} mm^3), past the "
                           f"design domain's horizon T = {total_time_mm:.4g} mm, by which it has released "
                           f"{at_t:.4g} mm^3 ({at_t / c[-1]:.1%}); enlarge the domain so that T >= {end:.4g} mm")
     grid = tau_grid(total_time_mm, samples)
-    return Target(grid, resample_monotone(tau, c, grid), f"csv:{path}")
+    return Target(grid, resample_monotone(tau, c, grid), f"csv:{source}")
 
 
 def constant_acceleration(total_time_mm: float, final_mm3: float, duration_mm: float,

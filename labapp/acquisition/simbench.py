@@ -136,7 +136,7 @@ def sample_release(shape: str = "pill", index: int = 0, resolution: int = 48,
     material : Material, optional
         Default :meth:`Material.draw`.
     """
-    from design.forward.pipeline import simulate_mesh
+    from design.files.pipeline import simulate_mesh
     from design.geometry.shapes import sample_shape
 
     material = material or Material.draw()

@@ -61,7 +61,7 @@ def mid_slice(x, k: int, every: int = 5):
 
 
 class DesignLauncher(QWidget):
-    """Pick a run folder or a ``tau_mm,released_mm3`` CSV, run ``design.inverse.optimize.run_design`` off the GUI
+    """Pick a run folder or a ``tau_mm,released_mm3`` CSV, run ``design.files.rundir.run_design`` off the GUI
     thread with progress, show target vs achieved curves and save the STL."""
 
     def __init__(self, data_dir: Path, parent: QWidget | None = None) -> None:

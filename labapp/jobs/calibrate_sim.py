@@ -147,7 +147,7 @@ def read_set(path: str | Path) -> list[SetRow]:
 def _simulate(mesh_path: Path, resolution: int):
     from design.errors import DesignError
     from design.files.meshio import load_mesh
-    from design.forward.pipeline import mesh_grid
+    from design.files.pipeline import mesh_grid
     from design.forward.simulator import simulate
 
     try:

@@ -157,7 +157,7 @@ def run_demo(out_dir: Path, sample: str = "pill", interval_s: float = 11.0, cali
     material : Material, optional
         The bench's hidden material (default: :meth:`Material.draw`).
     """
-    from design.forward.pipeline import simulate_mesh
+    from design.files.pipeline import simulate_mesh
     from design.geometry.shapes import sample_shape
     from design.inverse.problem import DesignConfig
     from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal

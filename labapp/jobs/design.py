@@ -114,7 +114,7 @@ def design(config, out: str | Path, *, resume: bool = False, units: str = "mm", 
 
     Returns
     -------
-    result : design.inverse.optimize.DesignResult
+    result : design.files.rundir.DesignResult
     physical : dict or None
         The summary with the physical prediction (None without ``simcal``).
 

@@ -112,7 +112,7 @@ def evaluate_models(set_csv: str | Path, bench_calibration: str | Path | None, o
     """
     from design.errors import DesignError
     from design.files.meshio import load_mesh
-    from design.forward.pipeline import mesh_grid
+    from design.files.pipeline import mesh_grid
     from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION, SimCalError, calibrate_sim, read_set
 
     say = progress or (lambda fraction, message: None)

@@ -196,11 +196,11 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
     bench_calibration : analysis.BenchCalibration, optional
         For a run folder target (default: the run's own ``calibration.json``).
     on_iteration, should_stop, resume
-        As in ``design.inverse.optimize.run_design``.
+        As in ``design.files.rundir.run_design``.
 
     Returns
     -------
-    result : design.inverse.optimize.DesignResult
+    result : design.files.rundir.DesignResult
     summary : dict or None
         The summary with the physical prediction (None without ``simcal``).
 
@@ -211,7 +211,7 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
     """
     import dataclasses
 
-    from design.inverse.optimize import run_design
+    from design.files.rundir import run_design
     from labapp.jobs.calibrate_sim import curve_of
 
     out_dir = Path(out_dir)
@@ -264,7 +264,7 @@ def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = N
     t_s, released_g : (Q,) ndarray of float
     """
     from design.errors import DesignError
-    from design.forward.pipeline import input_grid
+    from design.files.pipeline import input_grid
     from design.forward.simulator import simulate
 
     try:

@@ -40,7 +40,7 @@ def simulation_grid(source: str, *, resolution: int | None = None, voxel_size_mm
     warnings : list of str
     """
     from design.files.meshio import DENSITY_SUFFIXES
-    from design.forward.pipeline import DEFAULT_RESOLUTION, SAMPLE_PREFIX, input_grid, mesh_grid
+    from design.files.pipeline import DEFAULT_RESOLUTION, SAMPLE_PREFIX, input_grid, mesh_grid
     from design.geometry.shapes import sample_shape
     from labapp.jobs.meshunits import SIMULATE_BYTES_PER_VOXEL, check_memory, grid_shape, load_mesh_mm, size_warnings
 

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from design.fabrication.printability import PRINT_DENSITY_G_PER_CM3
+from design.material import PRINT_DENSITY_G_PER_CM3
 from design.montecarlo.erosion import DEFAULT_SEEDS, MonteCarloParams, simulate_mc
 from design.montecarlo.tuning import McTuning
 from labapp.acquisition.simbench import WATER_G

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
+from design.files.rundir import run_design
 from design.inverse.multistart import coarse_resolution, perturbed_start, upsample
-from design.inverse.optimize import run_design
 from design.inverse.problem import MULTISTART_STARTS, DesignConfig
 
 

@@ -6,8 +6,8 @@ import pytest
 import trimesh
 
 from design.errors import DesignError
+from design.files.rundir import run_design
 from design.geometry.shapes import sample_shape
-from design.inverse.optimize import run_design
 from design.inverse.problem import DesignConfig, prepare
 
 SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)

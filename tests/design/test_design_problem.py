@@ -4,9 +4,9 @@ import pytest
 import trimesh
 
 from design.errors import DesignError
+from design.files.targets_io import load_problem, target_from_csv
 from design.forward.simulator import simulate
 from design.inverse.problem import START_FILL, DesignConfig, prepare
-from design.inverse.targets import target_from_csv
 
 
 def _long_curve(path, end_mm=15.0, final_mm3=900.0):
@@ -26,11 +26,11 @@ def test_csv_rising_past_the_horizon_is_refused_with_the_numbers(tmp_path):
 
 def test_csv_target_without_a_domain_gets_a_horizon_that_holds_the_whole_curve(tmp_path):
     path = _long_curve(tmp_path / "long.csv")  # releases until 15 mm: the default 20 mm cube has T ~ 10 mm
-    problem = prepare(DesignConfig(target=str(path), resolution=16))
+    problem = load_problem(DesignConfig(target=str(path), resolution=16))
     assert problem.target.total_time_mm >= 15.0
     assert problem.target.final_mm3 == pytest.approx(900.0)
     with pytest.raises(DesignError, match="past the design domain's horizon"):
-        prepare(DesignConfig(target=str(path), resolution=16, domain_mm=(20.0, 20.0, 20.0)))
+        load_problem(DesignConfig(target=str(path), resolution=16, domain_mm=(20.0, 20.0, 20.0)))
 
 
 @pytest.mark.parametrize("target, space, resolution", [("pill", "extruded", 18), ("sphere", "extruded", 16),
@@ -86,13 +86,13 @@ def test_extruded_start_leaves_out_the_core_a_ring_releases_too_late_from(tmp_pa
     # a ring 6 mm tall whose wall is 3 mm thick ends its release at 1.5 mm, long before its faces
     # (3 mm) would dissolve a solid core: the start's core is empty
     ring = _write(trimesh.creation.annulus(r_min=4.0, r_max=7.0, height=6.0, sections=64), tmp_path / "ring.stl")
-    problem = prepare(DesignConfig(target=ring, space="extruded", resolution=32))
+    problem = load_problem(DesignConfig(target=ring, space="extruded", resolution=32))
     region = problem.start_region
     assert region is not None and not region[0, 0] and region[0].any()
     assert _start_mm3(problem) * START_FILL >= problem.target.final_mm3 * (1 - 1e-9)
     # a flat tablet's faces dissolve it before any in-plane core matters: its whole footprint starts
     tablet = _write(trimesh.creation.box(extents=(14.0, 10.0, 3.0)), tmp_path / "tablet.stl")
-    region = prepare(DesignConfig(target=tablet, space="extruded", resolution=32)).start_region
+    region = load_problem(DesignConfig(target=tablet, space="extruded", resolution=32)).start_region
     assert region is not None and np.array_equal(region, np.logical_and.outer(region[:, 0], region[0]))
 
 
@@ -114,10 +114,10 @@ def test_connectivity_settings_must_not_be_negative(field, value):
 def test_a_source_in_separate_pieces_is_warned_about_unless_pieces_are_allowed(two_boxes_stl, caplog):
     path = two_boxes_stl
     with caplog.at_level("WARNING", logger="design.inverse.problem"):
-        problem = prepare(DesignConfig(target=str(path), resolution=16))
+        problem = load_problem(DesignConfig(target=str(path), resolution=16))
     assert len(problem.warnings) == 1 and "the source is 2 separate pieces" in problem.warnings[0]
     assert problem.warnings[0] in caplog.text
-    assert prepare(DesignConfig(target=str(path), resolution=16, allow_pieces=True)).warnings == ()
+    assert load_problem(DesignConfig(target=str(path), resolution=16, allow_pieces=True)).warnings == ()
     assert prepare(DesignConfig(target="sphere", resolution=16)).warnings == ()
 
 
@@ -131,3 +131,12 @@ def test_a_rate_fitted_target_too_short_for_the_grid_is_warned_about():
     assert 200 <= needed <= 220 and prepare(DesignConfig(target=target, resolution=needed)).warnings == ()
     assert prepare(DesignConfig(target=target, resolution=128, w_rate=0.0)).warnings == ()  # the rate is not fitted
     assert prepare(DesignConfig(target="zero-order:final=0.1,duration=0.5", resolution=64)).warnings == ()
+
+
+def test_a_file_target_needs_its_contents(tmp_path):
+    with pytest.raises(DesignError, match="is a mesh file: load it with design.files.targets_io.load_problem"):
+        prepare(DesignConfig(target=str(tmp_path / "part.stl"), resolution=16))
+    with pytest.raises(DesignError, match="is a CSV file: read it with design.files.targets_io.load_problem"):
+        prepare(DesignConfig(target=str(tmp_path / "curve.csv"), resolution=16))
+    with pytest.raises(DesignError, match="target mesh .*part.stl does not exist"):
+        load_problem(DesignConfig(target=str(tmp_path / "part.stl"), resolution=16))

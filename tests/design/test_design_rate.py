@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
+from design.files.rundir import run_design
 from design.inverse.objective import DesignObjective
-from design.inverse.optimize import run_design
 from design.inverse.problem import ANALYTIC_DEFAULTS, ANALYTIC_W_RATE, SPACE_DEFAULTS, W_CONNECT, DesignConfig
 from design.inverse.rate import (
     lag_rate,

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
+from design.files.targets_io import target_from_csv
 from design.forward.simulator import simulate
 from design.inverse.targets import (
     SPHERE_AREA_COEF,
@@ -10,7 +11,6 @@ from design.inverse.targets import (
     check_feasibility,
     constant_acceleration,
     resample_monotone,
-    target_from_csv,
     target_from_density,
 )
 

@@ -6,7 +6,7 @@ import pytest
 import trimesh
 
 from design import SAMPLE_SHAPES, DesignError, load_density, load_mesh, sample_shape, simulate_mesh
-from design.forward.pipeline import input_grid, parse_symmetry
+from design.files.pipeline import input_grid, parse_symmetry
 from design.geometry.shapes import VOLUME_MM3
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "shapes"

@@ -12,6 +12,7 @@ from scipy.optimize import minimize as scipy_minimize
 from scipy.optimize import rosen, rosen_der
 
 from design.errors import DesignError
+from design.files.rundir import run_design
 from design.inverse.lbfgs import (
     CONVERGED,
     CURVATURE_C2,
@@ -24,7 +25,6 @@ from design.inverse.lbfgs import (
     _model_step,
     minimize,
 )
-from design.inverse.optimize import run_design
 from design.inverse.problem import DesignConfig
 
 

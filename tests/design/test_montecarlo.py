@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from design import DesignError
-from design.forward.pipeline import input_grid
+from design.files.pipeline import input_grid
 from design.montecarlo.erosion import GAS_CONSTANT, MonteCarloParams, default_dt_s, erosion_times, simulate_mc
 from design.montecarlo.tuning import tune_mc, unit_runs
 

@@ -11,7 +11,7 @@ import trimesh
 from analysis import AnalysisError, BenchCalibration
 from design.errors import DesignError
 from design.files.meshio import load_mesh
-from design.inverse.targets import read_curve_csv
+from design.files.targets_io import read_curve_csv
 from labapp.acquisition.calseries import read_masses
 from labapp.cli.main import main
 from labapp.errors import UsageError

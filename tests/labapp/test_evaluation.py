@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from design.forward.pipeline import simulate_mesh
+from design.files.pipeline import simulate_mesh
 from design.geometry.shapes import sample_shape
 from design.montecarlo.erosion import MonteCarloParams
 from labapp.cli.main import main

@@ -136,7 +136,7 @@ def test_serial_sweep_records_failures_and_reruns_skip_done(tmp_path):
 
 
 def test_stopped_designs_resume_from_their_checkpoint(tmp_path):
-    from design.inverse.optimize import run_design
+    from design.files.rundir import run_design
     from labapp.scaleout.sweep import prepare_sweep_dir
 
     spec = parse_spec(SMALL.replace("max_iter = 6", "max_iter = 12\ncheckpoint_every = 2"))

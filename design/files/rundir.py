@@ -1,0 +1,270 @@
+"""A design run's folder: the public `run_design`, and the records it resumes from.
+
+A run folder holds ``config.json`` (the `DesignConfig`), ``feasibility.txt`` (the target's check),
+``checkpoint.npz`` (the optimiser's `Checkpoint`, rewritten atomically every few evaluations) and, once the
+run stops, the outputs of `design.files.outputs`. A multi-start run (`DesignConfig.starts` > 1) keeps
+its coarse runs as ordinary run folders in ``starts/NN`` and its choice in ``multistart.json``; the
+refinement runs in the folder itself.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import threading
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from design.errors import DesignError
+from design.files.outputs import DesignOutputs, write_outputs
+from design.files.targets_io import load_problem
+from design.inverse.multistart import coarse_start, refine_start, start_name
+from design.inverse.optimize import (
+    HISTORY_COLUMNS,
+    Checkpoint,
+    IterationCallback,
+    StartDesign,
+    build_objective,
+    optimise,
+    with_phase,
+)
+from design.inverse.problem import DesignConfig
+
+log = logging.getLogger(__name__)
+
+CONFIG = "config.json"
+CHECKPOINT = "checkpoint.npz"
+FEASIBILITY = "feasibility.txt"
+MULTISTART = "multistart.json"
+STARTS = "starts"
+
+
+@dataclass(frozen=True)
+class DesignResult:
+    """What a design run returns.
+
+    Attributes
+    ----------
+    out_dir : Path
+    status : str
+        "converged", "max_iter", "stalled" (nlopt's line search gave up, restarts exhausted),
+        "stopped" (should_stop) or "interrupted" (Ctrl-C).
+    iterations : int
+        Objective evaluations over all sessions of the run (resumes included).
+    best_value : float
+    outputs : DesignOutputs
+    """
+
+    out_dir: Path
+    status: str
+    iterations: int
+    best_value: float
+    outputs: DesignOutputs
+
+
+def _atomic_save_npz(path: Path, **arrays) -> None:
+    """Write arrays to ``path`` via a temporary file and a rename, so a crash leaves the old file.
+
+    Uncompressed: zlib took 1.2 s for the two 17 MB design-variable arrays of a 128^3 design,
+    0.12 s per evaluation at the default checkpoint interval; writing them plainly takes 0.05 s.
+    """
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+def load_config(out_dir: Path) -> DesignConfig:
+    """The `DesignConfig` stored in a run folder's ``config.json``.
+
+    Raises
+    ------
+    DesignError
+        When the file is missing or unreadable.
+    """
+    try:
+        data = json.loads((out_dir / CONFIG).read_text())
+    except (OSError, ValueError) as exc:
+        raise DesignError(f"cannot resume: no readable config.json in {out_dir}: {exc}") from exc
+    names = {f.name for f in fields(DesignConfig)}
+    data = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names}
+    data.setdefault("rate_span", (0.0, 1.0))  # runs stored before the option compared the whole curve
+    data.setdefault("optimizer", "LD_LBFGS")  # and were optimised with nlopt's L-BFGS
+    data.setdefault("allow_pieces", True)  # runs stored without the option had no connectivity term
+    data.setdefault("connect_planes", False)  # and runs stored before the plane term measured the core only
+    data.setdefault("connect_tail", 0.0)  # and before the tail, without it
+    data.setdefault("line_search", "strong-wolfe")  # the "lbfgs" optimiser's only rule before the option
+    if data.get("beta_final") is None:  # stored resolved: None always meant a fixed beta
+        data["beta_final"] = data.get("beta")
+    return DesignConfig(**data)
+
+
+def save_config(out_dir: Path, config: DesignConfig) -> None:
+    """Write ``config.json``."""
+    (out_dir / CONFIG).write_text(json.dumps(asdict(config), indent=2))
+
+
+def load_checkpoint(path: Path) -> Checkpoint:
+    """The `Checkpoint` in a ``checkpoint.npz``."""
+    with np.load(path) as data:
+        saved = {name: data[name] for name in data.files}
+    history = saved["history"]
+    if history.shape[1] != len(HISTORY_COLUMNS):  # histories stored before the fab_seconds column: zeros
+        history = np.insert(history, 5, 0.0, axis=1)
+    best_value = saved.get("best_value", min(history[:, 1], default=np.inf))
+    return Checkpoint(x=saved["x"], best_x=saved["best_x"], best_value=float(best_value),
+                      stage=int(saved.get("stage", 0)), history=history,
+                      lbfgs={k[len("lbfgs_"):]: v for k, v in saved.items() if k.startswith("lbfgs_")})
+
+
+class CheckpointFile:
+    """A run's ``checkpoint.npz``: the `design.inverse.optimize.CheckpointStore` of `run_design`.
+
+    ``save(..., wait=False)`` writes from a thread; `wait` joins it and raises its error, if any.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._writer: threading.Thread | None = None  # the checkpoint being written
+        self._writer_error: BaseException | None = None
+
+    def _write(self, checkpoint: Checkpoint) -> None:
+        _atomic_save_npz(self.path, x=checkpoint.x, best_x=checkpoint.best_x, best_value=checkpoint.best_value,
+                         stage=checkpoint.stage, history=checkpoint.history,
+                         **{f"lbfgs_{k}": v for k, v in checkpoint.lbfgs.items()})
+
+    def save(self, checkpoint: Checkpoint, *, wait: bool = True) -> None:
+        """Write ``checkpoint`` atomically; with ``wait=False`` from a thread."""
+        self.wait()
+        if wait:
+            self._write(checkpoint)
+            return
+
+        def write() -> None:
+            try:
+                self._write(checkpoint)
+            except BaseException as exc:  # noqa: BLE001 -- re-raised in the run's thread by wait
+                self._writer_error = exc
+
+        self._writer = threading.Thread(target=write, name="checkpoint", daemon=True)
+        self._writer.start()
+
+    def wait(self) -> None:
+        """Wait for a checkpoint being written; raise its error, if any."""
+        if self._writer is None:
+            return
+        self._writer.join()
+        self._writer, error, self._writer_error = None, self._writer_error, None
+        if error is not None:
+            raise DesignError(f"cannot write checkpoint {self.path}: {error}") from error
+
+
+class _StartFolders:
+    """The coarse runs of a multi-start (`design.inverse.multistart.CoarseRuns`): run folders ``starts/NN``."""
+
+    def __init__(self, out_dir: Path, should_stop: Callable[[], bool] | None) -> None:
+        self.out_dir = out_dir
+        self.should_stop = should_stop
+
+    def folder(self, k: int) -> Path:
+        return self.out_dir / STARTS / start_name(k)
+
+    def finished(self, k: int) -> bool:
+        return (self.folder(k) / "summary.json").exists()
+
+    def run(self, k: int, config: DesignConfig, start: StartDesign, on_iteration: IterationCallback | None) -> str:
+        folder = self.folder(k)
+        resume = (folder / CONFIG).exists()
+        return run_design(None if resume else config, folder, on_iteration=on_iteration,
+                          should_stop=self.should_stop, resume=resume, start=start).status
+
+    def best_value(self, k: int) -> float:
+        history = np.loadtxt(self.folder(k) / "history.csv", delimiter=",", skiprows=1, ndmin=2)
+        return float(history[:, 1].min())
+
+
+def _multistart(config: DesignConfig, out_dir: Path, on_iteration: IterationCallback | None,
+                should_stop: Callable[[], bool] | None) -> StartDesign | None:
+    """Run the coarse starts of a multi-start in ``out_dir/starts``, record the choice in ``multistart.json`` and
+    return the refinement's start (None when `should_stop` ended a coarse run)."""
+    folders = _StartFolders(out_dir, should_stop)
+    choice = coarse_start(config, folders, on_iteration=on_iteration)
+    if choice is None:
+        return None
+    (out_dir / MULTISTART).write_text(json.dumps(
+        {"coarse_resolution": choice.coarse_resolution, "refined": start_name(choice.refined),
+         "best_J": {start_name(k): value for k, value in enumerate(choice.best_values)}}, indent=2))
+    with np.load(folders.folder(choice.refined) / "density.npz") as data:
+        x_coarse, dx_coarse = data["rho_hat"], float(data["dx_mm"])
+    return refine_start(x_coarse, dx_coarse)
+
+
+def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration: IterationCallback | None = None,
+               should_stop: Callable[[], bool] | None = None, resume: bool = False,
+               start: StartDesign | None = None) -> DesignResult:
+    """Run (or resume) an inverse design in ``out_dir``.
+
+    Parameters
+    ----------
+    config : DesignConfig or None
+        The run's settings; None with ``resume=True`` reuses the stored ``config.json``.
+    out_dir : str or Path
+        The run folder; must not hold a run unless resuming.
+    on_iteration : callable, optional
+        ``on_iteration(k, x, terms)`` after every evaluation; ``terms`` holds J, J_fit,
+        J_binary, J_fab, grad_norm, seconds and eta_s (upper bound from the iteration limit), and
+        in a multi-start run ``phase`` (which coarse start, or the refinement).
+    should_stop : callable, optional
+        Polled before every evaluation; True stops cleanly (best design still written).
+    resume : bool
+        Continue from ``checkpoint.npz``: exactly where the run stopped with the "lbfgs" optimiser;
+        with nlopt's, from the last evaluated design with an empty memory.
+    start : callable, optional
+        ``start(objective, problem)`` returns the start variables of a new run (variable shape);
+        default the uniform start of section 5.2 (`DesignObjective.uniform_start`), or for
+        ``config.starts`` > 1 the refined best of the coarse starts (`design.inverse.multistart`).
+
+    Returns
+    -------
+    DesignResult
+
+    Raises
+    ------
+    DesignError
+        On an invalid configuration, an infeasible target, or a resume mismatch.
+    """
+    out_dir = Path(out_dir)
+    if resume:
+        stored = load_config(out_dir)
+        if config is not None and config != stored:
+            raise DesignError(f"cannot resume {out_dir} with a different configuration; stored: {stored}")
+        config = stored
+    else:
+        if config is None:
+            raise DesignError("a configuration is required to start a new design run")
+        if (out_dir / CONFIG).exists():
+            raise DesignError(f"{out_dir} already holds a design run; resume it or choose another folder")
+        out_dir.mkdir(parents=True, exist_ok=True)
+        save_config(out_dir, config)
+    problem = load_problem(config)
+    (out_dir / FEASIBILITY).write_text(problem.feasibility.text() + "\n")
+    if not problem.feasibility.feasible and not config.allow_infeasible:
+        raise DesignError(problem.feasibility.text())
+    objective = build_objective(problem, config)
+    ckpt = out_dir / CHECKPOINT
+    saved = None
+    if resume and ckpt.exists():
+        saved = load_checkpoint(ckpt)
+        log.info("resuming %s at evaluation %d", out_dir, len(saved.history))
+    if saved is None and start is None and config.starts > 1:  # coarse-to-fine multi-start
+        start = _multistart(config, out_dir, on_iteration, should_stop)
+    if config.starts > 1:
+        on_iteration = with_phase(on_iteration, f"refinement at resolution {config.resolution}")
+    outcome = optimise(objective, problem, config, CheckpointFile(ckpt), saved=saved, start=start,
+                       on_iteration=on_iteration, should_stop=should_stop)
+    outputs = write_outputs(out_dir, problem, objective, outcome.best_x, outcome.history, config,
+                            status=outcome.status, session_seconds=outcome.session_seconds)
+    log.info("design %s after %d evaluations: %s", outcome.status, outcome.iterations, outputs.summary_path)
+    return DesignResult(out_dir, outcome.status, outcome.iterations, outcome.best_value, outputs)
