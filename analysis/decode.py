@@ -5,7 +5,7 @@ linearised with the sRGB transfer curve before any photometry. Raw files are dev
 no auto-brightening, unit white-balance multipliers, 16 bit. ``reduce`` = 2, 4 or 8 uses libjpeg's
 DCT-domain downscaling for JPEG (``cv2.IMREAD_REDUCED_COLOR_n``: each output pixel is the mean of an
 n x n block, decoded several times faster), area averaging for other formats and rawpy's half-size mode
-(2x2 Bayer quads) for raw. Cell means barely change (docs/analysis.md measures how little).
+(2x2 Bayer quads) for raw. Cell means barely change (docs/analysis.md, "What downscaled decoding costs").
 """
 from __future__ import annotations
 

@@ -24,14 +24,15 @@ MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 PLAUSIBLE_VOLUME_MM3 = (1.0, 1e6)
 TYPICAL_VOLUME_MM3 = 3e3        # a pill-sized print; ranks the candidate units of an implausible mesh
 MIN_VOXELS_ACROSS = 4
-#: Peak bytes per voxel of one forward simulation (fast marching and adjoint work arrays), measured with
-#: tracemalloc on 48^3 and 96^3 grids (160 and 153 B), rounded up with the density grid itself.
+#: Peak bytes per voxel of one forward simulation: the fast-marching and adjoint work arrays (traced with
+#: tracemalloc) and the density grid itself, rounded up.
 SIMULATE_BYTES_PER_VOXEL = 200
 BASE_MEMORY_BYTES = 250_000_000
 """Resident memory of a process before its first design: interpreter, numpy, numba kernels, bytes."""
 DESIGN_BYTES_PER_SIMULATED_VOXEL = (2.37e9 - BASE_MEMORY_BYTES) / 128**3
-"""Peak memory of a design per simulated voxel, bytes: 2.37 GB at a 128^3 simulated grid
-(docs/benchmarks.md, inverse design, output writing included)."""
+"""Peak memory of a design per simulated voxel, bytes: the peak resident memory of a design on a 128^3
+simulated grid, output writing included, less `BASE_MEMORY_BYTES` (`benchmarks/bench_design.py` prints the
+peak; docs/benchmarks.md, "Inverse design")."""
 MIRRORS = {"nfc": 8, "extruded": 4, "ico": 4}
 """How many mirror copies of the simulated grid make the full domain, per design space: nfc mirrors all
 three axes, the printable spaces only the two build-plate axes (section 5.2)."""
