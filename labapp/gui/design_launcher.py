@@ -8,6 +8,7 @@ import shutil
 import threading
 from pathlib import Path
 
+import numpy as np
 import pyqtgraph as pg
 from PySide6.QtWidgets import (
     QCheckBox,
@@ -24,6 +25,7 @@ from PySide6.QtWidgets import (
 )
 
 from design.files.outputs import enclosed_voids_text
+from design.inverse.problem import DesignConfig
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.sweep_panel import SweepPanel
 from labapp.jobs.calibrate_sim import SimCalFile, load_simcal
@@ -47,8 +49,6 @@ def mid_slice(x, k: int, every: int = 5):
     The optimiser reports its variables flat; a cube of n^3 (the nfc space) or a square of n^2 (an extruded
     cross-section) is folded back, other shapes show no slice.
     """
-    import numpy as np
-
     x = np.asarray(x, dtype=float)
     if k % every:
         return None
@@ -167,8 +167,6 @@ class DesignLauncher(QWidget):
 
     def start(self) -> None:
         """Convert the source if it is a run, then run the design in the background."""
-        from design.inverse.problem import DesignConfig
-
         source = Path(self.source.text().strip())
         if not source.exists():
             self.status.setText(f"{source} does not exist")

@@ -6,20 +6,22 @@ import hashlib
 import json
 import logging
 import shutil
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from design.inverse.problem import DesignConfig
 from labapp.errors import UsageError
+from labapp.jobs.meshunits import design_memory_bytes, load_mesh_mm, require_memory, size_warnings
+from labapp.jobs.physical import design_from_target, is_physical
 from labapp.records.outpaths import check_out
+from labapp.records.storage import sanitize_name
 
 log = logging.getLogger(__name__)
 
 
-
 def _design_defaults() -> dict[str, Any]:
-    from design.inverse.problem import DesignConfig
-
     return {f.name: f.default for f in dataclasses.fields(DesignConfig) if f.default is not dataclasses.MISSING}
 
 
@@ -31,10 +33,6 @@ _MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf")
 
 def design_folder(data_dir: str | Path, name: str) -> Path:
     """The folder of a new design run started from the GUI: ``DATA/designs/<YYYYmmdd-HHMMSS>_<name>``."""
-    import time
-
-    from labapp.records.storage import sanitize_name
-
     return Path(data_dir) / "designs" / f"{time.strftime('%Y%m%d-%H%M%S')}_{sanitize_name(name)}"
 
 
@@ -47,8 +45,6 @@ def _copy_target(target: str, out: Path, units: str) -> str:
     target (CSV, mesh scaled from ``units`` to mm) into the run folder and return the copy's path, which the
     run then optimises. A measured (physical) target is turned into its CSV in the run folder by
     ``labapp.jobs.physical.design_from_target``; here only its source is recorded."""
-    from labapp.jobs.physical import is_physical
-
     source = Path(target)
     if not source.exists():
         return target
@@ -58,8 +54,6 @@ def _copy_target(target: str, out: Path, units: str) -> str:
         suffix = source.suffix.lower()
         copy = out / f"target_input{suffix}"
         if suffix in _MESH_SUFFIXES:
-            from labapp.jobs.meshunits import load_mesh_mm, size_warnings
-
             mesh = load_mesh_mm(source, units)
             for w in size_warnings(mesh.extents, float(mesh.volume), source=str(source)):
                 log.warning("%s", w)
@@ -126,9 +120,6 @@ def design(config, out: str | Path, *, resume: bool = False, units: str = "mm", 
     design.DesignError
         For an invalid configuration or target, an infeasible target, or a resume mismatch.
     """
-    from labapp.jobs.meshunits import design_memory_bytes, require_memory
-    from labapp.jobs.physical import design_from_target
-
     warn = on_warning or (lambda message: log.warning("%s", message))
     out = Path(out)
     run = dict(simcal=simcal, bench_calibration=bench_calibration, on_iteration=on_iteration,

@@ -11,6 +11,7 @@ There is no other bridge: without a calibration, a physical curve cannot become 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import logging
 import os
@@ -18,7 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from labapp.jobs.calibrate_sim import SimCalError, SimCalFile
+from design.errors import DesignError
+from design.files.pipeline import input_grid
+from design.files.rundir import run_design
+from design.forward.simulator import simulate
+from labapp.jobs.calibrate_sim import SimCalError, SimCalFile, curve_of
 from labapp.jobs.compare import prediction_metrics
 from labapp.records.curvefiles import CURVE_FILES, PhysicalCurve
 from labapp.records.storage import atomic_write
@@ -209,11 +214,6 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
     SimCalError
         A physical target without a calibration, or an unreadable target.
     """
-    import dataclasses
-
-    from design.files.rundir import run_design
-    from labapp.jobs.calibrate_sim import curve_of
-
     out_dir = Path(out_dir)
     record = out_dir / "target_measured.json"
     measured: PhysicalCurve | None = None
@@ -263,10 +263,6 @@ def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = N
     -------
     t_s, released_g : (Q,) ndarray of float
     """
-    from design.errors import DesignError
-    from design.files.pipeline import input_grid
-    from design.forward.simulator import simulate
-
     try:
         rho, dx, mirror = input_grid(str(mesh), resolution=simcal.resolution)
         release = simulate(rho, dx, mirror=mirror)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.inverse.filters import SmoothingFilter, cone_kernel, project, project_adjoint, project_inverse
+from design.inverse.filters import SmoothingFilter, cone_kernel, fft_workers, project, project_adjoint, project_inverse
 
 
 def test_cone_kernel_decays_linearly_to_zero():
@@ -88,7 +88,6 @@ def test_smoothing_guards():
 
 def test_fft_threads_follow_omp_num_threads(monkeypatch):
     # a Dask worker's nanny sets OMP_NUM_THREADS=1: side-by-side designs then use one FFT thread each
-    from design.inverse.filters import fft_workers
     monkeypatch.setenv("OMP_NUM_THREADS", "1")
     assert fft_workers() == 1
     monkeypatch.setenv("OMP_NUM_THREADS", "not a number")

@@ -5,7 +5,10 @@ import numpy as np
 import pytest
 import trimesh
 
+import design.files.outputs
 from design.errors import DesignError
+from design.fabrication.connectivity import Connectivity
+from design.files.outputs import _rate_dev
 from design.files.rundir import run_design
 from design.geometry.shapes import sample_shape
 from design.inverse.problem import DesignConfig, prepare
@@ -124,7 +127,6 @@ def test_a_run_stored_before_the_plane_term_and_the_tail_resumes_with_the_bounde
     resumed = json.loads((tmp_path / "summary.json").read_text())["config"]
     assert resumed["connect_planes"] is False and resumed["connect_tail"] == 0.0
     # the core term alone is the plane term's absence: a floating blob pays its volume once, not twice
-    from design.fabrication.connectivity import Connectivity
     blob = np.zeros((12, 12))
     blob[0:4, 0:4] = blob[8:11, 8:11] = 1.0
     core_only = Connectivity(blob.shape, (True, True), 0.5, planes=False, tail_slope=0.0)(blob, 1.0)[0]
@@ -133,7 +135,6 @@ def test_a_run_stored_before_the_plane_term_and_the_tail_resumes_with_the_bounde
 
 
 def test_a_release_over_within_one_sample_has_no_rate_deviation_instead_of_failing_the_outputs():
-    from design.files.outputs import _rate_dev
     tau = np.linspace(0.0, 1.0, 11)
     curve = np.full(11, 10.0)
     curve[0] = 0.0
@@ -143,8 +144,6 @@ def test_a_release_over_within_one_sample_has_no_rate_deviation_instead_of_faili
 
 
 def test_a_fine_check_over_its_voxel_budget_is_skipped_with_a_warning(tmp_path, monkeypatch):
-    import design.files.outputs
-
     monkeypatch.setattr(design.files.outputs, "FINE_MAX_VOXELS", 8 ** 3 * 8 - 1)  # the 16^3 nfc run's check is 8^3 * 8
     result = run_design(DesignConfig(max_iter=6, **SMALL), tmp_path / "run")
     summary = result.outputs.summary

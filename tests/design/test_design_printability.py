@@ -12,6 +12,7 @@ from design.fabrication.printability import (
     print_mass_g,
     prusa_profile,
 )
+from design.files.outputs import enclosed_voids_text
 
 
 def _hollow_ball(hole_vox: int, n: int = 40) -> np.ndarray:
@@ -117,7 +118,6 @@ def test_supports_follow_the_design_space():
 
 
 def test_enclosed_voids_phrase_reads_the_summary():
-    from design.files.outputs import enclosed_voids_text
     assert enclosed_voids_text({"enclosed_voids": 0, "enclosed_void_mm3": 0.0}) == "no enclosed voids"
     assert enclosed_voids_text({"enclosed_voids": 2, "enclosed_void_mm3": 12.5}) == "2 enclosed voids, 12.5 mm^3"
     assert enclosed_voids_text({"pieces": 1}) == "enclosed voids not assessed"

@@ -6,6 +6,7 @@ import pytest
 import trimesh
 
 from design import DesignError, sample_shape, voxelize
+from design.fabrication.extract import density_mesh
 from design.geometry.voxelize import grid_for
 
 
@@ -69,7 +70,6 @@ def test_marching_cubes_vertices_on_the_ray_lines_keep_the_parity():
     # a 5 x 5 voxel window of a design density (csg, nfc, resolution 64) whose rho = 1/2 contour has
     # vertices within round-off of the ray through column (40, 31): floating-point side tests once
     # counted an odd number of crossings there and refused the design's own mesh as "not closed"
-    from design.fabrication.extract import density_mesh
     data = np.load(Path(__file__).parents[2] / "fixtures" / "design" / "marching_cubes_ray_window.npz")
     rho = np.zeros(tuple(data["shape"]))
     i, j, k = data["corner"]

@@ -7,7 +7,7 @@ from design.fabrication.ico import IcoConfig, IcoTerm, incremental_compliance, l
 from design.forward.simulator import simulate, total_time
 from design.inverse.objective import DesignObjective
 from design.inverse.presets import PRESET_NAMES, preset_values
-from design.inverse.problem import DesignConfig
+from design.inverse.problem import DesignConfig, prepare
 from design.inverse.spaces import SpaceRequest, build_space
 
 
@@ -139,8 +139,6 @@ def test_presets_fill_unset_fields_and_name_themselves():
 
 
 def test_an_ico_domain_stands_the_source_on_the_plate():
-    from design.inverse.problem import prepare
-
     problem = prepare(DesignConfig(target="pill", space="ico", resolution=24, layers=4))
     layers = np.flatnonzero(problem.source_solid.any(axis=(0, 1)))
     assert layers[0] == 0 and layers[-1] < problem.full_shape[2] - 2  # margin above only

@@ -2,10 +2,13 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import sys
+from pathlib import Path
 
 from labapp.cli.argtypes import finite_float, nonnegative_float, positive_float, positive_int
+from labapp.errors import UsageError
 from labapp.jobs.meshunits import MM_PER_UNIT
 
 log = logging.getLogger(__name__)
@@ -107,9 +110,6 @@ def _progress(max_iter: int):
 
 
 def _stored_max_iter(out: str) -> int:
-    import json
-    from pathlib import Path
-
     try:
         return int(json.loads((Path(out) / "config.json").read_text())["max_iter"])
     except (OSError, ValueError, KeyError):
@@ -117,12 +117,10 @@ def _stored_max_iter(out: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-
+    # the design and analysis packages load here, not with the module: `sfr --help` stays instant
     from analysis import BenchCalibration
     from design.files.outputs import enclosed_voids_text, percent_text
     from design.inverse.problem import DesignConfig
-    from labapp.errors import UsageError
     from labapp.jobs.calibrate_sim import load_simcal
     from labapp.jobs.design import design as design_job
 
