@@ -21,6 +21,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from analysis import RunCurve
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
 from labapp.errors import UsageError
 from labapp.gui.bridge import BackgroundTask
@@ -31,12 +32,13 @@ from labapp.jobs.compare import Comparison, compare_curves
 from labapp.jobs.run import resumable
 from labapp.jobs.verify import verify as verify_folder
 from labapp.records.outpaths import ANALYSIS_SUBFOLDER
-from labapp.records.storage import StorageError, finalise_run, read_run
+from labapp.records.runrecord import RecordKind, RecordStatus
+from labapp.records.storage import RunSnapshot, StorageError, finalise_run, read_run
 
 log = logging.getLogger(__name__)
 
 
-def list_runs(data_dir: Path) -> list:
+def list_runs(data_dir: Path) -> list[RunSnapshot]:
     """Snapshots of every run folder directly under ``data_dir``, newest first (unreadable ones skipped)."""
     runs = []
     for path in sorted(Path(data_dir).glob("*/run.json"), reverse=True):
@@ -127,9 +129,8 @@ class RunBrowser(QWidget):
         """Re-read the data directory."""
         self.tree.clear()
         for snap in list_runs(self.data_dir):
-            created = time.strftime("%Y-%m-%d %H:%M", time.localtime(snap.meta.get("created_unix_s", 0)))
-            item = QTreeWidgetItem([snap.path.name, snap.meta.get("kind", "run"), snap.status,
-                                    str(len(snap.frames)), created])
+            created = time.strftime("%Y-%m-%d %H:%M", time.localtime(snap.record.created_unix_s or 0))
+            item = QTreeWidgetItem([snap.path.name, snap.record.kind, snap.status, str(len(snap.frames)), created])
             item.setData(0, 256, str(snap.path))
             self.tree.addTopLevelItem(item)
         self._selected()
@@ -160,12 +161,12 @@ class RunBrowser(QWidget):
             snap, has = None, False
         for b in (self.analyse_button, self.verify_button):
             b.setEnabled(has)
-        self.resume_button.setEnabled(has and snap.status == "interrupted" and snap.meta.get("kind", "run") == "run")
-        self.finalise_button.setEnabled(has and snap.status == "interrupted")
+        interrupted = has and snap.status == RecordStatus.INTERRUPTED
+        self.resume_button.setEnabled(interrupted and snap.record.kind == RecordKind.RUN)
+        self.finalise_button.setEnabled(interrupted)
         if snap is None:
             return
-        gaps = snap.meta.get("gaps", [])
-        self.info.setText(f"{snap.path}: {snap.status}, {len(snap.frames)} frames, {len(gaps)} gaps"
+        self.info.setText(f"{snap.path}: {snap.status}, {len(snap.frames)} frames, {len(snap.record.gaps)} gaps"
                           + (f", torn last row of {snap.torn_bytes} bytes" if snap.torn_bytes else ""))
         self.plots.clear()
         for f in snap.frames:
@@ -211,7 +212,7 @@ class RunBrowser(QWidget):
         sources = [p / ANALYSIS_SUBFOLDER if (p / ANALYSIS_SUBFOLDER / "curve.csv").is_file() else p for p in (a, b)]
         self.task = BackgroundTask(lambda progress: compare_curves(*sources), self)
         self.task.finished.connect(self.show_comparison)
-        self.task.failed.connect(lambda message: self.info.setText(f"f2: {message}"))
+        self.task.failed.connect(self._comparison_failed)
         self.task.start()
 
     def show_comparison(self, result: Comparison) -> None:
@@ -222,11 +223,14 @@ class RunBrowser(QWidget):
         self.info.setText(f"{head}\nA {result.a.source}: MDT {result.a.mdt_s:.0f} s, DE {result.a.de_pct:.1f} %\n"
                           f"B {result.b.source}: MDT {result.b.mdt_s:.0f} s, DE {result.b.de_pct:.1f} %")
 
+    def _comparison_failed(self, message: str) -> None:
+        self.info.setText(f"f2: {message}")
+
     def _progress(self, done_total: tuple[int, int]) -> None:
         self.info.setText(f"analysing frame {done_total[0]} of {done_total[1]}")
 
-    def show_curve(self, curve) -> None:
-        """Slot: plot a reanalysed :class:`analysis.RunCurve`."""
+    def show_curve(self, curve: RunCurve) -> None:
+        """Slot: plot a reanalysed run's curve."""
         self.plots.smooth_window_s, self.plots.smooth_order = self.window.value(), self.order.value()
         self.plots.set_water(curve.water_g)
         self.plots.t_s.clear()

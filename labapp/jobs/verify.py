@@ -3,10 +3,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from labapp.records.storage import VerifyReport, verify_run
 
-def verify(folder: str | Path):
+
+def verify(folder: str | Path) -> VerifyReport:
     """Check a folder against its manifests; returns a :class:`labapp.records.storage.VerifyReport` (never raises
     for a bad folder: what is wrong is in the report)."""
-    from labapp.records.storage import verify_run
-
     return verify_run(Path(folder))

@@ -18,14 +18,16 @@ file and its row (row 1 is the first data row after the header).
 from __future__ import annotations
 
 import csv
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from analysis import AnalysisError, BenchCalibration, analyze_run
 from labapp.errors import UsageError
+from labapp.records.runrecord import RunRecord
+from labapp.records.storage import RUN_JSON, RecordReadError, read_record
 
 CURVE_FILES = ("curve.csv", "release_physical.csv", "curves_physical.csv")
 """The physical curve files the project writes, looked for in that order inside a folder."""
@@ -67,15 +69,15 @@ def _positive_or_none(value: object) -> float | None:
     return v if math.isfinite(v) and v > 0 else None
 
 
-def _run_json(folder: Path) -> dict:
-    path = folder / "run.json"
+def _record(folder: Path) -> RunRecord | None:
+    """The record in ``folder`` (None without a ``run.json``)."""
+    path = folder / RUN_JSON
     if not path.is_file():
-        return {}
+        return None
     try:
-        meta = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise CurveFileError(f"{path}: not readable JSON ({exc})") from exc
-    return meta if isinstance(meta, dict) else {}
+        return read_record(folder)
+    except RecordReadError as exc:
+        raise CurveFileError(f"{path}: not readable JSON ({exc.reason})") from exc
 
 
 def check_curve(t_s: np.ndarray, released_g: np.ndarray, source: str) -> None:
@@ -136,17 +138,15 @@ def _read_csv(path: Path, column: str | None) -> PhysicalCurve:
         ok = np.isfinite(conc) & (np.abs(conc) > 1e-9)
         if ok.any():
             water = _positive_or_none(float(np.median(released[ok] / conc[ok])) * 1000.0)
-    meta = _run_json(path.parent) or _run_json(path.parent.parent)
-    mass = _positive_or_none(meta.get("object_mass_g"))
-    if water is None:
-        water = _positive_or_none(meta.get("water_g"))
+    record = _record(path.parent) or _record(path.parent.parent)
+    mass = _positive_or_none(record.object_mass_g) if record is not None else None
+    if water is None and record is not None:
+        water = _positive_or_none(record.water_g)
     return PhysicalCurve(t_s, released, mass, None if water is None else round(water, 6), source)
 
 
-def _read_run(folder: Path, calibration, cache_dir: Path | None) -> PhysicalCurve:
-    from analysis import AnalysisError, BenchCalibration, analyze_run
-
-    meta = _run_json(folder)
+def _read_run(folder: Path, calibration: BenchCalibration | None, cache_dir: Path | None) -> PhysicalCurve:
+    record = _record(folder)
     if calibration is None:
         cal_path = folder / "calibration.json"
         if not cal_path.is_file():
@@ -160,8 +160,8 @@ def _read_run(folder: Path, calibration, cache_dir: Path | None) -> PhysicalCurv
     except AnalysisError as exc:
         raise CurveFileError(f"{folder}: {exc}") from exc
     check_curve(curve.t_s, curve.released_g, str(folder))
-    return PhysicalCurve(curve.t_s, curve.released_g, _positive_or_none(meta.get("object_mass_g")),
-                         curve.water_g, str(folder))
+    mass = _positive_or_none(record.object_mass_g) if record is not None else None
+    return PhysicalCurve(curve.t_s, curve.released_g, mass, curve.water_g, str(folder))
 
 
 def read_physical_curve(path: str | Path, *, calibration=None, column: str | None = None,

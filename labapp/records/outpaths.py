@@ -18,32 +18,53 @@ what the path is and what to do instead. The rules:
   unlisted file), except the ``analysis`` subfolder ``sfr analyze`` keeps beside a run;
 - an output never lies inside, nor contains, an input folder and is never an input file.
 
-A folder's kind is recognised by the files a command writes (:data:`KINDS`); a command with a new kind of
-output adds one line there.
+A folder's kind (:class:`FolderKind`) is recognised by the files a command writes (:data:`KINDS`); a
+command with a new kind of output adds a member and one line there. A record's kind
+(:class:`labapp.records.runrecord.RecordKind`) is what its ``run.json`` says.
 """
 from __future__ import annotations
 
-import json
+import enum
 from collections.abc import Iterable
 from pathlib import Path
 
 from labapp.errors import UsageError
+from labapp.records.runrecord import RecordKind
+from labapp.records.storage import RUN_JSON, StorageError, read_record
 
-__all__ = ["KINDS", "OutPathError", "check_data_dir", "check_out", "folder_kind"]
+__all__ = ["KINDS", "FolderKind", "OutPathError", "check_data_dir", "check_out", "folder_kind"]
+
+
+class FolderKind(enum.StrEnum):
+    """The kinds of folder the commands write or read, recognised by their files (:data:`KINDS`)."""
+
+    DESIGN = "design"
+    SIMULATION = "simulation"
+    ANALYSIS = "analysis"
+    IMAGES = "images"
+    SWEEP = "sweep"
+    BATCH_ANALYSIS = "batch-analysis"
+    SIMCAL = "simcal"
+    EVALUATION = "evaluation"
+    OTHER = "other"
+    """A non-empty folder of anything else."""
+
 
 #: kind -> (what it is for the operator, marker files: the folder is of this kind if it holds all of one
-#: group). Run-folder kinds (``run``, ``calibration-series``) come from ``run.json``'s ``kind``.
-KINDS: dict[str, tuple[str, tuple[tuple[str, ...], ...]]] = {
-    "design": ("a design run folder (sfr design)", (("config.json", "feasibility.txt"), ("config.json", "checkpoint.npz"))),
-    "simulation": ("a simulation folder (sfr simulate)", (("release.csv",),)),
-    "analysis": ("an analysis folder (sfr analyze)", (("curve.csv",), ("cells_cache.npz",))),
-    "images": ("an image or calibration-series folder (input data)", (("frames.csv",), ("masses.csv",))),
-    "sweep": ("a design sweep folder (sfr sweep)", (("spec.toml", "runs"),)),
-    "batch-analysis": ("a batch analysis folder (sfr analyze RUN... --out)", (("batch_summary.csv",),)),
-    "simcal": ("a simulation calibration folder (sfr calibrate-sim)", (("simcal.json",),)),
-    "evaluation": ("a model evaluation folder (sfr evaluate)", (("evaluation.json",),)),
+#: group). Record kinds (``run``, ``calibration-series``) come from ``run.json``'s ``kind``.
+KINDS: dict[FolderKind, tuple[str, tuple[tuple[str, ...], ...]]] = {
+    FolderKind.DESIGN: ("a design run folder (sfr design)",
+                        (("config.json", "feasibility.txt"), ("config.json", "checkpoint.npz"))),
+    FolderKind.SIMULATION: ("a simulation folder (sfr simulate)", (("release.csv",),)),
+    FolderKind.ANALYSIS: ("an analysis folder (sfr analyze)", (("curve.csv",), ("cells_cache.npz",))),
+    FolderKind.IMAGES: ("an image or calibration-series folder (input data)", (("frames.csv",), ("masses.csv",))),
+    FolderKind.SWEEP: ("a design sweep folder (sfr sweep)", (("spec.toml", "runs"),)),
+    FolderKind.BATCH_ANALYSIS: ("a batch analysis folder (sfr analyze RUN... --out)", (("batch_summary.csv",),)),
+    FolderKind.SIMCAL: ("a simulation calibration folder (sfr calibrate-sim)", (("simcal.json",),)),
+    FolderKind.EVALUATION: ("a model evaluation folder (sfr evaluate)", (("evaluation.json",),)),
 }
-RECORD_KINDS = {"run": "an acquisition run folder (a record)", "calibration-series": "a calibration-series folder (a record)"}
+RECORD_KINDS = {RecordKind.RUN: "an acquisition run folder (a record)",
+                RecordKind.CALIBRATION_SERIES: "a calibration-series folder (a record)"}
 ANALYSIS_SUBFOLDER = "analysis"
 _IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".nef", ".cr2", ".cr3", ".arw", ".dng", ".raf", ".orf"}
 
@@ -52,25 +73,26 @@ class OutPathError(UsageError):
     """An output path that would overwrite an input, a record or another command's files."""
 
 
-def folder_kind(path: Path) -> str | None:
-    """The kind of folder ``path`` is (a key of :data:`KINDS` or :data:`RECORD_KINDS`), ``"other"`` for a
-    non-empty folder of anything else, None for an absent or empty folder."""
+def folder_kind(path: Path) -> FolderKind | RecordKind | None:
+    """The kind of folder ``path`` is: a record's kind (a folder with ``run.json``; ``run`` when its ``kind``
+    is none this version knows), else a key of :data:`KINDS`, :attr:`FolderKind.OTHER` for a non-empty folder
+    of anything else, None for an absent or empty folder."""
     path = Path(path)
     if not path.is_dir():
         return None
-    if (path / "run.json").exists():
+    if (path / RUN_JSON).exists():
         try:
-            kind = json.loads((path / "run.json").read_text()).get("kind", "run")
-        except (OSError, ValueError, AttributeError):
-            kind = "run"
-        return kind if kind in RECORD_KINDS else "run"
+            kind = read_record(path).kind
+        except StorageError:
+            kind = RecordKind.RUN
+        return kind if kind in RECORD_KINDS else RecordKind.RUN
     for kind, (_, groups) in KINDS.items():
         if any(all((path / name).exists() for name in group) for group in groups):
             return kind
     entries = [p for p in path.iterdir() if not p.name.startswith(".")]
     if any(p.suffix.lower() in _IMAGE_SUFFIXES for p in entries):
-        return "images"
-    return "other" if entries else None
+        return FolderKind.IMAGES
+    return FolderKind.OTHER if entries else None
 
 
 def _describe(kind: str) -> str:
@@ -82,7 +104,7 @@ def _describe(kind: str) -> str:
 def _record_above(path: Path) -> Path | None:
     """The nearest folder at or above ``path`` that is a record (has ``run.json``)."""
     for folder in (path, *path.parents):
-        if (folder / "run.json").is_file():
+        if (folder / RUN_JSON).is_file():
             return folder
     return None
 
@@ -100,7 +122,7 @@ def _check_inputs(path: Path, inputs: Iterable[str | Path], option: str) -> None
             raise OutPathError(f"{option} {path} contains the input {src}; choose a new folder that holds no input")
 
 
-def check_out(path: str | Path, writes: str, inputs: Iterable[str | Path] = (), *, file: bool = False,
+def check_out(path: str | Path, writes: FolderKind | str, inputs: Iterable[str | Path] = (), *, file: bool = False,
               replace: bool = True, option: str = "--out") -> Path:
     """Check an output path before any work; returns it (resolved). Creates nothing.
 
@@ -108,9 +130,10 @@ def check_out(path: str | Path, writes: str, inputs: Iterable[str | Path] = (), 
     ----------
     path : str or Path
         The output folder (or file, with ``file=True``).
-    writes : str
-        The kind of folder the command writes (``"simulation"``, ``"analysis"``, ``"design"``, ...); an
-        existing folder of this kind is accepted (``replace``) and its outputs replaced.
+    writes : FolderKind or str
+        The kind of folder the command writes (:attr:`FolderKind.SIMULATION`, ``ANALYSIS``, ``DESIGN``, ...);
+        an existing folder of this kind is accepted (``replace``) and its outputs replaced. With
+        ``file=True`` only a name for the file's kind (not checked).
     inputs : iterable of path
         The command's input files and folders (``sample:NAME`` and None are skipped).
     file : bool
@@ -141,8 +164,8 @@ def check_out(path: str | Path, writes: str, inputs: Iterable[str | Path] = (), 
     if path.exists() and not path.is_dir():
         raise OutPathError(f"{option} {path} is a file; give a folder")
     record = _record_above(path)
-    if record is not None and not (writes == "analysis" and path == record / ANALYSIS_SUBFOLDER):
-        hint = f"; its analysis goes to {record / ANALYSIS_SUBFOLDER}" if writes == "analysis" else ""
+    if record is not None and not (writes == FolderKind.ANALYSIS and path == record / ANALYSIS_SUBFOLDER):
+        hint = f"; its analysis goes to {record / ANALYSIS_SUBFOLDER}" if writes == FolderKind.ANALYSIS else ""
         raise OutPathError(f"{option} {path} is or lies inside {record}, {_describe(folder_kind(record))}, which "
                            f"no command adds files to; choose a folder outside it{hint}")
     kind = folder_kind(path)
@@ -150,7 +173,7 @@ def check_out(path: str | Path, writes: str, inputs: Iterable[str | Path] = (), 
         return path
     if kind == writes:
         raise OutPathError(f"{option} {path} already holds {_describe(kind)}; choose a new folder"
-                           + (" or resume it with --resume" if writes == "design" else ""))
+                           + (" or resume it with --resume" if writes == FolderKind.DESIGN else ""))
     raise OutPathError(f"{option} {path} is {_describe(kind)}, not a {writes} folder; its files are not "
                        f"overwritten: choose a new or empty folder")
 
@@ -171,6 +194,6 @@ def check_data_dir(path: str | Path, option: str = "--out") -> Path:
         raise OutPathError(f"{option} {path} is or lies inside {record}, {_describe(folder_kind(record))}; give "
                            f"the data directory that holds run folders, e.g. {record.parent}")
     kind = folder_kind(path)
-    if kind in KINDS and kind != "images":
+    if kind in KINDS and kind != FolderKind.IMAGES:
         raise OutPathError(f"{option} {path} is {_describe(kind)}; give a data directory for run folders")
     return path

@@ -5,7 +5,8 @@ A run folder (format in ``docs/formats.md``) holds
 - the frames, each written to ``.<name>.part``, flushed, fsync'ed and renamed before it is recorded;
 - ``frames.csv``: one row per frame, appended and fsync'ed row by row, with the SHA-256 of the file;
 - ``events.log``: the event log, appended and flushed line by line (tab-separated);
-- ``run.json``: the run's settings and state, rewritten atomically (temp file + rename).
+- ``run.json``: the run's settings and state, rewritten atomically (temp file + rename); read through
+  :func:`read_record` as a :class:`labapp.records.runrecord.RunRecord`.
 
 After a crash or power cut the folder is still a valid run: every row of ``frames.csv`` names a complete
 file, a half-written last row (a torn write) is dropped when the folder is reopened, and stray ``.part``
@@ -14,10 +15,12 @@ files are ignored. A folder is never reused: :func:`create_run` always makes a n
 from __future__ import annotations
 
 import csv
+import dataclasses
 import hashlib
 import io
 import json
 import logging
+import math
 import os
 import re
 import shutil
@@ -29,6 +32,7 @@ from typing import Any
 import psutil
 
 from labapp.errors import LabError
+from labapp.records.runrecord import FORMAT, Gap, RecordFormatError, RecordKind, RecordStatus, RunRecord
 
 log = logging.getLogger(__name__)
 
@@ -36,12 +40,19 @@ FRAMES_CSV = "frames.csv"
 EVENTS_LOG = "events.log"
 RUN_JSON = "run.json"
 FRAME_COLUMNS = ("file", "t_s", "t_unix_s", "plate_c", "probe_c", "speed_rpm", "sha256", "bytes")
-STATUSES = ("created", "running", "interrupted", "complete", "stopped", "aborted", "failed")
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
 
 class StorageError(LabError):
     """A run folder could not be created, written or read; the message names the path."""
+
+
+class RecordReadError(StorageError):
+    """A folder's ``run.json`` cannot be read as a record; :attr:`reason` says why, without the path."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 def sanitize_name(text: str, max_len: int = 64) -> str:
@@ -180,31 +191,58 @@ class RunSnapshot:
     """A run folder as read from disk, without opening it for writing."""
 
     path: Path
-    meta: dict[str, Any]
+    record: RunRecord
     frames: list[FrameRecord]
     torn_bytes: int
 
     @property
+    def meta(self) -> dict[str, Any]:
+        """``run.json`` exactly as stored (what a writer extends); read its fields through :attr:`record`."""
+        return dict(self.record.stored)
+
+    @property
     def live(self) -> bool:
         """True while the process that writes the run is still alive."""
-        pid = self.meta.get("writer_pid")
-        if self.meta.get("status") != "running" or pid is None:
+        record = self.record
+        if record.status != RecordStatus.RUNNING or record.writer_pid is None:
             return False
         try:
-            return abs(psutil.Process(pid).create_time() - self.meta.get("writer_started", 0.0)) < 1.0
+            return abs(psutil.Process(record.writer_pid).create_time() - (record.writer_started or 0.0)) < 1.0
         except psutil.Error:
             return False
 
     @property
-    def status(self) -> str:
+    def status(self) -> RecordStatus | str:
         """The stored status, except ``interrupted`` for a ``running`` run whose writer is gone."""
-        status = self.meta.get("status", "created")
-        return "interrupted" if status == "running" and not self.live else status
+        status = self.record.status
+        return RecordStatus.INTERRUPTED if status == RecordStatus.RUNNING and not self.live else status
 
     def events(self) -> list[str]:
         """The lines of ``events.log``."""
         log_path = self.path / EVENTS_LOG
         return log_path.read_text().splitlines() if log_path.exists() else []
+
+
+def read_record(path: Path) -> RunRecord:
+    """The typed ``run.json`` of the folder ``path``, migrated in memory to the current layout; the file is
+    never written (see :func:`labapp.records.runrecord.migrate`).
+
+    Raises
+    ------
+    RecordReadError
+        If ``run.json`` is absent or unreadable, not a JSON object, or of a format this version cannot read.
+    """
+    path = Path(path)
+    try:
+        stored = json.loads((path / RUN_JSON).read_text())
+    except (OSError, ValueError) as exc:
+        raise RecordReadError(f"{path} is not a readable run folder ({RUN_JSON}: {exc})", str(exc)) from exc
+    if not isinstance(stored, dict):
+        raise RecordReadError(f"{path}: {RUN_JSON} is not a JSON object", "not a JSON object")
+    try:
+        return RunRecord.from_stored(stored)
+    except RecordFormatError as exc:
+        raise RecordReadError(f"{path}: {RUN_JSON} {exc}", str(exc)) from exc
 
 
 def read_run(path: Path) -> RunSnapshot:
@@ -213,19 +251,14 @@ def read_run(path: Path) -> RunSnapshot:
     Raises
     ------
     StorageError
-        If ``path`` has no readable ``run.json``.
+        If ``path`` has no readable ``run.json`` (:class:`RecordReadError`) or a damaged ``frames.csv``.
     """
     path = Path(path)
-    try:
-        meta = json.loads((path / RUN_JSON).read_text())
-    except (OSError, ValueError) as exc:
-        raise StorageError(f"{path} is not a readable run folder ({RUN_JSON}: {exc})") from exc
-    if not isinstance(meta, dict):
-        raise StorageError(f"{path}: {RUN_JSON} is not a JSON object")
+    record = read_record(path)
     csv_path = path / FRAMES_CSV
     frames, good_len = _read_frames(csv_path)
     torn = csv_path.stat().st_size - good_len if csv_path.exists() else 0
-    return RunSnapshot(path, meta, frames, torn)
+    return RunSnapshot(path, record, frames, torn)
 
 
 UNRECORDED_DIR = ".unrecorded"
@@ -237,9 +270,9 @@ def unrecorded_frames(snapshot: RunSnapshot) -> list[str]:
     """Frame files of an unfinished run that its manifests do not list: a crash between a frame's atomic
     write and its ``frames.csv`` row (or its ``run.json`` entry) leaves at most one such frame and its
     companion files."""
-    if snapshot.status not in ("interrupted", "running"):
+    if snapshot.status not in (RecordStatus.INTERRUPTED, RecordStatus.RUNNING):
         return []
-    listed = {f.file for f in snapshot.frames} | set(snapshot.meta.get("files", {}))
+    listed = {f.file for f in snapshot.frames} | set(snapshot.record.files)
     return sorted(p.name for p in snapshot.path.iterdir()
                   if p.is_file() and _FRAME_NAME.fullmatch(p.name) and p.name not in listed)
 
@@ -249,7 +282,8 @@ class RunFolder:
 
     def __init__(self, snapshot: RunSnapshot) -> None:
         self.path = snapshot.path
-        self.meta: dict[str, Any] = dict(snapshot.meta)
+        self.meta: dict[str, Any] = snapshot.meta
+        """``run.json`` as stored, extended by :meth:`update`; read its fields through :attr:`record`."""
         self.frames: list[FrameRecord] = list(snapshot.frames)
         csv_path = self.path / FRAMES_CSV
         if snapshot.torn_bytes:
@@ -272,9 +306,14 @@ class RunFolder:
                        f"stopped; kept aside as {UNRECORDED_DIR}/{name}")
 
     @property
-    def status(self) -> str:
-        """The run's status as stored in ``run.json`` (one of :data:`STATUSES`)."""
-        return self.meta.get("status", "created")
+    def record(self) -> RunRecord:
+        """The typed ``run.json`` as it is now."""
+        return RunRecord.from_stored(self.meta)
+
+    @property
+    def status(self) -> RecordStatus | str:
+        """The run's status as stored in ``run.json``."""
+        return self.record.status
 
     def update(self, **fields: Any) -> None:
         """Merge ``fields`` into ``run.json`` and rewrite it atomically."""
@@ -308,7 +347,7 @@ class RunFolder:
         list it with its SHA-256 under ``files`` in ``run.json``; returns the stored name."""
         digest, _ = self.write_file(name, data)
         stored = sanitize_name(name)
-        self.update(files=dict(self.meta.get("files", {}), **{stored: digest}))
+        self.update(files=dict(self.record.files, **{stored: digest}))
         return stored
 
     def add_frame(self, name: str, data: bytes, t_s: float, t_unix_s: float, plate_c: float | None = None,
@@ -327,15 +366,17 @@ class RunFolder:
 
     def add_gap(self, after_t_s: float, before_t_s: float, reason: str) -> None:
         """Record that no frames exist between two times (s from the drop), e.g. across a crash."""
-        gaps = list(self.meta.get("gaps", []))
+        gaps = [dataclasses.asdict(g) for g in self.record.gaps]
         gaps.append({"after_t_s": round(after_t_s, 3), "before_t_s": round(before_t_s, 3), "reason": reason})
         self.update(gaps=gaps)
         self.event("warning", "gap", f"no frames between t={after_t_s:.1f} s and t={before_t_s:.1f} s: {reason}")
 
-    def finish(self, status: str) -> None:
+    def finish(self, status: RecordStatus | str) -> None:
         """Set the final status (``complete``, ``stopped``, ``aborted``, ``failed``) and release the run."""
-        if status not in STATUSES:
-            raise StorageError(f"status {status!r} is not one of {STATUSES}")
+        try:
+            status = RecordStatus(status)
+        except ValueError:
+            raise StorageError(f"status {status!r} is not one of {tuple(s.value for s in RecordStatus)}") from None
         self.update(status=status, writer_pid=None, writer_started=None, finished_unix_s=time.time())
         self.event("info", "finished", f"run {status} with {len(self.frames)} frames")
 
@@ -366,7 +407,7 @@ def create_run(data_dir: Path, name: str, meta: dict[str, Any]) -> RunFolder:
     name : str
         User text naming the run; sanitised.
     meta : dict
-        Initial ``run.json`` content (settings); ``name``, ``status``, ``writer_pid`` and
+        Initial ``run.json`` content (settings); ``name``, ``status``, ``format``, ``writer_pid`` and
         ``created_unix_s`` are added.
     """
     data_dir = Path(data_dir)
@@ -381,7 +422,8 @@ def create_run(data_dir: Path, name: str, meta: dict[str, Any]) -> RunFolder:
             continue
     else:
         raise StorageError(f"could not find a free run folder name for {base!r} in {data_dir}")
-    full = dict(meta, name=name, status="running", created_unix_s=time.time(), gaps=[], **_writer())
+    full = dict(meta, name=name, status=RecordStatus.RUNNING, created_unix_s=time.time(), gaps=[], format=FORMAT,
+                **_writer())
     atomic_write(path / RUN_JSON, json.dumps(full, indent=2, sort_keys=True).encode())
     run = RunFolder(read_run(path))
     run.event("info", "created", f"run folder {path.name} created")
@@ -398,12 +440,12 @@ def open_run(path: Path) -> RunFolder:
         If ``path`` is not a run folder or another live process is writing it.
     """
     snapshot = read_run(path)
-    if snapshot.live and snapshot.meta.get("writer_pid") != os.getpid():
-        raise StorageError(f"{path} is being written by process {snapshot.meta['writer_pid']}; not reopening it")
+    if snapshot.live and snapshot.record.writer_pid != os.getpid():
+        raise StorageError(f"{path} is being written by process {snapshot.record.writer_pid}; not reopening it")
     run = RunFolder(snapshot)
-    if snapshot.status == "interrupted":
+    if snapshot.status == RecordStatus.INTERRUPTED:
         run.event("warning", "interrupted", "the process writing this run stopped without finishing it")
-    run.update(status="running", resumed=int(run.meta.get("resumed", 0)) + 1, **_writer())
+    run.update(status=RecordStatus.RUNNING, resumed=snapshot.record.resumed + 1, **_writer())
     return run
 
 
@@ -411,7 +453,7 @@ def finalise_run(path: Path) -> None:
     """Close an interrupted run without resuming it: its status becomes ``stopped``; nothing else changes."""
     run = open_run(path)
     run.event("info", "finalised", "finalised by the operator without resuming")
-    run.finish("stopped")
+    run.finish(RecordStatus.STOPPED)
     run.close()
 
 
@@ -428,7 +470,7 @@ class VerifyReport:
     mismatched: list[str]
     duplicates: list[str]
     unlisted: list[str]
-    gaps: list[dict[str, Any]]
+    gaps: list[Gap]
     torn_bytes: int
     problems: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
@@ -465,7 +507,7 @@ class VerifyReport:
         out += [f"MISMATCH {name} (SHA-256 differs from the manifest)" for name in self.mismatched]
         out += [f"DUPLICATE {name} (listed more than once)" for name in self.duplicates]
         out += [f"UNLISTED {name} (in the folder, not in the manifest)" for name in self.unlisted]
-        out += [f"GAP {g['after_t_s']:.1f} s .. {g['before_t_s']:.1f} s: {g['reason']}" for g in self.gaps]
+        out += [f"GAP {g.after_t_s:.1f} s .. {g.before_t_s:.1f} s: {g.reason}" for g in self.gaps]
         if self.torn_bytes:
             out.append(f"TORN last row of {FRAMES_CSV} ({self.torn_bytes} bytes; dropped when the run is reopened)")
         out += [f"NOTE {n}" for n in self.notes]
@@ -500,8 +542,8 @@ def _verify_record(path: Path) -> VerifyReport:
         torn = f"{RUN_JSON} is torn or unreadable" if (path / RUN_JSON).exists() else f"no {RUN_JSON}"
         return VerifyReport(path, "run folder", "unknown", 0, [], [], [], [], [], 0,
                             [str(exc) if FRAMES_CSV in str(exc) else f"{torn}: {exc}"])
-    kind = snap.meta.get("kind", "run")
-    if kind not in ("run", "calibration-series"):
+    kind = snap.record.kind
+    if kind not in tuple(RecordKind):
         problems.append(f"{RUN_JSON} names kind {kind!r}; a run folder is a 'run' or a 'calibration-series'")
     if not (path / FRAMES_CSV).is_file():
         problems.append(f"the manifest {FRAMES_CSV} is missing")
@@ -510,7 +552,7 @@ def _verify_record(path: Path) -> VerifyReport:
     bad = _bad_event_lines(path / EVENTS_LOG)
     if bad:
         problems.append(f"{EVENTS_LOG} line {bad[0]} is damaged (not time, t_s, level, kind, message)")
-    listed = [(f.file, f.sha256) for f in snap.frames] + list(snap.meta.get("files", {}).items())
+    listed = [(f.file, f.sha256) for f in snap.frames] + list(snap.record.files.items())
     seen: set[str] = set()
     missing, mismatched, duplicates = [], [], []
     for name, digest in listed:
@@ -524,23 +566,21 @@ def _verify_record(path: Path) -> VerifyReport:
         elif sha256_file(target) != digest:
             mismatched.append(name)
     own = {FRAMES_CSV, EVENTS_LOG, RUN_JSON, ANALYSIS_DIR}
-    if kind == "calibration-series":
+    if kind == RecordKind.CALIBRATION_SERIES:
         own.add(MASSES_CSV)
         problems += _check_masses(path, seen, required=True)
     unlisted = [p.name for p in _entries(snap.path) if p.name not in seen and p.name not in own]
     pending = unrecorded_frames(snap)
     notes = [f"{name} was written just before the process stopped and never recorded; resuming or finalising "
              f"the run keeps it aside in {UNRECORDED_DIR}/" for name in pending]
-    label = "calibration-series record" if kind == "calibration-series" else "acquisition run record"
+    label = "calibration-series record" if kind == RecordKind.CALIBRATION_SERIES else "acquisition run record"
     return VerifyReport(snap.path, label, snap.status, len(snap.frames), missing, mismatched, duplicates, unlisted,
-                        list(snap.meta.get("gaps", [])), snap.torn_bytes, problems, notes)
+                        list(snap.record.gaps), snap.torn_bytes, problems, notes)
 
 
 def _check_masses(path: Path, listed: set[str] | None, required: bool) -> list[str]:
     """Problems of ``masses.csv``: unreadable, non-finite or decreasing masses, an image listed twice or
     (when ``listed`` is given) an image not in the frame manifest."""
-    import math
-
     csv_path = path / MASSES_CSV
     if not csv_path.is_file():
         return [f"{MASSES_CSV} is missing"] if required else []
@@ -578,14 +618,12 @@ def _verify_unrecorded(path: Path) -> VerifyReport:
     images = [p.name for p in entries if p.suffix.lower() in IMAGE_SUFFIXES]
     problems, missing, duplicates = [], [], []
     listed: set[str] = set()
-    meta: dict[str, Any] = {}
+    record: RunRecord | None = None
     if (path / RUN_JSON).exists():
         try:
-            meta = json.loads((path / RUN_JSON).read_text())
-            if not isinstance(meta, dict):
-                raise ValueError("not a JSON object")
-        except (OSError, ValueError) as exc:
-            problems.append(f"{RUN_JSON} is torn or unreadable: {exc}")
+            record = read_record(path)
+        except RecordReadError as exc:
+            problems.append(f"{RUN_JSON} is torn or unreadable: {exc.reason}")
     n_frames = 0
     if (path / FRAMES_CSV).is_file():
         kind = "frames folder without checksums (not an acquisition record)"
@@ -610,7 +648,8 @@ def _verify_unrecorded(path: Path) -> VerifyReport:
                 listed.add(name)
                 if not (path / name).is_file():
                     missing.append(name)
-        listed |= {v for k, v in meta.items() if k.endswith("_file") and isinstance(v, str)}
+        stored = record.stored if record is not None else {}
+        listed |= {v for k, v in stored.items() if k.endswith("_file") and isinstance(v, str)}
         problems += _check_masses(path, None, required=False)
         listed |= _masses_names(path)
     elif (path / MASSES_CSV).is_file():
@@ -633,8 +672,8 @@ def _verify_unrecorded(path: Path) -> VerifyReport:
         else [f"{len(images)} images; no manifest, so nothing can be missing or altered"]
     if others:
         notes.append(f"other files (not frames): {', '.join(others)}")
-    return VerifyReport(path, kind, str(meta.get("status", "not recorded")), n_frames, missing, [], duplicates,
-                        unlisted, [], 0, problems, notes)
+    status = record.status if record is not None and "status" in record.stored else "not recorded"
+    return VerifyReport(path, kind, str(status), n_frames, missing, [], duplicates, unlisted, [], 0, problems, notes)
 
 
 def _masses_names(path: Path) -> set[str]:

@@ -67,7 +67,7 @@ def test_torn_last_row_is_reported_then_dropped_on_reopen(tmp_path):
     reopened.finish("stopped")
     reopened.close()
     report = verify_run(run.path)
-    assert report.ok and report.n_frames == 3 and report.gaps[0]["after_t_s"] == 11.0
+    assert report.ok and report.n_frames == 3 and report.gaps[0].after_t_s == 11.0
     assert "interrupted" in (run.path / "events.log").read_text()
 
 
