@@ -13,21 +13,18 @@ import threading
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from drivers.errors import DriverError
 from labapp.acquisition.clock import Clock, WallClock
-from labapp.acquisition.events import Done, EngineEvent, Message, Prompt, StateChanged
+from labapp.acquisition.events import Done, EngineEvent, Message, Outcome, Phase, Prompt, PromptKind, StateChanged
+from labapp.errors import LabError
 
 log = logging.getLogger(__name__)
-
-OUTCOMES = ("complete", "stopped", "aborted", "failed")
 
 
 def _log_failure(what: str, exc: Exception) -> None:
     """Log a procedure's failure: an expected one (a device, a record, bad settings) in one line at info
     level, since the ``error`` event carries it to the operator (the CLI's last line, the GUI's log); the
     traceback only for a bug (and at debug level for the rest)."""
-    from drivers.errors import DriverError
-    from labapp.errors import LabError
-
     if isinstance(exc, (LabError, DriverError, ValueError, OSError)):
         log.info("%s: %s", what, exc)
         log.debug("traceback of %s", what, exc_info=exc)
@@ -44,7 +41,7 @@ class Procedure(Protocol):
 
     def execute(self, engine: Engine) -> None: ...
 
-    def shutdown(self, engine: Engine, outcome: str) -> None: ...
+    def shutdown(self, engine: Engine, outcome: Outcome) -> None: ...
 
 
 class Engine:
@@ -62,10 +59,10 @@ class Engine:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._stop_reason = ""
-        self._answers: dict[str, Any] = {}
+        self._answers: dict[PromptKind, Any] = {}
         self._answered = threading.Condition(self._lock)
         self._thread: threading.Thread | None = None
-        self.outcome: str | None = None
+        self.outcome: Outcome | None = None
         self.error: BaseException | None = None
 
     # -- observers ---------------------------------------------------------------------------------------
@@ -112,16 +109,16 @@ class Engine:
                 self._answered.notify_all()
 
     def abort(self) -> None:
-        """Stop as soon as possible; the outcome is ``aborted``."""
+        """Stop as soon as possible; the outcome is :attr:`Outcome.ABORTED`."""
         self.stop("abort")
 
-    def answer(self, prompt: str, value: Any = True) -> None:
-        """Answer an operator prompt (e.g. ``answer("drop")`` or ``answer("added_mass_g", 0.25)``)."""
+    def answer(self, prompt: PromptKind, value: Any = True) -> None:
+        """Answer an operator prompt (e.g. ``answer(PromptKind.DROP)`` or ``answer(PromptKind.ADDED_MASS, 0.25)``)."""
         with self._answered:
             self._answers[prompt] = value
             self._answered.notify_all()
 
-    def ask(self, prompt: str, text: str, auto: Any = None) -> Any:
+    def ask(self, prompt: PromptKind, text: str, auto: Any = None) -> Any:
         """Publish a ``prompt`` event and block until :meth:`answer` (returns the value) or a stop (None).
 
         With ``auto`` not None the prompt answers itself with ``auto`` (simulation: the drop happens by itself).
@@ -147,14 +144,14 @@ class Engine:
         self._stop_reason = ""
         self.outcome, self.error = None, None
 
-    def run(self, procedure: Procedure) -> str:
-        """Walk ``procedure`` in the calling thread; returns the outcome (one of :data:`OUTCOMES`)."""
+    def run(self, procedure: Procedure) -> Outcome:
+        """Walk ``procedure`` in the calling thread; returns its outcome."""
         self._reset()
         return self._walk(procedure)
 
-    def _walk(self, procedure: Procedure) -> str:
-        outcome = "complete"
-        self.emit(StateChanged("starting", procedure=procedure.name))
+    def _walk(self, procedure: Procedure) -> Outcome:
+        outcome = Outcome.COMPLETE
+        self.emit(StateChanged(Phase.STARTING, procedure=procedure.name))
         try:
             procedure.startup(self)
             if not self.should_stop():
@@ -162,10 +159,10 @@ class Engine:
         except Exception as exc:
             _log_failure(f"{procedure.name} failed", exc)
             self.error = exc
-            outcome = "failed"
+            outcome = Outcome.FAILED
             self.emit(Message("error", f"{type(exc).__name__}: {exc}", topic=procedure.name, fatal=True))
-        if outcome != "failed" and self.should_stop():
-            outcome = "aborted" if self._stop_reason == "abort" else "stopped"
+        if outcome != Outcome.FAILED and self.should_stop():
+            outcome = Outcome.ABORTED if self._stop_reason == "abort" else Outcome.STOPPED
         try:
             procedure.shutdown(self, outcome)
         except Exception as exc:
@@ -192,7 +189,7 @@ class Engine:
         self._thread.start()
         return self._thread
 
-    def join(self, timeout_s: float | None = None) -> str | None:
+    def join(self, timeout_s: float | None = None) -> Outcome | None:
         """Wait for the background procedure; returns its outcome (None if still running)."""
         if self._thread is not None:
             self._thread.join(timeout_s)

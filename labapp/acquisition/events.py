@@ -7,14 +7,47 @@ concentrations in g/kg, masses in g.
 """
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, field
 from typing import Literal
 
-__all__ = ["CalibrationLevel", "Done", "EngineEvent", "FrameStored", "Message", "Preview", "Prompt", "Reading",
-           "StateChanged"]
+__all__ = ["CalibrationLevel", "Done", "EngineEvent", "FrameStored", "Message", "Outcome", "Phase", "Preview",
+           "Prompt", "PromptKind", "Reading", "StateChanged"]
 
 Level = Literal["info", "warning", "error"]
+
+
+class Phase(enum.StrEnum):
+    """The step a procedure is in (:class:`StateChanged`)."""
+
+    STARTING = "starting"
+    CONNECTING = "connecting"
+    OPENED = "opened"
+    """The run folder exists (new or resumed)."""
+    HEATING = "heating"
+    WAITING_DROP = "waiting-drop"
+    ACQUIRING = "acquiring"
+    CALIBRATING = "calibrating"
+
+
+class PromptKind(enum.StrEnum):
+    """What the operator is asked (:class:`Prompt`); the answer goes to ``Engine.answer`` under the same name."""
+
+    DROP = "drop"
+    """Confirm that the object is in the beaker (time zero)."""
+    ADDED_MASS = "added_mass_g"
+    """The cumulative filament mass of the next calibration level, g; empty to finish the series."""
+
+
+class Outcome(enum.StrEnum):
+    """How a procedure ended (:class:`Done`); a run's final status in ``run.json`` has the same value."""
+
+    COMPLETE = "complete"
+    STOPPED = "stopped"
+    """Stopped on request (the data so far is kept and finalised)."""
+    ABORTED = "aborted"
+    FAILED = "failed"
 
 
 @dataclass(frozen=True)
@@ -26,10 +59,9 @@ class EngineEvent:
 
 @dataclass(frozen=True)
 class StateChanged(EngineEvent):
-    """A procedure entered ``phase`` (``starting``, ``connecting``, ``opened``, ``heating``, ``waiting-drop``,
-    ``acquiring``, ``calibrating``); ``folder`` once the run folder exists."""
+    """A procedure entered ``phase``; ``folder`` once the run folder exists."""
 
-    phase: str
+    phase: Phase
     folder: str | None = None
     procedure: str | None = None
     resumed: bool = False
@@ -96,7 +128,7 @@ class Preview(EngineEvent):
 class Prompt(EngineEvent):
     """The operator is asked ``text``; answer with ``Engine.answer(prompt, value)``; ``auto`` answers itself."""
 
-    prompt: str
+    prompt: PromptKind
     text: str
     auto: bool = False
 
@@ -114,7 +146,7 @@ class Message(EngineEvent):
 
 @dataclass(frozen=True)
 class Done(EngineEvent):
-    """A procedure ended with ``outcome`` (``complete``, ``stopped``, ``aborted``, ``failed``)."""
+    """A procedure ended with ``outcome``; ``reason`` is the engine's stop reason."""
 
-    outcome: str
+    outcome: Outcome
     reason: str = ""

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 import threading
 
-from labapp.acquisition.events import Done, EngineEvent, FrameStored, Message, Prompt, Reading, StateChanged
+from labapp.acquisition.events import Done, EngineEvent, FrameStored, Message, Outcome, Prompt, Reading, StateChanged
 
 
 def hms(t_s: float | None) -> str:
@@ -20,7 +20,7 @@ class RunStatus:
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self.phase = "idle"
+        self.phase: str = "idle"        # shown first: "idle", the Phase, the prompt waited for, or the outcome
         self.folder = ""
         self.t_s: float | None = None
         self.frames = 0
@@ -30,7 +30,7 @@ class RunStatus:
         self.speed_rpm: float | None = None
         self.last_error = ""
         self.warnings = 0
-        self.outcome: str | None = None
+        self.outcome: Outcome | None = None
 
     def update(self, event: EngineEvent) -> None:
         """Fold one event into the status."""
