@@ -7,14 +7,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from labapp.records.outpaths import ANALYSIS_SUBFOLDER, check_out
+from analysis import BenchCalibration, RunCurve, analyze_run, write_cells_csv, write_curve_csv
+from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
+from labapp.figures.release_plot import draw_release
+from labapp.jobs.compare import release_summary
+from labapp.records.outpaths import ANALYSIS_SUBFOLDER, FolderKind, check_out
 
 
 @dataclass(frozen=True)
 class AnalysisOutputs:
-    """What :func:`analyse_run` wrote: the curve (an ``analysis.RunCurve``) and the files."""
+    """What :func:`analyse_run` wrote: the curve and the files."""
 
-    curve: Any
+    curve: RunCurve
     out: Path
     files: tuple[Path, ...]
 
@@ -46,14 +50,11 @@ def analyse_run(run: str | Path, calibration: str | Path, out: str | Path | None
     analysis.AnalysisError
         For unreadable frames, manifests or calibrations (the message names them).
     """
-    from analysis import BenchCalibration, analyze_run, write_cells_csv, write_curve_csv
-    from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
-
     run = Path(run)
     default_out = run / ANALYSIS_SUBFOLDER
     out = Path(out) if out is not None else default_out
     inputs = [calibration] if out.resolve() == default_out.resolve() else [calibration, run]
-    out = check_out(out, "analysis", inputs)
+    out = check_out(out, FolderKind.ANALYSIS, inputs)
     cal = BenchCalibration.load(calibration)
     out.mkdir(parents=True, exist_ok=True)
     curve = analyze_run(run, cal, interval_s=interval_s, workers=workers, progress=progress, reduce=reduce,
@@ -70,23 +71,19 @@ def analyse_run(run: str | Path, calibration: str | Path, out: str | Path | None
     return AnalysisOutputs(curve, out, tuple(files))
 
 
-def _analysis_summary(curve, run: Path) -> dict[str, Any]:
+def _analysis_summary(curve: RunCurve, run: Path) -> dict[str, Any]:
     """``summary.json`` of an analysis: the run's totals and its release metrics (MDT, DE, model fits)."""
-    from labapp.jobs.compare import release_summary
-
     return {"run": str(run), "frames": len(curve.files), "duration_s": float(curve.t_s[-1] - curve.t_s[0]),
             "water_g": curve.water_g, "object_mass_g": curve.object_mass_g,
             "final_released_g": float(curve.released_g[-1]),
             "release": release_summary(curve.t_s, curve.released_g, curve.object_mass_g, str(run))}
 
 
-def _plot_curve(curve, path: Path) -> None:
+def _plot_curve(curve: RunCurve, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from labapp.figures.release_plot import draw_release
 
     fig, ax = plt.subplots(figsize=(7, 4), dpi=120)
     draw_release(ax, curve)

@@ -9,6 +9,7 @@ be analysed is a row with its error; the others go on.
 from __future__ import annotations
 
 import csv
+import enum
 import json
 import logging
 import os
@@ -18,6 +19,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from analysis import BenchCalibration, ReleaseProfile, similarity
+from labapp.jobs.analyse import analyse_run
+from labapp.jobs.compare import profile_of
+from labapp.records.curvefiles import read_physical_curve
+from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import sanitize_name
 from labapp.scaleout.sweep import Progress
 
@@ -28,6 +34,15 @@ TABLE_COLUMNS = ("name", "run", "status", "error", "frames", "duration_s", "fina
                  "mdt_s", "de_pct", "f1", "f2", "f2_points", "f2_note", "best_fit", "folder")
 TASK_MEMORY_GB = 1.0
 """Peak memory of one run's analysis (decoded frames are reduced to per-cell values as they come), GB."""
+
+
+class RowStatus(enum.StrEnum):
+    """``status`` of a run's row in ``batch_summary.csv``."""
+
+    DONE = "done"
+    FAILED = "failed"
+    NOT_ANALYSED = "not analysed"
+    """No result yet: the batch is running, or was stopped before the run's turn."""
 
 
 @dataclass(frozen=True)
@@ -52,29 +67,27 @@ def output_names(runs: list[str | Path]) -> list[str]:
     return names
 
 
-def analyse_one(run: str, calibration: str, out: str, reference=None, options: dict | None = None) -> dict:
+def analyse_one(run: str, calibration: str, out: str, reference: ReleaseProfile | None = None,
+                options: dict | None = None) -> dict:
     """Analyse one run into ``out`` and return its table row; never raises (a failure is a row).
 
     Parameters
     ----------
     run, calibration, out : str
         Run folder, bench calibration JSON, output folder.
-    reference : analysis.ReleaseProfile, optional
+    reference : ReleaseProfile, optional
         For f1/f2 (s, g).
     options : dict, optional
         Keyword arguments of `labapp.jobs.analyse.analyse_run` (interval_s, water_g, window_s, order, workers,
         reduce, plot).
     """
-    from analysis import ReleaseProfile, similarity
-    from labapp.jobs.analyse import analyse_run
-
     row = {"run": str(run), "folder": Path(out).name}
     try:
         result = analyse_run(run, calibration, out, **(options or {}))
         curve = result.curve
         summary = json.loads((result.out / "summary.json").read_text())
         release = summary.get("release", {})
-        row.update(status="done", frames=len(curve.files), duration_s=summary["duration_s"],
+        row.update(status=RowStatus.DONE, frames=len(curve.files), duration_s=summary["duration_s"],
                    final_conc_g_per_kg=float(curve.conc_smooth_g_per_kg[-1]),
                    final_released_g=summary["final_released_g"], mdt_s=release.get("mdt_s"),
                    de_pct=release.get("de_pct"), best_fit=release.get("best_fit_text"),
@@ -85,7 +98,7 @@ def analyse_one(run: str, calibration: str, out: str, reference=None, options: d
             row.update(f1=sim.f1, f2=sim.f2, f2_points=sim.points_used, f2_note=sim.reason)
     except Exception as exc:  # noqa: BLE001 -- one bad run is a row with its error; the batch goes on
         log.debug("analysis of %s failed:\n%s", run, traceback.format_exc())
-        row.update(status="failed", error=f"{type(exc).__name__}: {exc}")
+        row.update(status=RowStatus.FAILED, error=f"{type(exc).__name__}: {exc}")
     return {k: ("" if v is None else v) for k, v in row.items()}
 
 
@@ -116,14 +129,9 @@ def analyse_many(runs: list[str | Path], calibration: str | Path, out: str | Pat
     labapp.records.curvefiles.CurveFileError
         For a reference that cannot be read.
     """
-    from analysis import BenchCalibration
-    from labapp.jobs.compare import profile_of
-    from labapp.records.curvefiles import read_physical_curve
-    from labapp.records.outpaths import check_out
-
     if not runs:
         raise ValueError("give at least one run folder")
-    out = check_out(out, "batch-analysis", [calibration, reference, *runs])
+    out = check_out(out, FolderKind.BATCH_ANALYSIS, [calibration, reference, *runs])
     BenchCalibration.load(calibration)  # a bad calibration stops the batch before any work
     ref = None
     if reference is not None:
@@ -140,7 +148,7 @@ def analyse_many(runs: list[str | Path], calibration: str | Path, out: str | Pat
     def progress(running: int) -> None:
         left = len(jobs) - len(rows) - running
         eta = (left + running) * (time.perf_counter() - t0) / len(rows) if rows else None
-        report(Progress(len(rows), sum(r["status"] == "failed" for r in rows.values()), running, left, eta))
+        report(Progress(len(rows), sum(r["status"] == RowStatus.FAILED for r in rows.values()), running, left, eta))
 
     stopped = False
     try:
@@ -167,7 +175,7 @@ def analyse_many(runs: list[str | Path], calibration: str | Path, out: str | Pat
 
 def _write_table(out: Path, jobs: list, names: list[str], rows: dict[int, dict]) -> list[dict]:
     """Write the summary table (atomically); runs without a result yet are "not analysed"."""
-    table_rows = [{"name": name, **rows.get(i, {"run": job[0], "folder": name, "status": "not analysed"})}
+    table_rows = [{"name": name, **rows.get(i, {"run": job[0], "folder": name, "status": RowStatus.NOT_ANALYSED})}
                   for i, (job, name) in enumerate(zip(jobs, names))]
     tmp = out / f"{TABLE}.tmp"
     with open(tmp, "w", newline="") as fh:

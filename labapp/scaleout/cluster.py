@@ -11,8 +11,11 @@ import logging
 import math
 import os
 import signal
+import threading
 import warnings
 from typing import Iterator
+
+import psutil
 
 from labapp.errors import LabError
 from labapp.jobs.meshunits import BASE_MEMORY_BYTES, design_memory_bytes
@@ -38,8 +41,6 @@ def design_memory_gb(resolution: int, space: str = "nfc") -> float:
 def local_worker_count(task_memory_gb: float, *, cores: int | None = None, memory_gb: float | None = None) -> int:
     """Single-threaded workers this machine can run side by side: one per core, as many as the
     available memory holds at `task_memory_gb` each (at least one)."""
-    import psutil
-
     cores = cores or os.cpu_count() or 1
     if memory_gb is None:
         memory_gb = psutil.virtual_memory().available / 1e9
@@ -108,8 +109,6 @@ def dask_client(scheduler: str | None = None, *, workers: int | None = None,
 
 
 def _main_thread() -> bool:
-    import threading
-
     return threading.current_thread() is threading.main_thread()
 
 

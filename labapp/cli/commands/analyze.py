@@ -3,9 +3,12 @@ folders at once (on a local Dask cluster or a scheduler) to one summary table (`
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 
 from labapp.cli.argtypes import nonnegative_int, positive_float, positive_int
+from labapp.cli.commands.sweep import progress_printer
+from labapp.errors import UsageError
 
 NAME = "analyze"
 HELP = ("turn a run folder or image folder into a release curve (curve.csv, cells.csv, summary.json, curve.png); "
@@ -35,8 +38,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse, write the outputs, print a summary."""
-    import json
-
     if len(args.run) > 1 or args.scheduler or args.reference:
         return _run_batch(args)
     args.run = args.run[0]
@@ -76,9 +77,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_batch(args: argparse.Namespace) -> int:
     """Many runs: the analysis job on Dask workers, one row each in ``--out/batch_summary.csv``."""
-    from labapp.cli.commands.sweep import progress_printer
-    from labapp.errors import UsageError
-    from labapp.scaleout.batch import TASK_MEMORY_GB, analyse_many
+    from labapp.scaleout.batch import TASK_MEMORY_GB, RowStatus, analyse_many
     from labapp.scaleout.cluster import dashboard_link, dask_client
 
     if not args.out:
@@ -92,7 +91,7 @@ def _run_batch(args: argparse.Namespace) -> int:
               + (f"; Dask dashboard: {link}" if link else ""), file=sys.stderr)
         result = analyse_many(args.run, args.calibration, args.out, client, reference=args.reference,
                               on_progress=progress_printer(), **options)
-    failed = [r for r in result.rows if r["status"] != "done"]
+    failed = [r for r in result.rows if r["status"] != RowStatus.DONE]
     for row in failed:
         print(f"{row['status']}: {row['run']}: {row.get('error', '')}", file=sys.stderr)
     print(f"{len(result.rows) - len(failed)} of {len(result.rows)} runs analysed; wrote {result.table}")

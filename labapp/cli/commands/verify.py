@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from labapp.jobs.verify import verify
+
 NAME = "verify"
 HELP = "check a run folder against its manifests (missing, altered, unlisted files, damaged manifests)"
 
@@ -16,8 +18,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print one report per folder, its last line ``OK`` or ``FAILED: <reason>``; exit 1 if any fails."""
-    from labapp.jobs.verify import verify
-
     failed = 0
     for folder in args.runs:
         report = verify(folder)
