@@ -23,7 +23,7 @@ from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, SimCal
 from analysis.simcal import DEFAULT_MAX_OFFSET_S, MODELS
 from labapp.errors import UsageError
 from labapp.records.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
-from labapp.records.outpaths import check_out
+from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import atomic_write, sha256_file
 
 FORMAT = "sfr-simcal/1"
@@ -159,7 +159,7 @@ def _simulate(mesh_path: Path, resolution: int):
 
 
 def _check_out(out_dir: Path, inputs: list) -> None:
-    check_out(out_dir, "simcal", inputs, replace=False)
+    check_out(out_dir, FolderKind.SIMCAL, inputs, replace=False)
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -15,7 +15,7 @@ from design.inverse.problem import DesignConfig
 from labapp.errors import UsageError
 from labapp.jobs.meshunits import design_memory_bytes, load_mesh_mm, require_memory, size_warnings
 from labapp.jobs.physical import design_from_target, is_physical
-from labapp.records.outpaths import check_out
+from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import sanitize_name
 
 log = logging.getLogger(__name__)
@@ -130,7 +130,7 @@ def design(config, out: str | Path, *, resume: bool = False, units: str = "mm", 
         for w in _check_target_unchanged(out):
             warn(w)
         return design_from_target(None, out, resume=True, **run)
-    out = check_out(out, "design", [config.target], replace=False)
+    out = check_out(out, FolderKind.DESIGN, [config.target], replace=False)
     existed = out.exists()
     before = set(out.iterdir()) if existed else set()
     source = target = config.target

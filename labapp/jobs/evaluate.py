@@ -28,7 +28,7 @@ from analysis.profile import ReleaseProfile, similarity
 from design.montecarlo.erosion import DEFAULT_SEEDS
 from design.montecarlo.tuning import DEFAULT_EA_J_PER_MOL, tune_mc, unit_runs
 from labapp.jobs.simulate_mc import calibration_doc
-from labapp.records.outpaths import check_out
+from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import atomic_write
 
 MODEL_NAMES = ("forward", "mc")
@@ -121,7 +121,7 @@ def evaluate_models(set_csv: str | Path, bench_calibration: str | Path | None, o
     rows = read_set(set_csv)
     if len(rows) < 3:
         raise SimCalError(f"{set_csv}: {len(rows)} objects; a leave-one-out evaluation needs at least 3")
-    out_dir = check_out(out_dir, "evaluation", [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)],
+    out_dir = check_out(out_dir, FolderKind.EVALUATION, [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)],
                         replace=False)
     out_dir.mkdir(parents=True, exist_ok=True)
     say(0.0, "forward model: simulation calibration and its leave-one-out predictions ...")

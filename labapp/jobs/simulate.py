@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from labapp.errors import UsageError
-from labapp.records.outpaths import check_out
+from labapp.records.outpaths import FolderKind, check_out
 
 log = logging.getLogger(__name__)
 
@@ -80,7 +80,7 @@ def simulate(source: str, out: str | Path, *, resolution: int | None = None, vox
     from design import simulate as forward
 
     say = progress or (lambda message: None)
-    out = check_out(out, "simulation", [source])
+    out = check_out(out, FolderKind.SIMULATION, [source])
     start = time.perf_counter()
     say(f"[1/3] loading and voxelising {source} ...")
     rho, dx, mirror, warnings = simulation_grid(source, resolution=resolution, voxel_size_mm=voxel_size_mm,

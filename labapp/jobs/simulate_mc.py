@@ -29,7 +29,7 @@ from design.montecarlo.tuning import McTuning
 from labapp.acquisition.simbench import WATER_G
 from labapp.errors import UsageError
 from labapp.jobs.physical import plot_physical
-from labapp.records.outpaths import check_out
+from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import atomic_write
 
 if TYPE_CHECKING:
@@ -132,7 +132,7 @@ def simulate_mc_job(source: str, out: str | Path, calibration: McCalibration, *,
     if int(seeds) < 1:
         raise UsageError(f"--seeds {seeds}: give at least 1 run")
     say = progress or (lambda message: None)
-    out = check_out(out, "simulation", [source])
+    out = check_out(out, FolderKind.SIMULATION, [source])
     start = time.perf_counter()
     say(f"[1/3] loading and voxelising {source} ...")
     rho, dx, mirror, warnings = simulation_grid(source, resolution=resolution, voxel_size_mm=voxel_size_mm,
