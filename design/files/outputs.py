@@ -32,6 +32,7 @@ from design.geometry.voxelize import grid_for, voxelize
 from design.inverse.objective import DesignObjective, rel_rmse
 from design.inverse.optimize import HISTORY_COLUMNS
 from design.inverse.rate import rate_deviation, rate_deviation_vs_target
+from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)
 
@@ -157,7 +158,8 @@ def fine_source_release(mesh, dx_mm: float, total_time_mm: float, dtau_mm: float
 
 
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
-                  history: list[list[float]], config, *, status: str, session_seconds: float) -> DesignOutputs:
+                  history: list[list[float]], config, *, status: DesignStatus,
+                  session_seconds: float) -> DesignOutputs:
     """Extract, re-simulate, assess and write every output of a design run.
 
     Parameters
@@ -169,7 +171,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         The best design variables found.
     history : list of rows with `HISTORY_COLUMNS`
     config : design.inverse.problem.DesignConfig
-    status : str
+    status : DesignStatus
     session_seconds : float
         Wall time of this session (resumes add up through the history's seconds column).
     """

@@ -21,7 +21,7 @@ import numpy as np
 from design.errors import DesignError
 from design.files.outputs import DesignOutputs, write_outputs
 from design.files.targets_io import load_problem
-from design.inverse.multistart import coarse_start, refine_start, start_name
+from design.inverse.multistart import coarse_start, refine_start, refinement_phase, start_name
 from design.inverse.optimize import (
     HISTORY_COLUMNS,
     Checkpoint,
@@ -32,6 +32,7 @@ from design.inverse.optimize import (
     with_phase,
 )
 from design.inverse.problem import DesignConfig
+from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)
 
@@ -49,9 +50,7 @@ class DesignResult:
     Attributes
     ----------
     out_dir : Path
-    status : str
-        "converged", "max_iter", "stalled" (nlopt's line search gave up, restarts exhausted),
-        "stopped" (should_stop) or "interrupted" (Ctrl-C).
+    status : DesignStatus
     iterations : int
         Objective evaluations over all sessions of the run (resumes included).
     best_value : float
@@ -59,7 +58,7 @@ class DesignResult:
     """
 
     out_dir: Path
-    status: str
+    status: DesignStatus
     iterations: int
     best_value: float
     outputs: DesignOutputs
@@ -174,7 +173,8 @@ class _StartFolders:
     def finished(self, k: int) -> bool:
         return (self.folder(k) / "summary.json").exists()
 
-    def run(self, k: int, config: DesignConfig, start: StartDesign, on_iteration: IterationCallback | None) -> str:
+    def run(self, k: int, config: DesignConfig, start: StartDesign,
+            on_iteration: IterationCallback | None) -> DesignStatus:
         folder = self.folder(k)
         resume = (folder / CONFIG).exists()
         return run_design(None if resume else config, folder, on_iteration=on_iteration,
@@ -261,7 +261,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     if saved is None and start is None and config.starts > 1:  # coarse-to-fine multi-start
         start = _multistart(config, out_dir, on_iteration, should_stop)
     if config.starts > 1:
-        on_iteration = with_phase(on_iteration, f"refinement at resolution {config.resolution}")
+        on_iteration = with_phase(on_iteration, refinement_phase(config.resolution))
     outcome = optimise(objective, problem, config, CheckpointFile(ckpt), saved=saved, start=start,
                        on_iteration=on_iteration, should_stop=should_stop)
     outputs = write_outputs(out_dir, problem, objective, outcome.best_x, outcome.history, config,

@@ -23,6 +23,7 @@ from scipy import ndimage
 from design.inverse.objective import DesignObjective
 from design.inverse.optimize import IterationCallback, StartDesign, with_phase
 from design.inverse.problem import DesignConfig, Problem
+from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +43,16 @@ def coarse_resolution(resolution: int) -> int:
 def start_name(k: int) -> str:
     """The name of coarse start ``k`` (its folder's, ``starts/NN``)."""
     return f"{k:02d}"
+
+
+def coarse_phase(k: int, starts: int, resolution: int) -> str:
+    """The progress phase (``terms["phase"]``) of coarse start ``k`` (from 0) of ``starts``."""
+    return f"coarse start {k + 1} of {starts} at resolution {resolution}"
+
+
+def refinement_phase(resolution: int) -> str:
+    """The progress phase (``terms["phase"]``) of the full-resolution run that refines the best coarse start."""
+    return f"refinement at resolution {resolution}"
 
 
 def perturbed_start(seed: int) -> StartDesign:
@@ -82,7 +93,8 @@ class CoarseRuns(Protocol):
     def finished(self, k: int) -> bool:
         """Whether start ``k`` has finished (its outputs are written)."""
 
-    def run(self, k: int, config: DesignConfig, start: StartDesign, on_iteration: IterationCallback | None) -> str:
+    def run(self, k: int, config: DesignConfig, start: StartDesign,
+            on_iteration: IterationCallback | None) -> DesignStatus:
         """Run (or resume) start ``k`` with ``config`` from ``start``; returns the run's status."""
 
     def best_value(self, k: int) -> float:
@@ -129,12 +141,12 @@ def coarse_start(config: DesignConfig, runs: CoarseRuns, *,
     values = []
     for k in range(config.starts):
         if not runs.finished(k):
-            phase = f"coarse start {k + 1} of {config.starts} at resolution {coarse.resolution}"
+            phase = coarse_phase(k, config.starts, coarse.resolution)
             log.info(phase)
             status = runs.run(k, coarse, perturbed_start(k), with_phase(on_iteration, phase))
-            if status == "interrupted":
+            if status == DesignStatus.INTERRUPTED:
                 raise KeyboardInterrupt
-            if status == "stopped":
+            if status == DesignStatus.STOPPED:
                 return None
         values.append(runs.best_value(k))
     best = min(range(len(values)), key=values.__getitem__)

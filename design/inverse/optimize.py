@@ -43,6 +43,7 @@ import numpy as np
 from design.inverse.lbfgs import CONVERGED, STALLED, Lbfgs, LbfgsSettings
 from design.inverse.objective import DesignObjective
 from design.inverse.problem import DesignConfig, Problem
+from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +64,8 @@ RESTART_GAIN = 1e-3
 """Relative decrease of J a session must achieve for another restart to be tried."""
 BETA_STAGES = 4
 """Stages of the beta continuation (`DesignConfig.beta_final`)."""
+_ERROR = "error"
+"""The stop reason of an evaluation that raised (the error is re-raised; never a run's status)."""
 HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "fab_seconds", "grad_norm", "seconds")
 """One row per evaluation: ``fab_seconds`` is the time of that evaluation's J_fab (the ICO solves), s;
 ``seconds`` the run time so far, s."""
@@ -116,9 +119,7 @@ class Outcome:
 
     Attributes
     ----------
-    status : str
-        "converged", "max_iter", "stalled" (the line search gave up, restarts exhausted),
-        "stopped" (should_stop) or "interrupted" (Ctrl-C).
+    status : DesignStatus
     iterations : int
         Objective evaluations over all sessions of the run (resumes included).
     best_value : float
@@ -129,7 +130,7 @@ class Outcome:
         Wall time of this session.
     """
 
-    status: str
+    status: DesignStatus
     iterations: int
     best_value: float
     best_x: np.ndarray
@@ -153,7 +154,7 @@ class _Run:
         self.best_x: np.ndarray | None = None
         self.best_value = min((row[1] for row in history), default=np.inf)
         self.last_x: np.ndarray | None = None
-        self.stop_reason: str | None = None
+        self.stop_reason: DesignStatus | str | None = None
         self.error: Exception | None = None
         self.opt: nlopt.opt | None = None
         self.lbfgs: Lbfgs | None = None  # the "lbfgs" optimiser with a pending trial point
@@ -179,12 +180,12 @@ class _Run:
         try:
             return self._step(z, grad)
         except KeyboardInterrupt:
-            return self._stop("interrupted", grad)
+            return self._stop(DesignStatus.INTERRUPTED, grad)
         except Exception as exc:  # noqa: BLE001 -- re-raised by _optimise after nlopt returns
             self.error = exc
-            return self._stop("error", grad)
+            return self._stop(_ERROR, grad)
 
-    def _stop(self, reason: str, grad: np.ndarray) -> float:
+    def _stop(self, reason: DesignStatus | str, grad: np.ndarray) -> float:
         self.stop_reason = self.stop_reason or reason
         self.opt.force_stop()
         if grad.size:
@@ -201,12 +202,12 @@ class _Run:
         self.report()
         return value
 
-    def stop_requested(self) -> str | None:
-        """"max_iter" at the stage's evaluation limit, "stopped" when `should_stop` says so, else None."""
+    def stop_requested(self) -> DesignStatus | None:
+        """MAX_ITER at the stage's evaluation limit, STOPPED when `should_stop` says so, else None."""
         if self.k >= self.stage_end:
-            return "max_iter"
+            return DesignStatus.MAX_ITER
         if self.should_stop is not None and self.should_stop():
-            return "stopped"
+            return DesignStatus.STOPPED
         return None
 
     def evaluate(self, z: np.ndarray, grad: np.ndarray) -> float:
@@ -259,10 +260,10 @@ class _Run:
                                    lbfgs=state), wait=wait)
 
 
-def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> str:
+def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> DesignStatus:
     """One nlopt session (algorithm `DesignConfig.optimizer`) from ``x0``, at most ``remaining`` evaluations."""
     cfg = run.config
-    if run.stop_reason == "max_iter":  # the previous beta stage's end, not the run's
+    if run.stop_reason == DesignStatus.MAX_ITER:  # the previous beta stage's end, not the run's
         run.stop_reason = None
     opt = nlopt.opt(getattr(nlopt, cfg.optimizer), x0.size)
     if not run.cosine:
@@ -279,13 +280,13 @@ def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> str:
     try:
         opt.optimize(run.from_x(x0))
     except KeyboardInterrupt:
-        return "interrupted"
+        return DesignStatus.INTERRUPTED
     except Exception as exc:  # noqa: BLE001 -- nlopt reports forced stops, roundoff and failures alike
         if run.error is not None:
             raise run.error
         if run.stop_reason is None:
             log.info("nlopt stopped (%s: %s) after %d evaluations", type(exc).__name__, exc, run.k)
-            return "stalled"
+            return DesignStatus.STALLED
     finally:
         run.opt = None  # nlopt's L-BFGS memory (m N doubles) goes with it
     if run.error is not None:
@@ -293,7 +294,7 @@ def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> str:
     if run.stop_reason is not None:
         return run.stop_reason
     code = opt.last_optimize_result()
-    return "max_iter" if code == nlopt.MAXEVAL_REACHED else "converged"
+    return DesignStatus.MAX_ITER if code == nlopt.MAXEVAL_REACHED else DesignStatus.CONVERGED
 
 
 def beta_stages(config: DesignConfig) -> list[tuple[float, int]]:
@@ -310,7 +311,7 @@ def beta_stages(config: DesignConfig) -> list[tuple[float, int]]:
     return [(float(b), e) for b, e in zip(betas, ends)]
 
 
-def _stage_lbfgs(run: _Run, start: np.ndarray, stage_end: int, state: dict | None) -> str:
+def _stage_lbfgs(run: _Run, start: np.ndarray, stage_end: int, state: dict | None) -> DesignStatus:
     """`design.inverse.lbfgs` from ``start`` (or from a checkpointed ``state``) until evaluation
     ``stage_end``; after an early end a new session starts at the best design so far, as `_stage`
     restarts nlopt (module doc), its count and the best J it began with kept in the optimiser's state."""
@@ -337,29 +338,33 @@ def _stage_lbfgs(run: _Run, start: np.ndarray, stage_end: int, state: dict | Non
                     opt.restarts, opt.f_restart = sessions, run.best_value
                     run.lbfgs = opt
                 else:
-                    ended = "stalled" if outcome == STALLED else "converged"
+                    ended = DesignStatus.STALLED if outcome == STALLED else DesignStatus.CONVERGED
                     run.lbfgs, run.stage = None, run.stage + 1
             run.report()
             if ended is not None:
                 return ended
     except KeyboardInterrupt:
-        return "interrupted"
+        return DesignStatus.INTERRUPTED
 
 
-def _stage(run: _Run, start: np.ndarray, stage_end: int) -> str:
+_ENDED_EARLY = (DesignStatus.STALLED, DesignStatus.CONVERGED)
+"""Statuses after which a stage restarts from the best design while that still makes progress (module doc)."""
+
+
+def _stage(run: _Run, start: np.ndarray, stage_end: int) -> DesignStatus:
     """nlopt from ``start`` until evaluation ``stage_end``, restarting after early ends."""
-    status = "max_iter"
+    status = DesignStatus.MAX_ITER
     for _ in range(1 + MAX_RESTARTS):
         remaining = stage_end - run.k
         if remaining <= 0:
-            return "max_iter"
+            return DesignStatus.MAX_ITER
         before = run.best_value
         status = _optimise(run, start, remaining)
         start = run.best_x.copy() if run.best_x is not None else start
         # nlopt's L-BFGS ends early on the piecewise-smooth fast-marching objective (line-search
         # failure, or its internal step criteria reporting success far from a minimum); restart
         # from the best point with empty curvature memory while that still makes progress
-        if status not in ("stalled", "converged") or not run.best_value < before * (1.0 - RESTART_GAIN):
+        if status not in _ENDED_EARLY or not run.best_value < before * (1.0 - RESTART_GAIN):
             break
         log.info("restarting L-BFGS from the best design (J = %.6g)", run.best_value)
     return status
@@ -423,7 +428,7 @@ def optimise(objective: DesignObjective, problem: Problem, config: DesignConfig,
         if config.optimizer == "lbfgs":  # its run continues from its saved state, else from the best
             lbfgs_state = dict(saved.lbfgs) or None
             x0 = run.best_x.reshape(problem.space.var_shape)
-    status = "max_iter" if run.k >= config.max_iter else "stalled"  # when no stage is left to run
+    status = DesignStatus.MAX_ITER if run.k >= config.max_iter else DesignStatus.STALLED  # no stage left to run
     start, resume_stage = x0.ravel().copy(), run.stage
     for i, (beta, stage_end) in enumerate(beta_stages(config)):
         if i < resume_stage or run.k >= stage_end:
@@ -440,9 +445,9 @@ def optimise(objective: DesignObjective, problem: Problem, config: DesignConfig,
         else:
             status = _stage(run, start, stage_end)
         start = run.best_x.copy() if run.best_x is not None else start
-        if status in ("stalled", "converged"):
+        if status in _ENDED_EARLY:
             run.stage = i + 1
-        if status not in ("stalled", "converged", "max_iter"):
+        if not status.finished:
             break
     run.checkpoint()
     run.lbfgs = None  # its 2 m N doubles are not needed for the outputs

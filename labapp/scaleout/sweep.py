@@ -30,13 +30,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from design.inverse.status import FINISHED, DesignStatus
 from labapp.errors import UsageError
 from labapp.scaleout.sweepspec import Combination, SweepSpec, config_matches
 
 log = logging.getLogger(__name__)
 
-DONE_STATUSES = ("converged", "max_iter", "stalled")
-"""`design.inverse.optimize.DesignResult` statuses that finish a design; "stopped"/"interrupted" resume."""
+DONE_STATUSES = FINISHED
+"""`design.files.rundir.DesignResult` statuses that finish a design; "stopped"/"interrupted" resume."""
 RUNS, FAILED, LOCKS = "runs", "failed", ".locks"
 STOP_POLL_S = 1.0
 """How often a running design asks the scheduler whether the sweep was stopped, s."""
@@ -278,7 +279,7 @@ def _run_serial(session: _Session, sweep_dir: Path, report, should_stop) -> bool
                 return True
             report(session.progress(1))
             session.outcomes[combo.name] = run_combination(combo, str(sweep_dir))
-            if session.outcomes[combo.name]["status"] == "interrupted":  # Ctrl-C, caught by the optimiser
+            if session.outcomes[combo.name]["status"] == DesignStatus.INTERRUPTED:  # Ctrl-C, caught by the optimiser
                 return True
     except KeyboardInterrupt:
         return True

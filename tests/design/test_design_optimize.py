@@ -12,6 +12,7 @@ from design.files.outputs import _rate_dev
 from design.files.rundir import run_design
 from design.geometry.shapes import sample_shape
 from design.inverse.problem import DesignConfig, prepare
+from design.inverse.status import FINISHED, DesignStatus
 
 SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)
 
@@ -170,3 +171,10 @@ def test_a_source_without_the_design_s_symmetry_is_re_simulated_whole_on_the_fin
     curves = np.genfromtxt(tmp_path / "run" / "curves.csv", delimiter=",", names=True)
     volume = sample_shape("spinner_top").volume
     assert abs(curves["fine_target_mm3"][-1] - volume) < 0.01 * volume
+
+
+def test_a_design_status_is_its_stored_string():
+    assert [str(s) for s in DesignStatus] == ["converged", "max_iter", "stalled", "stopped", "interrupted"]
+    assert json.dumps({"status": DesignStatus.MAX_ITER}) == '{"status": "max_iter"}'
+    assert DesignStatus("stopped") == "stopped" and f"{DesignStatus.STALLED}" == "stalled"
+    assert [s for s in DesignStatus if s.finished] == list(FINISHED) == ["converged", "max_iter", "stalled"]

@@ -121,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
     from analysis import BenchCalibration
     from design.files.outputs import enclosed_voids_text, percent_text
     from design.inverse.problem import DesignConfig
+    from design.inverse.status import DesignStatus
     from labapp.jobs.calibrate_sim import load_simcal
     from labapp.jobs.design import design as design_job
 
@@ -184,4 +185,4 @@ def run(args: argparse.Namespace) -> int:
              "summary.json", "design.ini")
     print(f"results in {result.out_dir}: {', '.join(n for n in names if (result.out_dir / n).exists())}")
     log.debug("summary %s", json.dumps(s))
-    return 0 if result.status != "interrupted" else 130
+    return 0 if result.status != DesignStatus.INTERRUPTED else 130
