@@ -5,6 +5,7 @@ import subprocess
 import sys
 import time
 
+from labapp.records.runrecord import RecordStatus
 from labapp.records.storage import read_run, unrecorded_frames, verify_run
 
 
@@ -35,7 +36,7 @@ def test_sigkill_mid_run_then_resume_into_the_same_folder(tmp_path, sim_calibrat
     first.wait(30)
 
     before = read_run(folder)
-    assert before.status == "interrupted" and not before.live
+    assert before.status == RecordStatus.INTERRUPTED and not before.live
     assert len(before.frames) >= 15
     assert all((folder / f.file).is_file() for f in before.frames)
     report = verify_run(folder)                        # every frame listed exactly once and intact, except
@@ -49,7 +50,7 @@ def test_sigkill_mid_run_then_resume_into_the_same_folder(tmp_path, sim_calibrat
     assert "stopping cleanly" in out and "run stopped" in out
 
     after = read_run(folder)
-    assert after.status == "stopped" and after.meta["resumed"] == 1
+    assert after.status == RecordStatus.STOPPED and after.meta["resumed"] == 1
     assert after.frames[: len(before.frames)] == before.frames
     names = [f.file for f in after.frames]
     assert len(names) == len(set(names)) and len(names) >= len(before.frames) + 10

@@ -6,7 +6,7 @@ import pytest
 
 from labapp.acquisition.clock import ScaledClock, SteppedClock, WallClock, make_clock
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import Done, Message, Prompt
+from labapp.acquisition.events import Done, Message, Outcome, Phase, Prompt, PromptKind, StateChanged
 
 
 class Counting:
@@ -24,7 +24,7 @@ class Counting:
     def execute(self, engine):
         self.calls.append("execute")
         if self.ask:
-            self.answer = engine.ask("added_mass_g", "enter the mass")
+            self.answer = engine.ask(PromptKind.ADDED_MASS, "enter the mass")
         for k in range(self.n):
             if engine.should_stop():
                 return
@@ -42,12 +42,13 @@ def test_a_procedure_runs_its_phases_and_publishes_events():
     seen = []
     unsubscribe = engine.subscribe(seen.append)
     proc = Counting(5)
-    assert engine.run(proc) == "complete"
+    assert engine.run(proc) == Outcome.COMPLETE
     assert proc.calls == ["startup", "execute", "shutdown:complete"]
     steps = [e for e in seen if isinstance(e, Message) and e.topic == "progress"]
     assert [e.message for e in steps] == [f"step {k}" for k in range(5)]
     assert [e.t_unix_s for e in steps] == [0.0, 1.0, 2.0, 3.0, 4.0]          # stamped with the engine's clock
-    assert seen[-1] == Done("complete", "", t_unix_s=5.0)
+    assert isinstance(seen[0], StateChanged) and seen[0].phase is Phase.STARTING
+    assert seen[-1] == Done(Outcome.COMPLETE, "", t_unix_s=5.0)
     assert engine.clock.now() == 5.0
     unsubscribe()
     engine.run(Counting(1))
@@ -59,7 +60,7 @@ def test_a_failure_is_published_and_shutdown_still_runs():
     errors = []
     engine.subscribe(lambda e: errors.append(e.message) if isinstance(e, Message) and e.level == "error" else None)
     proc = Counting(5, fail_at=2)
-    assert engine.run(proc) == "failed"
+    assert engine.run(proc) == Outcome.FAILED
     assert proc.calls[-1] == "shutdown:failed" and "device gone" in errors[0]
     assert isinstance(engine.error, RuntimeError)
 
@@ -67,7 +68,7 @@ def test_a_failure_is_published_and_shutdown_still_runs():
 def test_a_failing_subscriber_does_not_stop_the_run():
     engine = Engine(SteppedClock())
     engine.subscribe(lambda e: 1 / 0)
-    assert engine.run(Counting(3)) == "complete"
+    assert engine.run(Counting(3)) == Outcome.COMPLETE
 
 
 def test_stop_and_abort_from_another_thread():
@@ -78,10 +79,10 @@ def test_stop_and_abort_from_another_thread():
         engine.start(Counting(1))
     time.sleep(0.05)
     engine.stop()
-    assert engine.join(5) == "stopped" and proc.calls[-1] == "shutdown:stopped"
+    assert engine.join(5) == Outcome.STOPPED and proc.calls[-1] == "shutdown:stopped"
     engine.start(Counting(10_000))
     engine.abort()
-    assert engine.join(5) == "aborted"
+    assert engine.join(5) == Outcome.ABORTED
 
 
 def test_the_operator_answers_a_prompt():
@@ -91,8 +92,8 @@ def test_the_operator_answers_a_prompt():
     proc = Counting(1, ask=True)
     engine.start(proc)
     assert prompts.wait(5)
-    engine.answer("added_mass_g", 0.25)
-    assert engine.join(5) == "complete" and proc.answer == 0.25
+    engine.answer(PromptKind.ADDED_MASS, 0.25)
+    assert engine.join(5) == Outcome.COMPLETE and proc.answer == 0.25
 
 
 def test_a_stop_releases_a_waiting_prompt():
@@ -101,7 +102,7 @@ def test_a_stop_releases_a_waiting_prompt():
     engine.start(proc)
     time.sleep(0.05)
     engine.stop()
-    assert engine.join(5) == "stopped" and proc.answer is None
+    assert engine.join(5) == Outcome.STOPPED and proc.answer is None
 
 
 def test_clock_kinds():

@@ -6,6 +6,7 @@ import os
 import psutil
 import pytest
 
+from labapp.records.runrecord import RecordStatus
 from labapp.records.storage import StorageError, check_disk_space, create_run, open_run, read_run, sanitize_name, verify_run
 
 
@@ -20,14 +21,14 @@ def _run_with_frames(tmp_path, n=3):
 def test_frames_are_listed_with_their_hash_and_verify(tmp_path):
     run = _run_with_frames(tmp_path)
     run.add_file("reference.jpg", b"clear water")
-    run.finish("complete")
+    run.finish(RecordStatus.COMPLETE)
     run.close()
     with open(run.path / "frames.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["file"] for r in rows] == ["frame_000000.jpg", "frame_000001.jpg", "frame_000002.jpg"]
     assert rows[1]["t_s"] == "11.000" and rows[1]["probe_c"] == "" and rows[1]["plate_c"] == "70.10"
     report = verify_run(run.path)
-    assert report.ok and report.n_frames == 3 and report.status == "complete"
+    assert report.ok and report.n_frames == 3 and report.status == RecordStatus.COMPLETE
     assert not list(run.path.glob(".*.part"))
 
 
@@ -58,13 +59,13 @@ def test_torn_last_row_is_reported_then_dropped_on_reopen(tmp_path):
     with open(run.path / "frames.csv", "a") as fh:
         fh.write("frame_000002.jpg,22.0,10000")          # a crash in the middle of a row
     snap = read_run(run.path)
-    assert len(snap.frames) == 2 and snap.torn_bytes > 0 and snap.status == "interrupted"
+    assert len(snap.frames) == 2 and snap.torn_bytes > 0 and snap.status == RecordStatus.INTERRUPTED
     assert not verify_run(run.path).ok
     reopened = open_run(run.path)
-    assert reopened.status == "running" and reopened.meta["resumed"] == 1
+    assert reopened.status == RecordStatus.RUNNING and reopened.meta["resumed"] == 1
     reopened.add_frame("frame_000002.jpg", b"new", 22.0, 1e9 + 22)
     reopened.add_gap(11.0, 22.0, "test")
-    reopened.finish("stopped")
+    reopened.finish(RecordStatus.STOPPED)
     reopened.close()
     report = verify_run(run.path)
     assert report.ok and report.n_frames == 3 and report.gaps[0].after_t_s == 11.0

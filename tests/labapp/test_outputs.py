@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from labapp.cli.main import main
-from labapp.records.outpaths import OutPathError, check_data_dir, check_out, folder_kind
+from labapp.records.outpaths import FolderKind, OutPathError, check_data_dir, check_out, folder_kind
+from labapp.records.runrecord import RecordKind, RecordStatus
 from labapp.records.storage import create_run
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"
@@ -66,18 +67,18 @@ def test_simulate_reruns_into_its_own_folder_and_refuses_its_input(tmp_path, cap
 
 def test_analyze_writes_only_into_the_runs_analysis_folder(tmp_path, capsys):
     run = create_run(tmp_path / "data", "r", {"kind": "run"})
-    run.finish("complete")
+    run.finish(RecordStatus.COMPLETE)
     run.close()
     for out, says in ((run.path, "is an input of this command"), (run.path / "x", "lies inside the input folder")):
         assert main(["analyze", str(run.path), "--calibration", str(tmp_path / "c.json"), "--out", str(out)]) == 2
         assert says in capsys.readouterr().err
     assert sorted(p.name for p in run.path.iterdir()) == ["events.log", "frames.csv", "run.json"]
-    check_out(run.path / "analysis", "analysis", [tmp_path / "c.json"])          # the designated place
+    check_out(run.path / "analysis", FolderKind.ANALYSIS, [tmp_path / "c.json"])          # the designated place
 
 
 def test_run_refuses_a_data_directory_inside_a_record(tmp_path, capsys):
     run = create_run(tmp_path / "data", "r", {"kind": "run"})
-    run.finish("complete")
+    run.finish(RecordStatus.COMPLETE)
     run.close()
     before = sorted(p.name for p in run.path.iterdir())
     assert main(["run", "--simulate", "--out", str(run.path)]) == 2
@@ -91,7 +92,7 @@ def test_run_refuses_a_data_directory_inside_a_record(tmp_path, capsys):
 def test_folder_kinds(tmp_path):
     assert folder_kind(tmp_path / "absent") is None and folder_kind(tmp_path) is None
     (tmp_path / "release.csv").write_text("tau_mm,released_mm3\n")
-    assert folder_kind(tmp_path) == "simulation"
-    assert folder_kind(FIXTURES / "bench" / "run") == "run" and folder_kind(FIXTURES / "shapes") == "other"
+    assert folder_kind(tmp_path) == FolderKind.SIMULATION
+    assert folder_kind(FIXTURES / "bench" / "run") == RecordKind.RUN and folder_kind(FIXTURES / "shapes") == FolderKind.OTHER
     with pytest.raises(OutPathError, match="not a analysis folder|is a simulation folder"):
-        check_out(tmp_path, "analysis")
+        check_out(tmp_path, FolderKind.ANALYSIS)

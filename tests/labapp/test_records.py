@@ -11,6 +11,7 @@ import pytest
 from labapp.cli.main import main
 from labapp.errors import UsageError
 from labapp.jobs.run import resumable
+from labapp.records.runrecord import RecordKind, RecordStatus
 from labapp.records.storage import create_run, verify_run
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "bench"
@@ -23,7 +24,7 @@ def tree(path: Path) -> dict[str, str]:
             for p in sorted(path.rglob("*")) if p.is_file()}
 
 
-def _run(tmp_path, kind="run", finish=None, frames=3) -> Path:
+def _run(tmp_path, kind=RecordKind.RUN, finish=None, frames=3) -> Path:
     run = create_run(tmp_path / "data", "r", {"kind": kind, "simulated": True,
                                              "config": {"name": "r", "interval_s": 11.0}})
     for k in range(frames):
@@ -36,7 +37,7 @@ def _run(tmp_path, kind="run", finish=None, frames=3) -> Path:
     return run.path
 
 
-@pytest.mark.parametrize("finish", ["complete", "stopped", "aborted", "failed"])
+@pytest.mark.parametrize("finish", [RecordStatus.COMPLETE, RecordStatus.STOPPED, RecordStatus.ABORTED, RecordStatus.FAILED])
 def test_resume_refuses_a_finished_run_without_writing(tmp_path, capsys, finish):
     folder = _run(tmp_path, finish=finish)
     before = tree(folder)
@@ -47,7 +48,7 @@ def test_resume_refuses_a_finished_run_without_writing(tmp_path, capsys, finish)
 
 
 def test_resume_refuses_other_kinds_of_folder_untouched(tmp_path, capsys):
-    series = _run(tmp_path, kind="calibration-series")
+    series = _run(tmp_path, kind=RecordKind.CALIBRATION_SERIES)
     design = tmp_path / "design"
     design.mkdir()
     (design / "config.json").write_text("{}")
@@ -62,7 +63,7 @@ def test_resume_refuses_other_kinds_of_folder_untouched(tmp_path, capsys):
 
 def test_only_an_interrupted_run_is_resumable(tmp_path):
     folder = _run(tmp_path)
-    assert resumable(folder).status == "interrupted"
+    assert resumable(folder).status == RecordStatus.INTERRUPTED
     live = create_run(tmp_path / "data", "live", {"kind": "run", "config": {}})
     with pytest.raises(UsageError, match="being written by process"):
         resumable(live.path)
@@ -77,7 +78,7 @@ def _verify(folder, capsys) -> tuple[int, str]:
 
 
 def test_verify_passes_a_good_record(tmp_path, capsys):
-    assert _verify(_run(tmp_path, finish="complete"), capsys) == (0, "OK")
+    assert _verify(_run(tmp_path, finish=RecordStatus.COMPLETE), capsys) == (0, "OK")
 
 
 @pytest.mark.parametrize("damage, reason", [
@@ -93,7 +94,7 @@ def test_verify_passes_a_good_record(tmp_path, capsys):
     (lambda f: _set_kind(f, "calibration-series"), "masses.csv is missing"),
 ])
 def test_verify_fails_with_one_line_reason(tmp_path, capsys, damage, reason):
-    folder = _run(tmp_path, finish="complete")
+    folder = _run(tmp_path, finish=RecordStatus.COMPLETE)
     damage(folder)
     code, last = _verify(folder, capsys)
     assert code == 1 and last.startswith("FAILED: ") and reason in last
@@ -178,7 +179,7 @@ def test_a_frame_written_but_not_recorded_before_a_crash_is_kept_aside_on_reopen
     assert any("never recorded" in n for n in report.notes)
     run = open_run(folder)
     run.add_frame("frame_000003.jpg", b"y" * 50, t_s=33.0, t_unix_s=1e9 + 33)   # the name is free again
-    run.finish("stopped")
+    run.finish(RecordStatus.STOPPED)
     run.close()
     assert (folder / UNRECORDED_DIR / "frame_000003.jpg").read_bytes() == b"x" * 50   # nothing lost
     assert "kept aside" in (folder / "events.log").read_text()
