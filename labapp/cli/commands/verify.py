@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import argparse
 
-from labapp.jobs.verify import verify
-
 NAME = "verify"
 HELP = "check a run folder against its manifests (missing, altered, unlisted files, damaged manifests)"
 
@@ -18,6 +16,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print one report per folder, its last line ``OK`` or ``FAILED: <reason>``; exit 1 if any fails."""
+    from labapp.jobs.verify import verify  # here, not at the top: `sfr --help` does not load the records layer
+
     failed = 0
     for folder in args.runs:
         report = verify(folder)
