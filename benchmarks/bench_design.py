@@ -115,7 +115,7 @@ def bench(n_reduced: int, warmup: int, rounds: int, block: int, solves: int, opt
         patches.enter_context(_timed(Lbfgs, "tell", totals, "optimiser"))
         patches.enter_context(_timed(design.inverse.optimize._Run, "checkpoint", totals, "checkpoint"))
         patches.enter_context(_timed(design.files.rundir.CheckpointFile, "wait", totals, "checkpoint"))
-        patches.enter_context(_timed(design.files.rundir, "_atomic_save_npz", totals, "writer"))
+        patches.enter_context(_timed(design.files.rundir, "save_checkpoint", totals, "writer"))
         run_design(config, Path(tmp) / "run", on_iteration=on_iteration)
     for r in per_round:
         r["objective"] = r.pop("evaluate") - r["gradient"]

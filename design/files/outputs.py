@@ -26,6 +26,7 @@ import numpy as np
 from design.errors import DesignError
 from design.fabrication.extract import centred_iou, count_pieces, density_mesh, mass_preserving_level, revoxelize
 from design.fabrication.printability import assess, prusa_profile
+from design.files.records import SUMMARY, SUMMARY_FORMAT, DesignSummary
 from design.files.report import save_report
 from design.forward.simulator import simulate
 from design.geometry.voxelize import grid_for, voxelize
@@ -52,7 +53,7 @@ class DesignOutputs:
     """Paths and headline numbers of a run's outputs."""
 
     summary_path: Path
-    summary: dict
+    summary: DesignSummary
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -228,7 +229,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
                 ("fine", fine_curve, fine_target))
     iterations = len(history)
     seconds = float(history[-1][-1]) if history else 0.0
-    summary = {
+    summary: DesignSummary = {
+        "format": SUMMARY_FORMAT,
         "status": status,
         "target": target.source,
         "space": space.name,
@@ -274,6 +276,6 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
                 f"binary {summary['rel_rmse_binary']:.2%} (finer grid {percent_text(summary['rel_rmse_fine'])}) | "
                 f"overhang {facts.overhang_fraction:.1%} | {iterations} it."
                 + (f" | preset {config.preset}" if config.preset else ""))
-    path = out_dir / "summary.json"
+    path = out_dir / SUMMARY
     _write_text(path, json.dumps(summary, indent=2))
     return DesignOutputs(path, summary)

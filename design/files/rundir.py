@@ -1,18 +1,17 @@
-"""A design run's folder: the public `run_design`, and the records it resumes from.
+"""A design run's folder and the public `run_design`.
 
 A run folder holds ``config.json`` (the `DesignConfig`), ``feasibility.txt`` (the target's check),
 ``checkpoint.npz`` (the optimiser's `Checkpoint`, rewritten atomically every few evaluations) and, once the
-run stops, the outputs of `design.files.outputs`. A multi-start run (`DesignConfig.starts` > 1) keeps
-its coarse runs as ordinary run folders in ``starts/NN`` and its choice in ``multistart.json``; the
-refinement runs in the folder itself.
+run stops, the outputs of `design.files.outputs`; the three records and their formats are
+`design.files.records`. A multi-start run (`DesignConfig.starts` > 1) keeps its coarse runs as ordinary run
+folders in ``starts/NN`` and its choice in ``multistart.json``; the refinement runs in the folder itself.
 """
 from __future__ import annotations
 
 import json
 import logging
-import os
 import threading
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -20,10 +19,10 @@ import numpy as np
 
 from design.errors import DesignError
 from design.files.outputs import DesignOutputs, write_outputs
+from design.files.records import CHECKPOINT, CONFIG, SUMMARY, load_checkpoint, load_config, save_checkpoint, save_config
 from design.files.targets_io import load_problem
 from design.inverse.multistart import coarse_start, refine_start, refinement_phase, start_name
 from design.inverse.optimize import (
-    HISTORY_COLUMNS,
     Checkpoint,
     IterationCallback,
     StartDesign,
@@ -36,8 +35,6 @@ from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)
 
-CONFIG = "config.json"
-CHECKPOINT = "checkpoint.npz"
 FEASIBILITY = "feasibility.txt"
 MULTISTART = "multistart.json"
 STARTS = "starts"
@@ -64,60 +61,6 @@ class DesignResult:
     outputs: DesignOutputs
 
 
-def _atomic_save_npz(path: Path, **arrays) -> None:
-    """Write arrays to ``path`` via a temporary file and a rename, so a crash leaves the old file.
-
-    Uncompressed: zlib took 1.2 s for the two 17 MB design-variable arrays of a 128^3 design,
-    0.12 s per evaluation at the default checkpoint interval; writing them plainly takes 0.05 s.
-    """
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, **arrays)
-    os.replace(tmp, path)
-
-
-def load_config(out_dir: Path) -> DesignConfig:
-    """The `DesignConfig` stored in a run folder's ``config.json``.
-
-    Raises
-    ------
-    DesignError
-        When the file is missing or unreadable.
-    """
-    try:
-        data = json.loads((out_dir / CONFIG).read_text())
-    except (OSError, ValueError) as exc:
-        raise DesignError(f"cannot resume: no readable config.json in {out_dir}: {exc}") from exc
-    names = {f.name for f in fields(DesignConfig)}
-    data = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names}
-    data.setdefault("rate_span", (0.0, 1.0))  # runs stored before the option compared the whole curve
-    data.setdefault("optimizer", "LD_LBFGS")  # and were optimised with nlopt's L-BFGS
-    data.setdefault("allow_pieces", True)  # runs stored without the option had no connectivity term
-    data.setdefault("connect_planes", False)  # and runs stored before the plane term measured the core only
-    data.setdefault("connect_tail", 0.0)  # and before the tail, without it
-    data.setdefault("line_search", "strong-wolfe")  # the "lbfgs" optimiser's only rule before the option
-    if data.get("beta_final") is None:  # stored resolved: None always meant a fixed beta
-        data["beta_final"] = data.get("beta")
-    return DesignConfig(**data)
-
-
-def save_config(out_dir: Path, config: DesignConfig) -> None:
-    """Write ``config.json``."""
-    (out_dir / CONFIG).write_text(json.dumps(asdict(config), indent=2))
-
-
-def load_checkpoint(path: Path) -> Checkpoint:
-    """The `Checkpoint` in a ``checkpoint.npz``."""
-    with np.load(path) as data:
-        saved = {name: data[name] for name in data.files}
-    history = saved["history"]
-    if history.shape[1] != len(HISTORY_COLUMNS):  # histories stored before the fab_seconds column: zeros
-        history = np.insert(history, 5, 0.0, axis=1)
-    best_value = saved.get("best_value", min(history[:, 1], default=np.inf))
-    return Checkpoint(x=saved["x"], best_x=saved["best_x"], best_value=float(best_value),
-                      stage=int(saved.get("stage", 0)), history=history,
-                      lbfgs={k[len("lbfgs_"):]: v for k, v in saved.items() if k.startswith("lbfgs_")})
-
-
 class CheckpointFile:
     """A run's ``checkpoint.npz``: the `design.inverse.optimize.CheckpointStore` of `run_design`.
 
@@ -129,21 +72,16 @@ class CheckpointFile:
         self._writer: threading.Thread | None = None  # the checkpoint being written
         self._writer_error: BaseException | None = None
 
-    def _write(self, checkpoint: Checkpoint) -> None:
-        _atomic_save_npz(self.path, x=checkpoint.x, best_x=checkpoint.best_x, best_value=checkpoint.best_value,
-                         stage=checkpoint.stage, history=checkpoint.history,
-                         **{f"lbfgs_{k}": v for k, v in checkpoint.lbfgs.items()})
-
     def save(self, checkpoint: Checkpoint, *, wait: bool = True) -> None:
         """Write ``checkpoint`` atomically; with ``wait=False`` from a thread."""
         self.wait()
         if wait:
-            self._write(checkpoint)
+            save_checkpoint(self.path, checkpoint)
             return
 
         def write() -> None:
             try:
-                self._write(checkpoint)
+                save_checkpoint(self.path, checkpoint)
             except BaseException as exc:  # noqa: BLE001 -- re-raised in the run's thread by wait
                 self._writer_error = exc
 
@@ -171,7 +109,7 @@ class _StartFolders:
         return self.out_dir / STARTS / start_name(k)
 
     def finished(self, k: int) -> bool:
-        return (self.folder(k) / "summary.json").exists()
+        return (self.folder(k) / SUMMARY).exists()
 
     def run(self, k: int, config: DesignConfig, start: StartDesign,
             on_iteration: IterationCallback | None) -> DesignStatus:

@@ -21,6 +21,7 @@ import numpy as np
 
 from design.errors import DesignError
 from design.files.pipeline import input_grid
+from design.files.records import load_summary
 from design.files.rundir import run_design
 from design.forward.simulator import simulate
 from labapp.jobs.calibrate_sim import SimCalError, SimCalFile, curve_of
@@ -147,7 +148,7 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
     design_dir = Path(design_dir)
     try:
         data = np.genfromtxt(design_dir / "curves.csv", delimiter=",", names=True)
-        summary = json.loads((design_dir / "summary.json").read_text())
+        summary = load_summary(design_dir)
     except (OSError, ValueError) as exc:
         raise SimCalError(f"{design_dir}: no finished design to predict ({exc})") from exc
     tau, binary = np.asarray(data["tau_mm"], float), np.asarray(data["binary_mm3"], float)

@@ -30,6 +30,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from design.errors import DesignError
+from design.files.records import load_summary
 from design.inverse.status import FINISHED, DesignStatus
 from labapp.errors import UsageError
 from labapp.scaleout.sweepspec import Combination, SweepSpec, config_matches
@@ -81,10 +83,10 @@ class SweepResult:
 def folder_state(folder: Path) -> str:
     """"done", "resume" (a started run) or "new"."""
     try:
-        status = json.loads((folder / "summary.json").read_text())["status"]
+        status = load_summary(folder)["status"]
         if status in DONE_STATUSES:
             return "done"
-    except (OSError, ValueError, KeyError):
+    except (OSError, ValueError, KeyError, DesignError):
         pass
     return "resume" if (folder / "config.json").exists() else "new"
 
@@ -143,7 +145,7 @@ def run_combination(combo: Combination, sweep_dir: str, stop_event: str | None =
         fcntl.flock(lock, fcntl.LOCK_EX)  # released by the OS if this process dies
         state = folder_state(folder)
         if state == "done":
-            status = json.loads((folder / "summary.json").read_text())["status"]
+            status = load_summary(folder)["status"]
             return {"name": combo.name, "status": status, "seconds": 0.0, "worker": where, "skipped": True}
         if state == "new" and folder.is_dir() and any(folder.iterdir()):
             _set_aside(folder, sweep_dir)

@@ -255,4 +255,4 @@ def config_matches(config: DesignConfig, stored: dict) -> bool:
     """Whether a run folder's stored ``config.json`` holds this configuration (the target aside: a run
     optimises its own copy of a file target, `labapp.jobs.design.design`)."""
     mine = json.loads(json.dumps(asdict(config)))
-    return {k: v for k, v in mine.items() if k != "target"} == {k: v for k, v in stored.items() if k != "target"}
+    return {k: v for k, v in mine.items() if k != "target"} == {k: v for k, v in stored.items() if k not in ("target", "format")}

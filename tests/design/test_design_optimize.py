@@ -122,7 +122,7 @@ def test_a_run_stored_before_the_plane_term_and_the_tail_resumes_with_the_bounde
     assert config.connect_planes
     run_design(config, tmp_path, should_stop=lambda: True)
     stored = json.loads((tmp_path / "config.json").read_text())
-    del stored["connect_planes"], stored["connect_tail"]
+    del stored["format"], stored["connect_planes"], stored["connect_tail"]  # layout 0, before the options
     (tmp_path / "config.json").write_text(json.dumps(stored))
     run_design(None, tmp_path, resume=True)
     resumed = json.loads((tmp_path / "summary.json").read_text())["config"]

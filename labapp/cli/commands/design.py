@@ -110,9 +110,12 @@ def _progress(max_iter: int):
 
 
 def _stored_max_iter(out: str) -> int:
+    from design.errors import DesignError
+    from design.files.records import load_config
+
     try:
-        return int(json.loads((Path(out) / "config.json").read_text())["max_iter"])
-    except (OSError, ValueError, KeyError):
+        return load_config(Path(out)).max_iter
+    except DesignError:
         return 0  # run_design reports the missing or broken run folder
 
 
