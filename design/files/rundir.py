@@ -151,9 +151,9 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     out_dir : str or Path
         The run folder; must not hold a run unless resuming.
     on_iteration : callable, optional
-        ``on_iteration(k, x, terms)`` after every evaluation; ``terms`` holds J, J_fit,
-        J_binary, J_fab, grad_norm, seconds and eta_s (upper bound from the iteration limit), and
-        in a multi-start run ``phase`` (which coarse start, or the refinement).
+        ``on_iteration(k, x, terms)`` after every evaluation, as for `design.inverse.optimize.optimise`
+        (``x`` in the variable shape); in a multi-start run ``terms`` also holds ``phase`` (which coarse
+        start, or the refinement).
     should_stop : callable, optional
         Polled before every evaluation; True stops cleanly (best design still written).
     resume : bool

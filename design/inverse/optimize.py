@@ -48,6 +48,8 @@ from design.inverse.status import DesignStatus
 log = logging.getLogger(__name__)
 
 IterationCallback = Callable[[int, np.ndarray, dict], None]
+"""``on_iteration(k, x, terms)``: evaluation ``k``, its design variables ``x`` in the variable shape, and its
+terms (`optimise`)."""
 
 
 def with_phase(on_iteration: IterationCallback | None, phase: str) -> IterationCallback | None:
@@ -240,7 +242,9 @@ class _Run:
         if self.k % self.config.checkpoint_every == 0:
             self.checkpoint(wait=False)
         if self.on_iteration is not None:
-            self.on_iteration(self.k, self.last_x, self.terms)
+            x = self.last_x.reshape(self.objective.space.var_shape)
+            x.flags.writeable = False  # a view of the run's own variables
+            self.on_iteration(self.k, x, self.terms)
 
     def checkpoint(self, wait: bool = True) -> None:
         """Hand the current and best variables, the history, the stage and the "lbfgs" optimiser's
@@ -403,8 +407,10 @@ def optimise(objective: DesignObjective, problem: Problem, config: DesignConfig,
         ``start(objective, problem)`` returns the start variables of a new run (variable shape);
         default the uniform start of section 5.2 (`DesignObjective.uniform_start`).
     on_iteration : callable, optional
-        ``on_iteration(k, x, terms)`` after every evaluation; ``terms`` holds J, J_fit, J_binary,
-        J_fab, grad_norm, seconds and eta_s (upper bound from the iteration limit).
+        ``on_iteration(k, x, terms)`` after every evaluation ``k`` (from 1); ``x`` the evaluated design
+        variables rho_hat in the variable shape (`DesignSpace.var_shape`: 3D, or 2D for an extruded design),
+        read-only; ``terms`` holds J, J_fit, J_binary, J_fab, grad_norm, seconds and eta_s (upper bound
+        from the iteration limit).
     should_stop : callable, optional
         Polled before every evaluation; True stops cleanly.
 

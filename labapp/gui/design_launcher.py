@@ -46,17 +46,12 @@ def read_curves(path: Path) -> dict[str, list[float]]:
 def mid_slice(x, k: int, every: int = 5):
     """Every ``every`` iterations, the middle slice of the design variables, else None.
 
-    The optimiser reports its variables flat; a cube of n^3 (the nfc space) or a square of n^2 (an extruded
-    cross-section) is folded back, other shapes show no slice.
+    ``x`` comes in the design space's variable shape: a 3D field (nfc, ico) shows its slice through the
+    middle of the last axis, a 2D one (an extruded cross-section) itself.
     """
-    x = np.asarray(x, dtype=float)
     if k % every:
         return None
-    if x.ndim == 1:
-        n3, n2 = round(x.size ** (1 / 3)), round(x.size ** 0.5)
-        x = x.reshape(n3, n3, n3) if n3 ** 3 == x.size else x.reshape(n2, n2) if n2 * n2 == x.size else x
-    if x.ndim < 2:
-        return None
+    x = np.asarray(x, dtype=float)
     return np.array(x[..., x.shape[-1] // 2] if x.ndim == 3 else x)
 
 

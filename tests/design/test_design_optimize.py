@@ -178,3 +178,15 @@ def test_a_design_status_is_its_stored_string():
     assert json.dumps({"status": DesignStatus.MAX_ITER}) == '{"status": "max_iter"}'
     assert DesignStatus("stopped") == "stopped" and f"{DesignStatus.STALLED}" == "stalled"
     assert [s for s in DesignStatus if s.finished] == list(FINISHED) == ["converged", "max_iter", "stalled"]
+
+
+@pytest.mark.parametrize("space, ndim", [("nfc", 3), ("extruded", 2)])
+def test_progress_gets_the_design_variables_in_their_shape(tmp_path, space, ndim):
+    seen = []
+    result = run_design(DesignConfig(**dict(SMALL, space=space), max_iter=3), tmp_path,
+                        on_iteration=lambda k, x, terms: seen.append((k, x.shape, x.flags.writeable, x.copy())))
+    shape = prepare(DesignConfig(**dict(SMALL, space=space))).space.var_shape
+    assert len(shape) == ndim and [s[:3] for s in seen] == [(k, shape, False) for k in (1, 2, 3)]
+    with np.load(tmp_path / "checkpoint.npz") as saved:
+        np.testing.assert_array_equal(seen[-1][3].ravel(), saved["x"])  # the last evaluated design
+    assert result.iterations == 3
