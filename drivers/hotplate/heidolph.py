@@ -47,10 +47,10 @@ class HotplateConfig:
     restore_on_reconnect: bool = True
 
     def __post_init__(self) -> None:
-        if not 0 < self.max_temp_c <= 300:
-            raise ValueError(f"max_temp_c must be in (0, 300] C, got {self.max_temp_c!r}")
-        if not 0 < self.max_speed_rpm <= 1400:
-            raise ValueError(f"max_speed_rpm must be in (0, 1400] rpm, got {self.max_speed_rpm!r}")
+        for name, key in (("max_temp_c", "temperature"), ("max_speed_rpm", "speed")):
+            value, device = getattr(self, name), HEIDOLPH_HEI_TEC.setpoints[key]
+            if not 0 < value <= device.high:
+                raise ValueError(f"{name} must be in (0, {device.high:g}] {device.unit}, got {value!r}")
         if self.pace_s < 0.1:
             raise ValueError(f"pace_s must be >= 0.1 s (the plate's minimum pause), got {self.pace_s!r}")
         if self.timeout_s <= 0 or self.backoff_s <= 0 or self.backoff_max_s < self.backoff_s:
@@ -62,6 +62,12 @@ class HotplateConfig:
         if self.retries < 0 or self.reconnect_attempts < 1:
             raise ValueError(f"retries must be >= 0 and reconnect_attempts >= 1, got "
                              f"{self.retries!r}, {self.reconnect_attempts!r}")
+
+    def setpoint_range(self, key: str, table: ProtocolTable = HEIDOLPH_HEI_TEC) -> tuple[float, float]:
+        """The closed range a driver with this config accepts for a setpoint of ``table``: ``"temperature"``
+        (C, capped by ``max_temp_c``) or ``"speed"`` (rpm, capped by ``max_speed_rpm``)."""
+        limit = {"temperature": self.max_temp_c, "speed": self.max_speed_rpm}[key]
+        return table.setpoints[key].allowed(limit)
 
 
 class HeidolphHotplate:
@@ -117,18 +123,21 @@ class HeidolphHotplate:
 
     def set_temperature(self, temp_c: float) -> None:
         """Set the temperature setpoint, degrees C (probe temperature when a probe is plugged in)."""
-        self._set("temperature", temp_c, self.config.max_temp_c)
+        self._set("temperature", temp_c)
         self._setpoint_c = temp_c
 
     def set_speed(self, speed_rpm: float) -> None:
         """Set the stirring speed setpoint, rpm."""
-        self._set("speed", speed_rpm, self.config.max_speed_rpm)
+        self._set("speed", speed_rpm)
         self._setpoint_rpm = speed_rpm
 
-    def _set(self, key: str, value: float, limit: float) -> None:
+    def _limit(self, key: str) -> float:
+        return self.config.setpoint_range(key, self.table)[1]
+
+    def _set(self, key: str, value: float) -> None:
         """Send a setpoint; if the plate does not answer set commands, read it back to confirm it."""
         sp = self.table.setpoints[key]
-        line = sp.encode(value, limit)
+        line = sp.encode(value, self._limit(key))
         self._exchange(line)
         if not self.table.answers(line):
             got = float(self._exchange(sp.readback))
@@ -331,9 +340,9 @@ class HeidolphHotplate:
         """Re-send setpoints and switches the app commanded (after a reconnect or a watchdog trip)."""
         t = self.table
         if self._setpoint_c is not None:
-            self._exchange_once(t.setpoints["temperature"].encode(self._setpoint_c, self.config.max_temp_c))
+            self._exchange_once(t.setpoints["temperature"].encode(self._setpoint_c, self._limit("temperature")))
         if self._setpoint_rpm is not None:
-            self._exchange_once(t.setpoints["speed"].encode(self._setpoint_rpm, self.config.max_speed_rpm))
+            self._exchange_once(t.setpoints["speed"].encode(self._setpoint_rpm, self._limit("speed")))
         if self._heating:
             self._exchange_once(t.actions["start_heating"])
         if self._stirring:

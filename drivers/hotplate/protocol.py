@@ -60,13 +60,18 @@ class Setpoint:
         Raises
         ------
         HotplateError
-            If ``value`` is not finite or lies outside ``[low, min(high, limit)]``.
+            If ``value`` is not finite or lies outside :meth:`allowed` ``(limit)``.
         """
-        high = self.high if limit is None else min(self.high, limit)
-        if not math.isfinite(value) or not self.low <= value <= high:
+        low, high = self.allowed(limit)
+        if not math.isfinite(value) or not low <= value <= high:
             raise HotplateError(f"{self.command}: {value!r} {self.unit} is outside the allowed range "
-                                f"[{self.low:g}, {high:g}] {self.unit}")
+                                f"[{low:g}, {high:g}] {self.unit}")
         return f"{self.command} {value:.{self.decimals}f}"
+
+    def allowed(self, limit: float | None = None) -> tuple[float, float]:
+        """The closed range ``(low, high)`` in ``unit`` that :meth:`encode` accepts under a client-side
+        upper ``limit`` (None: the device's own range)."""
+        return self.low, self.high if limit is None else min(self.high, limit)
 
 
 @dataclass(frozen=True)
