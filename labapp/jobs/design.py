@@ -6,17 +6,17 @@ import hashlib
 import json
 import logging
 import shutil
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from design.files.meshio import MESH_SUFFIXES
 from design.inverse.problem import DesignConfig
 from labapp.errors import UsageError
 from labapp.jobs.meshunits import design_memory_bytes, load_mesh_mm, require_memory, size_warnings
 from labapp.jobs.physical import design_from_target, is_physical
 from labapp.records.outpaths import FolderKind, check_out
-from labapp.records.storage import sanitize_name
+from labapp.records.storage import timestamp_name
 
 log = logging.getLogger(__name__)
 
@@ -28,12 +28,11 @@ def _design_defaults() -> dict[str, Any]:
 #: The design settings every face starts from (``design.inverse.problem.DesignConfig``'s own defaults).
 DESIGN_DEFAULTS: dict[str, Any] = _design_defaults()
 TARGET_SOURCE = "target_source.json"
-_MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf")
 
 
 def design_folder(data_dir: str | Path, name: str) -> Path:
     """The folder of a new design run started from the GUI: ``DATA/designs/<YYYYmmdd-HHMMSS>_<name>``."""
-    return Path(data_dir) / "designs" / f"{time.strftime('%Y%m%d-%H%M%S')}_{sanitize_name(name)}"
+    return Path(data_dir) / "designs" / timestamp_name(name)
 
 
 def _sha256(path: Path) -> str:
@@ -53,7 +52,7 @@ def _copy_target(target: str, out: Path, units: str) -> str:
     if source.is_file() and not is_physical(source):
         suffix = source.suffix.lower()
         copy = out / f"target_input{suffix}"
-        if suffix in _MESH_SUFFIXES:
+        if suffix in MESH_SUFFIXES:
             mesh = load_mesh_mm(source, units)
             for w in size_warnings(mesh.extents, float(mesh.volume), source=str(source)):
                 log.warning("%s", w)

@@ -28,6 +28,7 @@ import enum
 from collections.abc import Iterable
 from pathlib import Path
 
+from analysis.decode import IMAGE_SUFFIXES
 from labapp.errors import UsageError
 from labapp.records.runrecord import RecordKind
 from labapp.records.storage import RUN_JSON, StorageError, read_record
@@ -66,7 +67,6 @@ KINDS: dict[FolderKind, tuple[str, tuple[tuple[str, ...], ...]]] = {
 RECORD_KINDS = {RecordKind.RUN: "an acquisition run folder (a record)",
                 RecordKind.CALIBRATION_SERIES: "a calibration-series folder (a record)"}
 ANALYSIS_SUBFOLDER = "analysis"
-_IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".nef", ".cr2", ".cr3", ".arw", ".dng", ".raf", ".orf"}
 
 
 class OutPathError(UsageError):
@@ -90,7 +90,7 @@ def folder_kind(path: Path) -> FolderKind | RecordKind | None:
         if any(all((path / name).exists() for name in group) for group in groups):
             return kind
     entries = [p for p in path.iterdir() if not p.name.startswith(".")]
-    if any(p.suffix.lower() in _IMAGE_SUFFIXES for p in entries):
+    if any(p.suffix.lower() in IMAGE_SUFFIXES for p in entries):
         return FolderKind.IMAGES
     return FolderKind.OTHER if entries else None
 

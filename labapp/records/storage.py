@@ -31,6 +31,7 @@ from typing import Any
 
 import psutil
 
+from analysis.decode import IMAGE_SUFFIXES
 from labapp.errors import LabError
 from labapp.records.runrecord import FORMAT, Gap, RecordFormatError, RecordKind, RecordStatus, RunRecord
 
@@ -70,6 +71,13 @@ def sanitize_name(text: str, max_len: int = 64) -> str:
     if not name:
         raise StorageError(f"name {text!r} has no usable characters (allowed: letters, digits, . _ -)")
     return name
+
+
+def timestamp_name(name: str | None = None) -> str:
+    """The name of a new folder: ``<YYYYmmdd-HHMMSS>_<sanitised name>`` in local time now (the stamp alone
+    without ``name``); run folders, series, designs, sweeps and demos are named so."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    return stamp if name is None else f"{stamp}_{sanitize_name(name)}"
 
 
 def _inside(root: Path, path: Path) -> Path:
@@ -412,7 +420,7 @@ def create_run(data_dir: Path, name: str, meta: dict[str, Any]) -> RunFolder:
     """
     data_dir = Path(data_dir)
     data_dir.mkdir(parents=True, exist_ok=True)
-    base = f"{time.strftime('%Y%m%d-%H%M%S')}_{sanitize_name(name)}"
+    base = timestamp_name(name)
     for k in range(1, 1000):
         path = _inside(data_dir, data_dir / (base if k == 1 else f"{base}-{k}"))
         try:
@@ -515,7 +523,6 @@ class VerifyReport:
         return out
 
 
-IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".nef", ".cr2", ".cr3", ".arw", ".dng", ".raf", ".orf")
 ANALYSIS_DIR = "analysis"
 MASSES_CSV = "masses.csv"
 

@@ -23,13 +23,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the session, printing progress; end with where the results are."""
-    import time
 
     from labapp.jobs.demo import run_demo
     from labapp.records.outpaths import check_data_dir
-    from labapp.records.storage import sanitize_name
+    from labapp.records.storage import timestamp_name
 
-    out = check_data_dir(args.out) / time.strftime(f"%Y%m%d-%H%M%S_{sanitize_name(args.sample)}")
+    out = check_data_dir(args.out) / timestamp_name(args.sample)
     print(f"sfr demo: measure -> calibrate -> design on the simulated bench, in {out}", flush=True)
     if not args.verbose:   # the injected faults are the point of the run's event log, not of the terminal
         logging.getLogger().setLevel(logging.ERROR)
