@@ -80,7 +80,9 @@ class BenchScene:
     seed : int
         Seed of the static diffuser texture.
     water_g : float
-        Water mass in the beaker, g.
+        Water mass in the beaker, g: recorded with the scene (a fixture's ``truth.json``), not used to render.
+        The bench application's default is ``labapp.acquisition.settings.WATER`` (the same 500 g; its
+        simulated bench passes it explicitly).
     """
 
     width: int = 1200

@@ -8,8 +8,9 @@ from dataclasses import dataclass, field
 from drivers.camera.base import DSLR_FRAME_BYTES, Camera, CameraError, CameraSettings, Capture, CaptureMissed
 from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import Message, Reading, StateChanged
+from labapp.acquisition.events import Message, Phase, Reading, StateChanged
 from labapp.acquisition.monitor import HotplateMonitor
+from labapp.acquisition.settings import KEEPALIVE, BathSettings
 from labapp.errors import LabError
 from labapp.records.storage import RunFolder
 
@@ -49,7 +50,8 @@ class BenchSession:
     the run folder exists (while connecting) are written to it by :meth:`attach`.
     """
 
-    def __init__(self, bench: Bench, engine: Engine, run: RunFolder | None, keepalive_s: float = 2.0) -> None:
+    def __init__(self, bench: Bench, engine: Engine, run: RunFolder | None,
+                 keepalive_s: float = KEEPALIVE.default) -> None:
         self.bench, self.engine, self.run = bench, engine, run
         self.keepalive_s = keepalive_s
         self.monitor: HotplateMonitor | None = None
@@ -85,7 +87,7 @@ class BenchSession:
 
     def connect(self, setpoint_c: float | None, speed_rpm: float | None) -> None:
         """Connect and configure the camera; connect the hotplate, set it up and start heating."""
-        self.engine.emit(StateChanged("connecting"))
+        self.engine.emit(StateChanged(Phase.CONNECTING))
         self.bench.camera.connect()
         outcome = self.bench.camera.configure(self.bench.camera_settings)
         self.note("info", "camera", f"camera connected ({self.bench.description or type(self.bench.camera).__name__}); "
@@ -123,7 +125,7 @@ class BenchSession:
         """
         if self.monitor is None:
             return
-        self.engine.emit(StateChanged("heating", setpoint_c=setpoint_c))
+        self.engine.emit(StateChanged(Phase.HEATING, setpoint_c=setpoint_c))
         clock = self.engine.clock
         ok = self.monitor.wait_stable(setpoint_c, tolerance_c, hold_s, timeout_s, step_s, clock.now,
                                       lambda dt: clock.sleep(dt, self.engine.should_stop), self.engine.should_stop)
@@ -134,6 +136,11 @@ class BenchSession:
             raise ProcedureError(f"bath did not reach {setpoint_c} +/- {tolerance_c} C for {hold_s} s within "
                                  f"{timeout_s} s (last reading: {last})")
         self.note("info", "stable", f"bath stable at {setpoint_c} +/- {tolerance_c} C for {hold_s:.0f} s")
+
+    def wait_bath(self, bath: BathSettings) -> None:
+        """Wait until the bath holds ``bath.setpoint_c`` (:meth:`wait_stable`); no wait without a setpoint."""
+        if bath.setpoint_c is not None:
+            self.wait_stable(bath.setpoint_c, bath.tolerance_c, bath.hold_s, bath.heat_timeout_s, bath.stable_step_s)
 
     def start_stirring(self, speed_rpm: float | None = None, timeout_s: float = 120.0, step_s: float = 2.0) -> None:
         """Switch the stirrer on (no-op without a hotplate); with ``speed_rpm``, wait until the measured

@@ -12,8 +12,9 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image
@@ -21,12 +22,22 @@ from PIL import Image
 from analysis import BenchCalibration, CropGeometry, decode_image, fit_bench_calibration, read_cells
 from labapp.acquisition.bench import Bench, BenchSession
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import CalibrationLevel, StateChanged
+from labapp.acquisition.events import CalibrationLevel, Outcome, Phase, PromptKind, StateChanged
+from labapp.acquisition.settings import (
+    GRID,
+    MIRROR_COL,
+    SERIES_REDUCE,
+    SERIES_SETTINGS,
+    SETTLE,
+    BathSettings,
+    check_settings,
+    from_record,
+    to_record,
+)
 from labapp.errors import UsageError
-from labapp.records.storage import RunFolder, atomic_write, create_run
+from labapp.records.storage import MASSES_CSV, RunFolder, atomic_write, create_run
 
 CALIBRATION_FILE = "bench_calibration.json"
-MASSES_CSV = "masses.csv"
 MASS_COLUMNS = ("file", "added_mass_g")
 
 
@@ -107,7 +118,7 @@ def fit_series(files: list[Path], masses_g: np.ndarray, geometry: CropGeometry, 
     if missing:
         raise UsageError(f"{len(missing)} image(s) of the series do not exist: {', '.join(missing[:3])}"
                          + (" ..." if len(missing) > 3 else ""))
-    shape = _image_shape(files[0])
+    shape = image_shape(files[0])
     cells = np.array([read_cells(f, geometry, reduce=reduce, expect_shape=shape) for f in files])
     conc = np.asarray(masses_g, float) / water_g * 1000.0
     return fit_bench_calibration(cells, conc, geometry, water_g, camera or {}, image_shape=shape, reduce=reduce)
@@ -115,40 +126,38 @@ def fit_series(files: list[Path], masses_g: np.ndarray, geometry: CropGeometry, 
 
 @dataclass(frozen=True)
 class SeriesConfig:
-    """Settings of a calibration series. Masses in g (cumulative), times in s, crop in px.
+    """Settings of a calibration series. Masses in g (cumulative), times in s, crop in px; the bath in ``bath``.
 
     ``masses_g`` given: the series adds these by itself (simulated bench) and waits ``settle_s`` after each;
     empty: the operator is asked for each mass (and ``settle_s`` is waited too: 0 on a real bench, where the
     operator waits for the piece to dissolve). Either way ``Bench.on_add_mass`` (a simulated bench) is told.
+    Ranges and defaults are declared in :mod:`labapp.acquisition.settings` (:data:`SERIES_SETTINGS`).
     """
 
     crop: tuple[int, int, int]
     name: str = "calibration"
-    water_g: float = 500.0
-    grid: int = 10
-    mirror_col: float | None = None
-    reduce: int = 2
+    grid: int = GRID.default
+    mirror_col: float | None = MIRROR_COL.default
+    reduce: int = SERIES_REDUCE.default
     masses_g: tuple[float, ...] = ()
-    settle_s: float = 600.0
-    setpoint_c: float | None = 70.0
-    speed_rpm: float | None = 150.0
-    tolerance_c: float = 0.5
-    hold_s: float = 120.0
-    heat_timeout_s: float = 2 * 3600.0
-    stable_step_s: float = 5.0
-    keepalive_s: float = 2.0
+    settle_s: float = SETTLE.default
+    bath: BathSettings = field(default_factory=BathSettings)
 
     def __post_init__(self) -> None:
+        check_settings(self, SERIES_SETTINGS)
         if len(self.crop) != 3 or min(self.crop) < 0 or self.crop[2] < self.grid:
             raise UsageError(f"SeriesConfig.crop must be (x, y, size) px with size >= grid, got {self.crop}")
-        if not self.water_g > 0:
-            raise UsageError(f"SeriesConfig.water_g must be > 0 g, got {self.water_g}")
         if any(b <= a for a, b in zip((0.0,) + self.masses_g, self.masses_g)):
             raise UsageError(f"SeriesConfig.masses_g must be positive and increasing (cumulative), got {self.masses_g}")
-        if self.reduce not in (1, 2, 4, 8):
-            raise UsageError(f"SeriesConfig.reduce must be 1, 2, 4 or 8, got {self.reduce}")
-        if self.settle_s < 0:
-            raise UsageError(f"SeriesConfig.settle_s must be >= 0 s, got {self.settle_s}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The settings as stored under ``config`` in ``run.json`` (the bath's fields alongside the series')."""
+        return to_record(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> SeriesConfig:
+        """Rebuild a config stored in ``run.json`` (flat, or the bath under ``bath``; unknown keys ignored)."""
+        return from_record(cls, data)
 
     def geometry(self) -> CropGeometry:
         """The crop geometry the calibration is fitted for."""
@@ -174,20 +183,19 @@ class CalibrationProcedure:
     def startup(self, engine: Engine) -> None:
         """Create the series folder and connect the devices."""
         cfg = self.config
-        self.run = create_run(self.data_dir, cfg.name, dict(kind="calibration-series", config=dataclasses.asdict(cfg),
-                                                           water_g=cfg.water_g, simulated=self.bench.simulated))
-        engine.emit(StateChanged("opened", folder=str(self.run.path)))
-        self.session = BenchSession(self.bench, engine, self.run, keepalive_s=cfg.keepalive_s)
+        self.run = create_run(self.data_dir, cfg.name, dict(kind="calibration-series", config=cfg.to_dict(),
+                                                           water_g=cfg.bath.water_g, simulated=self.bench.simulated))
+        engine.emit(StateChanged(Phase.OPENED, folder=str(self.run.path)))
+        self.session = BenchSession(self.bench, engine, self.run, keepalive_s=cfg.bath.keepalive_s)
         self.session.t0_unix_s = engine.clock.now()
-        self.session.connect(cfg.setpoint_c, cfg.speed_rpm)
+        self.session.connect(cfg.bath.setpoint_c, cfg.bath.speed_rpm)
 
     def execute(self, engine: Engine) -> None:
         """Heat, stir, then one capture per mass level; fit when the operator (or the list) ends."""
         cfg, session = self.config, self.session
-        if cfg.setpoint_c is not None:
-            session.wait_stable(cfg.setpoint_c, cfg.tolerance_c, cfg.hold_s, cfg.heat_timeout_s, cfg.stable_step_s)
+        session.wait_bath(cfg.bath)
         session.start_stirring()
-        engine.emit(StateChanged("calibrating"))
+        engine.emit(StateChanged(Phase.CALIBRATING))
         mass = 0.0
         auto = list(cfg.masses_g)
         while not engine.should_stop():
@@ -201,7 +209,7 @@ class CalibrationProcedure:
                 session.note("info", "mass", f"{mass:.4f} g of filament added in total (simulated)")
                 engine.clock.sleep(cfg.settle_s, engine.should_stop)
                 continue
-            answer = engine.ask("added_mass_g", f"Add filament, wait until it has dissolved, then enter the "
+            answer = engine.ask(PromptKind.ADDED_MASS, f"Add filament, wait until it has dissolved, then enter the "
                                 f"cumulative added mass in g (now {mass:g} g); leave empty to finish and fit.")
             if answer is None or answer == "":
                 break
@@ -218,7 +226,7 @@ class CalibrationProcedure:
         else:
             session.note("warning", "calibration", f"only {len(self.masses)} levels captured; 3 are needed to fit")
 
-    def shutdown(self, engine: Engine, outcome: str) -> None:
+    def shutdown(self, engine: Engine, outcome: Outcome) -> None:
         """Heating off, devices closed, final status written."""
         if self.session is not None:
             self.session.close()
@@ -235,18 +243,18 @@ class CalibrationProcedure:
         name = f"cal_{index:03d}{Path(cap.file_name).suffix.lower() or '.jpg'}"
         self.run.add_frame(name, cap.data, self.session.t_s(cap.t_unix_s), cap.t_unix_s)
         self.masses.append((name, mass_g))
-        rows = "file,added_mass_g\n" + "".join(f"{f},{m:.6f}\n" for f, m in self.masses)
-        atomic_write(self.run.path / "masses.csv", rows.encode())
-        conc = mass_g / (self.config.water_g / 1000.0)
+        rows = ",".join(MASS_COLUMNS) + "\n" + "".join(f"{f},{m:.6f}\n" for f, m in self.masses)
+        atomic_write(self.run.path / MASSES_CSV, rows.encode())
+        conc = mass_g / (self.config.bath.water_g / 1000.0)
         engine.emit(CalibrationLevel(index, name, str(self.run.path / name), self.session.t_s(), mass_g, conc,
                                      len(self.masses)))
         self.session.note("info", "level", f"{name}: {mass_g:g} g added, {conc:.4f} g/kg")
 
     def _fit(self) -> None:
         cfg = self.config
-        conc = np.array([m for _, m in self.masses]) / (cfg.water_g / 1000.0)
+        conc = np.array([m for _, m in self.masses]) / (cfg.bath.water_g / 1000.0)
         cal = fit_series([self.run.path / f for f, _ in self.masses], np.array([m for _, m in self.masses]),
-                         cfg.geometry(), cfg.water_g, reduce=cfg.reduce,
+                         cfg.geometry(), cfg.bath.water_g, reduce=cfg.reduce,
                          camera={k: str(v) for k, v in dataclasses.asdict(self.bench.camera_settings).items()})
         self.calibration_path = self.run.path / CALIBRATION_FILE
         tmp = self.run.path / f".{CALIBRATION_FILE}.fit"
@@ -260,7 +268,7 @@ class CalibrationProcedure:
                           f"saved {CALIBRATION_FILE}")
 
 
-def _image_shape(path: Path) -> tuple[int, int]:
+def image_shape(path: Path) -> tuple[int, int]:
     """(H, W) of an image file, px, from its header (decoded when Pillow cannot read it, e.g. camera raw)."""
     try:
         with Image.open(path) as image:

@@ -7,68 +7,67 @@ zero) -> a frame every ``interval_s`` with plate/probe temperature and stirring 
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench, BenchSession, ProcedureError
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import FrameStored, Preview, StateChanged
+from labapp.acquisition.events import FrameStored, Outcome, Phase, Preview, PromptKind, StateChanged
 from labapp.acquisition.live import LiveAnalyzer, is_steady
-from labapp.errors import UsageError
+from labapp.acquisition.settings import (
+    FRAME_BYTES,
+    INTERVAL,
+    LOW_SPACE,
+    MAX_DURATION,
+    MIN_DURATION,
+    OBJECT_MASS,
+    RUN_SETTINGS,
+    BathSettings,
+    check_settings,
+    from_record,
+    to_record,
+)
+from labapp.records.runrecord import RecordStatus
 from labapp.records.storage import RunFolder, check_disk_space, create_run, free_bytes, open_run, read_run
 
-_STATUS = {"complete": "complete", "stopped": "stopped", "aborted": "aborted", "failed": "failed"}
+_STATUS = {outcome: RecordStatus(outcome) for outcome in Outcome}
 
 
 @dataclass(frozen=True)
 class RunConfig:
-    """Settings of one release run (stored in ``run.json``). Times in s, temperatures in C, masses in g."""
+    """Settings of one release run (stored in ``run.json``). Times in s, masses in g; the bath in ``bath``.
+
+    Ranges and defaults are declared in :mod:`labapp.acquisition.settings` (:data:`RUN_SETTINGS`).
+    """
 
     name: str = "run"
-    interval_s: float = 11.0
-    setpoint_c: float = 70.0
-    speed_rpm: float = 150.0
-    tolerance_c: float = 0.5
-    hold_s: float = 120.0
-    heat_timeout_s: float = 2 * 3600.0
-    stable_step_s: float = 5.0
-    max_duration_s: float = 4 * 3600.0
+    interval_s: float = INTERVAL.default
+    max_duration_s: float = MAX_DURATION.default
     stop_on_steady: bool = True
-    min_duration_s: float = 1800.0
-    water_g: float = 500.0
-    object_mass_g: float | None = None
+    min_duration_s: float = MIN_DURATION.default
+    object_mass_g: float | None = OBJECT_MASS.default
     object_name: str = ""
     notes: str = ""
     auto_drop: bool = False
-    keepalive_s: float = 2.0
-    frame_bytes_estimate: int | None = None
-    low_space_bytes: int = 2_000_000_000
+    frame_bytes_estimate: int | None = FRAME_BYTES.default
+    low_space_bytes: int = LOW_SPACE.default
+    bath: BathSettings = field(default_factory=BathSettings)
 
     def __post_init__(self) -> None:
-        positive = ("interval_s", "hold_s", "heat_timeout_s", "stable_step_s", "max_duration_s", "water_g",
-                    "keepalive_s", "frame_bytes_estimate")
-        for key in positive:
-            if getattr(self, key) is not None and not getattr(self, key) > 0:
-                raise UsageError(f"RunConfig.{key} must be > 0, got {getattr(self, key)}")
-        if not 0 <= self.setpoint_c <= 150:
-            raise UsageError(f"RunConfig.setpoint_c must be in [0, 150] C, got {self.setpoint_c}")
-        if not 0 <= self.speed_rpm <= 1400:
-            raise UsageError(f"RunConfig.speed_rpm must be in [0, 1400] rpm, got {self.speed_rpm}")
-        if not self.tolerance_c > 0:
-            raise UsageError(f"RunConfig.tolerance_c must be > 0 C, got {self.tolerance_c}")
-        if self.object_mass_g is not None and not self.object_mass_g > 0:
-            raise UsageError(f"RunConfig.object_mass_g must be > 0 g, got {self.object_mass_g}")
+        check_settings(self, RUN_SETTINGS)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The settings as stored under ``config`` in ``run.json`` (the bath's fields alongside the run's)."""
+        return to_record(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:
-        """Rebuild a config stored in ``run.json`` (unknown keys ignored)."""
-        names = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{k: v for k, v in data.items() if k in names})
+        """Rebuild a config stored in ``run.json`` (flat, or the bath under ``bath``; unknown keys ignored)."""
+        return from_record(cls, data)
 
 
 def _calibration_bytes(calibration: BenchCalibration) -> bytes:
@@ -134,19 +133,19 @@ class RunProcedure:
         if self.resume_path is None:
             self.data_dir.mkdir(parents=True, exist_ok=True)
             check_disk_space(self.data_dir, cfg.frame_bytes_estimate or self.bench.frame_bytes, n_frames)
-        self.session = BenchSession(self.bench, engine, None, keepalive_s=cfg.keepalive_s)
-        self.session.connect(cfg.setpoint_c, cfg.speed_rpm)
+        self.session = BenchSession(self.bench, engine, None, keepalive_s=cfg.bath.keepalive_s)
+        self.session.connect(cfg.bath.setpoint_c, cfg.bath.speed_rpm)
         if self.resume_path is not None:
             self.run = open_run(self.resume_path)
         else:
-            meta = dict(kind="run", config=dataclasses.asdict(cfg), water_g=cfg.water_g,
+            meta = dict(kind="run", config=cfg.to_dict(), water_g=cfg.bath.water_g,
                         object_mass_g=cfg.object_mass_g, object_name=cfg.object_name, notes=cfg.notes,
                         interval_s=cfg.interval_s, simulated=self.bench.simulated, bench=self.bench.description,
                         **_geometry_meta(self.calibration))
             self.run = create_run(self.data_dir, cfg.name, meta)
             if self.calibration is not None:
                 self.run.add_file("calibration.json", _calibration_bytes(self.calibration))
-        engine.emit(StateChanged("opened", folder=str(self.run.path), resumed=self.resume_path is not None))
+        engine.emit(StateChanged(Phase.OPENED, folder=str(self.run.path), resumed=self.resume_path is not None))
         self.session.t0_unix_s = self.run.meta.get("t0_unix_s")
         self.session.attach(self.run)
         self.t_s = [f.t_s for f in self.run.frames]
@@ -158,14 +157,14 @@ class RunProcedure:
         if "reference.jpg" in run.meta.get("files", {}):
             self._use_reference()
         if session.t0_unix_s is None:
-            session.wait_stable(cfg.setpoint_c, cfg.tolerance_c, cfg.hold_s, cfg.heat_timeout_s, cfg.stable_step_s)
+            session.wait_bath(cfg.bath)
             if engine.should_stop():
                 return
-            session.start_stirring(cfg.speed_rpm)  # the reference shows the stirred bath
+            session.start_stirring(cfg.bath.speed_rpm)  # the reference shows the stirred bath
             if "reference.jpg" not in run.meta.get("files", {}):
                 self._capture_reference(engine)
-            engine.emit(StateChanged("waiting-drop"))
-            dropped = engine.ask("drop", "Drop the object into the beaker, then confirm.",
+            engine.emit(StateChanged(Phase.WAITING_DROP))
+            dropped = engine.ask(PromptKind.DROP, "Drop the object into the beaker, then confirm.",
                                  auto=True if cfg.auto_drop else None)
             if not dropped or engine.should_stop():
                 return
@@ -173,19 +172,19 @@ class RunProcedure:
             run.update(t0_unix_s=session.t0_unix_s)
             session.note("info", "drop", "object dropped: time zero")
         else:
-            session.start_stirring(cfg.speed_rpm)
+            session.start_stirring(cfg.bath.speed_rpm)
             last = run.frames[-1].t_s if run.frames else 0.0
             run.add_gap(last, session.t_s(), "acquisition interrupted; resumed into the same folder")
         if self.bench.on_drop is not None:
             self.bench.on_drop(session.t0_unix_s)
         self._acquire(engine)
 
-    def shutdown(self, engine: Engine, outcome: str) -> None:
+    def shutdown(self, engine: Engine, outcome: Outcome) -> None:
         """Heating off, devices closed, final status written (always runs)."""
         if self.session is not None:
             self.session.close()
         if self.run is not None:
-            if outcome == "failed" and engine.error is not None:
+            if outcome == Outcome.FAILED and engine.error is not None:
                 self.run.event("error", "failed", f"{type(engine.error).__name__}: {engine.error}")
             self.run.finish(_STATUS[outcome])
             self.run.close()
@@ -211,7 +210,7 @@ class RunProcedure:
 
     def _acquire(self, engine: Engine) -> None:
         cfg, session, clock = self.config, self.session, engine.clock
-        engine.emit(StateChanged("acquiring", folder=str(self.run.path), t0_unix_s=session.t0_unix_s))
+        engine.emit(StateChanged(Phase.ACQUIRING, folder=str(self.run.path), t0_unix_s=session.t0_unix_s))
         slot = math.floor(max(session.t_s(), 0.0) / cfg.interval_s) + (1 if self.run.frames else 0)
         while not engine.should_stop():
             clock.sleep(session.t0_unix_s + slot * cfg.interval_s - clock.now(), engine.should_stop)
@@ -253,7 +252,7 @@ class RunProcedure:
         self.conc.append(conc)
         engine.emit(FrameStored(index, name, str(run.path / name), t_s, len(run.frames), capture_t_unix_s=cap.t_unix_s,
                                 conc_g_per_kg=conc, uncertainty_g_per_kg=unc,
-                                released_g=conc * self.config.water_g / 1000.0 if not math.isnan(conc) else math.nan,
+                                released_g=conc * self.config.bath.water_g / 1000.0 if not math.isnan(conc) else math.nan,
                                 plate_c=record.plate_c, probe_c=record.probe_c, speed_rpm=record.speed_rpm,
                                 last_error=session.last_error))
         if index % 25 == 0 and free_bytes(run.path) < self.config.low_space_bytes:

@@ -29,12 +29,13 @@ from drivers.sim import BenchScene
 from drivers.sim.heidolph_emulator import HeidolphEmulator
 from labapp.acquisition.bench import Bench
 from labapp.acquisition.clock import Clock, ScaledClock, SteppedClock, WallClock
+from labapp.acquisition.settings import WATER
 from labapp.records.storage import FRAMES_CSV, read_run
 
 log = logging.getLogger(__name__)
 
-WATER_G = 500.0
-"""Water in the beaker, g (paper section 4.2)."""
+WATER_G = WATER.default
+"""Water in the simulated beaker, g: the declared default (:data:`labapp.acquisition.settings.WATER`)."""
 SCENE = BenchScene(width=960, height=640, water_g=WATER_G)
 """The simulated bench picture: the renderer's default scene at 960 x 640 px (renders in about half the time
 of its 1200 x 800 default; the analysis works in full-resolution px either way)."""

@@ -1,15 +1,55 @@
 """Argument types for `sfr` numbers: every command-line number is finite and in its meaningful range.
 
 ``argparse`` accepts ``nan``, ``inf`` and ``-2`` for ``type=float``/``int``; these types refuse them with a
-message naming what was expected (argparse prefixes the option name and exits with code 2). Use them as
-``parser.add_argument("--water-g", type=positive_float)``.
+message naming what was expected (argparse prefixes the option name and exits with code 2). A declared
+setting (:mod:`labapp.acquisition.settings`) becomes its option with :func:`add_setting`; other numbers use
+the types directly, as ``parser.add_argument("--window-s", type=positive_float)``.
 """
 from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
 
-__all__ = ["finite_float", "nonnegative_float", "nonnegative_int", "positive_float", "positive_int"]
+from labapp.acquisition.settings import Setting
+
+__all__ = ["add_setting", "add_settings", "finite_float", "nonnegative_float", "nonnegative_int", "positive_float",
+           "positive_int", "setting_type", "setting_values"]
+
+
+def setting_type(setting: Setting) -> Callable[[str], float | int]:
+    """The argparse type of a declared setting: a number in the setting's shown unit, checked against its
+    range and returned in its stored unit (``--max-hours 2`` -> 7200.0 s)."""
+    def parse(text: str) -> float | int:
+        value = _int(text) if setting.integer else finite_float(text)
+        stored = setting.stored(value)
+        if not setting.allows(stored):
+            what = "" if setting.choices else "a whole number " if setting.integer else "a number "
+            raise argparse.ArgumentTypeError(f"{text!r}: expected {what}{setting.range_text(shown=True)}")
+        return stored
+    parse.__name__ = setting.name
+    return parse
+
+
+def add_setting(parser: argparse.ArgumentParser | argparse._ArgumentGroup, setting: Setting) -> argparse.Action:
+    """Add the option of a declared setting: its flag, a type with the range check, its default and a help
+    text with unit, default and range; the value lands in ``args.<setting.name>``, in the stored unit."""
+    return parser.add_argument(setting.flag, dest=setting.name, type=setting_type(setting), default=setting.default,
+                               metavar=(setting.display_unit or "N").upper(), help=setting.help())
+
+
+def add_settings(parser: argparse.ArgumentParser, settings: tuple[Setting, ...], title: str,
+                 skip: tuple[Setting, ...] = ()) -> None:
+    """The options of the ``settings`` that have a flag (not those in ``skip``), as a group named ``title``."""
+    group = parser.add_argument_group(title)
+    for setting in settings:
+        if setting.flag and setting not in skip:
+            add_setting(group, setting)
+
+
+def setting_values(args: argparse.Namespace, settings: tuple[Setting, ...]) -> dict[str, float | int | None]:
+    """``{name: value}`` of the ``settings`` the parsed ``args`` hold (keyword arguments of a config)."""
+    return {s.name: getattr(args, s.name) for s in settings if hasattr(args, s.name)}
 
 
 def finite_float(text: str) -> float:

@@ -2,14 +2,12 @@
 save) and the simulation step (measured runs + their meshes -> ``simcal.json``, made active)."""
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from pathlib import Path
 
 from PySide6.QtCore import Signal
 from PySide6.QtGui import QPixmap
 from PySide6.QtWidgets import (
-    QDoubleSpinBox,
     QFileDialog,
     QFormLayout,
     QGroupBox,
@@ -23,18 +21,18 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from design.files.meshio import MESH_SUFFIXES
+from labapp.acquisition.settings import ADDED_MASS, parse_masses
 from labapp.gui.bridge import BackgroundTask
+from labapp.gui.fields import SettingBox
 from labapp.jobs.calibrate_sim import SET_COLUMNS, calibrate_sim
-
-
-def parse_masses(text: str) -> tuple[float, ...]:
-    """``"0.25, 0.5, 1"`` -> (0.25, 0.5, 1.0): cumulative masses in g (empty: ask the operator each time)."""
-    return tuple(float(t) for t in text.replace(";", ",").split(",") if t.strip())
+from labapp.records.storage import timestamp_name
 
 
 class CalibrationWizard(QWidget):
     """Guides a calibration series. Emits ``start_requested``; while the engine asks for a mass, the operator
-    enters it and presses "Capture" (``mass_entered(value)``) or "Finish and fit" (``finish_requested``)."""
+    enters it and presses "Capture" (``mass_entered(value)``) or "Finish and fit" (``finish_requested``).
+    The bath (water, temperature, stirring) is set in the device panel."""
 
     start_requested = Signal()
     mass_entered = Signal(float)
@@ -43,17 +41,10 @@ class CalibrationWizard(QWidget):
     def __init__(self, simulate: bool, data_dir: Path | None = None, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.simulation = SimulationStep(Path(data_dir) if data_dir is not None else Path.cwd())
-        self.water = QDoubleSpinBox()
-        self.water.setRange(1.0, 5000.0)
-        self.water.setValue(500.0)
-        self.water.setSuffix(" g")
         self.masses = QLineEdit("0.25, 0.5, 0.875, 1.25, 1.75" if simulate else "")
         self.masses.setToolTip("cumulative masses added by the simulated bench by itself; empty: ask each time")
         self.masses.setEnabled(simulate)
-        self.mass = QDoubleSpinBox()
-        self.mass.setRange(0.0, 100.0)
-        self.mass.setDecimals(4)
-        self.mass.setSuffix(" g")
+        self.mass = SettingBox(ADDED_MASS)
         self.step_label = QLabel("1. set the crop in the live view  2. start: the clear-water frame is captured")
         self.step_label.setWordWrap(True)
         self.result_label = QLabel("")
@@ -66,7 +57,6 @@ class CalibrationWizard(QWidget):
         self.finish_button.clicked.connect(self.finish_requested)
         box = QGroupBox("calibration series (paper section 4.2)")
         form = QFormLayout(box)
-        form.addRow("water", self.water)
         form.addRow("simulated masses", self.masses)
         form.addRow("cumulative mass added", self.mass)
         row = QHBoxLayout()
@@ -80,8 +70,18 @@ class CalibrationWizard(QWidget):
         layout.addWidget(self.simulation, 1)
         self.set_asking(False, "")
 
+    def masses_g(self) -> tuple[float, ...]:
+        """The cumulative masses the simulated bench adds by itself, g (empty: the operator enters each).
+
+        Raises
+        ------
+        UsageError
+            For an entry that is not a number.
+        """
+        return parse_masses(self.masses.text()) if self.masses.isEnabled() else ()
+
     def _capture(self) -> None:
-        self.mass_entered.emit(self.mass.value())
+        self.mass_entered.emit(self.mass.stored())
 
     def set_asking(self, asking: bool, text: str) -> None:
         """Enable the capture/finish buttons while the engine waits for a mass."""
@@ -147,7 +147,7 @@ class SimulationStep(QWidget):
         if not run:
             return
         mesh, _ = QFileDialog.getOpenFileName(self, "its mesh", str(self.data_dir),
-                                              "meshes (*.stl *.obj *.ply *.off *.3mf)")
+                                              f"meshes ({' '.join('*' + s for s in MESH_SUFFIXES)})")
         if mesh:
             self.add_row(run, mesh)
 
@@ -177,7 +177,7 @@ class SimulationStep(QWidget):
         """Run ``calibrate_sim`` on the table into a new folder under ``DATA/simcal`` (in the background)."""
         if self.task is not None and self.task.running:
             return
-        out = self.data_dir / "simcal" / time.strftime("%Y%m%d-%H%M%S")
+        out = self.data_dir / "simcal" / timestamp_name()
         set_csv = self.write_set(out.with_name(out.name + "_set.csv"))
         bench = self.bench_calibration()
 

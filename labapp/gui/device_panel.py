@@ -1,4 +1,5 @@
-"""Device panel: pick the camera and hotplate (real ports or simulated), camera settings, connect, readouts."""
+"""Device panel: pick the camera and hotplate (real ports or simulated), camera settings, the bath, connect,
+readouts."""
 from __future__ import annotations
 
 from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QPushButton, QVBoxLayout, QWidget
@@ -6,6 +7,8 @@ from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QL
 from drivers.camera.base import CameraSettings
 from labapp.acquisition.devices import CAMERA_SPECS
 from labapp.acquisition.events import Reading
+from labapp.acquisition.settings import BATH_SETTINGS, BathSettings
+from labapp.gui.fields import add_rows
 
 SIMULATED = "simulated"
 NO_HOTPLATE = "none"
@@ -19,10 +22,11 @@ def serial_ports() -> list[str]:
 
 
 class DevicePanel(QWidget):
-    """Camera and hotplate choice, camera settings, a Connect button and live hotplate readouts.
+    """Camera and hotplate choice, camera settings, the bath, a Connect button and live hotplate readouts.
 
     The main window reads :meth:`camera_spec`, :meth:`hotplate_spec` and :meth:`settings` when it builds
-    the bench; readouts are fed by :meth:`show_reading` (a slot for the bridge's ``reading`` signal).
+    the bench, and :meth:`bath` for a run or a calibration series; readouts are fed by :meth:`show_reading`
+    (a slot for the bridge's ``reading`` signal).
     """
 
     def __init__(self, simulate: bool, parent: QWidget | None = None) -> None:
@@ -53,6 +57,8 @@ class DevicePanel(QWidget):
         sform.addRow("shutter", self.shutter)
         sform.addRow("ISO", self.iso)
         sform.addRow("format", self.image_format)
+        bath = QGroupBox("bath (runs and calibration series)")
+        self.bath_fields = add_rows(QFormLayout(bath), tuple(s for s in BATH_SETTINGS if s.flag))
         readout = QGroupBox("hotplate")
         rform = QFormLayout(readout)
         for key, label in (("plate_c", "plate (C)"), ("probe_c", "probe (C)"), ("speed_rpm", "stirring (rpm)"),
@@ -61,7 +67,7 @@ class DevicePanel(QWidget):
         buttons = QHBoxLayout()
         buttons.addWidget(self.connect_button)
         layout = QVBoxLayout(self)
-        for w in (devices, settings, readout):
+        for w in (devices, settings, bath, readout):
             layout.addWidget(w)
         layout.addLayout(buttons)
         layout.addStretch(1)
@@ -74,6 +80,10 @@ class DevicePanel(QWidget):
         """The chosen hotplate port, ``simulated``, or None for no hotplate."""
         text = self.hotplate.currentText().strip()
         return None if text in ("", NO_HOTPLATE) else text
+
+    def bath(self) -> BathSettings:
+        """The bath settings of the fields (the others: their defaults; UsageError for a bad value)."""
+        return BathSettings(**{name: box.stored() for name, box in self.bath_fields.items()})
 
     def settings(self) -> CameraSettings:
         """Camera settings from the fields (empty: leave the camera's own)."""

@@ -1,12 +1,10 @@
 """The bench application's main window: a thin face over the engine.
 
-Every button calls the same Qt-free pieces the CLI uses (``Engine``, ``RunProcedure``,
-``CalibrationProcedure``, ``PreviewProcedure``); engine events come in through the :class:`EngineBridge`.
+Every button calls the same Qt-free pieces the CLI uses (``Engine``, the jobs ``new_run``, ``resume_run`` and
+``new_series``, ``PreviewProcedure``); engine events come in through the :class:`EngineBridge`.
 """
 from __future__ import annotations
 
-import dataclasses
-import math
 from pathlib import Path
 
 import cv2
@@ -16,17 +14,17 @@ from PySide6.QtWidgets import QDockWidget, QMainWindow, QMessageBox, QPlainTextE
 
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench
-from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
+from labapp.acquisition.calseries import CalibrationProcedure
 from labapp.acquisition.clock import make_clock
 from labapp.acquisition.devices import make_bench
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import CalibrationLevel, Done, FrameStored, Preview, Prompt, StateChanged
+from labapp.acquisition.events import CalibrationLevel, Done, FrameStored, Phase, Preview, Prompt, PromptKind, StateChanged
 from labapp.acquisition.procedures import PreviewProcedure
 from labapp.acquisition.simbench import SimulatedBench, resume_clock
 from labapp.acquisition.status import RunStatus
 from labapp.errors import UsageError
 from labapp.gui.bridge import EngineBridge, LogBridge
-from labapp.gui.calibration_wizard import CalibrationWizard, parse_masses
+from labapp.gui.calibration_wizard import CalibrationWizard
 from labapp.gui.design_launcher import DesignLauncher
 from labapp.gui.device_panel import SIMULATED, DevicePanel
 from labapp.gui.live_view import LiveView
@@ -34,6 +32,7 @@ from labapp.gui.plots import PlotsPanel
 from labapp.gui.run_browser import RunBrowser
 from labapp.gui.run_controls import RunControls
 from labapp.jobs.run import new_run, resumable, resume_run
+from labapp.jobs.series import new_series
 
 UI_MS = 100
 
@@ -175,15 +174,13 @@ class MainWindow(QMainWindow):
     def start_run(self) -> None:
         """Start a run with the run controls' settings."""
         try:
-            config, calibration, bench = self.controls.config(), self._calibration(), self.make_bench()
-            if math.isinf(self.engine.clock.speed):
-                # an instant clock only moves when the procedure sleeps: wait for the bath in 60 s steps
-                config = dataclasses.replace(config, stable_step_s=60.0)
+            config = self.controls.config(self.devices.bath().on_clock(self.engine.clock.speed))
+            calibration, bench = self._calibration(), self.make_bench()
         except Exception as exc:
             self.on_message("error", f"cannot start: {exc}")
             return
         self.plots.clear()
-        self.plots.set_water(config.water_g)
+        self.plots.set_water(config.bath.water_g)
         if calibration is not None:
             g = calibration.geometry
             self.live.set_geometry(g.x, g.y, g.size, g.grid, g.mirror_col)
@@ -219,35 +216,33 @@ class MainWindow(QMainWindow):
 
     def confirm_drop(self) -> None:
         """The operator dropped the object: time zero."""
-        self.engine.answer("drop", True)
+        self.engine.answer(PromptKind.DROP, True)
 
     def stop(self) -> None:
         """Finish the current procedure cleanly."""
         self.engine.stop()
 
     def start_calibration(self) -> None:
-        """Start a calibration series with the crop of the live view."""
-        x, y, size = self.live.geometry_px()
+        """Start a calibration series (:func:`labapp.jobs.series.new_series`) with the crop of the live view,
+        the device panel's bath and the wizard's masses."""
         try:
-            masses = parse_masses(self.wizard.masses.text()) if self.wizard.masses.isEnabled() else ()
-            config = SeriesConfig(crop=(x, y, size), water_g=self.wizard.water.value(), masses_g=masses,
-                                  settle_s=600.0 if self.simulate else 0.0,
-                                  stable_step_s=60.0 if math.isinf(self.engine.clock.speed) else 5.0)
-            bench = self.make_bench()
+            masses, bath = self.wizard.masses_g(), self.devices.bath()
+            proc = new_series(self.make_bench(), self.data_dir, self.live.geometry_px(), bath=bath, masses_g=masses,
+                              clock_speed=self.engine.clock.speed)
         except Exception as exc:
             self.wizard.show_result(f"cannot start: {exc}")
             return
-        self._start(CalibrationProcedure(config, bench, self.data_dir))
+        self._start(proc)
 
     def answer_mass(self, mass_g: float) -> None:
         """The operator entered the cumulative mass for the next capture."""
         self.wizard.set_asking(False, f"capturing at {mass_g:g} g ...")
-        self.engine.answer("added_mass_g", mass_g)
+        self.engine.answer(PromptKind.ADDED_MASS, mass_g)
 
     def finish_calibration(self) -> None:
         """No more levels: fit and save."""
         self.wizard.set_asking(False, "fitting ...")
-        self.engine.answer("added_mass_g", "")
+        self.engine.answer(PromptKind.ADDED_MASS, "")
 
     # -- slots for engine events --------------------------------------------------------------------------
     def on_frame(self, frame: FrameStored) -> None:
@@ -270,18 +265,18 @@ class MainWindow(QMainWindow):
     def on_state(self, state: StateChanged) -> None:
         """Follow the procedure's phase."""
         self.controls.set_running(self.engine.running or state.phase != "done",
-                                  waiting_drop=state.phase == "waiting-drop")
-        if state.phase == "opened":
+                                  waiting_drop=state.phase == Phase.WAITING_DROP)
+        if state.phase == Phase.OPENED:
             self.on_message("info", f"run folder {state.folder}")
 
     def on_prompt(self, prompt: Prompt) -> None:
         """The engine asks the operator something."""
         if prompt.auto:
             return
-        if prompt.prompt == "drop":
+        if prompt.prompt == PromptKind.DROP:
             self.controls.set_running(True, waiting_drop=True)
             self.statusBar().showMessage(prompt.text)
-        elif prompt.prompt == "added_mass_g":
+        elif prompt.prompt == PromptKind.ADDED_MASS:
             self.wizard.set_asking(True, prompt.text)
 
     def on_message(self, level: str, message: str) -> None:

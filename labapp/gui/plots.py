@@ -14,6 +14,7 @@ from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from analysis import smooth_curve
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
+from labapp.acquisition.settings import WATER
 
 REDRAW_MS = 100
 
@@ -22,7 +23,7 @@ class PlotsPanel(QWidget):
     """Live plots of one run. ``water_g`` sets the released-mass axis (g = g/kg x kg of water). The smoothed
     curve uses the analysis' Savitzky-Golay window and order, the curve the steady-state stop judges."""
 
-    def __init__(self, parent: QWidget | None = None, water_g: float = 500.0,
+    def __init__(self, parent: QWidget | None = None, water_g: float = WATER.default,
                  smooth_window_s: float = DEFAULT_WINDOW_S, smooth_order: int = DEFAULT_ORDER) -> None:
         super().__init__(parent)
         self.smooth_window_s, self.smooth_order = smooth_window_s, smooth_order

@@ -4,7 +4,6 @@ from __future__ import annotations
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (
     QCheckBox,
-    QDoubleSpinBox,
     QFileDialog,
     QFormLayout,
     QGridLayout,
@@ -17,20 +16,14 @@ from PySide6.QtWidgets import (
 )
 
 from labapp.acquisition.procedures import RunConfig
-
-
-def _spin(value: float, lo: float, hi: float, decimals: int = 1, suffix: str = "") -> QDoubleSpinBox:
-    box = QDoubleSpinBox()
-    box.setRange(lo, hi)
-    box.setDecimals(decimals)
-    box.setValue(value)
-    box.setSuffix(suffix)
-    return box
+from labapp.acquisition.settings import INTERVAL, MAX_DURATION, OBJECT_MASS, BathSettings
+from labapp.gui.fields import SettingBox
 
 
 class RunControls(QWidget):
     """Settings form and buttons. Emits ``start_requested``, ``drop_confirmed``, ``stop_requested``,
-    ``abort_requested``; the main window wires them to the engine and calls :meth:`set_running`."""
+    ``abort_requested``; the main window wires them to the engine and calls :meth:`set_running`. The bath
+    (water, temperature, stirring) is set in the device panel."""
 
     start_requested = Signal()
     drop_confirmed = Signal()
@@ -40,14 +33,11 @@ class RunControls(QWidget):
     def __init__(self, simulate: bool, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         d = RunConfig()
-        self.name = QLineEdit("run")
+        self.name = QLineEdit(d.name)
         self.object_name = QLineEdit("")
-        self.object_mass = _spin(1.75, 0.0, 100.0, 3, " g")
-        self.water = _spin(d.water_g, 1.0, 5000.0, 1, " g")
-        self.interval = _spin(d.interval_s, 1.0, 3600.0, 1, " s")
-        self.setpoint = _spin(d.setpoint_c, 0.0, 100.0, 1, " C")
-        self.rpm = _spin(d.speed_rpm, 0.0, 1400.0, 0, " rpm")
-        self.max_hours = _spin(d.max_duration_s / 3600, 0.01, 48.0, 2, " h")
+        self.object_mass = SettingBox(OBJECT_MASS, none_text="not weighed")
+        self.interval = SettingBox(INTERVAL)
+        self.max_hours = SettingBox(MAX_DURATION)
         self.stop_on_steady = QCheckBox("stop at steady state")
         self.stop_on_steady.setChecked(d.stop_on_steady)
         self.auto_drop = QCheckBox("drop by itself once stable (simulation)")
@@ -61,12 +51,8 @@ class RunControls(QWidget):
         form = QFormLayout(form_box)
         form.addRow("name", self.name)
         form.addRow("object", self.object_name)
-        form.addRow("object mass", self.object_mass)
-        form.addRow("water", self.water)
-        form.addRow("interval", self.interval)
-        form.addRow("setpoint", self.setpoint)
-        form.addRow("stirring", self.rpm)
-        form.addRow("max duration", self.max_hours)
+        for box in (self.object_mass, self.interval, self.max_hours):
+            form.addRow(box.setting.label, box)
         form.addRow("", self.stop_on_steady)
         form.addRow("", self.auto_drop)
         cal_row = QHBoxLayout()
@@ -96,14 +82,12 @@ class RunControls(QWidget):
         if path:
             self.calibration.setText(path)
 
-    def config(self) -> RunConfig:
-        """The run settings as a :class:`RunConfig` (raises ValueError on a bad combination)."""
-        return RunConfig(name=self.name.text() or "run", interval_s=self.interval.value(),
-                         setpoint_c=self.setpoint.value(), speed_rpm=self.rpm.value(),
-                         max_duration_s=self.max_hours.value() * 3600, stop_on_steady=self.stop_on_steady.isChecked(),
-                         water_g=self.water.value(), object_mass_g=self.object_mass.value() or None,
-                         object_name=self.object_name.text(), notes=self.notes.text(),
-                         auto_drop=self.auto_drop.isChecked())
+    def config(self, bath: BathSettings) -> RunConfig:
+        """The run settings with ``bath`` as a :class:`RunConfig` (UsageError on a bad value)."""
+        return RunConfig(name=self.name.text() or RunConfig.name, interval_s=self.interval.stored(),
+                         max_duration_s=self.max_hours.stored(), stop_on_steady=self.stop_on_steady.isChecked(),
+                         object_mass_g=self.object_mass.stored(), object_name=self.object_name.text(),
+                         notes=self.notes.text(), auto_drop=self.auto_drop.isChecked(), bath=bath)
 
     def set_running(self, running: bool, waiting_drop: bool = False) -> None:
         """Enable the buttons that make sense now."""

@@ -4,11 +4,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from labapp.acquisition.settings import WATER
 from labapp.errors import UsageError
 from labapp.records.outpaths import check_out
+from labapp.records.storage import MASSES_CSV, RUN_JSON
 
 
-def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = 500.0,
+def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WATER.default,
                      crop: tuple[int, int, int] | None = None, grid: int = 10, mirror_col: float | None = None,
                      mirror: bool = True, reduce: int = 1, camera: dict[str, str] | None = None):
     """Fit the bench calibration of a series folder (images + ``masses.csv``) and save it to ``out``.
@@ -25,20 +27,19 @@ def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = 50
         For unreadable images or a fit that is not possible.
     """
     from analysis import CropGeometry, default_geometry
-    from labapp.acquisition.calseries import MASSES_CSV, _image_shape, fit_series, read_masses
+    from labapp.acquisition.calseries import fit_series, image_shape, read_masses
 
     folder = Path(folder)
     if not folder.is_dir():
         raise UsageError(f"{folder} is not a folder; give the calibration-series folder holding {MASSES_CSV}")
     out = check_out(out, "calibration", [folder / MASSES_CSV], file=True)
-    if not water_g > 0:
-        raise UsageError(f"water mass {water_g} g: expected > 0 g")
+    WATER.check(water_g, "calibrate_series")
     files, masses = read_masses(folder)
     crop = crop or _recorded_crop(folder)
     if crop:
         geometry = CropGeometry(*crop, grid, mirror_col, mirror)
     else:
-        base = default_geometry(_image_shape(files[0]) if files[0].is_file() else (0, 0), grid)
+        base = default_geometry(image_shape(files[0]) if files[0].is_file() else (0, 0), grid)
         geometry = CropGeometry(base.x, base.y, base.size, grid, mirror_col, mirror)
     cal = fit_series(files, masses, geometry, water_g, camera, reduce)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -49,15 +50,15 @@ def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = 50
 def _recorded_crop(folder: Path) -> tuple[int, int, int] | None:
     """The crop a series recorded by `sfr lab`/`sfr run` stored in its run.json (x, y, size px), if any."""
     try:
-        meta = json.loads((folder / "run.json").read_text())
+        meta = json.loads((folder / RUN_JSON).read_text())
     except FileNotFoundError:
         return None
     except (OSError, ValueError) as exc:
-        raise UsageError(f"{folder / 'run.json'} cannot be read: {exc}") from exc
+        raise UsageError(f"{folder / RUN_JSON} cannot be read: {exc}") from exc
     if "crop" not in meta:
         return None
     try:
         crop = meta["crop"]
         return int(crop["x"]), int(crop["y"]), int(crop["size"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise UsageError(f"{folder / 'run.json'}: crop is not {{x, y, size}} in px: {exc}") from exc
+        raise UsageError(f"{folder / RUN_JSON}: crop is not {{x, y, size}} in px: {exc}") from exc

@@ -28,8 +28,9 @@ from drivers.sim import BenchScene
 from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
 from labapp.acquisition.clock import SteppedClock
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import EngineEvent, FrameStored
+from labapp.acquisition.events import EngineEvent, FrameStored, Outcome
 from labapp.acquisition.procedures import RunConfig, RunProcedure
+from labapp.acquisition.settings import BathSettings
 from labapp.acquisition.simbench import SCENE, WATER_G, Material, SampleRelease, SimulatedBench, sample_release
 from labapp.records.storage import read_run, verify_run
 
@@ -79,8 +80,8 @@ def simulated_calibration(out_dir: Path, clock: SteppedClock | None = None,
     no_object = SampleRelease("none", np.array([0.0, 1.0]), np.zeros(2))
     sim = SimulatedBench(clock, release=no_object, scene=dataclasses.replace(scene, intrusion_probability=0.0))
     try:
-        config = SeriesConfig(crop=sim.scene.default_crop(), water_g=WATER_G, masses_g=CAL_MASSES_G,
-                              settle_s=600.0, stable_step_s=60.0, reduce=2)
+        config = SeriesConfig(crop=sim.scene.default_crop(), masses_g=CAL_MASSES_G, settle_s=600.0, reduce=2,
+                              bath=BathSettings(water_g=WATER_G, stable_step_s=60.0))
         proc = CalibrationProcedure(config, sim.bench(), out_dir)
         outcome = Engine(clock).run(proc)
     finally:
@@ -119,9 +120,9 @@ def simulated_run(clock: SteppedClock, calibration: BenchCalibration, release: S
     try:
         config = RunConfig(name=f"demo-{release.name}", interval_s=interval_s,
                            max_duration_s=release.duration_s + 3600.0, stop_on_steady=True,
-                           min_duration_s=0.5 * release.duration_s, water_g=water_g,
+                           min_duration_s=0.5 * release.duration_s,
                            object_mass_g=round(release.mass_g, 4), object_name=release.name, auto_drop=True,
-                           stable_step_s=60.0, notes="sfr demo: simulated bench")
+                           notes="sfr demo: simulated bench", bath=BathSettings(water_g=water_g, stable_step_s=60.0))
         proc = RunProcedure(config, sim.bench(), data_dir, calibration)
         engine = Engine(clock)
         if faults:
@@ -132,7 +133,7 @@ def simulated_run(clock: SteppedClock, calibration: BenchCalibration, release: S
         outcome = engine.run(proc)
     finally:
         sim.close()
-    if outcome not in ("complete", "stopped"):
+    if outcome not in (Outcome.COMPLETE, Outcome.STOPPED):
         raise RuntimeError(f"the simulated run ended '{outcome}': {engine.error}; see {proc.run.path / 'events.log'}")
     return proc.run.path
 

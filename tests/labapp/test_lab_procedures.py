@@ -14,11 +14,13 @@ from labapp.acquisition.clock import SteppedClock
 from labapp.acquisition.engine import Engine
 from labapp.acquisition.events import FrameStored, Prompt, StateChanged
 from labapp.acquisition.procedures import RunConfig, RunProcedure
+from labapp.acquisition.settings import WATER, BathSettings
 from labapp.acquisition.simbench import SimulatedBench
 from labapp.records.storage import read_run, verify_run
 from tests.labapp.lab_fakes import SCENE, ModelHotplate, RenderCamera
 
-WATER_G = 500.0
+WATER_G = WATER.default
+FAST_BATH = BathSettings(stable_step_s=30, keepalive_s=0.02)
 
 
 def _bench(clock, conc_of_t, faults=None):
@@ -31,8 +33,8 @@ def calibration(tmp_path_factory):
     state = {"mass": 0.0}
     bench = _bench(clock, lambda t: state["mass"] / (WATER_G / 1000))
     bench.on_add_mass = lambda m: state.update(mass=m)
-    config = SeriesConfig(crop=SCENE.default_crop(), water_g=WATER_G, masses_g=(0.25, 0.5, 1.0, 1.5, 2.0),
-                          settle_s=300, stable_step_s=30, keepalive_s=0.02, reduce=1)
+    config = SeriesConfig(crop=SCENE.default_crop(), masses_g=(0.25, 0.5, 1.0, 1.5, 2.0), settle_s=300, reduce=1,
+                          bath=BathSettings(water_g=WATER_G, stable_step_s=30, keepalive_s=0.02))
     proc = CalibrationProcedure(config, bench, tmp_path_factory.mktemp("cal"))
     assert Engine(clock).run(proc) == "complete"
     with open(proc.run.path / "masses.csv") as fh:
@@ -52,7 +54,7 @@ def test_a_simulated_run_heats_drops_acquires_and_reads_the_concentration(tmp_pa
     bench = _bench(clock, _truth(t0))
     bench.on_drop = lambda t: t0.__setitem__(0, t)
     config = RunConfig(name="pill", interval_s=60, max_duration_s=3000, stop_on_steady=False, auto_drop=True,
-                       stable_step_s=30, keepalive_s=0.02, frame_bytes_estimate=100_000, low_space_bytes=0)
+                       frame_bytes_estimate=100_000, low_space_bytes=0, bath=FAST_BATH)
     engine = Engine(clock)
     frames, phases = [], []
     engine.subscribe(lambda e: frames.append(e) if isinstance(e, FrameStored) else
@@ -80,8 +82,9 @@ def test_faults_are_logged_and_the_run_goes_on(tmp_path, calibration):
     faults = {4: CameraError, 6: CaptureMissed, 8: "corrupt", 9: CameraError, 10: CameraError, 11: CameraError}
     bench = _bench(clock, _truth(t0), faults)
     bench.on_drop = lambda t: (t0.__setitem__(0, t), setattr(bench.hotplate, "fail_reads", 3))
-    config = RunConfig(interval_s=60, max_duration_s=1800, stop_on_steady=False, auto_drop=True, stable_step_s=30,
-                       keepalive_s=0.01, frame_bytes_estimate=100_000, low_space_bytes=0)
+    config = RunConfig(interval_s=60, max_duration_s=1800, stop_on_steady=False, auto_drop=True,
+                       frame_bytes_estimate=100_000, low_space_bytes=0,
+                       bath=BathSettings(stable_step_s=30, keepalive_s=0.01))
     proc = RunProcedure(config, bench, tmp_path, calibration)
     assert Engine(clock).run(proc) == "complete"
     log_text = (proc.run.path / "events.log").read_text()
@@ -96,7 +99,7 @@ def test_operator_stop_while_waiting_for_the_drop(tmp_path, calibration):
     clock = SteppedClock(start_s=4e9)
     engine = Engine(clock)
     engine.subscribe(lambda e: engine.stop() if isinstance(e, Prompt) and e.prompt == "drop" else None)
-    proc = RunProcedure(RunConfig(stable_step_s=30, keepalive_s=0.02, frame_bytes_estimate=1000), _bench(clock, _truth([None])),
+    proc = RunProcedure(RunConfig(frame_bytes_estimate=1000, bath=FAST_BATH), _bench(clock, _truth([None])),
                         tmp_path, calibration)
     assert engine.run(proc) == "stopped"
     snap = read_run(proc.run.path)
@@ -104,17 +107,19 @@ def test_operator_stop_while_waiting_for_the_drop(tmp_path, calibration):
 
 
 def test_config_guards():
-    with pytest.raises(ValueError, match="interval_s must be > 0"):
+    with pytest.raises(ValueError, match=r"RunConfig.interval_s must be > 0 s, got 0"):
         RunConfig(interval_s=0)
-    with pytest.raises(ValueError, match="setpoint_c must be in"):
-        RunConfig(setpoint_c=400)
+    with pytest.raises(ValueError, match=r"BathSettings.setpoint_c must be in \[0, 100\] C, got 400"):
+        RunConfig(bath=BathSettings(setpoint_c=400))
     with pytest.raises(ValueError, match="increasing"):
         SeriesConfig(crop=(0, 0, 100), masses_g=(0.5, 0.25))
+    with pytest.raises(ValueError, match=r"SeriesConfig.reduce must be one of 1, 2, 4, 8, got 3"):
+        SeriesConfig(crop=(0, 0, 100), reduce=3)
 
 
 def test_the_disk_check_before_a_run_uses_the_benchs_frame_size(tmp_path, calibration, monkeypatch):
     monkeypatch.setattr("labapp.records.storage.free_bytes", lambda folder: 10**9)  # 1 GB free
-    config = RunConfig(stable_step_s=30, keepalive_s=0.02, max_duration_s=3600)  # 328 frames at 11 s
+    config = RunConfig(max_duration_s=3600, bath=FAST_BATH)  # 328 frames at 11 s
     clock = SteppedClock(start_s=4e9)
     dslr = _bench(clock, _truth([None]))  # 15 MB a frame: 328 x 15 MB x 1.5 = 7.4 GB do not fit
     assert dslr.frame_bytes == DSLR_FRAME_BYTES

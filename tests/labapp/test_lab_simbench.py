@@ -6,6 +6,7 @@ from labapp.acquisition.clock import SteppedClock
 from labapp.acquisition.engine import Engine
 from labapp.acquisition.events import FrameStored
 from labapp.acquisition.procedures import RunConfig, RunProcedure
+from labapp.acquisition.settings import BathSettings
 from labapp.acquisition.simbench import Material, SampleRelease, SimulatedBench, sample_release
 from labapp.records.storage import read_run, verify_run
 
@@ -52,7 +53,7 @@ def test_faults_during_a_simulated_run_are_logged_and_the_run_goes_on(tmp_path, 
     sim = SimulatedBench(clock, release=_sphere())
     try:
         config = RunConfig(interval_s=11, max_duration_s=800, stop_on_steady=False, auto_drop=True,
-                           stable_step_s=120, keepalive_s=0.2, frame_bytes_estimate=100_000)
+                           frame_bytes_estimate=100_000, bath=BathSettings(stable_step_s=120, keepalive_s=0.2))
         proc = RunProcedure(config, sim.bench(), tmp_path, calibration)
         engine = Engine(clock)
 

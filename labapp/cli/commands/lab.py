@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from labapp.cli.argtypes import nonnegative_float, positive_float
+from labapp.acquisition.settings import SIM_SPEED
+from labapp.cli.argtypes import add_setting, positive_float
 
 NAME = "lab"
 HELP = "start the bench GUI; --simulate runs it on the simulated camera, hotplate emulator and sample object"
@@ -13,8 +14,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr lab`."""
     parser.add_argument("--data", default="runs", help="data directory for runs and calibrations (default ./runs)")
     parser.add_argument("--simulate", action="store_true", help="offer the simulated bench")
-    parser.add_argument("--speed", type=nonnegative_float, default=100.0,
-                        help="simulated time acceleration (default 100; 0 = as fast as frames render)")
+    add_setting(parser, SIM_SPEED)
     parser.add_argument("--sample", default="pill", help="sample object of the simulated bench (default pill)")
     parser.add_argument("--calibration", help="bench calibration JSON to make active")
     parser.add_argument("--autostart", action="store_true", help="start a run at once (simulated: the object drops "

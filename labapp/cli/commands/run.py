@@ -5,21 +5,22 @@ import argparse
 import dataclasses
 import logging
 
-from labapp.cli.argtypes import finite_float, nonnegative_float, positive_float
+from labapp.acquisition.devices import CAMERA_SPECS
+from labapp.acquisition.settings import BATH_SETTINGS, INTERVAL, MAX_DURATION, OBJECT_MASS, SIM_SPEED
+from labapp.cli.argtypes import add_setting, add_settings, setting_values
 
 NAME = "run"
 HELP = "acquire a release run (real bench or --simulate) with a live status line; --resume continues one"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of `sfr run`."""
-    parser.add_argument("--camera", default="gphoto2", help="gphoto2 | gphoto2:MODEL@PORT | folder:PATH")
+    """Options of `sfr run`: the bench, the run's settings and the bath's (from their declarations)."""
+    parser.add_argument("--camera", default="gphoto2", help=CAMERA_SPECS)
     parser.add_argument("--hotplate", help="hotplate serial port or URL (omit: no hotplate)")
     parser.add_argument("--out", default="runs", help="data directory; the run gets a new folder in it")
     parser.add_argument("--simulate", action="store_true",
                         help="simulated camera + Heidolph emulator + a dissolving sample object")
-    parser.add_argument("--speed", type=nonnegative_float, default=100.0,
-                        help="simulated time acceleration (default 100; 0 = as fast as frames render)")
+    add_setting(parser, SIM_SPEED)
     parser.add_argument("--sample", default="pill", help="shipped sample object of the simulated bench")
     parser.add_argument("--resume", metavar="RUN_FOLDER",
                         help="continue an interrupted run into its folder (its run.json says whether it was "
@@ -28,44 +29,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "with --simulate and none given, a simulated calibration series runs first")
     parser.add_argument("--name", default="run", help="run name (part of the folder name)")
     parser.add_argument("--object", default="", help="object description")
-    parser.add_argument("--object-mass", type=positive_float, help="object mass, g")
-    parser.add_argument("--water-g", type=positive_float, default=500.0, help="water mass, g (default 500)")
-    parser.add_argument("--interval", type=positive_float, default=11.0, help="frame interval, s (default 11)")
-    parser.add_argument("--setpoint", type=finite_float, default=70.0, help="bath temperature, C (default 70)")
-    parser.add_argument("--rpm", type=nonnegative_float, default=150.0, help="stirring speed, rpm (default 150)")
-    parser.add_argument("--max-hours", type=positive_float, default=4.0, help="stop after this long, h (default 4)")
+    for setting in (OBJECT_MASS, INTERVAL, MAX_DURATION):
+        add_setting(parser, setting)
     parser.add_argument("--no-steady-stop", action="store_true", help="do not stop at steady state")
     parser.add_argument("--notes", default="", help="free text stored in run.json")
     parser.add_argument("--auto-drop", action="store_true", help="time zero as soon as the bath is stable and the "
                         "reference is taken (drop the object then); default with --simulate, else Enter confirms")
-
-
-_quiet: list[bool] = []
-
-
-def _write_line(text: str, end: str = "\n") -> None:
-    """Write to stdout unless its reader has gone (``sfr run | head``): then stay quiet, the run goes on."""
-    import sys
-
-    if _quiet:
-        return
-    try:
-        sys.stdout.write(text + end)
-        sys.stdout.flush()
-    except (BrokenPipeError, ValueError):
-        from labapp.cli.main import _quiet_stdout
-
-        _quiet.append(True)
-        _quiet_stdout()
-
-
-def _status_printer(status):
-    import shutil
-
-    def show() -> None:
-        width = shutil.get_terminal_size((120, 20)).columns - 1
-        _write_line("\r" + status.line(width).ljust(width), end="")
-    return show
+    add_settings(parser, BATH_SETTINGS, "bath")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -76,7 +46,9 @@ def run(args: argparse.Namespace) -> int:
     from analysis import BenchCalibration
     from labapp.acquisition.clock import make_clock
     from labapp.acquisition.procedures import RunConfig
+    from labapp.acquisition.settings import BathSettings
     from labapp.acquisition.status import RunStatus
+    from labapp.cli.drive import write_line
     from labapp.errors import UsageError
     from labapp.jobs.run import new_run, resumable, resume_run
     from labapp.records.outpaths import check_data_dir
@@ -93,11 +65,10 @@ def run(args: argparse.Namespace) -> int:
         config = None
     else:
         check_data_dir(args.out)
-        config = RunConfig(name=args.name, interval_s=args.interval, setpoint_c=args.setpoint,
-                           speed_rpm=args.rpm, max_duration_s=args.max_hours * 3600,
-                           stop_on_steady=not args.no_steady_stop, water_g=args.water_g,
-                           object_mass_g=args.object_mass, object_name=args.object, notes=args.notes,
-                           auto_drop=simulate or args.auto_drop)
+        config = RunConfig(name=args.name, interval_s=args.interval_s, max_duration_s=args.max_duration_s,
+                           stop_on_steady=not args.no_steady_stop, object_mass_g=args.object_mass_g,
+                           object_name=args.object, notes=args.notes, auto_drop=simulate or args.auto_drop,
+                           bath=BathSettings(**setting_values(args, BATH_SETTINGS)))
     speed = (math.inf if args.speed == 0 else args.speed) if simulate else None
     calibration = BenchCalibration.load(args.calibration) if args.calibration else None
     sim = None
@@ -111,9 +82,9 @@ def run(args: argparse.Namespace) -> int:
             from labapp.acquisition.simbench import SimulatedBench
             if calibration is None and not args.resume:
                 from labapp.jobs.demo import simulated_calibration
-                _write_line("no --calibration: running a simulated calibration series first ...")
+                write_line("no --calibration: running a simulated calibration series first ...")
                 calibration, cal_path = simulated_calibration(Path(args.out))
-                _write_line(f"calibration: {cal_path}")
+                write_line(f"calibration: {cal_path}")
             sim = SimulatedBench(clock, sample=sample)
             bench = sim.bench()
             if config is not None:
@@ -127,52 +98,30 @@ def run(args: argparse.Namespace) -> int:
             proc = resume_run(Path(args.resume), bench, calibration)
         else:
             proc = new_run(config, bench, Path(args.out), calibration)
-        return _drive(proc, clock, bench, RunStatus())
+        return _drive(proc, clock, RunStatus())
     finally:
         if sim is not None:
             sim.close()
 
 
-def _drive(proc, clock, bench, status) -> int:
-    import signal
-
+def _drive(proc, clock, status) -> int:
     from labapp.acquisition.engine import Engine
-    from labapp.acquisition.events import Prompt
+    from labapp.acquisition.events import Outcome, Prompt
+    from labapp.cli.drive import drive, write_line
 
     engine = Engine(clock)
     engine.subscribe(status.update)
-    engine.subscribe(lambda e: _write_line(f"\n>>> {e.text} (press Enter)")
+    engine.subscribe(lambda e: write_line(f"\n>>> {e.text} (press Enter)")
                      if isinstance(e, Prompt) and not e.auto else None)
-    show = _status_printer(status)
-    interrupts = []
-
-    def on_sigint(signum, frame) -> None:
-        interrupts.append(signum)
-        if len(interrupts) == 1:
-            _write_line("\nstopping cleanly (heating off, run finalised); Ctrl-C again aborts")
-            engine.stop()
-        else:
-            engine.abort()
-    previous = signal.signal(signal.SIGINT, on_sigint)
-    previous_term = signal.signal(signal.SIGTERM, on_sigint)   # a service manager's stop: the same clean stop
-    try:
-        engine.start(proc)
-        _answer_prompts(engine, proc)
-        while engine.join(0.25) is None:
-            show()
-        show()
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        signal.signal(signal.SIGTERM, previous_term)
-    _write_line("")
+    outcome = drive(engine, proc, status, started=lambda: _answer_prompts(engine, proc))
     folder = proc.run.path if proc.run is not None else None
-    if engine.outcome == "failed":
+    if outcome == Outcome.FAILED:
         from labapp.errors import JobFailed
 
         where = f" ({len(proc.run.frames)} frames kept in {folder})" if folder is not None else " (no run folder written)"
         raise JobFailed(f"run failed: {engine.error}{where}")
-    _write_line(f"run {engine.outcome}: {len(proc.run.frames) if proc.run else 0} frames in {folder}")
-    return 0 if engine.outcome in ("complete", "stopped") else 1
+    write_line(f"run {outcome}: {len(proc.run.frames) if proc.run else 0} frames in {folder}")
+    return 0 if outcome in (Outcome.COMPLETE, Outcome.STOPPED) else 1
 
 
 def _answer_prompts(engine, proc) -> None:
@@ -180,10 +129,12 @@ def _answer_prompts(engine, proc) -> None:
     import sys
     import threading
 
+    from labapp.acquisition.events import PromptKind
+
     if proc.config.auto_drop or not sys.stdin.isatty():
         return
 
     def wait_enter() -> None:
         sys.stdin.readline()
-        engine.answer("drop", True)
+        engine.answer(PromptKind.DROP, True)
     threading.Thread(target=wait_enter, daemon=True).start()

@@ -1,0 +1,67 @@
+"""Walk an acquisition procedure from the terminal: the engine in its thread, a live status line, Ctrl-C (or a
+service manager's SIGTERM) as a clean stop and a second Ctrl-C as an abort (`sfr run`,
+`sfr calibrate-bench --record`)."""
+from __future__ import annotations
+
+import shutil
+import signal
+import sys
+from collections.abc import Callable
+
+from labapp.acquisition.engine import Engine, Procedure
+from labapp.acquisition.status import RunStatus
+
+_quiet: list[bool] = []
+
+
+def write_line(text: str, end: str = "\n") -> None:
+    """Write to stdout unless its reader has gone (``sfr run | head``): then stay quiet, the run goes on."""
+    if _quiet:
+        return
+    try:
+        sys.stdout.write(text + end)
+        sys.stdout.flush()
+    except (BrokenPipeError, ValueError):
+        from labapp.cli.main import _quiet_stdout
+
+        _quiet.append(True)
+        _quiet_stdout()
+
+
+def _status_printer(status: RunStatus) -> Callable[[], None]:
+    def show() -> None:
+        width = shutil.get_terminal_size((120, 20)).columns - 1
+        write_line("\r" + status.line(width).ljust(width), end="")
+    return show
+
+
+def drive(engine: Engine, procedure: Procedure, status: RunStatus,
+          started: Callable[[], None] = lambda: None) -> str | None:
+    """Walk ``procedure`` on ``engine`` (``status`` subscribed to it) and show the status line until it ends.
+
+    ``started`` is called once the engine's thread runs (e.g. to wait for the operator's Enter). Returns the
+    outcome.
+    """
+    show = _status_printer(status)
+    interrupts = []
+
+    def on_sigint(signum, frame) -> None:
+        interrupts.append(signum)
+        if len(interrupts) == 1:
+            write_line("\nstopping cleanly (heating off, folder finalised); Ctrl-C again aborts")
+            engine.stop()
+        else:
+            engine.abort()
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    previous_term = signal.signal(signal.SIGTERM, on_sigint)   # a service manager's stop: the same clean stop
+    try:
+        engine.start(procedure)
+        started()
+        while engine.join(0.25) is None:
+            show()
+        show()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        signal.signal(signal.SIGTERM, previous_term)
+    write_line("")
+    return engine.outcome
