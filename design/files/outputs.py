@@ -129,6 +129,47 @@ def enclosed_voids_text(summary: dict) -> str:
     return f"{count} enclosed void{'s' if count > 1 else ''}, {summary['enclosed_void_mm3']:.4g} mm^3"
 
 
+RESULT_FILES = ("design.stl", "density.npz", "curves.csv", "curves_physical.csv", "report.png", "history.csv",
+                "summary.json", "design.ini")
+"""The files a finished design run's result lines name, where they exist (`summary_lines`)."""
+
+
+def summary_lines(summary: DesignSummary, out_dir: Path) -> list[str]:
+    """The result of a design run in a few lines of text, from its summary: what `sfr design` prints and the
+    design launcher shows.
+
+    Parameters
+    ----------
+    summary : DesignSummary
+        The run's summary (with the physical prediction, ``simcal`` and ``rel_rmse_physical``, when it has one).
+    out_dir : Path
+        The run folder; the last line names the result files it holds.
+    """
+    s = summary
+    lines = [f"{s['status']} after {s['iterations']} evaluations ({s['seconds']:.1f} s, "
+             f"{s['seconds_per_iteration'] or 0:.3f} s each)",
+             f"rel. RMSE: density {s['rel_rmse_density']:.3%}, binary solid {s['rel_rmse_binary']:.3%}, "
+             f"binary solid on a {s['fine_factor']}x finer grid {percent_text(s['rel_rmse_fine'], 3)}"]
+    dev = {k: percent_text(v) for k, v in s["rate_dev_mid80"].items()}
+    lines.append(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid "
+                 f"{dev['binary']}, on the finer grid {dev['fine']}")
+    lines.append(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
+                 f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}, "
+                 f"{enclosed_voids_text(s)}")
+    lines.append(f"overhangs along +z: {s['overhang_fraction']:.1%} of the solid, longest run "
+                 f"{s['max_overhang_run_mm']:.2f} mm" + (f"; preset {s['preset']}" if s.get("preset") else ""))
+    if s.get("ico"):
+        ico = s["ico"]
+        share = percent_text(ico["fab_time_share"], 0)
+        lines.append(f"ICO J_fab {ico['J_fab']:.4g} of the start design's, {ico['layers']} layers, {share} of the time")
+    if "simcal" in s:
+        lines.append(f"physical prediction ({s['simcal']['model']} model, {s['simcal']['seconds_per_mm']:.1f} s/mm): "
+                     f"rel. RMSE {s['rel_rmse_physical']:.3%} of the target's final grams (curves_physical.csv)")
+    lines += [f"warning: {w}" for w in s["warnings"]]
+    lines.append(f"results in {out_dir}: {', '.join(n for n in RESULT_FILES if (out_dir / n).exists())}")
+    return lines
+
+
 def solid_release(solid: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], total_time_mm: float,
                   dtau_mm: float) -> np.ndarray:
     """Released volume of a full (unfolded) binary solid, simulated on its reduced grid, mm^3 per tau sample."""

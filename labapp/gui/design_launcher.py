@@ -24,7 +24,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from design.files.outputs import enclosed_voids_text
+from design.files.outputs import summary_lines
 from design.inverse.problem import DesignConfig
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.sweep_panel import SweepPanel
@@ -209,25 +209,14 @@ class DesignLauncher(QWidget):
         self.target_curve.setData(curves["tau_mm"], curves["target_mm3"])
         self.achieved_curve.setData(curves["tau_mm"], curves["binary_mm3"])
         self.save_button.setEnabled((result.out_dir / "design.stl").is_file())
-        summary = result.outputs.summary
-        fine = summary["rel_rmse_fine"]
-        text = (f"design {result.status} after {result.iterations} evaluations in {result.out_dir}. Binary solid "
-                f"within {summary['rel_rmse_binary']:.2%} RMS of the target ("
-                f"{'not checked' if fine is None else format(fine, '.2%')} on a {summary['fine_factor']}x finer grid). "
-                "Overhangs "
-                f"along +z: {summary['overhang_fraction']:.1%} of the solid, longest run "
-                f"{summary['max_overhang_run_mm']:.2f} mm; {enclosed_voids_text(summary)}.")
         if physical is not None:
             rows = read_curves(result.out_dir / "curves_physical.csv")
             hours = [t / 3600.0 for t in rows["t_s"]]
             self.physical_target.setData(hours, rows["target_released_g"])
             self.physical_design.setData(hours, rows["design_released_g"])
-            channel = physical.get("min_channel_mm")
-            text += (f" Predicted release within {physical['rel_rmse_physical']:.2%} RMS of the target; print mass "
-                     f"{physical['print_mass_g']:.3f} g; narrowest channel "
-                     f"{'none' if channel is None else format(channel, '.2f') + ' mm'}.")
-        text += "".join(f" Warning: {w}." for w in summary["warnings"])
-        self.status.setText(text)
+        # the lines sfr design prints, each shown as a sentence
+        lines = summary_lines(physical or result.outputs.summary, result.out_dir)
+        self.status.setText("\n".join(line[:1].upper() + line[1:] for line in [f"design {lines[0]}", *lines[1:]]))
 
     def _failed(self, message: str) -> None:
         self.start_button.setEnabled(True)

@@ -3,7 +3,7 @@ import numpy as np
 import trimesh
 
 from design.fabrication.extract import revoxelize
-from design.files.outputs import FINE_FACTOR, fine_release, percent_text, solid_release
+from design.files.outputs import FINE_FACTOR, fine_release, percent_text, solid_release, summary_lines
 from design.inverse.objective import rel_rmse
 
 
@@ -33,3 +33,24 @@ def test_fine_release_without_a_solid_is_zero():
 def test_a_summary_fraction_prints_as_a_percentage_or_a_dash():
     assert percent_text(0.012345) == "1.23%" and percent_text(0.012345, 3) == "1.234%"
     assert percent_text(0.5, 0) == "50%" and percent_text(None) == "-"
+
+
+def test_summary_lines_read_the_summary(tmp_path):
+    (tmp_path / "design.stl").write_text("solid\n")
+    (tmp_path / "summary.json").write_text("{}")
+    summary = {"status": "max_iter", "iterations": 40, "seconds": 12.34, "seconds_per_iteration": 0.3085,
+               "rel_rmse_density": 0.01234, "rel_rmse_binary": 0.02, "fine_factor": 2, "rel_rmse_fine": None,
+               "rate_dev_mid80": {"density": 0.05, "binary": None, "fine": 0.1}, "pieces": 1, "print_mass_g": 1.75,
+               "min_channel_mm": 1.5, "enclosed_voids": 0, "enclosed_void_mm3": 0.0, "overhang_fraction": 0.125,
+               "max_overhang_run_mm": 2.0, "preset": "paper:pill", "ico": {"J_fab": 0.5, "layers": 8, "fab_time_share": 0.25},
+               "simcal": {"model": "lag", "seconds_per_mm": 600.0}, "rel_rmse_physical": 0.05, "warnings": ["thin"]}
+    assert summary_lines(summary, tmp_path) == [
+        "max_iter after 40 evaluations (12.3 s, 0.308 s each)",
+        "rel. RMSE: density 1.234%, binary solid 2.000%, binary solid on a 2x finer grid -",
+        "rate deviation, middle 80% of the release: density 5.00%, binary solid -, on the finer grid 10.00%",
+        "pieces 1, print mass 1.750 g, narrowest channel 1.50 mm, no enclosed voids",
+        "overhangs along +z: 12.5% of the solid, longest run 2.00 mm; preset paper:pill",
+        "ICO J_fab 0.5 of the start design's, 8 layers, 25% of the time",
+        "physical prediction (lag model, 600.0 s/mm): rel. RMSE 5.000% of the target's final grams (curves_physical.csv)",
+        "warning: thin",
+        f"results in {tmp_path}: design.stl, summary.json"]

@@ -122,7 +122,7 @@ def _stored_max_iter(out: str) -> int:
 def run(args: argparse.Namespace) -> int:
     # the design and analysis packages load here, not with the module: `sfr --help` stays instant
     from analysis import BenchCalibration
-    from design.files.outputs import enclosed_voids_text, percent_text
+    from design.files.outputs import summary_lines
     from design.inverse.problem import DesignConfig
     from design.inverse.status import DesignStatus
     from labapp.jobs.calibrate_sim import load_simcal
@@ -163,29 +163,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         print(file=sys.stderr)          # ends the progress line, also before an error's line
     s = physical or result.outputs.summary
-    print(f"{result.status} after {result.iterations} evaluations ({s['seconds']:.1f} s, "
-          f"{s['seconds_per_iteration'] or 0:.3f} s each)")
-    print(f"rel. RMSE: density {s['rel_rmse_density']:.3%}, binary solid {s['rel_rmse_binary']:.3%}, "
-          f"binary solid on a {s['fine_factor']}x finer grid {percent_text(s['rel_rmse_fine'], 3)}")
-    dev = {k: percent_text(v) for k, v in s["rate_dev_mid80"].items()}
-    print(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid {dev['binary']}, "
-          f"on the finer grid {dev['fine']}")
-    print(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
-          f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}, "
-          f"{enclosed_voids_text(s)}")
-    print(f"overhangs along +z: {s['overhang_fraction']:.1%} of the solid, longest run "
-          f"{s['max_overhang_run_mm']:.2f} mm" + (f"; preset {s['preset']}" if s.get("preset") else ""))
-    if s.get("ico"):
-        ico = s["ico"]
-        share = percent_text(ico["fab_time_share"], 0)
-        print(f"ICO J_fab {ico['J_fab']:.4g} of the start design's, {ico['layers']} layers, {share} of the time")
-    if physical is not None:
-        print(f"physical prediction ({s['simcal']['model']} model, {s['simcal']['seconds_per_mm']:.1f} s/mm): "
-              f"rel. RMSE {s['rel_rmse_physical']:.3%} of the target's final grams (curves_physical.csv)")
-    for w in s["warnings"]:
-        print(f"warning: {w}")
-    names = ("design.stl", "density.npz", "curves.csv", "curves_physical.csv", "report.png", "history.csv",
-             "summary.json", "design.ini")
-    print(f"results in {result.out_dir}: {', '.join(n for n in names if (result.out_dir / n).exists())}")
+    for line in summary_lines(s, result.out_dir):
+        print(line)
     log.debug("summary %s", json.dumps(s))
     return 0 if result.status != DesignStatus.INTERRUPTED else 130
