@@ -1,5 +1,6 @@
 """Sweep panel of the design launcher: a small grid of design settings on the local Dask cluster
-(`labapp.scaleout.sweep.run_sweep`, the job behind `sfr sweep`), then its contact sheet and each design's report."""
+(`labapp.scaleout.sweep.sweep_on_cluster`, the job behind `sfr sweep`), then its contact sheet and each design's
+report."""
 from __future__ import annotations
 
 import csv
@@ -26,7 +27,13 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from design.inverse.presets import PRESET_NAMES
+from labapp.figures.contact_sheet import rank
 from labapp.gui.bridge import BackgroundTask
+from labapp.records.storage import sanitize_name
+from labapp.scaleout.cluster import local_worker_count
+from labapp.scaleout.sweep import Progress, SweepResult, sweep_on_cluster
+from labapp.scaleout.sweepspec import SweepSpec, parse_spec, spec_text
 
 SHEET_ITEM = "contact sheet (ranked)"
 
@@ -56,9 +63,6 @@ class SweepPanel(QGroupBox):
 
     def __init__(self, data_dir: Path, base_settings: Callable[[], tuple[str, dict, str | None]],
                  parent: QWidget | None = None) -> None:
-        from design.inverse.presets import PRESET_NAMES
-        from labapp.scaleout.cluster import local_worker_count
-
         super().__init__("Sweep (local Dask cluster)", parent)
         self.data_dir, self.base_settings = Path(data_dir), base_settings
         self.w_binary, self.radius, self.beta = QLineEdit("10, 20"), QLineEdit("3, 4"), QLineEdit("3")
@@ -105,10 +109,8 @@ class SweepPanel(QGroupBox):
         self._folders: dict[str, str] = {}
         self._stop = threading.Event()
 
-    def spec(self):
-        """The sweep spec of the fields (`labapp.scaleout.sweepspec.SweepSpec`); raises ValueError naming a bad field."""
-        from labapp.scaleout.sweepspec import parse_spec, spec_text
-
+    def spec(self) -> SweepSpec:
+        """The sweep spec of the fields; raises ValueError naming a bad field."""
         target, fixed, simcal = self.base_settings()
         if not target:
             raise ValueError("choose a target first")
@@ -120,10 +122,6 @@ class SweepPanel(QGroupBox):
 
     def start(self) -> None:
         """Run the sweep on a local cluster in the background."""
-        from labapp.records.storage import sanitize_name
-        from labapp.scaleout.cluster import dask_client
-        from labapp.scaleout.sweep import run_sweep
-
         try:
             spec = self.spec()
         except ValueError as exc:
@@ -134,9 +132,8 @@ class SweepPanel(QGroupBox):
         sweep_dir, workers = self.sweep_dir, self.workers.value()
         self._stop.clear()
 
-        def work(progress):
-            with dask_client(workers=workers) as client:
-                return run_sweep(spec, sweep_dir, client, on_progress=progress, should_stop=self._stop.is_set)
+        def work(progress: Callable[[Progress], None]) -> SweepResult:
+            return sweep_on_cluster(spec, sweep_dir, workers=workers, on_progress=progress, should_stop=self._stop.is_set)
         self.task = BackgroundTask(work, self)
         self.task.progress.connect(self._progress)
         self.task.finished.connect(self._finished)
@@ -150,12 +147,12 @@ class SweepPanel(QGroupBox):
         """Running designs checkpoint and stop; queued ones do not start."""
         self._stop.set()
 
-    def _progress(self, p) -> None:
+    def _progress(self, p: Progress) -> None:
         eta = "-" if p.eta_s is None else f"{p.eta_s / 60:.1f} min"
         self.status.setText(f"{p.done} done ({p.failed} failed), {p.running} running, {p.left} left, ETA {eta}"
                             + (f"; dashboard {p.dashboard}" if p.dashboard else ""))
 
-    def _finished(self, result) -> None:
+    def _finished(self, result: SweepResult) -> None:
         self.sweep_button.setEnabled(True)
         self.stop_button.setEnabled(False)
         stopped = " (stopped: Sweep again resumes)" if result.stopped else ""
@@ -175,8 +172,6 @@ class SweepPanel(QGroupBox):
 
     def browse(self, sweep_dir: Path) -> None:
         """List a sweep's designs best first (the contact sheet's ranking) and show its contact sheet."""
-        from labapp.figures.contact_sheet import rank
-
         self.sweep_dir = Path(sweep_dir)
         try:
             with open(self.sweep_dir / "sweep.csv", newline="") as fh:

@@ -14,10 +14,14 @@ skips those and resumes the others from their checkpoints. A worker holds an exc
 folder while it designs, so a task Dask reschedules after a worker died, while a stale copy is still
 running somewhere, waits and then finds the design done or resumes it: each combination is designed
 once. The same `run_combination` runs one after another in this process without a Dask client.
+
+`sweep_on_cluster` is the job `sfr sweep` and the GUI's sweep panel call: it starts (or joins) the Dask
+cluster and runs `run_sweep` on it.
 """
 from __future__ import annotations
 
 import csv
+import enum
 import fcntl
 import json
 import logging
@@ -34,6 +38,8 @@ from design.errors import DesignError
 from design.files.records import load_summary
 from design.inverse.status import FINISHED, DesignStatus
 from labapp.errors import UsageError
+from labapp.records.outpaths import FolderKind, check_out
+from labapp.scaleout.cluster import dashboard_link, dask_client, design_memory_gb
 from labapp.scaleout.sweepspec import Combination, SweepSpec, config_matches
 
 log = logging.getLogger(__name__)
@@ -52,6 +58,16 @@ TABLE_COLUMNS = ("name", "status", "error", "rel_rmse_density", "rel_rmse_binary
 
 class SweepError(UsageError):
     """A sweep folder that cannot hold this sweep."""
+
+
+class FolderState(enum.StrEnum):
+    """Where a combination's run folder stands (`folder_state`)."""
+
+    DONE = "done"
+    """Its ``summary.json`` has a final status (`DONE_STATUSES`)."""
+    RESUME = "resume"
+    """Started (it has a ``config.json``): the design resumes from its checkpoint."""
+    NEW = "new"
 
 
 @dataclass(frozen=True)
@@ -80,15 +96,15 @@ class SweepResult:
 
 # ----------------------------------------------------------------------------------------------- worker side
 
-def folder_state(folder: Path) -> str:
-    """"done", "resume" (a started run) or "new"."""
+def folder_state(folder: Path) -> FolderState:
+    """Whether a combination's run folder is done, to be resumed or new."""
     try:
         status = load_summary(folder)["status"]
         if status in DONE_STATUSES:
-            return "done"
+            return FolderState.DONE
     except (OSError, ValueError, KeyError, DesignError):
         pass
-    return "resume" if (folder / "config.json").exists() else "new"
+    return FolderState.RESUME if (folder / "config.json").exists() else FolderState.NEW
 
 
 def _log_line(sweep_dir: Path, text: str) -> None:
@@ -144,14 +160,14 @@ def run_combination(combo: Combination, sweep_dir: str, stop_event: str | None =
     with open(sweep_dir / LOCKS / f"{combo.name}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released by the OS if this process dies
         state = folder_state(folder)
-        if state == "done":
+        if state == FolderState.DONE:
             status = load_summary(folder)["status"]
             return {"name": combo.name, "status": status, "seconds": 0.0, "worker": where, "skipped": True}
-        if state == "new" and folder.is_dir() and any(folder.iterdir()):
+        if state == FolderState.NEW and folder.is_dir() and any(folder.iterdir()):
             _set_aside(folder, sweep_dir)
         _log_line(sweep_dir, f"start {combo.name} on {where} ({state})")
         try:
-            status = _design(combo, folder, state == "resume", _stop_poller(stop_event))
+            status = _design(combo, folder, state == FolderState.RESUME, _stop_poller(stop_event))
         except Exception as exc:  # noqa: BLE001 -- a failed combination is recorded and the sweep goes on
             _log_line(sweep_dir, f"failed {combo.name} on {where}: {type(exc).__name__}: {exc}")
             return {"name": combo.name, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
@@ -210,9 +226,7 @@ def prepare_sweep_dir(spec: SweepSpec, sweep_dir: str | Path) -> Path:
     SweepError
         A combination's run folder holds a design with other settings.
     """
-    from labapp.records.outpaths import check_out
-
-    sweep_dir = check_out(sweep_dir, "sweep", [spec.target, spec.simcal])
+    sweep_dir = check_out(sweep_dir, FolderKind.SWEEP, [spec.target, spec.simcal])
     for combo in spec.combinations:
         stored = sweep_dir / RUNS / combo.name / "config.json"
         if stored.exists():
@@ -259,19 +273,65 @@ def run_sweep(spec: SweepSpec, sweep_dir: str | Path, client=None, *,
         ``stopped`` is True after Ctrl-C (KeyboardInterrupt) or `should_stop`.
     """
     sweep_dir = prepare_sweep_dir(spec, sweep_dir)
-    todo = [c for c in spec.combinations if folder_state(sweep_dir / RUNS / c.name) != "done"]
+    todo = [c for c in spec.combinations if folder_state(sweep_dir / RUNS / c.name) != FolderState.DONE]
     log.info("sweep %s: %d combinations, %d to run", sweep_dir, len(spec.combinations), len(todo))
     session = _Session(len(spec.combinations), todo)
     report = on_progress or (lambda p: None)
     if client is None:
         stopped = _run_serial(session, sweep_dir, report, should_stop)
     else:
-        from labapp.scaleout.cluster import dashboard_link
-
         session.dashboard = dashboard_link(client)
         stopped = _run_dask(client, session, sweep_dir, report, should_stop)
     report(session.progress(0))
     return _finish(spec, sweep_dir, session.outcomes, stopped, contact_sheet, session.dashboard)
+
+
+@dataclass(frozen=True)
+class ClusterStart:
+    """What `sweep_on_cluster` reports once its cluster is up: the sweep folder, the workers, the memory one
+    design takes (GB, which sized a local cluster) and the Dask dashboard (None without one)."""
+
+    sweep_dir: Path
+    workers: int
+    task_memory_gb: float
+    dashboard: str | None
+
+
+def sweep_on_cluster(spec: SweepSpec, sweep_dir: str | Path, *, scheduler: str | None = None,
+                     workers: int | None = None, on_start: Callable[[ClusterStart], None] | None = None,
+                     on_progress: Callable[[Progress], None] | None = None,
+                     should_stop: Callable[[], bool] | None = None) -> SweepResult:
+    """The sweep job (`sfr sweep`, the GUI's sweep panel): check the sweep folder, start a local Dask cluster
+    sized for the spec's largest design (or join ``scheduler``), and `run_sweep` on it.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+    sweep_dir : str or Path
+        The sweep folder, checked before the cluster starts.
+    scheduler : str, optional
+        ``tcp://HOST:PORT`` of a running scheduler; None starts a local cluster.
+    workers : int, optional
+        Local cluster: worker processes (default: as many as cores and memory allow); with ``scheduler``:
+        wait for this many workers.
+    on_start : callable, optional
+        Called once with a `ClusterStart` when the cluster is up, before the first design.
+    on_progress, should_stop : callable, optional
+        As for `run_sweep`.
+
+    Raises
+    ------
+    labapp.records.outpaths.OutPathError, SweepError
+        As `prepare_sweep_dir`.
+    labapp.scaleout.cluster.ClusterError
+        The scheduler cannot be reached or the local cluster cannot start.
+    """
+    sweep_dir = prepare_sweep_dir(spec, sweep_dir)
+    memory_gb = max(design_memory_gb(c.config.resolution, c.config.space) for c in spec.combinations)
+    with dask_client(scheduler, workers=workers, task_memory_gb=memory_gb) as client:
+        if on_start is not None:
+            on_start(ClusterStart(sweep_dir, len(client.scheduler_info()["workers"]), memory_gb, dashboard_link(client)))
+        return run_sweep(spec, sweep_dir, client, on_progress=on_progress, should_stop=should_stop)
 
 
 def _run_serial(session: _Session, sweep_dir: Path, report, should_stop) -> bool:

@@ -46,22 +46,20 @@ def progress_printer():
 
 def run(args: argparse.Namespace) -> int:
     """Check the spec and --out, start or join the cluster, run the sweep, print where the results are."""
-    from labapp.scaleout.cluster import dashboard_link, dask_client, design_memory_gb
-    from labapp.scaleout.sweep import prepare_sweep_dir, run_sweep
+    from labapp.scaleout.sweep import sweep_on_cluster
     from labapp.scaleout.sweepspec import load_spec
 
     spec = load_spec(args.spec)
-    out = prepare_sweep_dir(spec, args.out)
-    memory = max(design_memory_gb(c.config.resolution, c.config.space) for c in spec.combinations)
-    with dask_client(args.scheduler, workers=args.workers, task_memory_gb=memory) as client:
-        n = len(client.scheduler_info()["workers"])
-        where = args.scheduler or "a local cluster"
-        print(f"sweep of {len(spec.combinations)} combinations into {out} on {where} ({n} workers, "
-              f"~{memory:.2f} GB per design)", file=sys.stderr)
-        link = dashboard_link(client)
-        if link:
-            print(f"Dask dashboard: {link}", file=sys.stderr)
-        result = run_sweep(spec, out, client, on_progress=progress_printer())
+    where = args.scheduler or "a local cluster"
+
+    def started(start) -> None:
+        print(f"sweep of {len(spec.combinations)} combinations into {start.sweep_dir} on {where} "
+              f"({start.workers} workers, ~{start.task_memory_gb:.2f} GB per design)", file=sys.stderr)
+        if start.dashboard:
+            print(f"Dask dashboard: {start.dashboard}", file=sys.stderr)
+    result = sweep_on_cluster(spec, args.out, scheduler=args.scheduler, workers=args.workers, on_start=started,
+                              on_progress=progress_printer())
+    out = result.table.parent
     if sys.stderr.isatty():
         print(file=sys.stderr)
     for name in result.failed:
