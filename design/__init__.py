@@ -16,7 +16,7 @@ from design.inverse.objective import DesignObjective
 from design.inverse.presets import PRESET_NAMES, preset_values
 from design.inverse.problem import DesignConfig
 from design.inverse.rate import rate_deviation
-from design.inverse.spaces import SPACE_CHOICES, build_space, register_space
+from design.inverse.spaces import SPACE_CHOICES, build_space
 from design.inverse.targets import Target, check_feasibility, constant_acceleration, target_from_mesh
 from design.montecarlo.erosion import MonteCarloParams, MonteCarloRelease, simulate_mc
 from design.montecarlo.tuning import tune_mc, unit_runs
@@ -26,6 +26,6 @@ __all__ = ["DesignConfig", "DesignError", "DesignObjective", "DesignResult", "Ic
            "SPACE_CHOICES", "Saturation", "SmoothingFilter", "Target", "assess", "build_space", "check_feasibility",
            "constant_acceleration", "density_mesh", "incremental_compliance", "load_density", "load_mesh",
            "mass_preserving_level", "overhang_stats", "preset_values", "project", "prusa_profile",
-           "rate_deviation", "register_space", "release_at_times", "release_at_times_vjp", "release_gradient",
+           "rate_deviation", "release_at_times", "release_at_times_vjp", "release_gradient",
            "remap_time", "remap_time_vjp", "run_design", "sample_shape", "simulate", "simulate_mc", "simulate_mesh",
            "target_from_csv", "target_from_mesh", "total_time", "tune_mc", "unit_runs", "voxelize"]

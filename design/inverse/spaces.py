@@ -2,9 +2,9 @@
 
 A design space owns the variable field ``rho_hat`` (what nlopt sees), the grid on which the
 filters of eq. (4) act, and the linear map from the filtered field to the reduced
-(mirror-symmetric) simulation grid, with its adjoint. Spaces are built by name from a
-registry (`register_space` adds more); "ico" carries the incremental-compliance term of section
-3.6 (`design.fabrication.ico`) as its ``fab_term``.
+(mirror-symmetric) simulation grid, with its adjoint. Spaces are built by name (`SPACE_CHOICES`,
+`build_space`); "ico" carries the incremental-compliance term of section 3.6 (`design.fabrication.ico`)
+as its ``fab_term``.
 """
 from __future__ import annotations
 
@@ -164,23 +164,14 @@ def ico_space(request: SpaceRequest) -> DesignSpace:
 
 
 SpaceBuilder = Callable[[SpaceRequest], DesignSpace]
-_REGISTRY: dict[str, SpaceBuilder] = {"nfc": nfc_space, "extruded": extruded_space, "ico": ico_space}
-_RESERVED: dict[str, str] = {}
-SPACE_CHOICES: tuple[str, ...] = ("nfc", "extruded", "ico")
-"""Names accepted on the command line, including reserved ones that report why they are unavailable."""
-
-
-def register_space(name: str, builder: SpaceBuilder) -> None:
-    """Make a design space available by name."""
-    if name in _REGISTRY:
-        raise DesignError(f"design space {name!r} is already registered")
-    _REGISTRY[name] = builder
-    _RESERVED.pop(name, None)
+_BUILDERS: dict[str, SpaceBuilder] = {"nfc": nfc_space, "extruded": extruded_space, "ico": ico_space}
+SPACE_CHOICES: tuple[str, ...] = tuple(_BUILDERS)
+"""The design spaces' names (`DesignConfig.space`, ``sfr design --space``)."""
 
 
 def available_spaces() -> tuple[str, ...]:
-    """Names of the design spaces that can be built now."""
-    return tuple(sorted(_REGISTRY))
+    """Names of the design spaces, sorted."""
+    return tuple(sorted(_BUILDERS))
 
 
 def build_space(name: str, request: SpaceRequest) -> DesignSpace:
@@ -189,11 +180,8 @@ def build_space(name: str, request: SpaceRequest) -> DesignSpace:
     Raises
     ------
     DesignError
-        If the name is reserved but not implemented yet, or unknown.
+        If the name is unknown.
     """
-    if name in _REGISTRY:
-        return _REGISTRY[name](request)
-    if name in _RESERVED:
-        raise DesignError(f"design space {name!r} is not available yet: {_RESERVED[name]}; "
-                          f"available: {', '.join(available_spaces())}")
+    if name in _BUILDERS:
+        return _BUILDERS[name](request)
     raise DesignError(f"unknown design space {name!r}; available: {', '.join(available_spaces())}")
