@@ -75,7 +75,7 @@ HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "fab_seconds"
 
 @dataclass(frozen=True)
 class Checkpoint:
-    """What a run resumes from (``checkpoint.npz``, `design.files.rundir`).
+    """What a run resumes from (``checkpoint.npz``, `design.files.records`).
 
     Attributes
     ----------
