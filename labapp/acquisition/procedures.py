@@ -116,7 +116,7 @@ class RunProcedure:
     def resume(cls, folder: Path, bench: Bench, calibration: BenchCalibration | None = None) -> RunProcedure:
         """A procedure continuing the run in ``folder`` with its stored settings (and stored calibration)."""
         snap = read_run(folder)
-        config = RunConfig.from_dict(snap.meta.get("config", {}))
+        config = RunConfig.from_dict(snap.record.config or {})
         cal_file = Path(folder) / "calibration.json"
         if calibration is None and cal_file.is_file():
             calibration = BenchCalibration.load(cal_file)
@@ -146,7 +146,7 @@ class RunProcedure:
             if self.calibration is not None:
                 self.run.add_file("calibration.json", _calibration_bytes(self.calibration))
         engine.emit(StateChanged(Phase.OPENED, folder=str(self.run.path), resumed=self.resume_path is not None))
-        self.session.t0_unix_s = self.run.meta.get("t0_unix_s")
+        self.session.t0_unix_s = self.run.record.t0_unix_s
         self.session.attach(self.run)
         self.t_s = [f.t_s for f in self.run.frames]
         self.conc = [math.nan] * len(self.t_s)
@@ -154,14 +154,14 @@ class RunProcedure:
     def execute(self, engine: Engine) -> None:
         """Heat, reference, drop (unless resuming after the drop), then acquire until a stop criterion."""
         cfg, session, run = self.config, self.session, self.run
-        if "reference.jpg" in run.meta.get("files", {}):
+        if "reference.jpg" in run.record.files:
             self._use_reference()
         if session.t0_unix_s is None:
             session.wait_bath(cfg.bath)
             if engine.should_stop():
                 return
             session.start_stirring(cfg.bath.speed_rpm)  # the reference shows the stirred bath
-            if "reference.jpg" not in run.meta.get("files", {}):
+            if "reference.jpg" not in run.record.files:
                 self._capture_reference(engine)
             engine.emit(StateChanged(Phase.WAITING_DROP))
             dropped = engine.ask(PromptKind.DROP, "Drop the object into the beaker, then confirm.",
