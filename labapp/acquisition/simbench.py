@@ -181,6 +181,8 @@ class SimulatedBench:
         Shipped sample shape simulated when ``release`` is None.
     scene : BenchScene
         What the camera sees (default :data:`SCENE`).
+    water_g : float, optional
+        Water in the beaker, g (default: the scene's); a run's or series' bath water on this bench.
     with_hotplate : bool
         Start the Heidolph emulator on a pseudo-terminal and talk to it with the real driver.
     seed : int
@@ -188,10 +190,13 @@ class SimulatedBench:
     """
 
     def __init__(self, clock: Clock, release: SampleRelease | None = None, sample: str = "pill",
-                 scene: BenchScene | None = None, with_hotplate: bool = True, seed: int = 0) -> None:
+                 scene: BenchScene | None = None, with_hotplate: bool = True, seed: int = 0,
+                 water_g: float | None = None) -> None:
         self.clock = clock
         self.release = release if release is not None else sample_release(sample)
         self.scene = scene or SCENE
+        if water_g is not None:
+            self.scene = dataclasses.replace(self.scene, water_g=water_g)
         self.t_drop: float | None = None
         self.added_mass_g = 0.0
         self.camera = SimulatedCamera(lambda _t: self.conc_at(self.clock.now()), self.scene, seed=seed,

@@ -142,11 +142,15 @@ class MainWindow(QMainWindow):
 
     # -- building benches ---------------------------------------------------------------------------------
     def make_bench(self) -> Bench:
-        """The bench the device panel describes (the simulated one is built once and kept)."""
+        """The bench the device panel describes (the simulated one is kept until the bath's water changes)."""
         if self.devices.camera_spec() == SIMULATED:
+            water_g = self.devices.bath().water_g
+            if self.sim is not None and self.sim.scene.water_g != water_g:
+                self.sim.close()
+                self.sim = None
             if self.sim is None:
                 self.sim = SimulatedBench(self.engine.clock, sample=self.sample,
-                                          with_hotplate=self.devices.hotplate_spec() == SIMULATED)
+                                          with_hotplate=self.devices.hotplate_spec() == SIMULATED, water_g=water_g)
             return self.sim.bench()
         return make_bench(self.devices.camera_spec(), self.devices.hotplate_spec(), self.devices.settings())
 
@@ -197,7 +201,7 @@ class MainWindow(QMainWindow):
             self.on_message("warning", "the engine is busy; stop the current procedure first")
             return
         try:
-            simulated = bool(resumable(folder).meta.get("simulated"))
+            simulated = resumable(folder).record.simulated
             if simulated != (self.devices.camera_spec() == SIMULATED):
                 raise UsageError(f"{folder} was recorded on a {'simulated' if simulated else 'real'} bench; "
                                  f"choose {'the simulated' if simulated else 'a real'} camera in the device panel")

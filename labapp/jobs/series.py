@@ -71,5 +71,5 @@ def simulated_series_bench(clock: Clock, water_g: float = WATER.default, seed: i
     from labapp.acquisition.simbench import SCENE, SampleRelease, SimulatedBench
 
     no_object = SampleRelease("none", np.array([0.0, 1.0]), np.zeros(2))
-    scene = dataclasses.replace(SCENE, intrusion_probability=0.0, water_g=water_g)
-    return SimulatedBench(clock, release=no_object, scene=scene, seed=seed)
+    return SimulatedBench(clock, release=no_object, scene=dataclasses.replace(SCENE, intrusion_probability=0.0),
+                          seed=seed, water_g=water_g)

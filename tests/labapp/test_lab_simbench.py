@@ -74,3 +74,11 @@ def test_faults_during_a_simulated_run_are_logged_and_the_run_goes_on(tmp_path, 
     assert verify_run(proc.run.path).ok
     slots = round(snap.frames[-1].t_s / 11) + 1
     assert len(snap.frames) == slots - 1                                # every slot but the busy one
+
+
+def test_the_simulated_beaker_holds_the_water_it_is_given():
+    release = SampleRelease("step", np.array([0.0, 100.0]), np.array([0.0, 1.0]))
+    sim = SimulatedBench(SteppedClock(start_s=0.0), release=release, with_hotplate=False, water_g=400.0)
+    assert sim.scene.water_g == 400.0 and SimulatedBench.default_crop() == sim.scene.default_crop()
+    sim.drop(0.0)
+    assert sim.conc_at(200.0) == pytest.approx(2.5)          # 1 g in 400 g of water

@@ -17,7 +17,6 @@ from labapp.jobs.series import new_series, simulated_series_bench
 from labapp.records.storage import read_run, verify_run
 from tests.labapp.lab_fakes import SCENE, ModelHotplate, RenderCamera
 
-
 QUICK_BATH = ("--setpoint", "25", "--tolerance", "1", "--hold", "30")
 """A bath the emulated plate holds within a few simulated minutes (every poll of it takes real time)."""
 

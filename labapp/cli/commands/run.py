@@ -85,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
                 write_line("no --calibration: running a simulated calibration series first ...")
                 calibration, cal_path = simulated_calibration(Path(args.out))
                 write_line(f"calibration: {cal_path}")
-            sim = SimulatedBench(clock, sample=sample)
+            water_g = config.bath.water_g if config is not None else stored.get("water_g")
+            sim = SimulatedBench(clock, sample=sample, water_g=water_g)
             bench = sim.bench()
             if config is not None:
                 config = dataclasses.replace(
