@@ -5,6 +5,7 @@ job                            function                                        `
 =============================  ==============================================  ==========================
 analyse a run                  :func:`labapp.jobs.analyse.analyse_run`         ``analyze``
 calibrate the bench            :func:`labapp.jobs.calibrate_bench.calibrate_series`  ``calibrate-bench``
+record a calibration series    :func:`labapp.jobs.series.new_series`           ``calibrate-bench --record``
 simulate                       :func:`labapp.jobs.simulate.simulate`           ``simulate``
 Monte Carlo simulation         :func:`labapp.jobs.simulate_mc.simulate_mc_job`  ``simulate --model mc``
 design                         :func:`labapp.jobs.design.design`               ``design``
@@ -21,6 +22,6 @@ Sweeps and batch reanalysis fan these jobs out on Dask (:mod:`labapp.scaleout`).
 
 Each job checks its output path (:mod:`labapp.records.outpaths`) and its inputs before any work, raises
 :class:`labapp.errors.UsageError` (or the package's own error) for bad input, and reports progress
-through a plain callable. An acquisition (new or resumed run) is a procedure the engine walks; the job
-builds and checks it, the caller walks it with :class:`labapp.acquisition.engine.Engine`.
+through a plain callable. An acquisition (new or resumed run, calibration series) is a procedure the engine
+walks; the job builds and checks it, the caller walks it with :class:`labapp.acquisition.engine.Engine`.
 """
