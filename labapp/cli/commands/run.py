@@ -57,11 +57,11 @@ def run(args: argparse.Namespace) -> int:
         logging.getLogger().setLevel(logging.WARNING)
     sample, simulate = args.sample, args.simulate
     if args.resume:
-        stored = resumable(args.resume).meta          # refuses anything but an interrupted run, untouched
-        if args.simulate and not stored.get("simulated"):
+        stored = resumable(args.resume).record        # refuses anything but an interrupted run, untouched
+        if args.simulate and not stored.simulated:
             raise UsageError(f"{args.resume} was recorded on the real bench; resume it without --simulate")
-        simulate = bool(stored.get("simulated"))
-        sample = stored.get("object_name") or sample
+        simulate = stored.simulated
+        sample = stored.object_name or sample
         config = None
     else:
         check_data_dir(args.out)
@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
                 write_line("no --calibration: running a simulated calibration series first ...")
                 calibration, cal_path = simulated_calibration(Path(args.out))
                 write_line(f"calibration: {cal_path}")
-            water_g = config.bath.water_g if config is not None else stored.get("water_g")
+            water_g = config.bath.water_g if config is not None else stored.water_g
             sim = SimulatedBench(clock, sample=sample, water_g=water_g)
             bench = sim.bench()
             if config is not None:
