@@ -266,7 +266,8 @@ def resume_clock(folder: Path, speed: float | None) -> Clock:
     if speed is None or speed == 1:
         return WallClock()
     snap = read_run(folder)
-    last = snap.frames[-1].t_unix_s if snap.frames else snap.meta.get("t0_unix_s", time.time())
+    t0 = snap.record.t0_unix_s
+    last = snap.frames[-1].t_unix_s if snap.frames else (time.time() if t0 is None else t0)
     down_wall_s = max(time.time() - (folder / FRAMES_CSV).stat().st_mtime, 0.0)
     start = last + (down_wall_s * speed if math.isfinite(speed) else 0.0)
     return SteppedClock(start) if math.isinf(speed) else ScaledClock(speed, start_s=start)
