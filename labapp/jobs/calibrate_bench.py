@@ -1,13 +1,12 @@
 """Calibrate the bench: a calibration-series folder to its per-cell Beer-Lambert fit (`sfr calibrate-bench`)."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from labapp.acquisition.settings import WATER
 from labapp.errors import UsageError
 from labapp.records.outpaths import check_out
-from labapp.records.storage import MASSES_CSV, RUN_JSON
+from labapp.records.storage import MASSES_CSV, RUN_JSON, RecordReadError, read_record
 
 
 def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WATER.default,
@@ -49,16 +48,15 @@ def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WA
 
 def _recorded_crop(folder: Path) -> tuple[int, int, int] | None:
     """The crop a series recorded by `sfr lab`/`sfr run` stored in its run.json (x, y, size px), if any."""
-    try:
-        meta = json.loads((folder / RUN_JSON).read_text())
-    except FileNotFoundError:
-        return None
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"{folder / RUN_JSON} cannot be read: {exc}") from exc
-    if "crop" not in meta:
+    if not (folder / RUN_JSON).exists():
         return None
     try:
-        crop = meta["crop"]
+        crop = read_record(folder).crop
+    except RecordReadError as exc:
+        raise UsageError(f"{folder / RUN_JSON} cannot be read: {exc.reason}") from exc
+    if crop is None:
+        return None
+    try:
         return int(crop["x"]), int(crop["y"]), int(crop["size"])
     except (KeyError, TypeError, ValueError) as exc:
         raise UsageError(f"{folder / RUN_JSON}: crop is not {{x, y, size}} in px: {exc}") from exc

@@ -138,7 +138,14 @@ class RunRecord:
     object_name: str | None
     notes: str | None
     interval_s: float | None
+    bench: str | None
+    crop: Mapping[str, int] | None
+    """The square crop chosen at acquisition, px: ``{"x", "y", "size"}``."""
+    grid: int | None
+    mirror_col: float | None
+    reduce: int | None
     reference_file: str | None
+    reference_t_unix_s: float | None
     calibration_file: str | None
     stored: Mapping[str, Any]
 
@@ -171,6 +178,8 @@ class RunRecord:
                    writer_pid=data.get("writer_pid"), writer_started=data.get("writer_started"),
                    resumed=resumed, files=files, gaps=gaps, water_g=data.get("water_g"),
                    object_mass_g=data.get("object_mass_g"), object_name=data.get("object_name"),
-                   notes=data.get("notes"), interval_s=data.get("interval_s"),
-                   reference_file=data.get("reference_file"), calibration_file=data.get("calibration_file"),
+                   notes=data.get("notes"), interval_s=data.get("interval_s"), bench=data.get("bench"),
+                   crop=data.get("crop"), grid=data.get("grid"), mirror_col=data.get("mirror_col"),
+                   reduce=data.get("reduce"), reference_file=data.get("reference_file"),
+                   reference_t_unix_s=data.get("reference_t_unix_s"), calibration_file=data.get("calibration_file"),
                    stored=dict(stored))

@@ -72,6 +72,7 @@ def test_the_bench_fixtures_read_without_being_touched(tmp_path):
         before = (folder / "run.json").read_bytes()
         record = read_record(folder)
         assert record.kind == kind and record.status == RecordStatus.CREATED and record.format == FORMAT
+        assert record.crop == {"x": 180, "y": 262, "size": 120} and record.grid == 10 and record.water_g == 500.0
         assert verify_run(folder).ok and verify_run(folder).status == "not recorded"
         assert (folder / "run.json").read_bytes() == before
 
