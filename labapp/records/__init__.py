@@ -1,2 +1,4 @@
-"""Records on disk: crash-safe run folders and their verification, output-path checks, and the
-one reader of physical release curves."""
+"""Records on disk: what ``run.json`` says (:mod:`~labapp.records.runrecord`: the typed record, its format and
+migration), crash-safe run folders and their verification (:mod:`~labapp.records.storage`), output-path checks
+(:mod:`~labapp.records.outpaths`), and the one reader of physical release curves
+(:mod:`~labapp.records.curvefiles`)."""
