@@ -8,6 +8,7 @@ records carried their format, or by hand (the bench fixtures). Reading never rew
 """
 from __future__ import annotations
 
+import copy
 import enum
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -84,7 +85,7 @@ def migrate(stored: Mapping[str, Any]) -> dict[str, Any]:
         record = _UPGRADES[layout](record)
         layout = record["format"]
     for key, absent in _OPTIONAL.items():
-        record.setdefault(key, type(absent)(absent) if isinstance(absent, (dict, list)) else absent)
+        record.setdefault(key, copy.copy(absent))
     return record
 
 
