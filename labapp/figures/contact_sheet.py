@@ -8,16 +8,18 @@ then by the binary design's fit error (relative RMSE of its simulated release), 
 from __future__ import annotations
 
 import csv
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
+from design.errors import DesignError
+from design.files.records import load_summary
+from design.inverse.status import FINISHED
+
 TILES_PER_ROW = 3
 MAX_PIXELS = 16000
 """Longest side of the contact sheet, pixels: large sweeps get a lower resolution."""
-FINISHED = ("converged", "max_iter", "stalled")
 
 
 def _curves(folder: Path) -> dict[str, np.ndarray] | None:
@@ -32,8 +34,8 @@ def _curves(folder: Path) -> dict[str, np.ndarray] | None:
 def summary_row(folder: Path) -> dict:
     """sweep.csv fields from a design run folder (empty when it has no ``summary.json`` yet)."""
     try:
-        s = json.loads((Path(folder) / "summary.json").read_text())
-    except (OSError, ValueError):
+        s = load_summary(Path(folder))
+    except (OSError, ValueError, DesignError):
         return {}
     row = {key: s.get(key) for key in ("status", "rel_rmse_density", "rel_rmse_binary", "rel_rmse_fine", "pieces",
                                        "min_channel_mm", "enclosed_void_mm3", "print_mass_g", "iterations", "seconds",

@@ -186,10 +186,13 @@ class SimulationStep(QWidget):
         self.task = BackgroundTask(work, self)
         self.task.progress.connect(self.result.setText)
         self.task.finished.connect(self._finished)
-        self.task.failed.connect(lambda message: self.result.setText(f"calibration failed: {message}"))
+        self.task.failed.connect(self._failed)
         self.task.start()
         self.activate_button.setEnabled(False)
         self.result.setText(f"calibrating into {out} ...")
+
+    def _failed(self, message: str) -> None:
+        self.result.setText(f"calibration failed: {message}")
 
     def _finished(self, run) -> None:
         doc = run.doc

@@ -268,8 +268,7 @@ class MainWindow(QMainWindow):
 
     def on_state(self, state: StateChanged) -> None:
         """Follow the procedure's phase."""
-        self.controls.set_running(self.engine.running or state.phase != "done",
-                                  waiting_drop=state.phase == Phase.WAITING_DROP)
+        self.controls.set_running(True, waiting_drop=state.phase == Phase.WAITING_DROP)  # Done ends it (on_done)
         if state.phase == Phase.OPENED:
             self.on_message("info", f"run folder {state.folder}")
 
