@@ -2,13 +2,14 @@
 
 For each reduced grid N^3 (nfc, octant symmetry: the full design is (2N)^3) this runs `sfr design`'s
 engine (`design.files.rundir.run_design`, default optimiser and checkpoints) on a zero-order target in a
-20 mm cube, with the objective of eq. (4) plus J_rate as in earlier runs (r = 4 voxels, no
-connectivity term). After a warm-up (the L-BFGS memory fills; its step cost grows with the stored pairs), it
-alternates, for ``--rounds`` rounds, a block of design iterations (one checkpoint interval, so every
-block holds one checkpoint) with a block of first-order `skfmm.travel_time` solves of the design's
-current density on the same N^3 grid, from inside the run's progress callback. Each round's ratio
-compares the two blocks measured within the same minute, so a slow period of the shared machine
-slows both; the headline is the median ratio over the rounds, printed with its spread.
+20 mm cube, with a fixed objective, eq. (4) plus J_rate (r = 4 voxels, no connectivity term), so
+that the ratio does not move with the design defaults. After a warm-up (the L-BFGS memory fills; its
+step cost grows with the stored pairs), it alternates, for ``--rounds`` rounds, a block of design
+iterations (one checkpoint interval, so every block holds one checkpoint) with a block of first-order
+`skfmm.travel_time` solves of the design's current density on the same N^3 grid, from inside the
+run's progress callback. Each round's ratio compares the two blocks measured within the same
+minute, so a slow period of the machine (other jobs) slows both; the headline is the median ratio
+over the rounds, printed with its spread.
 
 An iteration is the wall time between two progress callbacks (objective, gradient, optimiser step,
 bookkeeping and checkpoint). Its breakdown: "objective" is `DesignObjective.evaluate` less its

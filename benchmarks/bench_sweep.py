@@ -5,11 +5,11 @@ beta on the pill target, nfc, resolution 48, 300 evaluations; ``--quick``: resol
 one round), into fresh folders. A `LocalCluster` sized by `labapp.scaleout.cluster` (one single-threaded worker
 per core here) is started and warmed up (imports, compiled kernels), as this process is by a warm-up
 design. Then ``--rounds`` rounds (default 3) each run the sweep serially (``client=None``) and then on
-the running cluster, so that a change in the shared machine's load shows in one round, not in one side.
+the running cluster, so that a change in the machine's load shows in one round, not in one side.
 
-Resolution 48 keeps a design's working set (a few MB) in this machine's caches: at resolution 80 two
-designs side by side each run 1.13 x slower than alone, as two plain processes do (the memory bus),
-which caps any scheduler at about 1.7 on 2 cores; ``--resolution 80`` shows it.
+Resolution 48 keeps a design's working set (a few MB) in a core's caches: at larger resolutions
+designs side by side contend for the memory bus, as two plain processes do, which caps any
+scheduler's speed-up below the number of cores; ``--resolution 80`` shows it.
 
 Overhead per task, set against a design's own time: Dask's round trip (the mean time of `NOOP_TASKS`
 empty tasks, submitted at once and gathered), and the workers' idle time (workers x wall on the

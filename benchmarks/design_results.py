@@ -1,11 +1,12 @@
-"""Tabulate design run folders for docs/results.md and copy their report pictures to docs/figures.
+"""Tabulate design run folders as markdown and copy their report pictures to docs/figures.
 
     python benchmarks/design_results.py RUN_DIR [RUN_DIR ...] [--figures docs/figures]
 
 For each run folder (written by `sfr design`) prints one markdown table row from summary.json; for
 analytic zero-order targets it also prints `design.inverse.rate.rate_deviation` of the achieved release
 rate over the middle 80% of the release, against the curve's own mean rate and against the
-target's constant rate (docs/results.md, "Zero-order"). Last line: ``runs: <count>``.
+target's constant rate (docs/design.md#from-density-to-print-designfabricationextractpy-designfilesoutputspy).
+Last line: ``runs: <count>``.
 """
 from __future__ import annotations
 

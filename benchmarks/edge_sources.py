@@ -1,4 +1,4 @@
-"""Sources at the edges of what `sfr design` takes (docs/results.md, "Sources at the edges").
+"""Sources at the edges of what `sfr design` takes (docs/benchmarks.md#tools-for-design-experiments).
 
 Unlike `benchmarks/robust_sources.py`, these keep their own size and placement, since those are what
 they test:

@@ -1,4 +1,4 @@
-"""Tabulate ICO and NFC design runs of the same targets and draw their overhangs (docs/results.md, ICO).
+"""Tabulate ICO and NFC design runs of the same targets and draw their overhangs (docs/design.md#ico-weight-w_f).
 
     python benchmarks/ico_results.py --pairs ICO_DIR NFC_DIR [ICO_DIR NFC_DIR ...] --figure PNG
 

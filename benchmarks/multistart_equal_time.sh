@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# One start against `--starts 4` at equal wall time (docs/results.md, "Multi-start").
+# One start against `--starts 4` at equal wall time (docs/design.md#multi-start).
 #
 #   bash benchmarks/multistart_equal_time.sh SOURCE OUT_DIR [RESOLUTION] [SPACE]
 #

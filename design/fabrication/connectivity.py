@@ -26,7 +26,8 @@ zero for a design whose material all connects to the core, about the volume of a
 each of the two parts, and smooth (C1). Its gradient is exact: the chain runs through the
 fast-marching adjoint (eqs. 9-10). The core term holds a compact part's centre solid; the plane term
 keeps guiding when the centre is void (a ring, a tube, a shell), where every voxel is far from the
-core and the core term is a uniform pressure on the mass without a direction (docs/results.md).
+core and the core term is a uniform pressure on the mass without a direction
+(docs/design.md#one-printable-piece).
 
 Tail. h is bounded, so it saturates for a piece far beyond its allowance and gives no direction
 there. The plane term supplies one for a piece that misses a plane, but not for pieces that each

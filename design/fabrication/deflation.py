@@ -31,8 +31,9 @@ log = logging.getLogger(__name__)
 
 ISLAND_MODULUS = 0.02
 """Elements at least this stiff (E / E0; SIMP rho = 0.27) form islands, softer ones count as void.
-Of 0.001-0.4, 0.02 needed the fewest PCG iterations on `benchmarks/bench_ico.py`'s void field at
-128^3. A design grey everywhere is one cluster on the plate: nothing to deflate."""
+Chosen within 0.001-0.4 for the fewest PCG iterations on `benchmarks/bench_ico.py`'s void field
+(docs/benchmarks.md#incremental-compliance-term). A design grey everywhere is one cluster on the
+plate: nothing to deflate."""
 
 
 def floating_islands(e_mod: np.ndarray, threshold: float = ISLAND_MODULUS, faces_only: bool = True

@@ -281,8 +281,9 @@ def gauss_seidel(s, dinv, u, f, forward):
     A forward sweep followed by a backward one is a symmetric smoother, as PCG needs. Each x line
     first gathers, in ascending memory order, its couplings to the other lines (fixed while the line
     is updated), then updates its nodes in the sweep's direction: a backward sweep reading the
-    stencil in descending order ran 3.5 times slower. Serial on purpose: a multicolour order that
-    threads could share costs 3.4 times as much per sweep (strided passes over the stencil).
+    stencil in descending order would be several times slower. Serial on purpose: a multicolour
+    order that threads could share costs several times as much per sweep (strided passes over the
+    stencil).
     """
     nzn, nyn, nxn = u.shape[0], u.shape[1], u.shape[2]
     rest = np.empty((nxn, 3))

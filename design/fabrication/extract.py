@@ -8,8 +8,9 @@ paper's plots.
 The paper cuts at rho = 1/2. The smoothing filter leaves a grey boundary layer (section 5.2: "Imperfections
 in the fits ... are introduced almost entirely by the density rounding step"), and the 1/2 contour
 of an optimised design holds up to a few per cent less material than the density does, which the
-binary fit then shows as a release short of the target (docs/benchmarks.md, "Why an equal J can give
-a worse binary solid"). The level is therefore chosen so that the solid keeps the density's mass
+binary fit then shows as a release short of the target
+(docs/design.md#from-density-to-print-designfabricationextractpy-designfilesoutputspy). The level is
+therefore chosen so that the solid keeps the density's mass
 (`mass_preserving_level`, the volume-preserving threshold of Heaviside-projection topology
 optimisation), within `LEVEL_RANGE` around 1/2.
 """
@@ -33,9 +34,10 @@ surface moves by at most this fraction of a voxel per unit density step."""
 
 
 LEVEL_RANGE = (0.4, 0.6)
-"""Bounds of the extraction level. Optimised designs measured 0.44-0.60 at resolution 64 and
-0.47-0.55 at 128 (docs/results.md); a density grey enough to need a level outside this range is not
-a design any single cut stands for."""
+"""Bounds of the extraction level. An optimised design's mass-preserving level lies within a few
+hundredths of 1/2 (``extraction_level`` in a run's ``summary.json``; benchmarks/recut_runs.py compares
+the cuts, docs/benchmarks.md#tools-for-design-experiments); a density grey enough to need a level
+outside this range is not a design any single cut stands for."""
 
 
 def mass_preserving_level(rho_full: np.ndarray) -> float:

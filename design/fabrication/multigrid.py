@@ -7,21 +7,21 @@ transpose (restriction). Coarse operators are Galerkin, ``K_c = P^T K P``, built
 element: fine elements nest in coarse ones and P restricted to a child element depends only on its
 parent's nodes, so each coarse element matrix is ``sum_children P_c^T K_child P_c`` (24 x 24
 each). Averaging the SIMP moduli instead (rediscretisation) lets the PCG iteration count grow with
-the grid on high-contrast designs (10, 16, 26 iterations at 32, 64, 128 elements tall); Galerkin
-operators keep it flat. The coarsest level is factorised (scipy sparse LU) and solved directly.
+the grid on high-contrast designs; Galerkin operators keep it flat. The coarsest level is
+factorised (scipy sparse LU) and solved directly.
 
 Cycle. On each level forward nodal block Gauss-Seidel sweeps (`SWEEPS` on the finest level,
 `COARSE_SWEEPS` on coarser ones), the coarse correction, then as many backward sweeps. The coarse
 correction is `CYCLE_INDEX` cycles of the next level (a W-cycle for 2), the direct solve on the
 coarsest. Every part is symmetric, so the cycle is a symmetric operator, as PCG needs. On
-high-contrast designs a V-cycle with one sweep lets the PCG iteration count grow with the grid
-(cold, summed over 8 layers, on `benchmarks/bench_ico.py`'s void field: 173 at 64^3, 293 at
-128^3): the Galerkin operators of the deeper levels of the finer grid carry the contrast with
-less accuracy, and a two-grid cycle with an exact solve on the second level needs only 108 at
-128^3. The W-cycle and the extra coarse sweeps, which cost little since coarse levels are small,
-close most of that gap: with `design.fabrication.deflation`, 133 at 64^3 and 145 at 128^3 (docs/benchmarks.md).
-A K-cycle (two coarse cycles combined by CG steps, a nonlinear preconditioner) needed 137 and 138
-there, but 5 times as many as the W-cycle on a small grid with floating islands and no deflation.
+high-contrast designs a V-cycle with one sweep lets the PCG iteration count grow with the grid:
+the Galerkin operators of the deeper levels of the finer grid carry the contrast with less
+accuracy, which a two-grid cycle with an exact solve on the second level does not suffer. The
+W-cycle and the extra coarse sweeps, which cost little since coarse levels are small, close most of
+that gap together with `design.fabrication.deflation`; the iteration counts of the variants on
+`benchmarks/bench_ico.py`'s void field: docs/benchmarks.md#incremental-compliance-term. A K-cycle
+(two coarse cycles combined by CG steps, a nonlinear preconditioner) is no better on large grids
+and far worse on a small grid with floating islands and no deflation.
 """
 from __future__ import annotations
 
@@ -48,15 +48,16 @@ COARSE_SWEEPS = 2
 CYCLE_INDEX = 2
 """Cycles of the next level per coarse correction (1: V-cycle, 2: W-cycle)."""
 PCG_TOL = 3e-4
-"""Relative residual ``|f - K u| / |f|`` at which PCG stops. J_fab stays within 2e-6 and its
-gradient within 4e-5 (largest entry) of a 1e-10 solve (`benchmarks/bench_ico.py`, 64^3)."""
+"""Relative residual ``|f - K u| / |f|`` at which PCG stops: tight enough that J_fab and its gradient
+match a 1e-10 solve to far below the coarsening error (`benchmarks/bench_ico.py`,
+docs/benchmarks.md#incremental-compliance-term)."""
 
 
 class Scratch:
     """Memory reused by hierarchies that one thread builds one after another.
 
-    The first touch of freshly allocated pages is slow (0.2 s for the 137 MB fine-level stencil of
-    a 128^3 design): a hierarchy built with a scratch takes over the arrays of the previous one
+    The first touch of freshly allocated pages is slow (the fine-level stencil of a 128^3 design
+    is 137 MB): a hierarchy built with a scratch takes over the arrays of the previous one
     built with it, which must no longer be in use.
     """
 
@@ -298,7 +299,7 @@ def cycle(levels: list[Level], r: np.ndarray, depth: int = 0) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True)
 def _dot(a, b):
-    """Plain serial dot product of two arrays of the same shape (BLAS threads spin on a shared machine)."""
+    """Plain serial dot product of two arrays of the same shape (threaded BLAS spins when the cores are busy)."""
     a, b = a.ravel(), b.ravel()
     s = 0.0
     for i in range(a.size):

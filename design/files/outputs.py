@@ -6,7 +6,7 @@
 
 The binary solid is the printed mesh re-voxelised on the design grid, as the paper plots it (Fig. 6).
 On that grid a rate measured over a short window (`design.inverse.rate.rate_deviation`) is off by a few
-points (docs/results.md, "How precisely a 128-voxel grid measures the rate deviation"), so the
+points (docs/design.md#from-density-to-print-designfabricationextractpy-designfilesoutputspy), so the
 printed mesh is also re-simulated on a grid `FINE_FACTOR` times finer: the ``fine`` curve and
 figures, the closer estimate of what the print releases. A mesh target (the source's release on the
 design grid) is re-simulated there too, so that the fine figures compare like with like.
@@ -43,9 +43,9 @@ target itself."""
 FINE_FACTOR = 2
 """The ``fine`` curve re-simulates the printed mesh on voxels this many times smaller than the design's."""
 FINE_MAX_VOXELS = 2 ** 25
-"""Largest simulated grid of the ``fine`` check: its solve holds about 165 bytes a voxel (2.8 GB
-measured for 256^3), so a larger one (beyond an nfc design at 256 or an extruded one at 256) is
-skipped with a warning rather than risk the end of a long run."""
+"""Largest simulated grid of the ``fine`` check, voxels: its solve holds about 165 bytes a voxel, so a
+larger one (beyond an nfc design at 256 or an extruded one at 256) is skipped with a warning rather
+than risk the end of a long run."""
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,7 @@ def _csv(columns: tuple[str, ...], rows: np.ndarray) -> str:
 
 SOFTWARE_PACKAGES = ("shape-from-release", "numpy", "scipy", "scikit-fmm", "nlopt", "numba")
 """Packages whose versions a summary records: the design's figures move with the numerical libraries'
-build (docs/results.md, "Best of three starts, and the figures on this build")."""
+build (docs/results.md#software-and-machine lists those its figures were made with)."""
 
 
 def software_versions() -> dict[str, str | None]:

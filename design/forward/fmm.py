@@ -12,14 +12,15 @@ sign as the "known" flag (n < 0 once accepted; padding is known), the smallest k
 along each axis (the upwind candidates of eq. 5, updated when a neighbour is accepted) and, for a
 trial voxel, its position in the heap. A trial voxel is then re-solved and re-keyed from its own
 cache line instead of from six scattered neighbours and a separate position array: fast marching
-visits voxels in the order of the front, not of memory, and scattered reads were most of its run
-time. Far voxels have u = inf and n > 0, trial voxels finite u and n > 0. When a voxel is accepted
+visits voxels in the order of the front, not of memory, and scattered reads would be most of its
+run time. Far voxels have u = inf and n > 0, trial voxels finite u and n > 0. When a voxel is accepted
 its value is final; the marcher then appends its linearisation of eq. (5) to an array in visit
-order, which the adjoint sweep streams backwards instead of revisiting the records (0.16 -> 0.06 s
-at 128^3, for 0.04 s more marching).
+order, which the adjoint sweep streams backwards instead of revisiting the records: a sequential
+read in place of scattered ones, for a little more work while marching. Timings:
+docs/benchmarks.md#forward-simulator.
 
-Repeated solves on one grid (inverse design) pass a `MarchBuffers`: allocating the 140 MB of records
-of a 128^3 grid afresh costs 0.25-0.4 s of page faults per solve on this machine, a third of a solve.
+Repeated solves on one grid (inverse design) pass a `MarchBuffers`: allocating the records (140 MB
+for a 128^3 grid) afresh would cost page faults on every solve, a sizeable part of the solve.
 """
 from __future__ import annotations
 
@@ -123,9 +124,8 @@ def _aligned(shape: tuple[int, ...]) -> np.ndarray:
 # The priority queue is an 8-ary min-heap with keys (u) and voxel ids in separate arrays; each
 # trial voxel's record holds its heap position for decrease-key. The eight children of node k, 8k+1..8k+8, have their keys in one
 # cache line, and the heap is a third as deep as a binary one; the smallest child is found by a
-# branch-free tournament, since the comparisons of a heap are unpredictable. At 128^3 this took the
-# marching kernel from 0.61 to 0.48 s against the 4-ary heap with interleaved (key, id) rows, and
-# keeping positions in the records instead of a separate array saved another 11-13 %.
+# branch-free tournament, since the comparisons of a heap are unpredictable. Keys and ids in separate
+# arrays and positions in the records keep the reads of a sift on as few cache lines as possible.
 
 @njit(cache=True, nogil=True, inline="always")
 def _smaller(key_a, a, key_b, b):

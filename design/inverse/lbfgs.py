@@ -19,9 +19,9 @@ what an iteration needs, on arrays allocated once:
     functions of the two latest points (cubic, else secant, else quadratic; `_model_step`). A
     search that fails after 10 model steps, or a pair with ``s^T y <= 0``, or a direction that is
     not a uniform descent direction (``g^T d > -1e-4 |g| |d|``), resets the memory to steepest
-    descent; a failing steepest-descent search ends with `STALLED`. Measured, this evaluates the
-    designs nlopt's LD_LBFGS evaluates, bit for bit, until nlopt ends a session on a stopping test
-    of its own once J no longer changes (docs/benchmarks.md);
+    descent; a failing steepest-descent search ends with `STALLED`. This evaluates the designs
+    nlopt's LD_LBFGS evaluates, bit for bit, until nlopt ends a session on a stopping test of its
+    own once J no longer changes (tests/design/test_lbfgs.py checks it);
   - "strong-wolfe": a step satisfying the strong Wolfe conditions
     ``f(x + a d) <= f(x) + c1 a g^T d`` and ``|g(x + a d)^T d| <= c2 |g^T d|`` (Nocedal and
     Wright, eq. 3.7; bracketing and zoom of algorithms 3.5-3.6 with safeguarded cubic
@@ -34,11 +34,12 @@ arrays and scalars (`Lbfgs.state`), so a run checkpointed after any evaluation a
 `Lbfgs.from_state` asks for exactly the points the uninterrupted run would have asked for.
 
 The cost per evaluation is about ``4 m N`` flops in the two loops, one pass for the trial point and
-one dot product for the directional derivative (N variables, m pairs). The vector kernels are
-single-threaded numba loops rather than BLAS: on the two shared cores this runs on, OpenBLAS's
-threaded ``daxpy`` took 7.5 ms at N = 2.1M against 0.74 ms with one thread. Every sum runs in index
-order with one accumulator (1.9 ms per fused pass at N = 2.1M), the order of nlopt's own loops: every
-run, resumed or not, is bit-for-bit the same, and the "luksan" rule reproduces nlopt's iterates.
+one dot product for the directional derivative (N variables, m pairs); its share of an iteration:
+docs/benchmarks.md#inverse-design. The vector kernels are single-threaded numba loops rather than
+BLAS, whose threaded vector kernels spin rather than compute when the cores are busy with the
+objective or other jobs. Every sum runs in index order with one accumulator, the order of nlopt's own
+loops: every run, resumed or not, is bit-for-bit the same, and the "luksan" rule reproduces nlopt's
+iterates.
 """
 from __future__ import annotations
 
@@ -55,8 +56,9 @@ log = logging.getLogger(__name__)
 LINE_SEARCHES = ("luksan", "strong-wolfe")
 """`LbfgsSettings.line_search` rules (module doc); the first is the default."""
 CURVATURE_C2 = {"luksan": 0.8, "strong-wolfe": 0.5}
-"""Default curvature constant c2 of each rule: PLIS's ``tolp``; for the strong rule, measured against
-0.8 and 0.9 on the sample designs (docs/benchmarks.md, "Design quality")."""
+"""Default curvature constant c2 of each rule: PLIS's ``tolp``; for the strong rule, of 0.5, 0.8 and 0.9
+the one with the better designs on the sample shapes (benchmarks/optimizer_quality.py,
+docs/benchmarks.md#tools-for-design-experiments)."""
 MODEL_STEPS = 10
 """Extrapolations or interpolations a "luksan" search may make before it fails (PLIS's ``mred``)."""
 SEARCH, STEP, CONVERGED, STALLED = "search", "step", "converged", "stalled"
@@ -79,8 +81,9 @@ class LbfgsSettings:
         Evaluations one "strong-wolfe" search may use before it is declared stalled.
     first_step : float
         "strong-wolfe" only: largest change of any variable on a step without curvature pairs (the
-        first, and after a reset), in the variables' units. 2 rad, measured against 0.5
-        with beta continuation, where every stage starts afresh (docs/benchmarks.md).
+        first, and after a reset), in the variables' units (rad of the cosine map, default 2; with
+        beta continuation every stage starts afresh, so this step recurs; compared with
+        benchmarks/optimizer_quality.py, docs/benchmarks.md#tools-for-design-experiments).
     ftol_rel, xtol_rel : float
         Convergence when an accepted step changes f by at most ``ftol_rel |f|`` or x by at most
         ``xtol_rel |x|`` (Euclidean norms); 0 disables.

@@ -9,18 +9,17 @@ no file: the run folder (configuration, checkpoints, outputs) is `design.files.r
 Optimisers (`DesignConfig.optimizer`): "lbfgs" (default), the lean L-BFGS of `design.inverse.lbfgs`, whose
 step costs a small fraction of an evaluation and whose whole state goes into every checkpoint, so a
 resumed run repeats the uninterrupted one evaluation for evaluation (with its default line search,
-`DesignConfig.line_search` "luksan", it evaluates the designs nlopt's LD_LBFGS evaluates, measured in
-docs/benchmarks.md, at a fraction of its cost per step); or nlopt's "LD_LBFGS",
+`DesignConfig.line_search` "luksan", it evaluates the designs nlopt's LD_LBFGS evaluates, checked by
+tests/design/test_lbfgs.py, at a fraction of its cost per step); or nlopt's "LD_LBFGS",
 "LD_MMA", "LD_CCSAQ", whose internal state is not accessible: their resumes restart with an empty
 memory from the last evaluated design.
 
 Bounds 0 <= rho_hat <= 1. With ``bounds="cosine"`` (default) the optimiser sees unconstrained
 variables z and ``rho_hat = (1 - cos z) / 2``; with ``bounds="box"`` nlopt gets the box directly
-(the "lbfgs" optimiser is unconstrained and requires the cosine map). nlopt's LD_LBFGS
-(Luksan's code) handles active box bounds poorly here: on a 16^3 sphere design it needed 600
-evaluations for a 3% fit that the unconstrained form reaches in 50. A sigmoid map was tried first and
-rejected: saturated variables lose their gradient for good and L-BFGS reports success far from a
-minimum (2.5% vs 1.4% on the zero-order target at 64^3); the periodic cosine map has no such trap.
+(the "lbfgs" optimiser is unconstrained and requires the cosine map). The cosine map is the default
+because nlopt's LD_LBFGS (Luksan's code) handles active box bounds poorly on this objective, and
+because, unlike a sigmoid map, whose saturated variables lose their gradient for good, the periodic
+map has no flat region in which L-BFGS can report success far from a minimum.
 
 One "iteration" here is one objective-and-gradient evaluation; L-BFGS line searches occasionally
 need more than one per step, so the evaluation count bounds the work exactly.
@@ -251,7 +250,7 @@ class _Run:
         state (when a trial is pending) to the store.
 
         With ``wait=False`` the store may write while the next evaluation runs (the optimiser's 2 m N
-        doubles took 0.4-2.3 s to write at 128^3 on the shared machine). The arrays are handed over as
+        doubles take seconds to write at 128^3). The arrays are handed over as
         they are, not copied: the evaluation only reads them and writes the trial gradient, which is not
         saved, and `evaluate` waits for the store before returning to the optimiser.
         """

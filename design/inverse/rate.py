@@ -11,11 +11,12 @@ rate error e held over the release weighs like a relative cumulative error e in 
 in C, so its adjoint is the transposed difference operator applied to the weighted residual. The sum
 may be restricted to a span of k (`DesignObjective` uses the target's 5%-95% by default): where a
 target's rate jumps, at its start and end, no solid can follow within a voxel's ramp, and matching
-the jump there pulled the design's rate off within the release (docs/results.md).
+the jump there would pull the design's rate off within the release
+(docs/design.md#analytic-targets-rate-term-robust-formulation-beta-64).
 
-`rate_deviation` is the metric a zero-order requirement is judged by (see
-docs/results.md): the largest relative deviation from the mean rate over the middle 80% of the
-release.
+`rate_deviation` is the metric a zero-order requirement is judged by: the largest relative deviation
+from the mean rate over the middle 80% of the release
+(docs/design.md#from-density-to-print-designfabricationextractpy-designfilesoutputspy).
 """
 from __future__ import annotations
 
@@ -29,8 +30,8 @@ MID_INTERVALS = 20
 """Sub-intervals the middle 80% is split into for the rate (each 4% of the 10%-90% time span)."""
 RATE_SPAN_MIN_VOX = 10.0
 """Voxels of tau the middle 80% of a release should span for `rate_deviation` to be measured to
-about a point: a plate with an exact release (benchmarks/rate_metric_grid.py) gives an error of up to
-4.4 points where the span is about 5 voxels and up to 1.4 where it is about 10 (docs/results.md)."""
+about a percentage point; below it `sfr design` warns. The grid's error against the span, on a plate
+with an exact release: benchmarks/rate_metric_grid.py (docs/benchmarks.md#tools-for-design-experiments)."""
 
 
 def release_duration(tau_mm: np.ndarray, curve_mm3: np.ndarray, fraction: float = 0.999) -> float:

@@ -49,7 +49,7 @@ def test_empty_density_is_rejected():
 @pytest.mark.parametrize("seed", range(5))
 def test_densities_at_the_level_still_give_a_closed_solid(seed):
     # values exactly at (or within round-off of) 1/2 put marching-cubes vertices on grid points; the
-    # coincident vertices used to leave the contour open ("not watertight")
+    # coincident vertices would leave the contour open ("not watertight") without `extract.LEVEL_GAP`
     rng = np.random.default_rng(seed)
     rho = rng.choice([0.0, 0.5, 0.5 - 1e-13, 1.0, 0.3, 0.7], size=(12, 12, 12), p=[0.3, 0.2, 0.1, 0.2, 0.1, 0.1])
     mesh = density_mesh(rho, 0.25, np.zeros(3))

@@ -60,13 +60,13 @@ def test_perturbed_starts_differ_by_seed_and_start_zero_is_the_default():
 
 
 def test_multistart_is_the_default_at_fine_resolutions_only():
-    # measured to beat one start at equal time on shapes at resolution 128 (nfc and extruded), not at 64
+    # shapes at resolution 128 or finer, nfc and extruded (docs/design.md#multi-start)
     assert DesignConfig(target="sphere", space="nfc", resolution=128).starts == MULTISTART_STARTS == 4
     assert DesignConfig(target="sphere", space="extruded", resolution=256).starts == 4
     assert DesignConfig(target="sphere", space="extruded", resolution=64).starts == 1
     assert DesignConfig(target="sphere", space="ico", resolution=128).starts == 1
     assert DesignConfig(target="sphere", space="nfc", resolution=128, starts=1).starts == 1
-    # measured on shapes; curve targets (analytic, CSV, measured) keep one start
+    # curve targets (analytic, CSV, measured) keep one start
     assert DesignConfig(target="zero-order", space="nfc", resolution=128).starts == 1
     assert DesignConfig(target="mesh.stl", space="nfc", resolution=128).starts == 4
     assert DesignConfig(target="curve.csv", space="nfc", resolution=128).starts == 1

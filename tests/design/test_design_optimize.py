@@ -104,8 +104,8 @@ def test_beta_continuation_defaults_and_stored_fixed_runs(tmp_path):
 
 def test_an_extruded_ring_opens_its_hole_with_default_flags(tmp_path):
     # a ring 6 mm tall with a 5 mm wall ends its release at 2.5 mm, before its faces (3 mm) dissolve a
-    # solid core: a start whose core is solid kept it (1.38% at these settings); the start without
-    # it opens the hole: 0.37% measured, one piece
+    # solid core: a start whose core is solid would keep it; the start without it opens the hole, in
+    # one piece (docs/design.md#extruded-start)
     trimesh.creation.annulus(r_min=3.0, r_max=8.0, height=6.0, sections=64).export(tmp_path / "ring.stl")
     run_design(DesignConfig(target=str(tmp_path / "ring.stl"), space="extruded", resolution=48, max_iter=150),
                tmp_path / "run")

@@ -122,7 +122,7 @@ def test_a_source_in_separate_pieces_is_warned_about_unless_pieces_are_allowed(t
 
 
 def test_a_rate_fitted_target_too_short_for_the_grid_is_warned_about():
-    """The zero-order target of docs/results.md releases its middle 80% over ~0.95 mm of tau: about six
+    """A zero-order target of final 0.1 and duration 0.12 releases its middle 80% over ~0.95 mm of tau: about six
     voxels at resolution 128 (dx 0.156 mm) and twelve at 256, against `RATE_SPAN_MIN_VOX` = 10."""
     target = "zero-order:final=0.1,duration=0.12"
     coarse = prepare(DesignConfig(target=target, resolution=128)).warnings
