@@ -23,6 +23,7 @@ from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, SimCal
 from analysis.simcal import DEFAULT_MAX_OFFSET_S, MODELS
 from labapp.errors import UsageError
 from labapp.records.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
+from labapp.records.jsonfile import read_format
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import atomic_write, sha256_file
 
@@ -345,13 +346,7 @@ def load_simcal(path: str | Path) -> SimCalFile:
         Naming the file and the field.
     """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise SimCalError(f"{path}: cannot read a simulation calibration ({exc})") from exc
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        found = doc.get("format") if isinstance(doc, dict) else None
-        raise SimCalError(f"{path}: format {found!r} is not {FORMAT!r}; make one with sfr calibrate-sim")
+    doc = read_format(path, FORMAT, "a simulation calibration", "make one with sfr calibrate-sim", SimCalError)
     if doc.get("forward_model") != FORWARD_MODEL:
         raise SimCalError(f"{path}: calibrated for the simulator {doc.get('forward_model')!r}, this one is "
                           f"{FORWARD_MODEL!r}; recalibrate with sfr calibrate-sim")

@@ -29,6 +29,7 @@ from design.montecarlo.tuning import McTuning
 from labapp.acquisition.simbench import WATER_G
 from labapp.errors import UsageError
 from labapp.jobs.physical import plot_physical
+from labapp.records.jsonfile import read_format
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import atomic_write
 
@@ -90,13 +91,7 @@ def load_mc_calibration(path: str | Path) -> McCalibration:
     from design.errors import DesignError
 
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"{path}: cannot read a Monte Carlo calibration ({exc})") from exc
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        found = doc.get("format") if isinstance(doc, dict) else None
-        raise UsageError(f"{path}: format {found!r} is not {FORMAT!r}; make one with sfr evaluate")
+    doc = read_format(path, FORMAT, "a Monte Carlo calibration", "make one with sfr evaluate")
     try:
         params = MonteCarloParams.from_dict(doc)
         g, water = float(doc["g_per_mm3"]), float(doc["water_g"])
