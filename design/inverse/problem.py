@@ -43,28 +43,26 @@ DEFAULT_DOMAIN_MM = 20.0
 CSV_HORIZON_MARGIN = 1.1
 """A CSV target's default cube has a half-edge (about its horizon T) this much above the curve's end."""
 
-# Hyperparameters per design space (Tables 1-2 of the paper: w_b 20-50, r 4-5, beta 3 for the
+# Hyperparameters per design space (the paper's Tables 1-2: w_b 20-50, r 4-5, beta 3 for the
 # source-shape designs of Fig. 6). NFC uses the ICO column without the ICO term.
 SPACE_DEFAULTS: dict[str, dict[str, float]] = {
     "nfc": {"w_binary": 20.0, "beta": 3.0, "beta_final": 12.0},
     "extruded": {"w_binary": 30.0, "beta": 3.0, "beta_final": 12.0},
     "ico": {"w_binary": 30.0, "beta": 3.0, "w_fab": 3000.0},
 }
-"""The ICO w_f weighs J_fab normalised to 1 at the start design (`design.fabrication.ico`); 3000 is measured in
-docs/results.md (ICO section); the paper's Table 1 values (50-200) come with its own normalisation.
-NFC and extruded designs raise beta from 3 to 12 over the run: at a fixed beta 3, holes and columns
-narrower than the smoothing radius stay grey, the density's release fits while the printed solid's
-does not (docs/results.md, "Beta continuation by default"); a ``beta_final`` equal to ``beta`` keeps
-it fixed. Extruded designs weigh J_binary 30 rather than 20: at 20 a design can keep pin-holes narrower
-than the radius grey, which the printed solid opens (the csg block: solid 3.7% against a density fit
-of 0.5%); 30 and 40 measured in docs/results.md ("The line search of nlopt's LD_LBFGS by default")."""
+"""`DesignConfig` defaults per design space: the J_binary weight w_b, the projection steepness beta
+at the start and, where it differs, at the end of the run (``beta_final``; equal to ``beta``: fixed),
+and for ICO the weight w_f of J_fab normalised to 1 at the start design (`design.fabrication.ico`).
+Why NFC and extruded designs raise beta from 3 to 12: docs/design.md#beta-continuation; why w_b is
+30 rather than 20 for extruded and ICO designs: docs/design.md#j_binary-weight-per-space; why w_f is
+3000 rather than the paper's 50-200: docs/design.md#ico-weight-w_f."""
 DEFAULT_RADIUS_MM = 1.0
-"""Smoothing radius r when none is given, mm: the paper's r = 4 voxels on the sample shapes at
-resolution 64 (dx 0.25-0.32 mm) are 1.0-1.3 mm; fixed in mm so that the minimum feature (about r, five
-0.2 mm print lines, section 4.1) does not shrink as the resolution grows."""
+"""Smoothing radius r when none is given, mm: about the paper's r = 4 voxels on its sample grids,
+fixed in mm so that the minimum feature (about r, five 0.2 mm print lines, section 4.1) does not
+shrink as the resolution grows (docs/design.md#smoothing-radius-in-mm)."""
 W_CONNECT = 5.0
-"""Default weight of the connectivity penalty J_conn (`design.fabrication.connectivity`); measured against 2 and
-20 on extruded designs (docs/results.md, "Shapes nobody tuned for")."""
+"""Default weight of the connectivity penalty J_conn (`design.fabrication.connectivity`), which holds a
+design to one printable piece (docs/design.md#one-printable-piece)."""
 START_FILL = 2.0 / 3.0
 """Density of the compact start of an extruded design (`start_region`): a target without a source starts
 at it, and a start is hollowed only as far as its band still holds the target's volume at it."""
@@ -72,16 +70,14 @@ MULTISTART_STARTS = 4
 MULTISTART_MIN_RESOLUTION = 128
 MULTISTART_SPACES = ("nfc", "extruded")
 """Default multi-start (`DesignConfig.starts`): 4 seeded starts at half the resolution, then the best
-refined, for nfc and extruded designs of a source shape at resolution 128 or finer. Measured against
-one start given the same wall time on 15 sources (docs/results.md, "Multi-start"): at 128 it wins in
-both spaces; at 64 (starts at 32, where the 1 mm radius is about one voxel) it loses in the extruded
-space. Curve targets keep one start: on the zero-order settings it helped four and set back two well
-beyond their documented figures. ICO is not measured."""
+refined, for nfc and extruded designs of a source shape at resolution 128 or finer; curve targets and
+ICO designs keep one start. Why: docs/design.md#multi-start."""
 OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
 """`DesignConfig.optimizer` choices: `design.inverse.lbfgs` (default) and three nlopt algorithms."""
 ANALYTIC_W_RATE = 1.0
 """Default weight of the rate-fit term J_rate for analytic (zero-order / accel) targets; 0 for the
-others, whose curves come from shapes or measurements (see docs/results.md, "Zero-order")."""
+others, whose curves come from shapes or measurements
+(docs/design.md#analytic-targets-rate-term-robust-formulation-beta-64)."""
 ANALYTIC_DEFAULTS: dict[str, dict[str, float]] = {
     "nfc": {"robust_eta": 0.1, "beta_final": 64.0},
     "extruded": {"robust_eta": 0.1, "beta_final": 64.0, "w_connect": 10.0},
@@ -89,12 +85,10 @@ ANALYTIC_DEFAULTS: dict[str, dict[str, float]] = {
 """Defaults for analytic targets, per design space, over `SPACE_DEFAULTS` and `W_CONNECT`: the robust
 formulation's threshold offset (0, one design as in the paper, for the other targets; it needs
 w_rate > 0), the final beta of the continuation and, for extruded designs, the connectivity weight.
-With one design and beta 3 -> 12, designs of analytic curves kept holes narrower than the smoothing
-radius grey: the density released like the target while the printed solid, whose contour opens them,
-was up to 11.6% off (500 evaluations). In the extruded space the robust formulation at the weight 5
-split a nested zero-order target into five pieces; 10 keeps it and every measured extruded target one
-piece. Measured on six analytic targets and the nested one (docs/results.md, "Analytic targets: the
-robust formulation and beta 64 by default"). ICO is not measured and keeps its defaults."""
+ICO designs keep their `SPACE_DEFAULTS`. Why: the robust formulation makes a design that relies on
+grey layers narrower than the smoothing radius pay for them, and in the extruded space it needs the
+higher J_conn weight to keep a nested target in one piece
+(docs/design.md#analytic-targets-rate-term-robust-formulation-beta-64)."""
 
 
 @dataclass(frozen=True)
@@ -470,19 +464,19 @@ def start_region(space: DesignSpace, target: Target, half_extent_mm: np.ndarray 
     The outline is the source's footprint (its bounding box plus a voxel), or for a target without a
     source a centred square. Spreading the start over the whole domain footprint, as for the other
     spaces, leaves an extruded design far from the compact part and lets it split into one piece per
-    quadrant (docs/results.md).
+    quadrant (docs/design.md#extruded-start).
 
     When the extrusion is taller than twice the target's release end D, the start leaves out the
     outline's core deeper than 2 D from its edge. A point of a prism dissolves at min(in-plane distance
     to the nearest edge, distance to the top or bottom face), so the part's material must lie within D
     of an in-plane edge for its release to end by D; the band that remains has that width between the
     outline and the hole, and a start that holds the core solid gives the design a core that the
-    projection then keeps (a ring's central hole never opens; docs/results.md). The hole is cut only
+    projection then keeps (a ring's central hole never opens). The hole is cut only
     as far as the band that remains holds the target's volume at density `START_FILL`, and not at all
     when its half-width would be below the smoothing radius (the filter would keep it a grey pin-hole
     that the printed solid opens). A target without a source starts in the square that holds its
     volume at `START_FILL` throughout, so it has no room for a hole: a square ring start with the
-    core's connectivity penalty closes up instead (docs/results.md).
+    core's connectivity penalty closes up instead.
 
     Returns
     -------
