@@ -7,6 +7,10 @@ import numpy as np
 
 from design.errors import DesignError
 
+#: The input files `design` reads: triangle meshes in mm, and density arrays.
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf")
+DENSITY_SUFFIXES = (".npy", ".npz")
+
 
 def _where(source: str | None) -> str:
     return f" in {source}" if source else ""

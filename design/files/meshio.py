@@ -6,11 +6,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from design._validate import check_density, check_positive
+from design._validate import DENSITY_SUFFIXES, MESH_SUFFIXES, check_density, check_positive
 from design.errors import DesignError
-
-MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf")
-DENSITY_SUFFIXES = (".npy", ".npz")
 
 
 def load_mesh(path: str | Path) -> trimesh.Trimesh:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from design._validate import MESH_SUFFIXES
 from design.errors import DesignError
 from design.fabrication.connectivity import TAIL_SLOPE
 from design.fabrication.extract import count_pieces
@@ -37,7 +38,6 @@ from design.inverse.targets import (
 
 log = logging.getLogger(__name__)
 
-MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf")
 DEFAULT_DOMAIN_MM = 20.0
 """Edge of the cubic domain used when the target has no source mesh and no --domain-mm, mm."""
 CSV_HORIZON_MARGIN = 1.1
