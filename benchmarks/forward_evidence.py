@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 from scipy.ndimage import gaussian_filter  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "design"))
+sys.path.insert(0, str(ROOT / "tests" / "design" / "forward"))
 from test_forward_analytic import SHAPES, _centres, release_error  # noqa: E402
 
 from design import release_gradient, simulate  # noqa: E402

@@ -11,7 +11,7 @@ deviation over the solid's middle 80% (`design.inverse.rate.rate_deviation`).
     python benchmarks/recut_runs.py RUN_FOLDER [RUN_FOLDER ...]
 
 Thresholding equals re-voxelising the contour mesh at the same level
-(tests/design/test_design_extract.py), so the 1/2 column reproduces a run's own ``rel_rmse_binary``
+(tests/design/fabrication/test_design_extract.py), so the 1/2 column reproduces a run's own ``rel_rmse_binary``
 when the run was cut at 1/2.
 """
 from __future__ import annotations

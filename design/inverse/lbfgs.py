@@ -21,7 +21,7 @@ what an iteration needs, on arrays allocated once:
     not a uniform descent direction (``g^T d > -1e-4 |g| |d|``), resets the memory to steepest
     descent; a failing steepest-descent search ends with `STALLED`. This evaluates the designs
     nlopt's LD_LBFGS evaluates, bit for bit, until nlopt ends a session on a stopping test of its
-    own once J no longer changes (tests/design/test_lbfgs.py checks it);
+    own once J no longer changes (tests/design/inverse/test_lbfgs.py checks it);
   - "strong-wolfe": a step satisfying the strong Wolfe conditions
     ``f(x + a d) <= f(x) + c1 a g^T d`` and ``|g(x + a d)^T d| <= c2 |g^T d|`` (Nocedal and
     Wright, eq. 3.7; bracketing and zoom of algorithms 3.5-3.6 with safeguarded cubic

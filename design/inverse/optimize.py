@@ -10,7 +10,7 @@ Optimisers (`DesignConfig.optimizer`): "lbfgs" (default), the lean L-BFGS of `de
 step costs a small fraction of an evaluation and whose whole state goes into every checkpoint, so a
 resumed run repeats the uninterrupted one evaluation for evaluation (with its default line search,
 `DesignConfig.line_search` "luksan", it evaluates the designs nlopt's LD_LBFGS evaluates, checked by
-tests/design/test_lbfgs.py, at a fraction of its cost per step); or nlopt's "LD_LBFGS",
+tests/design/inverse/test_lbfgs.py, at a fraction of its cost per step); or nlopt's "LD_LBFGS",
 "LD_MMA", "LD_CCSAQ", whose internal state is not accessible: their resumes restart with an empty
 memory from the last evaluated design.
 

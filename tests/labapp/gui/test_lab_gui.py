@@ -9,7 +9,7 @@ from labapp.gui.live_view import grid_segments, mirrored_x
 from labapp.gui.main_window import MainWindow
 from labapp.records.storage import read_run, verify_run
 
-FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures"
+FIGURES = Path(__file__).resolve().parents[3] / "docs" / "figures"
 
 
 def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration):

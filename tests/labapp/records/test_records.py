@@ -14,7 +14,7 @@ from labapp.jobs.run import resumable
 from labapp.records.runrecord import RecordKind, RecordStatus
 from labapp.records.storage import create_run, verify_run
 
-FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "bench"
+FIXTURES = Path(__file__).resolve().parents[3] / "fixtures" / "bench"
 DEAD_PID = 2 ** 22 + 12345          # above the default pid_max: no live process has it
 
 

@@ -16,7 +16,7 @@ from labapp.acquisition.calseries import read_masses
 from labapp.cli.main import main
 from labapp.errors import UsageError
 
-FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"
+FIXTURES = Path(__file__).resolve().parents[3] / "fixtures"
 
 
 def test_target_csv_nan_and_repeated_rows(tmp_path):

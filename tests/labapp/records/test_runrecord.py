@@ -11,7 +11,7 @@ from labapp.records.outpaths import folder_kind
 from labapp.records.runrecord import FORMAT, RecordFormatError, RecordKind, RecordStatus, RunRecord, migrate
 from labapp.records.storage import StorageError, create_run, open_run, read_record, read_run, verify_run
 
-FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "bench"
+FIXTURES = Path(__file__).resolve().parents[3] / "fixtures" / "bench"
 DEAD_PID = 2 ** 22 + 12345          # above the default pid_max: no live process has it
 
 LAYOUT_0 = {                        # a run.json as written before records carried their format

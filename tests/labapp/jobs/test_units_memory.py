@@ -11,7 +11,7 @@ from labapp.errors import UsageError
 from labapp.jobs import meshunits
 from labapp.jobs.meshunits import check_memory, size_warnings
 
-SPHERE = Path(__file__).resolve().parents[2] / "fixtures" / "shapes" / "sphere.stl"
+SPHERE = Path(__file__).resolve().parents[3] / "fixtures" / "shapes" / "sphere.stl"
 
 
 @pytest.fixture

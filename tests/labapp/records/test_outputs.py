@@ -12,7 +12,7 @@ from labapp.records.outpaths import FolderKind, OutPathError, check_data_dir, ch
 from labapp.records.runrecord import RecordKind, RecordStatus
 from labapp.records.storage import create_run
 
-FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"
+FIXTURES = Path(__file__).resolve().parents[3] / "fixtures"
 
 
 def digest(path: Path) -> str:

@@ -70,7 +70,7 @@ def test_marching_cubes_vertices_on_the_ray_lines_keep_the_parity():
     # a 5 x 5 voxel window of a design density (csg, nfc, resolution 64) whose rho = 1/2 contour has
     # vertices within round-off of the ray through column (40, 31): floating-point side tests once
     # counted an odd number of crossings there and refused the design's own mesh as "not closed"
-    data = np.load(Path(__file__).parents[2] / "fixtures" / "design" / "marching_cubes_ray_window.npz")
+    data = np.load(Path(__file__).parents[3] / "fixtures" / "design" / "marching_cubes_ray_window.npz")
     rho = np.zeros(tuple(data["shape"]))
     i, j, k = data["corner"]
     w = data["window"]

@@ -9,7 +9,7 @@ from design import SAMPLE_SHAPES, DesignError, load_density, load_mesh, sample_s
 from design.files.pipeline import input_grid, parse_symmetry
 from design.geometry.shapes import VOLUME_MM3
 
-FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "shapes"
+FIXTURES = Path(__file__).resolve().parents[3] / "fixtures" / "shapes"
 
 
 @pytest.mark.parametrize("name", SAMPLE_SHAPES)

@@ -11,7 +11,7 @@ from analysis import CropGeometry, fit_bench_calibration, read_cells
 from labapp.cli.main import main
 from labapp.scaleout.batch import analyse_many, output_names
 
-BENCH = Path(__file__).resolve().parents[2] / "fixtures" / "bench"
+BENCH = Path(__file__).resolve().parents[3] / "fixtures" / "bench"
 
 
 def _retimed(src: Path, dst: Path, factor: float) -> Path:
