@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from drivers.camera.base import CameraSettings
+from drivers.hotplate import HeidolphHotplate
 from labapp.acquisition.bench import Bench
 from labapp.errors import UsageError
 
@@ -41,7 +42,6 @@ def make_hotplate(url: str | None):
     """
     if not url:
         return None
-    from drivers.hotplate import HeidolphHotplate
 
     return HeidolphHotplate(url, keep_alive=False)
 

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from design.files.pipeline import simulate_mesh
+from design.geometry.shapes import sample_shape
 from drivers.camera import SimulatedCamera
 from drivers.camera.base import CameraSettings, Capture
 from drivers.hotplate import HeidolphHotplate
@@ -137,9 +139,6 @@ def sample_release(shape: str = "pill", index: int = 0, resolution: int = 48,
     material : Material, optional
         Default :meth:`Material.draw`.
     """
-    from design.files.pipeline import simulate_mesh
-    from design.geometry.shapes import sample_shape
-
     material = material or Material.draw()
     seconds_per_mm, g_per_mm3 = material.printed(index)
     release = simulate_mesh(sample_shape(shape), resolution=resolution)

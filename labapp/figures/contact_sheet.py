@@ -15,6 +15,7 @@ import numpy as np
 
 from design.errors import DesignError
 from design.files.records import load_summary
+from design.inverse.spaces import BUILD_AXIS
 from design.inverse.status import FINISHED
 
 TILES_PER_ROW = 3
@@ -110,8 +111,6 @@ def views(solid: np.ndarray, build_axis: int) -> np.ndarray:
 
 
 def _picture(folder: Path) -> np.ndarray | None:
-    from design.inverse.spaces import BUILD_AXIS
-
     try:
         with np.load(folder / "density.npz") as data:
             return views(data["solid"].astype(bool), BUILD_AXIS)

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from analysis import CropGeometry, default_geometry
+from labapp.acquisition.calseries import fit_series, image_shape, read_masses
 from labapp.acquisition.settings import WATER
 from labapp.errors import UsageError
 from labapp.records.outpaths import check_out
@@ -25,9 +27,6 @@ def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WA
     analysis.AnalysisError
         For unreadable images or a fit that is not possible.
     """
-    from analysis import CropGeometry, default_geometry
-    from labapp.acquisition.calseries import fit_series, image_shape, read_masses
-
     folder = Path(folder)
     if not folder.is_dir():
         raise UsageError(f"{folder} is not a folder; give the calibration-series folder holding {MASSES_CSV}")

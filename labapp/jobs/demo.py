@@ -24,6 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from analysis import BenchCalibration, analyze_run, write_cells_csv, write_curve_csv
+from design.files.pipeline import simulate_mesh
+from design.geometry.shapes import sample_shape
+from design.inverse.problem import DesignConfig
 from drivers.sim import BenchScene
 from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
 from labapp.acquisition.clock import SteppedClock
@@ -32,6 +35,9 @@ from labapp.acquisition.events import EngineEvent, FrameStored, Outcome
 from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.acquisition.settings import BathSettings
 from labapp.acquisition.simbench import SCENE, WATER_G, Material, SampleRelease, SimulatedBench, sample_release
+from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
+from labapp.jobs.physical import design_from_target
+from labapp.records.curvefiles import read_physical_curve
 from labapp.records.storage import read_run, verify_run
 
 CAL_MASSES_G = (0.25, 0.5, 0.875, 1.25, 1.75, 2.25)
@@ -158,13 +164,6 @@ def run_demo(out_dir: Path, sample: str = "pill", interval_s: float = 11.0, cali
     material : Material, optional
         The bench's hidden material (default: :meth:`Material.draw`).
     """
-    from design.files.pipeline import simulate_mesh
-    from design.geometry.shapes import sample_shape
-    from design.inverse.problem import DesignConfig
-    from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
-    from labapp.jobs.physical import design_from_target
-    from labapp.records.curvefiles import read_physical_curve
-
     if sample in CALIBRATION_SHAPES:
         raise ValueError(f"the further object {sample!r} must not be one of the calibration set "
                          f"{', '.join(CALIBRATION_SHAPES)}")

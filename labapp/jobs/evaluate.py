@@ -25,8 +25,12 @@ from pathlib import Path
 import numpy as np
 
 from analysis.profile import ReleaseProfile, similarity
+from design.errors import DesignError
+from design.files.meshio import load_mesh
+from design.files.pipeline import mesh_grid
 from design.montecarlo.erosion import DEFAULT_SEEDS
 from design.montecarlo.tuning import DEFAULT_EA_J_PER_MOL, tune_mc, unit_runs
+from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION, SimCalError, calibrate_sim, read_set
 from labapp.jobs.simulate_mc import calibration_doc
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import atomic_write
@@ -110,11 +114,6 @@ def evaluate_models(set_csv: str | Path, bench_calibration: str | Path | None, o
     -------
     Evaluation
     """
-    from design.errors import DesignError
-    from design.files.meshio import load_mesh
-    from design.files.pipeline import mesh_grid
-    from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION, SimCalError, calibrate_sim, read_set
-
     say = progress or (lambda fraction, message: None)
     set_csv, out_dir = Path(set_csv), Path(out_dir)
     resolution = DEFAULT_RESOLUTION if resolution is None else int(resolution)

@@ -12,6 +12,7 @@ from labapp.acquisition.bench import Bench
 from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
 from labapp.acquisition.clock import Clock
 from labapp.acquisition.settings import GRID, SERIES_REDUCE, SETTLE, WATER, BathSettings
+from labapp.acquisition.simbench import SCENE, SampleRelease, SimulatedBench
 from labapp.errors import UsageError
 from labapp.records.outpaths import check_data_dir
 
@@ -68,8 +69,6 @@ def simulated_series_bench(clock: Clock, water_g: float = WATER.default, seed: i
 
     Returns the :class:`labapp.acquisition.simbench.SimulatedBench` (close it when done).
     """
-    from labapp.acquisition.simbench import SCENE, SampleRelease, SimulatedBench
-
     no_object = SampleRelease("none", np.array([0.0, 1.0]), np.zeros(2))
     return SimulatedBench(clock, release=no_object, scene=dataclasses.replace(SCENE, intrusion_probability=0.0),
                           seed=seed, water_g=water_g)

@@ -8,7 +8,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from design import simulate as forward
+from design.files.meshio import DENSITY_SUFFIXES
+from design.files.pipeline import DEFAULT_RESOLUTION, SAMPLE_PREFIX, input_grid, mesh_grid
+from design.geometry.shapes import sample_shape
 from labapp.errors import UsageError
+from labapp.jobs.meshunits import SIMULATE_BYTES_PER_VOXEL, check_memory, grid_shape, load_mesh_mm, size_warnings
 from labapp.records.outpaths import FolderKind, check_out
 
 log = logging.getLogger(__name__)
@@ -39,11 +44,6 @@ def simulation_grid(source: str, *, resolution: int | None = None, voxel_size_mm
     mirror : tuple of bool
     warnings : list of str
     """
-    from design.files.meshio import DENSITY_SUFFIXES
-    from design.files.pipeline import DEFAULT_RESOLUTION, SAMPLE_PREFIX, input_grid, mesh_grid
-    from design.geometry.shapes import sample_shape
-    from labapp.jobs.meshunits import SIMULATE_BYTES_PER_VOXEL, check_memory, grid_shape, load_mesh_mm, size_warnings
-
     if Path(source).suffix.lower() in DENSITY_SUFFIXES and not source.startswith(SAMPLE_PREFIX):
         if units != "mm":
             raise UsageError("--units applies to meshes; a density array's voxel size is in mm")
@@ -76,8 +76,6 @@ def simulate(source: str, out: str | Path, *, resolution: int | None = None, vox
     import time
 
     import numpy as np
-
-    from design import simulate as forward
 
     say = progress or (lambda message: None)
     out = check_out(out, FolderKind.SIMULATION, [source])

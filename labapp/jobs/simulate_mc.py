@@ -23,12 +23,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from design.errors import DesignError
 from design.material import PRINT_DENSITY_G_PER_CM3
 from design.montecarlo.erosion import DEFAULT_SEEDS, MonteCarloParams, simulate_mc
 from design.montecarlo.tuning import McTuning
 from labapp.acquisition.simbench import WATER_G
 from labapp.errors import UsageError
+from labapp.jobs.compare import release_summary
 from labapp.jobs.physical import plot_physical
+from labapp.jobs.simulate import (
+    SimulationOutputs,  # labapp.jobs imports this module
+    simulation_grid,
+)
 from labapp.records.jsonfile import read_format
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import atomic_write
@@ -88,8 +94,6 @@ def load_mc_calibration(path: str | Path) -> McCalibration:
     UsageError
         An unreadable file, another format, or a bad field (named).
     """
-    from design.errors import DesignError
-
     path = Path(path)
     doc = read_format(path, FORMAT, "a Monte Carlo calibration", "make one with sfr evaluate")
     try:
@@ -121,9 +125,6 @@ def simulate_mc_job(source: str, out: str | Path, calibration: McCalibration, *,
     water_g : float, optional
         Bath water for ``conc_g_per_kg``, g (default: the calibration's).
     """
-    from labapp.jobs.compare import release_summary
-    from labapp.jobs.simulate import simulation_grid
-
     if int(seeds) < 1:
         raise UsageError(f"--seeds {seeds}: give at least 1 run")
     say = progress or (lambda message: None)
@@ -160,6 +161,5 @@ def simulate_mc_job(source: str, out: str | Path, calibration: McCalibration, *,
                   f"{source}: {calibration.describe()}",
                   band=(release.t_s, grams - 2 * spread_g, grams + 2 * spread_g,
                         "+-2 standard deviations over the seeds"))
-    from labapp.jobs.simulate import SimulationOutputs  # labapp.jobs imports this module
 
     return SimulationOutputs(release, summary, out, tuple(warnings))

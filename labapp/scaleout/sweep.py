@@ -38,6 +38,9 @@ from design.errors import DesignError
 from design.files.records import load_summary
 from design.inverse.status import FINISHED, DesignStatus
 from labapp.errors import UsageError
+from labapp.figures.contact_sheet import draw_contact_sheet, rank, summary_row
+from labapp.jobs.calibrate_sim import load_simcal
+from labapp.jobs.design import design
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.scaleout.cluster import dashboard_link, dask_client, design_memory_gb
 from labapp.scaleout.sweepspec import Combination, SweepSpec, config_matches
@@ -134,9 +137,6 @@ def _stop_poller(event_name: str | None) -> Callable[[], bool] | None:
 
 def _design(combo: Combination, folder: Path, resume: bool, should_stop) -> str:
     """Start or resume the combination's design through the job `sfr design` runs; returns its status."""
-    from labapp.jobs.calibrate_sim import load_simcal
-    from labapp.jobs.design import design
-
     simcal = load_simcal(combo.simcal) if combo.simcal else None
     result, _ = design(None if resume else combo.config, folder, resume=resume, simcal=simcal,
                        should_stop=should_stop)
@@ -429,8 +429,6 @@ def _running(client, pending) -> int:
 def _finish(spec: SweepSpec, sweep_dir: Path, outcomes: dict, stopped: bool, contact_sheet: bool,
             dashboard: str | None) -> SweepResult:
     """Record failures, write sweep.csv and the contact sheet."""
-    from labapp.figures.contact_sheet import draw_contact_sheet, rank
-
     for name, outcome in outcomes.items():
         if outcome["status"] == "failed":
             (sweep_dir / FAILED).mkdir(exist_ok=True)
@@ -453,8 +451,6 @@ def _finish(spec: SweepSpec, sweep_dir: Path, outcomes: dict, stopped: bool, con
 
 def table_row(spec: SweepSpec, combo: Combination, sweep_dir: Path, outcome: dict | None) -> dict:
     """One sweep.csv row: the combination's settings (resolved values), its status and its summary."""
-    from labapp.figures.contact_sheet import summary_row
-
     folder = sweep_dir / RUNS / combo.name
     row = {"name": combo.name, "folder": str(folder.relative_to(sweep_dir))}
     for key in spec.swept_keys:

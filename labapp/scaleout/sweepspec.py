@@ -34,6 +34,8 @@ from pathlib import Path
 from design.errors import DesignError
 from design.inverse.problem import DesignConfig
 from labapp.errors import UsageError
+from labapp.jobs.calibrate_sim import SimCalError, load_simcal
+from labapp.jobs.physical import is_physical
 
 PRESET_KEY = "preset"
 SPEC_ONLY_KEYS = ("target", "simcal", "grid", "points")
@@ -162,9 +164,6 @@ def _resolve(value: str, base_dir: str | Path) -> str:
 
 def _check_simcal(source: str, target: str, simcal: str | None) -> None:
     """A measured (physical) target needs a readable simulation calibration."""
-    from labapp.jobs.calibrate_sim import SimCalError, load_simcal
-    from labapp.jobs.physical import is_physical
-
     if simcal is None:
         if is_physical(target):
             raise SpecError(f"{source}: target {target} is a measured curve: add simcal = \"simcal.json\" "
