@@ -27,6 +27,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from design.files.outputs import percent_text
+
 ROOT = Path(__file__).resolve().parents[1]
 RESOLUTION = 64
 """Voxels along the longest side of every case's design domain (full page)."""
@@ -158,10 +160,6 @@ def _zero_order(case: Case) -> bool:
     return case.target.partition(":")[0] == "zero-order"
 
 
-def _pct(value) -> str:
-    return "-" if value is None else f"{value:.2%}"
-
-
 def _machine() -> str:
     model = ""
     try:
@@ -194,7 +192,7 @@ def figure(rows: list[dict], path: Path) -> None:
             ax.plot(data["tau_mm"], data["fine_target_mm3"], color="0.6", lw=1, label="target, finer grid")
             ax.plot(data["tau_mm"], data["fine_mm3"], color="C3", lw=1.2,
                     label=f"printed solid, {row['fine_factor']}x finer grid")
-        ax.set_title(f"{row['case'].target}, {row['case'].space}: {_pct(row['fine'])}", fontsize=9)
+        ax.set_title(f"{row['case'].target}, {row['case'].space}: {percent_text(row['fine'])}", fontsize=9)
         final = data["target_mm3"][-1]
         ax.set_xlim(0, 1.3 * data["tau_mm"][np.argmax(data["target_mm3"] >= 0.999 * final)])
         ax.set_xlabel("tau (mm dissolved)")
@@ -252,8 +250,9 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
                          f"{r['error']} | - | - | - | - | - | - | - | {r['wall']:.0f} |")
             continue
         lines.append(f"| {r['case'].label} | {r['case'].space} | {r['iterations']} | "
-                     f"{r['status']} | {_pct(r['density'])} | {_pct(r['binary'])} | **{_pct(r['fine'])}** | "
-                     f"{_pct(r['rate_dev']) if _zero_order(r['case']) else '-'} | "
+                     f"{r['status']} | {percent_text(r['density'])} | {percent_text(r['binary'])} | "
+                     f"**{percent_text(r['fine'])}** | "
+                     f"{percent_text(r['rate_dev']) if _zero_order(r['case']) else '-'} | "
                      f"{r['pieces']} | {r['mass_g']:.3f} | {r['voids']} | {r['wall']:.0f} |")
 
     lines += [
@@ -341,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"{prefix} {row['status']}: {row['error']}", file=sys.stderr, flush=True)
                     continue
                 print(f"{prefix} {row['status']} after {row['iterations']} evaluations, {row['wall']:.0f} s; "
-                      f"printed solid {_pct(row['binary'])} (design grid), {_pct(row['fine'])} (finer grid), "
+                      f"printed solid {percent_text(row['binary'])} (design grid), {percent_text(row['fine'])} (finer grid), "
                       f"{row['pieces']} piece(s)", file=sys.stderr, flush=True)
         except KeyboardInterrupt:
             print("\ninterrupted: no page written", file=sys.stderr)

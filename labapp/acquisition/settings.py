@@ -265,16 +265,11 @@ def to_record(config: Any) -> dict[str, Any]:
 
 
 def from_record(cls: type, data: dict[str, Any]) -> Any:
-    """Rebuild a config of ``cls`` from ``run.json``: the flat layout :func:`to_record` writes, or the bath's
-    fields under ``bath``; unknown keys are ignored, lists become tuples."""
-    data = dict(data)
-    nested = data.pop("bath", None)
+    """Rebuild a config of ``cls`` from ``run.json``'s flat layout (:func:`to_record`); unknown keys are
+    ignored, lists become tuples."""
     names = {f.name for f in dataclasses.fields(cls)}
     bath_names = {f.name for f in dataclasses.fields(BathSettings)}
-    bath = {k: v for k, v in data.items() if k in bath_names}
-    if isinstance(nested, dict):
-        bath.update({k: v for k, v in nested.items() if k in bath_names})
     kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names and k != "bath"}
     if "bath" in names:
-        kwargs["bath"] = BathSettings(**bath)
+        kwargs["bath"] = BathSettings(**{k: v for k, v in data.items() if k in bath_names})
     return cls(**kwargs)

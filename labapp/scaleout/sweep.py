@@ -9,7 +9,7 @@ Layout of a sweep folder ``DIR``::
     DIR/sweep.csv            the table of every combination (`TABLE_COLUMNS`)
     DIR/contact_sheet.png    each design's fit and picture, best first (`labapp.figures.contact_sheet`)
 
-A combination is done when its folder's ``summary.json`` has a final status (`DONE_STATUSES`); a rerun
+A combination is done when its folder's ``summary.json`` has a final status (`design.inverse.status.FINISHED`); a rerun
 skips those and resumes the others from their checkpoints. A worker holds an exclusive lock on the run
 folder while it designs, so a task Dask reschedules after a worker died, while a stale copy is still
 running somewhere, waits and then finds the design done or resumes it: each combination is designed
@@ -47,8 +47,6 @@ from labapp.scaleout.sweepspec import Combination, SweepSpec, config_matches
 
 log = logging.getLogger(__name__)
 
-DONE_STATUSES = FINISHED
-"""`design.files.rundir.DesignResult` statuses that finish a design; "stopped"/"interrupted" resume."""
 RUNS, FAILED, LOCKS = "runs", "failed", ".locks"
 STOP_POLL_S = 1.0
 """How often a running design asks the scheduler whether the sweep was stopped, s."""
@@ -67,7 +65,7 @@ class FolderState(enum.StrEnum):
     """Where a combination's run folder stands (`folder_state`)."""
 
     DONE = "done"
-    """Its ``summary.json`` has a final status (`DONE_STATUSES`)."""
+    """Its ``summary.json`` has a final status (`design.inverse.status.FINISHED`)."""
     RESUME = "resume"
     """Started (it has a ``config.json``): the design resumes from its checkpoint."""
     NEW = "new"
@@ -103,7 +101,7 @@ def folder_state(folder: Path) -> FolderState:
     """Whether a combination's run folder is done, to be resumed or new."""
     try:
         status = load_summary(folder)["status"]
-        if status in DONE_STATUSES:
+        if status in FINISHED:
             return FolderState.DONE
     except (OSError, ValueError, KeyError, DesignError):
         pass

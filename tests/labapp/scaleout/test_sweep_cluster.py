@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from labapp.scaleout.sweep import DONE_STATUSES
+from design.inverse.status import FINISHED
 
 MAX_ITER = 150
 SPEC = f"""target = "sphere"
@@ -56,7 +56,7 @@ def _check_every_combination_once(out: Path) -> None:
         folder = out / "runs" / name
         assert log.count(f"finish {name} ") == 1, log
         summary = json.loads((folder / "summary.json").read_text())
-        assert summary["status"] in DONE_STATUSES  # L-BFGS may stall before the limit
+        assert summary["status"] in FINISHED  # L-BFGS may stall before the limit
         history = np.loadtxt(folder / "history.csv", delimiter=",", skiprows=1)
         assert history[:, 0].tolist() == list(range(1, summary["iterations"] + 1)), name
         for file in ("config.json", "density.npz", "curves.csv", "report.png"):
@@ -131,7 +131,7 @@ def test_ctrl_c_checkpoints_running_designs(tmp_path):
     statuses = {p.parent.name: json.loads(p.read_text())["status"] for p in out.glob("runs/*/summary.json")}
     assert len(statuses) == 2, statuses  # the queued two never started
     # the running two stop with a checkpoint (one may have ended on its own just before: L-BFGS can stall)
-    assert "stopped" in statuses.values() and set(statuses.values()) <= {"stopped", *DONE_STATUSES}, statuses
+    assert "stopped" in statuses.values() and set(statuses.values()) <= {"stopped", *FINISHED}, statuses
     for name, status in statuses.items():
         with np.load(out / "runs" / name / "checkpoint.npz") as ckpt:
             assert 0 < len(ckpt["history"]) < 2000
