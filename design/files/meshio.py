@@ -1,6 +1,7 @@
 """Loading simulation inputs from disk: triangle meshes (mm) and density arrays, with clear errors."""
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -8,6 +9,9 @@ import trimesh
 
 from design._validate import DENSITY_SUFFIXES, MESH_SUFFIXES, check_density, check_positive
 from design.errors import DesignError
+from design.geometry.bodies import solid_mesh
+
+log = logging.getLogger(__name__)
 
 
 def load_mesh(path: str | Path) -> trimesh.Trimesh:
@@ -45,11 +49,22 @@ def _check_finite(vertices: np.ndarray, source: str, per_facet: bool = False) ->
 
 
 def checked_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> trimesh.Trimesh:
-    """Return `mesh` after checking its vertices are finite and it is watertight."""
+    """The solid `mesh` bounds (`design.geometry.bodies.solid_mesh`: overlapping bodies united, with a
+    warning) after checking its vertices are finite and it is watertight.
+
+    Raises
+    ------
+    DesignError
+        For non-finite vertices, open edges, inconsistent or inward-facing normals, or a surface that
+        passes through itself; the message names `source`.
+    """
     _check_finite(mesh.vertices, source)
     if not mesh.is_watertight:
         raise DesignError(f"{source}: is not watertight (it has open edges), so its inside is undefined")
-    return mesh
+    solid, notes = solid_mesh(mesh, source)
+    for note in notes:
+        log.warning("%s", note)
+    return solid
 
 
 def load_density(path: str | Path, dx_mm: float | None = None) -> tuple[np.ndarray, float]:

@@ -11,6 +11,7 @@ from design._validate import check_positive
 from design.errors import DesignError
 from design.files.meshio import DENSITY_SUFFIXES, checked_mesh, load_density, load_mesh
 from design.forward.simulator import Release, simulate
+from design.geometry.bodies import mirror_mismatch
 from design.geometry.shapes import sample_shape
 from design.geometry.voxelize import voxelize
 
@@ -20,6 +21,10 @@ DEFAULT_RESOLUTION = 64
 """Voxels along the longest bounding-box side when neither resolution nor voxel size is given."""
 SAMPLE_PREFIX = "sample:"
 _AXES = "xyz"
+SYMMETRY_TOLERANCE = 0.005
+"""Largest fraction of a solid's volume, voxelised, that may lack a mirror image about a claimed mirror
+plane: the release error a mirrored simulation then makes is of this order, below the simulation's
+own discretisation error at its default resolution."""
 
 
 def parse_symmetry(symmetry: str, ndim: int = 3) -> tuple[bool, ...]:
@@ -52,9 +57,34 @@ def mesh_grid(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel_siz
     else:
         dx = check_positive("voxel_size_mm", voxel_size_mm)
     mirror = parse_symmetry(symmetry)
+    if any(mirror):
+        check_symmetric(mesh, dx, mirror)
     rho = voxelize(mesh, dx, mirror=mirror).astype(np.float64)
     log.info("voxelised to %s voxels of %.4g mm (mirror %s)", rho.shape, dx, mirror)
     return rho, dx, mirror
+
+
+def check_symmetric(mesh: trimesh.Trimesh, dx_mm: float, mirror: tuple[bool, ...]) -> None:
+    """Refuse mirror planes (through the bounding-box centre) that the mesh is not symmetric about.
+
+    Raises
+    ------
+    DesignError
+        When more than `SYMMETRY_TOLERANCE` of the solid's volume, voxelised at `dx_mm`, has no mirror
+        image about a claimed plane; the message says how far off each such plane is.
+    """
+    full = voxelize(mesh, dx_mm)
+    centre = mesh.bounds.mean(axis=0)
+    off = []
+    for axis, m in enumerate(mirror):
+        if m:
+            miss = mirror_mismatch(full, tuple(a == axis for a in range(3)))
+            if miss > SYMMETRY_TOLERANCE:
+                off.append(f"{_AXES[axis]} = {centre[axis]:.4g} mm ({miss:.1%} of the volume has no mirror image)")
+    if off:
+        raise DesignError(f"--symmetry {''.join(_AXES[a] for a in range(3) if mirror[a])}: the shape is not "
+                          f"symmetric about the plane {'; nor about '.join(off)}; at most {SYMMETRY_TOLERANCE:.1%} "
+                          "may differ. Drop the axes it is not symmetric about")
 
 
 def simulate_mesh(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel_size_mm: float | None = None,

@@ -1,12 +1,14 @@
-"""Exact voxelisation of a closed triangle mesh by ray parity at voxel centres.
+"""Exact voxelisation of a closed triangle mesh by winding numbers at voxel centres.
 
 One ray per column of voxel centres runs along axis 2 (z). A triangle is hit by the ray through
-(x, y) when (x, y) lies in its xy projection; the crossings, sorted along z, alternate between
-entering and leaving the solid, so a voxel centre is inside when an odd number of crossings lies
-below it. Points on a projected edge or vertex are decided by a symbolic perturbation of the ray,
+(x, y) when (x, y) lies in its xy projection; a crossing through a face whose outward normal points
+down (-z) enters the solid (+1), one through a face pointing up leaves it (-1). The winding number of
+a voxel centre is the sum of the crossings below it, and the centre is inside when it is positive: the
+union of overlapping bodies, and a cavity (an inward-facing inner shell) subtracted from its solid.
+Points on a projected edge or vertex are decided by a symbolic perturbation of the ray,
 (x + e, y + e^2), evaluated with each edge oriented from its lower to its higher vertex index so that
 both triangles sharing an edge see bit-identical values: a ray through an edge crosses exactly one
-of the two triangles (or, at a silhouette, both or neither), and parity stays exact.
+of the two triangles (or, at a silhouette, both or neither), and the winding numbers stay exact.
 
 Grid convention: array axis a is mesh coordinate a (x, y, z); voxel (i, j, k) has its centre at
 origin_mm + (i + 1/2, j + 1/2, k + 1/2) dx_mm.
@@ -14,6 +16,7 @@ origin_mm + (i + 1/2, j + 1/2, k + 1/2) dx_mm.
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 import trimesh
@@ -49,8 +52,9 @@ def _side(px, py, ax, ay, bx, by):
 
 
 @njit(cache=True, nogil=True)
-def _crossings(vertices, faces, x0, y0, dx, nx, ny, count_only, counts, offsets, zs):
-    """Count (count_only) or record the z of every ray/triangle crossing, per column."""
+def _crossings(vertices, faces, x0, y0, dx, nx, ny, count_only, counts, offsets, zs, signs):
+    """Count (count_only) or record the z and the winding step (+1 entering, -1 leaving) of every
+    ray/triangle crossing, per column."""
     fill = np.zeros(nx * ny, dtype=np.int64)
     for f in range(faces.shape[0]):
         ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
@@ -90,26 +94,54 @@ def _crossings(vertices, faces, x0, y0, dx, nx, ny, count_only, counts, offsets,
                     # relative to vertex a, so that a horizontal face gives its z exactly
                     za = vertices[ia, 2]
                     zs[offsets[col] + fill[col]] = za + w[1] * (vertices[ib, 2] - za) + w[2] * (vertices[ic, 2] - za)
+                    signs[offsets[col] + fill[col]] = -orient  # a face seen clockwise from above faces down
                     fill[col] += 1
 
 
 @njit(cache=True, nogil=True)
-def _fill(zs, offsets, counts, z0, dx, nz, out):
+def _fill(zs, signs, offsets, counts, z0, dx, nz, out):
+    """Mark the voxel centres of positive winding number; return (the last column whose winding does not
+    return to 0 or -1, the lowest and highest winding, the first column with a winding outside 0..1 or -1)."""
     bad = -1
+    low, high, odd = 0, 0, -1
     for col in range(counts.shape[0]):
         c = counts[col]
         if c == 0:
             continue
-        if c % 2 == 1:
+        order = np.argsort(zs[offsets[col]:offsets[col] + c], kind="mergesort")
+        z = zs[offsets[col]:offsets[col] + c][order]
+        step = signs[offsets[col]:offsets[col] + c][order]
+        winding = 0
+        for m in range(c):
+            winding += step[m]
+            if winding < low or winding > high:
+                low, high = min(low, winding), max(high, winding)
+                if odd < 0 and (winding < 0 or winding > 1):
+                    odd = col
+            if winding > 0 and m + 1 < c:
+                k_lo = max(int(np.ceil((z[m] - z0) / dx - 0.5)), 0)  # first centre above this crossing
+                k_hi = min(int(np.ceil((z[m + 1] - z0) / dx - 0.5)), nz)  # first centre at/above the next
+                for k in range(k_lo, k_hi):
+                    out[col, k] = True
+        if winding != 0:
             bad = col
-            continue
-        z = np.sort(zs[offsets[col]:offsets[col] + c])
-        for m in range(0, c, 2):
-            k_lo = max(int(np.ceil((z[m] - z0) / dx - 0.5)), 0)  # first centre above the entry
-            k_hi = min(int(np.ceil((z[m + 1] - z0) / dx - 0.5)), nz)  # first centre at/above the exit
-            for k in range(k_lo, k_hi):
-                out[col, k] = True
-    return bad
+    return bad, low, high, odd
+
+
+@dataclass(frozen=True)
+class Winding:
+    """Voxel centres inside a mesh and the range of winding numbers its rays met.
+
+    ``low``/``high`` are the lowest and highest winding numbers (0 and 1 for one outward-facing closed
+    surface; below 0 where a surface faces inward with no solid around it, above 1 where bodies overlap
+    or a surface passes through itself). ``odd_mm`` is a point (mm) on a ray where one was first outside
+    0..1, or None.
+    """
+
+    inside: np.ndarray
+    low: int
+    high: int
+    odd_mm: tuple[float, float] | None
 
 
 def grid_for(bounds_mm: np.ndarray, dx_mm: float, mirror: tuple[bool, ...] = (False, False, False)
@@ -158,12 +190,12 @@ def voxelize(mesh: trimesh.Trimesh, dx_mm: float, *, origin_mm: np.ndarray | Non
     Returns
     -------
     (X, Y, Z) ndarray of bool
-        True where the voxel centre is inside the mesh.
+        True where the voxel centre's winding number is positive (inside the union of the mesh's bodies).
 
     Raises
     ------
     DesignError
-        For a zero or negative voxel size, or a mesh whose crossings do not pair up (not closed).
+        For a zero or negative voxel size, or a mesh whose crossings do not sum to zero (not closed).
     """
     dx = check_positive("dx_mm", dx_mm)
     mirror = check_mirror(mirror, 3)
@@ -172,19 +204,40 @@ def voxelize(mesh: trimesh.Trimesh, dx_mm: float, *, origin_mm: np.ndarray | Non
     shape = default_shape if shape is None else tuple(int(s) for s in shape)
     if len(shape) != 3 or min(shape) < 1:
         raise DesignError(f"voxel grid shape must be 3 positive sizes, got {shape}")
+    return winding(mesh, dx, origin, shape).inside
+
+
+def winding(mesh: trimesh.Trimesh, dx_mm: float, origin_mm: np.ndarray, shape: tuple[int, int, int]) -> Winding:
+    """Winding numbers of a mesh on a voxel grid (see :func:`voxelize` for the grid).
+
+    Raises
+    ------
+    DesignError
+        For a mesh whose crossings do not sum to zero along a ray (not closed, or faces not consistently
+        oriented).
+    """
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
     faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
     nx, ny, nz = shape
     counts = np.zeros(nx * ny, dtype=np.int64)
     empty = np.zeros(0)
-    _crossings(vertices, faces, origin[0], origin[1], dx, nx, ny, True, counts, counts, empty)
+    no_signs = np.zeros(0, dtype=np.int64)
+    _crossings(vertices, faces, origin_mm[0], origin_mm[1], dx_mm, nx, ny, True, counts, counts, empty, no_signs)
     offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
     zs = np.empty(int(counts.sum()))
-    _crossings(vertices, faces, origin[0], origin[1], dx, nx, ny, False, counts, offsets, zs)
+    signs = np.empty(zs.size, dtype=np.int64)
+    _crossings(vertices, faces, origin_mm[0], origin_mm[1], dx_mm, nx, ny, False, counts, offsets, zs, signs)
     out = np.zeros((nx * ny, nz), dtype=bool)
-    bad = _fill(zs, offsets, counts, origin[2], dx, nz, out)
+    bad, low, high, odd = _fill(zs, signs, offsets, counts, origin_mm[2], dx_mm, nz, out)
     if bad >= 0:
-        raise DesignError(f"mesh is not closed: the ray through column {divmod(bad, ny)} crosses its surface "
-                          "an odd number of times")
-    log.debug("voxelised %d faces onto %s voxels of %.4g mm", len(faces), shape, dx)
-    return out.reshape(shape)
+        raise DesignError(f"mesh is not closed or its faces are not consistently oriented: the ray through "
+                          f"{_column_mm(bad, ny, origin_mm, dx_mm)} mm enters its surface more often than it "
+                          "leaves it")
+    log.debug("voxelised %d faces onto %s voxels of %.4g mm", len(faces), shape, dx_mm)
+    return Winding(out.reshape(shape), int(low), int(high), None if odd < 0 else _column_mm(odd, ny, origin_mm, dx_mm))
+
+
+def _column_mm(col: int, ny: int, origin_mm: np.ndarray, dx_mm: float) -> tuple[float, float]:
+    """The (x, y) of a voxel column's ray, mm."""
+    i, j = divmod(col, ny)
+    return (round(float(origin_mm[0] + (i + 0.5) * dx_mm), 3), round(float(origin_mm[1] + (j + 0.5) * dx_mm), 3))
