@@ -123,7 +123,7 @@ def _check_inputs(path: Path, inputs: Iterable[str | Path], option: str) -> None
 
 
 def check_out(path: str | Path, writes: FolderKind | str, inputs: Iterable[str | Path] = (), *, file: bool = False,
-              replace: bool = True, option: str = "--out") -> Path:
+              replace: bool = True, option: str = "--out", analysed: str | Path | None = None) -> Path:
     """Check an output path before any work; returns it (resolved). Creates nothing.
 
     Parameters
@@ -142,6 +142,8 @@ def check_out(path: str | Path, writes: FolderKind | str, inputs: Iterable[str |
         Accept an existing folder of kind ``writes`` (default True); False refuses any non-empty folder.
     option : str
         The option's name in messages.
+    analysed : path, optional
+        The record an analysis reads: the only record whose ``analysis`` subfolder it may write.
 
     Raises
     ------
@@ -164,7 +166,12 @@ def check_out(path: str | Path, writes: FolderKind | str, inputs: Iterable[str |
     if path.exists() and not path.is_dir():
         raise OutPathError(f"{option} {path} is a file; give a folder")
     record = _record_above(path)
-    if record is not None and not (writes == FolderKind.ANALYSIS and path == record / ANALYSIS_SUBFOLDER):
+    own = analysed is not None and record == Path(analysed).expanduser().resolve()
+    if record is not None and not (writes == FolderKind.ANALYSIS and path == record / ANALYSIS_SUBFOLDER and own):
+        if writes == FolderKind.ANALYSIS and path == record / ANALYSIS_SUBFOLDER:
+            mine = f"; {Path(analysed).resolve() / ANALYSIS_SUBFOLDER} is its own" if analysed is not None else ""
+            raise OutPathError(f"{option} {path} is the analysis folder of {record}, another record: a record's "
+                               f"analysis goes only into its own folder{mine}")
         hint = f"; its analysis goes to {record / ANALYSIS_SUBFOLDER}" if writes == FolderKind.ANALYSIS else ""
         raise OutPathError(f"{option} {path} is or lies inside {record}, {_describe(folder_kind(record))}, which "
                            f"no command adds files to; choose a folder outside it{hint}")

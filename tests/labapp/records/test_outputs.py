@@ -73,7 +73,27 @@ def test_analyze_writes_only_into_the_runs_analysis_folder(tmp_path, capsys):
         assert main(["analyze", str(run.path), "--calibration", str(tmp_path / "c.json"), "--out", str(out)]) == 2
         assert says in capsys.readouterr().err
     assert sorted(p.name for p in run.path.iterdir()) == ["events.log", "frames.csv", "run.json"]
-    check_out(run.path / "analysis", FolderKind.ANALYSIS, [tmp_path / "c.json"])          # the designated place
+    check_out(run.path / "analysis", FolderKind.ANALYSIS, [tmp_path / "c.json"], analysed=run.path)  # its own place
+
+
+def test_one_runs_analysis_is_never_written_into_another_run(tmp_path, capsys):
+    runs = []
+    for name in ("a", "b"):
+        run = create_run(tmp_path / "data", name, {"kind": "run"})
+        run.finish(RecordStatus.COMPLETE)
+        run.close()
+        runs.append(run.path)
+    a, b = runs
+    before = sorted(p.name for p in b.iterdir())
+    (tmp_path / "c.json").write_text("{}")
+    assert main(["analyze", str(a), "--calibration", str(tmp_path / "c.json"), "--out", str(b / "analysis")]) == 2
+    err = capsys.readouterr().err
+    assert f"is the analysis folder of {b}, another record" in err and f"{a / 'analysis'} is its own" in err
+    assert sorted(p.name for p in b.iterdir()) == before
+    with pytest.raises(OutPathError, match="another record"):
+        check_out(b / "analysis", FolderKind.ANALYSIS, [], analysed=a)
+    with pytest.raises(OutPathError, match="another record"):
+        check_out(b / "analysis", FolderKind.ANALYSIS, [])              # no record named: no record's folder
 
 
 def test_run_refuses_a_data_directory_inside_a_record(tmp_path, capsys):
