@@ -8,7 +8,7 @@ from scipy.optimize import curve_fit
 
 from analysis import AnalysisError
 from analysis.profile import ReleaseProfile
-from analysis.release_models import MODEL_NAMES, best_fit, fit_release_models
+from analysis.release_models import BAKER_LONSDALE_END, MODEL_NAMES, best_fit, fit_release_models
 
 T_MIN = np.linspace(0, 240, 49)  # every 5 min for 4 h
 
@@ -18,7 +18,25 @@ TRUTH = {
     "Higuchi": (lambda t: 6.2 * np.sqrt(t), {"kH": 6.2}),
     "Hixson-Crowell": (lambda t: 100 * (1 - np.clip(1 - 0.0035 * t, 0, None) ** 3), {"kHC": 0.0035}),
     "Weibull": (lambda t: 100 * (1 - np.exp(-(t / 70.0) ** 1.6)), {"td": 70.0, "beta": 1.6}),
+    "Hopfenberg": (lambda t: 100 * (1 - np.clip(1 - 0.0032 * t, 0, None) ** 1.7), {"kHB": 0.0032, "n": 1.7}),
+    "Gompertz": (lambda t: 100 * np.exp(-45.0 * np.where(t > 0, t, 1.0) ** -1.1), {"alpha": 45.0, "beta": 1.1}),
 }
+TIES = {"first-order": ("Weibull", {"beta": 1.0}), "Hixson-Crowell": ("Hopfenberg", {"n": 3.0})}
+"""Models that contain another as a special case tie with it at round-off on its noise-free curve."""
+
+
+def _baker_lonsdale_pct(t, kbl):
+    """Independent inverse of 3/2 (1 - (1 - F)^(2/3)) - F = kBL t: the real root of the cubic in
+    u = (1 - F)^(1/3) inside [0, 1], by numpy's polynomial roots."""
+    out = []
+    for y in np.minimum(kbl * np.asarray(t, float), BAKER_LONSDALE_END):
+        roots = np.roots([1.0, -1.5, 0.0, 0.5 - y])
+        u = min(r.real for r in roots if abs(r.imag) < 1e-9 and -1e-12 <= r.real <= 1 + 1e-12)
+        out.append(100 * (1 - max(u, 0.0) ** 3))
+    return np.array(out)
+
+
+TRUTH["Baker-Lonsdale"] = (lambda t: _baker_lonsdale_pct(t, 0.0019), {"kBL": 0.0019})
 
 
 def _fits(t, pct):
@@ -33,9 +51,11 @@ def test_noise_free_data_give_back_the_parameters(model):
     for name, value in params.items():
         assert fit.params[name] == pytest.approx(value, rel=1e-6), name
     assert fit.r2 == pytest.approx(1.0, abs=1e-9)
-    if model == "first-order":  # Weibull with beta = 1 is the same curve: the two tie at round-off
-        assert fits["Weibull"].params["beta"] == pytest.approx(1.0, rel=1e-6)
-        assert {fit.rank, fits["Weibull"].rank} == {1, 2}
+    if model in TIES:  # Weibull with beta = 1 and Hopfenberg with n = 3 are the same curves
+        other, special = TIES[model]
+        for name, value in special.items():
+            assert fits[other].params[name] == pytest.approx(value, rel=1e-6)
+        assert {fit.rank, fits[other].rank} == {1, 2}
     else:
         assert fit.rank == 1  # an exact fit has the lowest AIC
 
@@ -50,8 +70,19 @@ def test_korsmeyer_peppas_uses_the_first_60_percent_and_matches_a_log_log_line()
     assert fit.params["n"] == pytest.approx(slope, rel=1e-6)
     assert fit.params["kKP"] == pytest.approx(math.exp(intercept), rel=1e-6)
     assert fit.rank is None and "not comparable" in fit.note
-    low = _fits(t, 0.2 * t ** 0.9)["Korsmeyer-Peppas"]  # the whole curve stays below 60 %: ranked
-    assert low.rank == 1 and low.note == ""
+    low = _fits(t, 0.2 * t ** 0.9)  # the whole curve stays below 60 %: ranked (Peppas-Sahlin with k2 = 0 ties)
+    assert low["Korsmeyer-Peppas"].note == "" and {low["Korsmeyer-Peppas"].rank, low["Peppas-Sahlin"].rank} == {1, 2}
+    assert low["Peppas-Sahlin"].params["k2"] == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("k1, k2, m", [(3.1, 0.05, 0.42), (1.2, -0.0008, 0.8)])
+def test_peppas_sahlin_gives_back_fickian_and_relaxation_terms_of_either_sign(k1, k2, m):
+    t = T_MIN
+    pct = np.minimum(k1 * t ** m + k2 * t ** (2 * m), 100.0)
+    fit = _fits(t, pct)["Peppas-Sahlin"]
+    early = (t > 0) & (pct <= 60)
+    assert fit.n_points == int(early.sum())
+    assert [fit.params[p] for p in ("k1", "k2", "m")] == pytest.approx([k1, k2, m], rel=1e-6)
 
 
 def test_noisy_fits_agree_with_scipy_curve_fit_and_goodness_of_fit_recomputed():
@@ -65,6 +96,9 @@ def test_noisy_fits_agree_with_scipy_curve_fit_and_goodness_of_fit_recomputed():
         "Hixson-Crowell": (lambda x, k: 100 * (1 - np.clip(1 - k * x, 0, None) ** 3), [0.002], ("kHC",)),
         "Higuchi": (lambda x, k: k * np.sqrt(x), [1.0], ("kH",)),
         "zero-order": (lambda x, k: k * x, [1.0], ("k0",)),
+        "Hopfenberg": (lambda x, k, n: 100 * (1 - np.clip(1 - k * x, 0, None) ** n), [0.003, 2.0], ("kHB", "n")),
+        "Gompertz": (lambda x, a, b: 100 * np.exp(-a * x ** -b), [60.0, 1.0], ("alpha", "beta")),
+        "Baker-Lonsdale": (_baker_lonsdale_pct, [0.002], ("kBL",)),
     }
     for model, (f, p0, names) in checks.items():
         popt, _ = curve_fit(f, t, pct, p0=p0, method="trf", xtol=1e-14, ftol=1e-14, gtol=1e-14)
