@@ -255,6 +255,25 @@ class IcoTerm:
         log.debug("ICO %.6g, PCG iterations %s, %.3f s", result.value, result.iterations.tolist(), result.seconds)
         return result
 
+    def state(self) -> dict[str, np.ndarray]:
+        """What a resumed run needs to continue as this one would: the warm-start solutions of the last
+        evaluation (``warm_L`` per layer; they decide where each PCG solve starts, so its result to within
+        the tolerance) and the counters (``evaluations``, ``iterations``, ``seconds``). The arrays are the
+        term's own, not copies: an evaluation replaces them and never writes into them."""
+        state = {"evaluations": np.array(self.evaluations), "iterations": self.iterations.copy(),
+                 "seconds": np.array(self.seconds)}
+        for l, u in enumerate(self._warm or ()):
+            state[f"warm_{l}"] = u
+        return state
+
+    def restore(self, state: dict[str, np.ndarray]) -> None:
+        """Continue from a `state` of a term with the same grid and configuration."""
+        warm = [state[f"warm_{l}"] for l in range(self.config.layers) if f"warm_{l}" in state]
+        self._warm = warm if len(warm) == self.config.layers else None
+        self.evaluations = int(state["evaluations"])
+        self.iterations = np.array(state["iterations"], dtype=int)
+        self.seconds = float(state["seconds"])
+
     def normalise_at(self, rho: np.ndarray) -> float:
         """Set the reference (the start design's J_fab) that later values are divided by; returns it."""
         value = self.evaluate(rho).value

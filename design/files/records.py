@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from collections.abc import Mapping
 from dataclasses import asdict, fields
 from pathlib import Path
@@ -30,9 +31,10 @@ CONFIG_FORMAT = 1
 """The layout of ``config.json`` this version writes: the `DesignConfig` fields and ``format``."""
 SUMMARY_FORMAT = 1
 """The layout of ``summary.json`` this version writes (`DesignSummary`)."""
-CHECKPOINT_FORMAT = 1
+CHECKPOINT_FORMAT = 2
 """The layout of ``checkpoint.npz`` this version writes: the `Checkpoint` arrays (the "lbfgs" optimiser's
-state prefixed ``lbfgs_``) and ``format``."""
+state prefixed ``lbfgs_``, the fabrication term's ``fab_``), ``beta``, ``status`` ("" while the run goes on)
+and ``format``."""
 
 
 def _layout(stored: Mapping[str, Any], current: int, what: str) -> int:
@@ -109,6 +111,14 @@ def load_config(out_dir: Path) -> DesignConfig:
     record = migrate_config(stored, str(out_dir / CONFIG))
     names = {f.name for f in fields(DesignConfig)}
     return DesignConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in record.items() if k in names})
+
+
+def stored_form(config: DesignConfig) -> dict[str, Any]:
+    """The fields of ``config`` as ``config.json`` holds them and `load_config` reads them (JSON values,
+    `migrate_config`): two configurations run alike when their stored forms are equal."""
+    record = migrate_config(json.loads(json.dumps({"format": CONFIG_FORMAT, **asdict(config)})))
+    del record["format"]
+    return record
 
 
 def save_config(out_dir: Path, config: DesignConfig) -> None:
@@ -234,7 +244,14 @@ def _checkpoint_0_to_1(stored: dict[str, Any]) -> dict[str, Any]:
     return record
 
 
-_CHECKPOINT_UPGRADES = {0: _checkpoint_0_to_1}
+def _checkpoint_1_to_2(stored: dict[str, Any]) -> dict[str, Any]:
+    """Layout 1 did not record the objective's beta (NaN: the beta of its stage), how the optimisation ended
+    ("": not known, judged from the evaluations) nor the fabrication term's state (none: its warm starts
+    begin again)."""
+    return dict(stored, format=np.array(2), beta=np.array(np.nan), status=np.array(""))
+
+
+_CHECKPOINT_UPGRADES = {0: _checkpoint_0_to_1, 1: _checkpoint_1_to_2}
 """``layout -> function`` making the next layout of ``checkpoint.npz``; one entry per format change."""
 
 
@@ -251,22 +268,70 @@ def migrate_checkpoint(stored: Mapping[str, np.ndarray], what: str = CHECKPOINT)
 
 
 def load_checkpoint(path: Path) -> Checkpoint:
-    """The `Checkpoint` in a ``checkpoint.npz`` (`migrate_checkpoint`)."""
-    with np.load(path) as data:
-        record = migrate_checkpoint({name: data[name] for name in data.files}, str(path))
-    return Checkpoint(x=record["x"], best_x=record["best_x"], best_value=float(record["best_value"]),
-                      stage=int(record["stage"]), history=record["history"],
-                      lbfgs={k[len("lbfgs_"):]: v for k, v in record.items() if k.startswith("lbfgs_")})
+    """The `Checkpoint` in a ``checkpoint.npz`` (`migrate_checkpoint`).
+
+    Raises
+    ------
+    DesignError
+        When the file cannot be read as a checkpoint (empty, truncated, not an ``.npz``, an array missing or
+        of the wrong kind), naming the file.
+    """
+    what = str(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            stored = {name: data[name] for name in data.files}
+        record = migrate_checkpoint(stored, what)
+        status = str(record["status"])
+        checkpoint = Checkpoint(
+            x=np.asarray(record["x"], float).ravel(), best_x=np.asarray(record["best_x"], float).ravel(),
+            best_value=float(record["best_value"]), stage=int(record["stage"]),
+            history=np.asarray(record["history"], float).reshape(-1, len(HISTORY_COLUMNS)),
+            lbfgs={k[len("lbfgs_"):]: v for k, v in record.items() if k.startswith("lbfgs_")},
+            beta=float(record["beta"]), status=DesignStatus(status) if status else None,
+            fab={k[len("fab_"):]: v for k, v in record.items() if k.startswith("fab_")})
+    except DesignError:
+        raise
+    except (OSError, EOFError, ValueError, KeyError, TypeError, IndexError, zipfile.BadZipFile) as exc:
+        # what np.load and the record's arrays raise on an empty, truncated or foreign file
+        raise DesignError(f"{what}: not a readable design checkpoint ({type(exc).__name__}: "
+                          f"{exc or 'empty or truncated'}); restore it or start a new run") from exc
+    if checkpoint.x.shape != checkpoint.best_x.shape:
+        raise DesignError(f"{what}: x and best_x differ in size ({checkpoint.x.size}, {checkpoint.best_x.size})")
+    return checkpoint
 
 
 def save_checkpoint(path: Path, checkpoint: Checkpoint) -> None:
-    """Write a `Checkpoint` to ``path`` via a temporary file and a rename, so a crash leaves the old file.
+    """Write a `Checkpoint` to ``path``: a temporary file, flushed to the disk, then renamed over ``path``,
+    so a crash or a full disk leaves the previous checkpoint and no partial file.
 
     Uncompressed: compressing the two design-variable arrays (17 MB each at 128^3) would cost
     more time per evaluation than writing them plainly.
+
+    Raises
+    ------
+    DesignError
+        When the file cannot be written (a read-only folder, a full disk), naming it; the temporary file is
+        removed.
     """
+    path = Path(path)
     tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, format=CHECKPOINT_FORMAT, x=checkpoint.x, best_x=checkpoint.best_x,
-             best_value=checkpoint.best_value, stage=checkpoint.stage, history=checkpoint.history,
-             **{f"lbfgs_{k}": v for k, v in checkpoint.lbfgs.items()})
-    os.replace(tmp, path)
+    status = "" if checkpoint.status is None else str(checkpoint.status)
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, format=CHECKPOINT_FORMAT, x=checkpoint.x, best_x=checkpoint.best_x,
+                     best_value=checkpoint.best_value, stage=checkpoint.stage, history=checkpoint.history,
+                     beta=checkpoint.beta, status=status,
+                     **{f"lbfgs_{k}": v for k, v in checkpoint.lbfgs.items()},
+                     **{f"fab_{k}": v for k, v in checkpoint.fab.items()})
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        if not isinstance(exc, OSError):
+            raise
+        raise DesignError(f"cannot write the checkpoint {path}: {exc.strerror or exc} (a read-only folder or a "
+                          "full disk?); the previous checkpoint is kept") from exc

@@ -19,7 +19,18 @@ import numpy as np
 
 from design.errors import DesignError
 from design.files.outputs import DesignOutputs, write_outputs
-from design.files.records import CHECKPOINT, CONFIG, SUMMARY, load_checkpoint, load_config, save_checkpoint, save_config
+from design.files.records import (
+    CHECKPOINT,
+    CONFIG,
+    SUMMARY,
+    DesignSummary,
+    load_checkpoint,
+    load_config,
+    load_summary,
+    save_checkpoint,
+    save_config,
+    stored_form,
+)
 from design.files.targets_io import load_problem
 from design.inverse.multistart import coarse_start, refine_start, refinement_phase, start_name
 from design.inverse.optimize import (
@@ -28,10 +39,11 @@ from design.inverse.optimize import (
     StartDesign,
     build_objective,
     optimise,
+    restore_objective,
     with_phase,
 )
-from design.inverse.problem import DesignConfig
-from design.inverse.status import DesignStatus
+from design.inverse.problem import DesignConfig, Problem
+from design.inverse.status import FINISHED, DesignStatus
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +64,7 @@ class DesignResult:
         Objective evaluations over all sessions of the run (resumes included).
     best_value : float
     outputs : DesignOutputs
+    unchanged : bool
     """
 
     out_dir: Path
@@ -59,6 +72,8 @@ class DesignResult:
     iterations: int
     best_value: float
     outputs: DesignOutputs
+    unchanged: bool = False
+    """True for a resumed run that had already finished with its outputs written: nothing was done."""
 
 
 class CheckpointFile:
@@ -94,6 +109,8 @@ class CheckpointFile:
             return
         self._writer.join()
         self._writer, error, self._writer_error = None, self._writer_error, None
+        if isinstance(error, DesignError):  # save_checkpoint's own message names the file
+            raise error
         if error is not None:
             raise DesignError(f"cannot write checkpoint {self.path}: {error}") from error
 
@@ -139,6 +156,75 @@ def _multistart(config: DesignConfig, out_dir: Path, on_iteration: IterationCall
     return refine_start(x_coarse, dx_coarse)
 
 
+def _resume_config(out_dir: Path, stored: DesignConfig, config: DesignConfig | None) -> DesignConfig:
+    """The configuration a resume runs with: the stored one, whose evaluation limit ``config`` may raise;
+    any other difference is refused."""
+    if config is None or config == stored:
+        return stored
+    given, kept = stored_form(config), stored_form(stored)  # as config.json holds them, migrated alike
+    differ = [name for name in kept if given.get(name) != kept[name]]
+    if not differ:
+        return stored
+    if differ != ["max_iter"] or config.max_iter < stored.max_iter:
+        shown = ", ".join(f"{name} {given.get(name)!r} (stored {kept[name]!r})" for name in differ)
+        raise DesignError(f"cannot resume {out_dir / CONFIG} with different settings: {shown}; a resume keeps the "
+                          "run's settings, except that it may raise max_iter")
+    return config
+
+
+def _finished(saved: Checkpoint, out_dir: Path, config: DesignConfig) -> bool:
+    """Whether the optimisation of a run is over and a resume has no evaluation to make: its last checkpoint
+    says it finished, unless it reached an evaluation limit that ``config`` raises. A checkpoint that did not
+    record how the run ended counts as finished when the run's summary says so for its evaluations."""
+    status = saved.status
+    if status is None:
+        summary = _complete_outputs(out_dir, saved)
+        status = None if summary is None else summary["status"]
+    if status not in FINISHED:
+        return False
+    return not (status == DesignStatus.MAX_ITER and len(saved.history) < config.max_iter)
+
+
+def _complete_outputs(out_dir: Path, saved: Checkpoint) -> DesignSummary | None:
+    """The run's summary when its outputs are those of ``saved`` (``summary.json``, written last, names the
+    status and evaluation count the checkpoint holds), else None."""
+    try:
+        summary = load_summary(out_dir)
+    except (OSError, ValueError, DesignError):
+        return None
+    if summary.get("iterations") != len(saved.history):
+        return None
+    if saved.status is not None and summary.get("status") != saved.status:
+        return None
+    return summary
+
+
+def _problem(config: DesignConfig, out_dir: Path) -> Problem:
+    """The prepared problem, its feasibility report in ``feasibility.txt`` (written when it changes)."""
+    problem = load_problem(config)
+    text = problem.feasibility.text() + "\n"
+    path = out_dir / FEASIBILITY
+    if not path.is_file() or path.read_text() != text:
+        path.write_text(text)
+    if not problem.feasibility.feasible and not config.allow_infeasible:
+        raise DesignError(problem.feasibility.text())
+    return problem
+
+
+def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint) -> DesignResult:
+    """The outputs of a run whose optimisation finished, from its last checkpoint: its best design, history
+    and status, with the objective as the run left it (`restore_objective`: the final beta)."""
+    problem = _problem(config, out_dir)
+    objective = build_objective(problem, config)
+    restore_objective(objective, saved, config)
+    log.info("%s: optimisation finished (%s); writing its outputs", out_dir, saved.status)
+    best = np.asarray(saved.best_x, float).reshape(problem.space.var_shape)
+    history = [list(row) for row in saved.history]
+    outputs = write_outputs(out_dir, problem, objective, best, history, config, status=saved.status,
+                            session_seconds=0.0)
+    return DesignResult(out_dir, saved.status, len(history), float(saved.best_value), outputs)
+
+
 def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration: IterationCallback | None = None,
                should_stop: Callable[[], bool] | None = None, resume: bool = False,
                start: StartDesign | None = None) -> DesignResult:
@@ -147,7 +233,8 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     Parameters
     ----------
     config : DesignConfig or None
-        The run's settings; None with ``resume=True`` reuses the stored ``config.json``.
+        The run's settings; None with ``resume=True`` reuses the stored ``config.json``, which a resume's
+        ``config`` may differ from only by a higher ``max_iter`` (then stored).
     out_dir : str or Path
         The run folder; must not hold a run unless resuming.
     on_iteration : callable, optional
@@ -158,7 +245,9 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         Polled before every evaluation; True stops cleanly (best design still written).
     resume : bool
         Continue from ``checkpoint.npz``: exactly where the run stopped with the "lbfgs" optimiser;
-        with nlopt's, from the last evaluated design with an empty memory.
+        with nlopt's, from the last evaluated design with an empty memory. A run whose optimisation
+        finished is not continued (unless its evaluation limit is raised): with its outputs written it is
+        left as it is (``unchanged``), else its outputs are written from its last checkpoint.
     start : callable, optional
         ``start(objective, problem)`` returns the start variables of a new run (variable shape);
         default the uniform start of section 5.2 (`DesignObjective.uniform_start`), or for
@@ -174,11 +263,24 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         On an invalid configuration, an infeasible target, or a resume mismatch.
     """
     out_dir = Path(out_dir)
+    ckpt = out_dir / CHECKPOINT
+    saved = None
     if resume:
         stored = load_config(out_dir)
-        if config is not None and config != stored:
-            raise DesignError(f"cannot resume {out_dir} with a different configuration; stored: {stored}")
-        config = stored
+        config = _resume_config(out_dir, stored, config)
+        if ckpt.exists():
+            saved = load_checkpoint(ckpt)
+        if saved is not None and _finished(saved, out_dir, config):
+            summary = _complete_outputs(out_dir, saved)
+            if summary is not None:
+                log.info("%s already finished (%s after %d evaluations): nothing to do", out_dir, summary["status"],
+                         len(saved.history))
+                return DesignResult(out_dir, DesignStatus(summary["status"]), len(saved.history),
+                                    float(saved.best_value), DesignOutputs(out_dir / SUMMARY, summary), unchanged=True)
+            if saved.status is not None:  # the optimisation ended, its outputs did not all get written
+                return _rewrite_outputs(out_dir, stored, saved)
+        if config != stored:  # a raised evaluation limit
+            save_config(out_dir, config)
     else:
         if config is None:
             raise DesignError("a configuration is required to start a new design run")
@@ -186,15 +288,9 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
             raise DesignError(f"{out_dir} already holds a design run; resume it or choose another folder")
         out_dir.mkdir(parents=True, exist_ok=True)
         save_config(out_dir, config)
-    problem = load_problem(config)
-    (out_dir / FEASIBILITY).write_text(problem.feasibility.text() + "\n")
-    if not problem.feasibility.feasible and not config.allow_infeasible:
-        raise DesignError(problem.feasibility.text())
+    problem = _problem(config, out_dir)
     objective = build_objective(problem, config)
-    ckpt = out_dir / CHECKPOINT
-    saved = None
-    if resume and ckpt.exists():
-        saved = load_checkpoint(ckpt)
+    if saved is not None:
         log.info("resuming %s at evaluation %d", out_dir, len(saved.history))
     if saved is None and start is None and config.starts > 1:  # coarse-to-fine multi-start
         start = _multistart(config, out_dir, on_iteration, should_stop)

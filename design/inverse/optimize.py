@@ -91,6 +91,14 @@ class Checkpoint:
     lbfgs : dict of str to ndarray
         The "lbfgs" optimiser's state (`design.inverse.lbfgs.Lbfgs.state`) when a trial point is pending,
         else empty.
+    beta : float
+        The projection steepness of the objective at the checkpoint: the beta the outputs of a finished
+        run are computed at. NaN when not recorded (then the beta of ``stage``).
+    status : DesignStatus or None
+        How the optimisation ended (the last checkpoint of a session), None while it runs.
+    fab : dict of str to ndarray
+        The fabrication term's state (`design.inverse.spaces.FabTerm.state`: the ICO term's warm starts
+        and counters), empty without one.
     """
 
     x: np.ndarray
@@ -99,6 +107,9 @@ class Checkpoint:
     stage: int
     history: np.ndarray
     lbfgs: dict[str, np.ndarray] = field(default_factory=dict)
+    beta: float = float("nan")
+    status: DesignStatus | None = None
+    fab: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 class CheckpointStore(Protocol):
@@ -245,9 +256,10 @@ class _Run:
             x.flags.writeable = False  # a view of the run's own variables
             self.on_iteration(self.k, x, self.terms)
 
-    def checkpoint(self, wait: bool = True) -> None:
-        """Hand the current and best variables, the history, the stage and the "lbfgs" optimiser's
-        state (when a trial is pending) to the store.
+    def checkpoint(self, wait: bool = True, status: DesignStatus | None = None) -> None:
+        """Hand the current and best variables, the history, the stage, the objective's beta, the "lbfgs"
+        optimiser's state (when a trial is pending), the fabrication term's state and, at the end of a
+        session, its ``status`` to the store.
 
         With ``wait=False`` the store may write while the next evaluation runs (the optimiser's 2 m N
         doubles take seconds to write at 128^3). The arrays are handed over as
@@ -258,9 +270,11 @@ class _Run:
         if self.last_x is None:
             return
         state = {} if self.lbfgs is None else dict(self.lbfgs.state())
+        term = self.objective.space.fab_term
         self.store.save(Checkpoint(x=self.last_x, best_x=self.best_x, best_value=self.best_value, stage=self.stage,
                                    history=np.array(self.history, dtype=float).reshape(-1, len(HISTORY_COLUMNS)),
-                                   lbfgs=state), wait=wait)
+                                   lbfgs=state, beta=float(self.objective.beta), status=status,
+                                   fab={} if term is None else term.state()), wait=wait)
 
 
 def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> DesignStatus:
@@ -385,6 +399,16 @@ def build_objective(problem: Problem, config: DesignConfig) -> DesignObjective:
                                                  / problem.target.total_time_mm)))
 
 
+def restore_objective(objective: DesignObjective, saved: Checkpoint, config: DesignConfig) -> None:
+    """Put ``objective`` in the state the run of ``saved`` left it: its beta (the one a finished run's
+    outputs are computed at; for a checkpoint that did not record it, the beta of its stage) and the
+    fabrication term's warm starts and counters, so that a resumed run repeats the uninterrupted one."""
+    stages = beta_stages(config)
+    objective.beta = saved.beta if np.isfinite(saved.beta) else stages[min(int(saved.stage), len(stages) - 1)][0]
+    if saved.fab and objective.space.fab_term is not None:
+        objective.space.fab_term.restore(saved.fab)
+
+
 def optimise(objective: DesignObjective, problem: Problem, config: DesignConfig, store: CheckpointStore, *,
              saved: Checkpoint | None = None, start: StartDesign | None = None,
              on_iteration: IterationCallback | None = None,
@@ -426,16 +450,21 @@ def optimise(objective: DesignObjective, problem: Problem, config: DesignConfig,
         x0 = objective.uniform_start(problem.start_region)
     run = _Run(objective, store, config, len(history), history, on_iteration, should_stop)
     lbfgs_state = None
+    stages = beta_stages(config)
     if saved is not None:
         run.best_x = saved.best_x.ravel().copy()
+        run.last_x = saved.x.ravel().copy()
         run.best_value = float(saved.best_value)
         run.stage = int(saved.stage)
+        restore_objective(objective, saved, config)
         if config.optimizer == "lbfgs":  # its run continues from its saved state, else from the best
             lbfgs_state = dict(saved.lbfgs) or None
             x0 = run.best_x.reshape(problem.space.var_shape)
-    status = DesignStatus.MAX_ITER if run.k >= config.max_iter else DesignStatus.STALLED  # no stage left to run
+    # with no stage left to run, the status the run ended with
+    status = (saved.status if saved is not None and saved.status is not None and saved.status.finished
+              else DesignStatus.MAX_ITER if run.k >= config.max_iter else DesignStatus.STALLED)
     start, resume_stage = x0.ravel().copy(), run.stage
-    for i, (beta, stage_end) in enumerate(beta_stages(config)):
+    for i, (beta, stage_end) in enumerate(stages):
         if i < resume_stage or run.k >= stage_end:
             continue
         state = lbfgs_state if i == resume_stage else None
@@ -454,7 +483,7 @@ def optimise(objective: DesignObjective, problem: Problem, config: DesignConfig,
             run.stage = i + 1
         if not status.finished:
             break
-    run.checkpoint()
+    run.checkpoint(status=status)
     run.lbfgs = None  # its 2 m N doubles are not needed for the outputs
     best = (run.best_x if run.best_x is not None else x0.ravel()).reshape(problem.space.var_shape)
     return Outcome(status, run.k, float(run.best_value), best, history, time.perf_counter() - run.session_t0)

@@ -25,7 +25,8 @@ class FabTerm(Protocol):
 
     ``__call__(rho)`` returns the value and its gradient with respect to ``rho`` (same shape);
     ``normalise_at(rho)`` fixes the value that divides it (the start design's), ``seconds`` is the
-    time spent in it so far. `design.fabrication.ico.IcoTerm` (section 3.6) implements it.
+    time spent in it so far; ``state()`` and ``restore(state)`` carry what a resumed run needs (warm
+    starts, counters) through a checkpoint. `design.fabrication.ico.IcoTerm` (section 3.6) implements it.
     """
 
     name: str
@@ -34,6 +35,10 @@ class FabTerm(Protocol):
     def __call__(self, rho: np.ndarray) -> tuple[float, np.ndarray]: ...
 
     def normalise_at(self, rho: np.ndarray) -> float: ...
+
+    def state(self) -> dict[str, np.ndarray]: ...
+
+    def restore(self, state: dict[str, np.ndarray]) -> None: ...
 
 
 @dataclass(frozen=True)

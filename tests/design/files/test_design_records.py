@@ -34,7 +34,7 @@ def test_every_record_of_a_run_carries_its_format(tmp_path):
     assert json.loads((tmp_path / "config.json").read_text())["format"] == CONFIG_FORMAT == 1
     assert json.loads((tmp_path / "summary.json").read_text())["format"] == SUMMARY_FORMAT == 1
     with np.load(tmp_path / "checkpoint.npz") as saved:
-        assert int(saved["format"]) == CHECKPOINT_FORMAT == 1
+        assert int(saved["format"]) == CHECKPOINT_FORMAT == 2
     assert load_config(tmp_path) == DesignConfig(max_iter=4, **SMALL)
     summary = load_summary(tmp_path)
     assert summary["status"] is DesignStatus.MAX_ITER and summary["iterations"] == 4
@@ -74,13 +74,13 @@ def test_a_format_less_checkpoint_of_the_oldest_layout_reads_with_its_gaps_fille
     ckpt = load_checkpoint(tmp_path / "checkpoint.npz")
     assert ckpt.history.shape == (2, len(HISTORY_COLUMNS)) and list(ckpt.history[:, 5]) == [0.0, 0.0]
     assert list(ckpt.history[:, 6]) == [0.3, 0.2] and ckpt.best_value == 3.0 and ckpt.stage == 0
-    assert ckpt.lbfgs == {}
+    assert ckpt.lbfgs == {} and ckpt.fab == {} and np.isnan(ckpt.beta) and ckpt.status is None  # not recorded
     newer = Checkpoint(np.zeros(2), np.zeros(2), 1.0, 0, np.zeros((1, len(HISTORY_COLUMNS))))
     save_checkpoint(tmp_path / "new.npz", newer)
     with np.load(tmp_path / "new.npz") as saved:
         arrays = dict(saved)
-    np.savez(tmp_path / "new.npz", **dict(arrays, format=2))
-    with pytest.raises(DesignError, match="format 2 is newer"):
+    np.savez(tmp_path / "new.npz", **dict(arrays, format=3))
+    with pytest.raises(DesignError, match="format 3 is newer"):
         load_checkpoint(tmp_path / "new.npz")
 
 

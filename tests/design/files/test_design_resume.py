@@ -1,0 +1,148 @@
+"""What a design resume guarantees: a finished run is left as it is, outputs cut short are written from the
+finished state (at its final beta), settings cannot change, an ico run resumes exactly, bad checkpoints."""
+import hashlib
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from design.errors import DesignError
+from design.files.records import CHECKPOINT, load_checkpoint, save_checkpoint
+from design.files.rundir import run_design
+from design.inverse.problem import DesignConfig
+
+SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)
+
+
+def _hashes(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory) -> Path:
+    """A finished nfc run with beta continuation (beta 3 -> 12 over 4 stages)."""
+    out = tmp_path_factory.mktemp("finished") / "run"
+    result = run_design(DesignConfig(max_iter=40, **SMALL), out)
+    assert result.status == "max_iter" and result.iterations == 40
+    return out
+
+
+def test_resuming_a_finished_run_changes_nothing(finished, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(finished, copy)
+    before = _hashes(copy)
+    mtimes = {p.name: p.stat().st_mtime_ns for p in copy.iterdir()}
+    result = run_design(None, copy, resume=True)
+    assert result.unchanged and result.status == "max_iter" and result.iterations == 40
+    assert _hashes(copy) == before
+    assert {p.name: p.stat().st_mtime_ns for p in copy.iterdir()} == mtimes  # not even rewritten
+    # the same configuration given again, or a higher limit on a converged run, is no reason to work
+    assert run_design(DesignConfig(max_iter=40, **SMALL), copy, resume=True).unchanged
+
+
+@pytest.mark.parametrize("lost", [("summary.json",), ("summary.json", "density.npz", "design.stl")])
+def test_outputs_cut_short_are_written_from_the_finished_state_at_its_final_beta(finished, tmp_path, lost):
+    copy = tmp_path / "copy"
+    shutil.copytree(finished, copy)
+    for name in lost:  # Ctrl-C while the outputs were written: summary.json, written last, is missing
+        (copy / name).unlink()
+    assert load_checkpoint(copy / CHECKPOINT).beta == pytest.approx(12.0)
+    result = run_design(None, copy, resume=True)
+    assert not result.unchanged and result.status == "max_iter" and result.iterations == 40
+    with np.load(finished / "density.npz") as a, np.load(copy / "density.npz") as b:
+        np.testing.assert_array_equal(a["rho"], b["rho"])  # projected at beta 12, not at the start's 3
+        np.testing.assert_array_equal(a["solid"], b["solid"])
+    original = json.loads((finished / "summary.json").read_text())
+    rewritten = json.loads((copy / "summary.json").read_text())
+    for key in ("rel_rmse_density", "rel_rmse_binary", "pieces", "volume_mm3", "iterations", "status"):
+        assert rewritten[key] == original[key], key
+    assert original["pieces"] >= 1
+    assert (copy / "design.stl").read_bytes() == (finished / "design.stl").read_bytes()
+
+
+def test_a_stale_summary_of_an_earlier_session_does_not_count_as_the_outputs(finished, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(finished, copy)
+    summary = json.loads((copy / "summary.json").read_text())
+    summary.update(status="stopped", iterations=5)  # a stopped session's summary; its resume was cut short
+    (copy / "summary.json").write_text(json.dumps(summary))
+    result = run_design(None, copy, resume=True)
+    assert not result.unchanged and json.loads((copy / "summary.json").read_text())["iterations"] == 40
+
+
+def test_a_resume_refuses_other_settings_and_may_raise_the_evaluation_limit(finished, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(finished, copy)
+    with pytest.raises(DesignError, match=r"resolution 32 \(stored 16\)"):
+        run_design(DesignConfig(max_iter=40, **dict(SMALL, resolution=32)), copy, resume=True)
+    with pytest.raises(DesignError, match="max_iter 6 \\(stored 40\\)"):
+        run_design(DesignConfig(max_iter=6, **SMALL), copy, resume=True)
+    result = run_design(DesignConfig(max_iter=43, **SMALL), copy, resume=True)
+    assert not result.unchanged and result.iterations == 43
+    assert json.loads((copy / "config.json").read_text())["max_iter"] == 43
+
+
+def _ico(max_iter: int) -> DesignConfig:
+    return DesignConfig(target="sphere", space="ico", resolution=16, radius_vox=2.0, layers=4, w_fab=50.0,
+                        max_iter=max_iter, checkpoint_every=4)
+
+
+def test_an_interrupted_ico_run_resumes_exactly(tmp_path):
+    """The ICO term's warm starts (each layer's last solution) are part of the checkpoint: without them the
+    resumed PCG solves start elsewhere and the run drifts from the uninterrupted one."""
+    whole = run_design(_ico(14), tmp_path / "whole")
+    assert whole.iterations == 14
+
+    def interrupt(k, x, terms):
+        if k == 6:
+            raise KeyboardInterrupt
+
+    first = run_design(_ico(14), tmp_path / "cut", on_iteration=interrupt)
+    assert first.status == "interrupted" and first.iterations == 6
+    run_design(None, tmp_path / "cut", resume=True)
+    a = np.loadtxt(tmp_path / "whole" / "history.csv", delimiter=",", skiprows=1)
+    b = np.loadtxt(tmp_path / "cut" / "history.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(b[:, 1:5], a[:, 1:5], rtol=1e-9, atol=0)  # J, J_fit, J_binary, J_fab
+    sa = json.loads((tmp_path / "whole" / "summary.json").read_text())["ico"]
+    sb = json.loads((tmp_path / "cut" / "summary.json").read_text())["ico"]
+    assert sa["pcg_iterations_mean"] == sb["pcg_iterations_mean"]
+
+
+def test_an_ico_run_cut_by_its_limit_continues_exactly_with_a_higher_one(tmp_path):
+    whole = run_design(_ico(12), tmp_path / "whole")
+    run_design(_ico(7), tmp_path / "cut")
+    assert run_design(_ico(12), tmp_path / "cut", resume=True).iterations == whole.iterations
+    a = np.loadtxt(tmp_path / "whole" / "history.csv", delimiter=",", skiprows=1)
+    b = np.loadtxt(tmp_path / "cut" / "history.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(b[:, 1:5], a[:, 1:5], rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("content", [b"", b"PK\x03\x04 truncated", None])
+def test_an_empty_or_truncated_checkpoint_is_one_clear_error(finished, tmp_path, content):
+    copy = tmp_path / "copy"
+    shutil.copytree(finished, copy)
+    data = (copy / CHECKPOINT).read_bytes()
+    (copy / CHECKPOINT).write_bytes(data[: len(data) // 2] if content is None else content)
+    with pytest.raises(DesignError, match=r"checkpoint\.npz: not a readable design checkpoint"):
+        run_design(None, copy, resume=True)
+
+
+def test_a_checkpoint_that_cannot_be_written_leaves_no_temporary_file(finished, tmp_path, monkeypatch):
+    saved = load_checkpoint(finished / CHECKPOINT)
+    path = tmp_path / CHECKPOINT
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr("os.fsync", full_disk)
+    with pytest.raises(DesignError, match=r"cannot write the checkpoint .*checkpoint\.npz: No space left on device"):
+        save_checkpoint(path, saved)
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.undo()
+    save_checkpoint(path, saved)
+    again = load_checkpoint(path)
+    assert again.status == "max_iter" and again.beta == saved.beta and len(again.history) == 40
+    assert [p.name for p in tmp_path.iterdir()] == [CHECKPOINT]
