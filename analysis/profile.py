@@ -10,9 +10,12 @@ Sousa Lobo 2001, "Modeling and comparison of dissolution profiles", Eur. J. Phar
   f2 >= 50 (an average difference of at most about 10 %) is read as "similar";
 - both curves are expressed in percent of the reference's total (its weighed mass when known, else its
   final value), at the same time points, time zero excluded, at most one point after 85 % released in
-  either curve (EMA; ``rule="both"`` gives the FDA reading), and at least 3 points;
+  either curve (EMA and FDA; ``rule="reference"``: in the reference, the WHO's; ``rule="both"``: in both,
+  the conventional reading of the FDA text), and at least 3 points (:mod:`analysis.regulatory` holds each
+  regulator's rule with its CV limits, for replicate units);
 - MDT = sum t_mid,j dM_j / sum dM_j and DE(T) = int_0^T M dt / (M_total T), both from the piecewise
-  linear curve through the samples, starting at (0, 0).
+  linear curve through the samples, joined to (0, 0) when it starts after time 0; an amount already
+  released at time 0 is a burst at time 0 (it enters sum dM_j with t = 0, and the area of DE).
 
 When the rules leave too few points, :func:`similarity` returns a result whose ``reason`` says why and
 whose f1/f2 are None.
@@ -39,7 +42,7 @@ GRID_POINTS = 8
 """Time points aimed for up to the reference's 85 % time when both curves are densely sampled."""
 DECREASE_TOLERANCE = 0.02
 """Largest drop of a cumulative curve below its running maximum accepted as noise, fraction of its maximum."""
-RULES = ("either", "both")
+RULES = ("either", "both", "reference")
 _NICE_STEPS_S = (1, 2, 5, 10, 15, 20, 30, 60, 120, 300, 600, 900, 1200, 1800, 3600, 7200, 10800, 21600, 43200)
 
 
@@ -276,8 +279,9 @@ def similarity(reference: ReleaseProfile, test: ReleaseProfile, *, times: Sequen
         The reference's 100 % (weighed mass), in its amount unit; default ``reference.amount_total``.
     cutoff_pct : float
         At most one point after this percent released (default 85).
-    rule : {"either", "both"}
-        The point after the cut-off is the first at which either curve (EMA) or both curves (FDA) exceed it.
+    rule : {"either", "both", "reference"}
+        The point after the cut-off is the first at which either curve (EMA, FDA, Canada, ANVISA), the
+        reference (WHO), or both curves (the conventional reading of the FDA text) exceed it.
 
     Returns
     -------
@@ -313,12 +317,16 @@ def similarity(reference: ReleaseProfile, test: ReleaseProfile, *, times: Sequen
         pts = pts[pts > 0]
     ref_pct = 100.0 * reference.at(pts) / total
     test_pct = 100.0 * test.at(pts) / total
-    over = (ref_pct > cutoff_pct) | (test_pct > cutoff_pct) if rule == "either" else \
-        (ref_pct > cutoff_pct) & (test_pct > cutoff_pct)
+    if rule == "either":
+        over = (ref_pct > cutoff_pct) | (test_pct > cutoff_pct)
+    elif rule == "reference":
+        over = ref_pct > cutoff_pct
+    else:
+        over = (ref_pct > cutoff_pct) & (test_pct > cutoff_pct)
     if over.any():
         last = int(np.flatnonzero(over)[0])
         if last + 1 < pts.size:
-            which = "either curve" if rule == "either" else "both curves"
+            which = {"either": "either curve", "reference": "the reference", "both": "both curves"}[rule]
             notes.append(f"{pts.size - last - 1} point(s) after the first point above {cutoff_pct:g} % in {which} "
                          f"dropped")
         pts, ref_pct, test_pct = pts[:last + 1], ref_pct[:last + 1], test_pct[:last + 1]
@@ -453,7 +461,8 @@ def mean_dissolution_time(profile: ReleaseProfile, *, until: float | None = None
     Parameters
     ----------
     profile : ReleaseProfile
-        Released amount from (0, 0); a curve that starts later is joined linearly to (0, 0).
+        Released amount; a curve that starts after time 0 is joined linearly to (0, 0); an amount already
+        released at time 0 (a burst) counts as released at time 0.
     until : float, optional
         Use the curve up to this time (default: its end), in ``profile.time_unit``.
 
@@ -462,6 +471,15 @@ def mean_dissolution_time(profile: ReleaseProfile, *, until: float | None = None
     float
         MDT in ``profile.time_unit``: the mean time at which the amount released by ``until`` left.
 
+    Examples
+    --------
+    Half released at once, the other half evenly over 10 min: MDT = (0 x 50 + 5 x 50) / 100 = 2.5 min.
+
+    >>> round(mean_dissolution_time(ReleaseProfile([0.0, 10.0], [50.0, 100.0], "min", "%")), 6)
+    2.5
+    >>> round(mean_dissolution_time(ReleaseProfile([1e-9, 10.0], [50.0, 100.0], "min", "%")), 6)
+    2.5
+
     Raises
     ------
     AnalysisError
@@ -469,7 +487,10 @@ def mean_dissolution_time(profile: ReleaseProfile, *, until: float | None = None
     """
     t, m = _from_zero(profile, until)
     dm = np.diff(m)
-    released = float(m[-1] - m[0])
+    # an amount already out at t = 0 (m[0], a burst) left at time 0: it adds nothing to the sum of
+    # t dM and all of itself to the sum of dM, so that a first sample at t = 0 and one at t -> 0+
+    # (joined linearly to (0, 0)) give the same MDT
+    released = float(m[-1])
     if not released > 0:
         raise AnalysisError(f"{profile.label}: nothing released by {t[-1]:g} {profile.time_unit}; MDT is undefined")
     return float(np.sum(0.5 * (t[1:] + t[:-1]) * dm) / released)

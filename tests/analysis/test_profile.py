@@ -217,3 +217,17 @@ def test_measurement_noise_below_the_tolerance_is_accepted():
     t = np.arange(0, 100.0)
     m = np.minimum(t / 50, 1) + 0.005 * np.sin(t)  # wiggles of 0.5 % of the maximum
     assert ReleaseProfile(t, m).released.shape == (100,)
+
+
+@pytest.mark.parametrize("t0", [0.0, 1e-9, 1e-6])
+def test_an_amount_out_at_time_zero_is_a_burst_at_time_zero_in_mdt_and_de(t0):
+    # 50 % at once, then 50 % evenly over 10 min: MDT = (0 x 50 + 5 x 50) / 100 = 2.5 min by the definition
+    # sum t_mid dM / sum dM; DE = area (50 x 10 + 50 x 10 / 2) / (100 x 10) = 75 %
+    burst = ReleaseProfile([t0, 10.0], [50.0, 100.0], "min", "%", 100.0)
+    assert mean_dissolution_time(burst) == pytest.approx(2.5, abs=1e-6)
+    assert dissolution_efficiency(burst) == pytest.approx(75.0, abs=1e-5)
+    # the same with samples in between and a later end: a burst of 30 %, then 70 % linearly over 20 min
+    t = np.array([t0, 5.0, 10.0, 20.0])
+    steady = ReleaseProfile(t, 30.0 + 70.0 * np.minimum(t, 20.0) / 20.0, "min", "%", 100.0)
+    assert mean_dissolution_time(steady) == pytest.approx((0 * 30 + 10.0 * 70) / 100.0, abs=1e-6)
+    assert mean_dissolution_time(steady, until=10.0) == pytest.approx((5.0 * 35) / 65.0, abs=1e-6)
