@@ -10,7 +10,9 @@ from pyqtgraph.util.garbage_collector import GarbageCollector
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QApplication
 
+from labapp.errors import UsageError
 from labapp.gui.main_window import MainWindow
+from labapp.gui.syslibs import xcb_problem
 
 log = logging.getLogger(__name__)
 
@@ -34,10 +36,12 @@ def launch(data_dir: Path, simulate: bool, speed: float | None, sample: str, cal
     ``autostart`` starts a run at once (simulated: the object drops by itself); ``quit_after_s`` closes the
     window after that many seconds, saving ``screenshot`` (PNG) first (scripted, offscreen sessions).
     """
+    problem = None if QApplication.instance() else xcb_problem()
+    if problem:
+        raise UsageError(problem)
     app = QApplication.instance() or QApplication(sys.argv[:1])
     collector = gui_thread_garbage_collector()
     window = MainWindow(Path(data_dir), simulate=simulate, speed=speed, sample=sample)
-    window.resize(1500, 950)
     if calibration:
         window.controls.calibration.setText(calibration)
     window.show()

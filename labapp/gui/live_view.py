@@ -56,16 +56,24 @@ class LiveView(QWidget):
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addWidget(self.graphics, 1)
         layout.addWidget(self.caption)
+        self.graphics.ci.layout.setContentsMargins(0, 0, 0, 0)
+        self.view.sigResized.connect(self.fit)
 
     def set_frame(self, rgb: np.ndarray, caption: str = "") -> None:
         """Show an (H, W, 3) uint8 RGB frame."""
-        first = self._shape is None
+        new_shape = self._shape != rgb.shape[:2]
         self._shape = rgb.shape[:2]
         self.image.setImage(rgb, autoLevels=False, levels=(0, 255))
-        if first:
-            self.view.autoRange(padding=0.0)
+        if new_shape:
+            self.fit()
         self.caption.setText(caption)
         self._update_overlay()
+
+    def fit(self) -> None:
+        """Show the whole frame as large as the view allows (aspect kept): the range follows the image alone,
+        not the crop square or its mirror, which may reach past it. Called again whenever the view is resized."""
+        if self._shape is not None:
+            self.view.autoRange(padding=0.0, items=[self.image])
 
     def set_geometry(self, x: int, y: int, size: int, grid: int = 10, mirror_col: float | None = None) -> None:
         """Place the crop square (px) and set the grid size and mirror axis (None: the image centre)."""

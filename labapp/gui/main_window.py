@@ -1,16 +1,31 @@
 """The bench application's main window: a thin face over the engine.
 
 Every button calls the same Qt-free pieces the CLI uses (``Engine``, the jobs ``new_run``, ``resume_run`` and
-``new_series``, ``PreviewProcedure``); engine events come in through the :class:`EngineBridge`.
+``new_series``, ``PreviewProcedure``); engine events come in through the :class:`EngineBridge`. Nothing slow
+runs in the GUI thread: benches are built in a worker thread, procedures run in the engine's, and closing
+while something runs stops it and closes once it has finished.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
 import numpy as np
-from PySide6.QtCore import Qt, QTimer
-from PySide6.QtWidgets import QDockWidget, QMainWindow, QMessageBox, QPlainTextEdit, QSplitter, QTabWidget, QWidget
+from PySide6.QtCore import QRect, Qt, QTimer
+from PySide6.QtGui import QAction, QGuiApplication, QKeySequence
+from PySide6.QtWidgets import (
+    QDockWidget,
+    QFileDialog,
+    QMainWindow,
+    QMessageBox,
+    QPlainTextEdit,
+    QProgressBar,
+    QScrollArea,
+    QSplitter,
+    QTabWidget,
+    QWidget,
+)
 
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench
@@ -18,23 +33,41 @@ from labapp.acquisition.calseries import CalibrationProcedure
 from labapp.acquisition.clock import make_clock
 from labapp.acquisition.devices import make_bench
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import CalibrationLevel, Done, FrameStored, Phase, Preview, Prompt, PromptKind, StateChanged
-from labapp.acquisition.procedures import PreviewProcedure
+from labapp.acquisition.events import (
+    CalibrationLevel,
+    Done,
+    FrameStored,
+    Message,
+    Phase,
+    Preview,
+    Prompt,
+    PromptKind,
+    StateChanged,
+)
+from labapp.acquisition.procedures import PreviewProcedure, RunConfig
 from labapp.acquisition.simbench import SimulatedBench, resume_clock
 from labapp.acquisition.status import RunStatus
 from labapp.errors import UsageError
-from labapp.gui.bridge import EngineBridge, LogBridge
+from labapp.gui import persist
+from labapp.gui.bridge import BackgroundTask, EngineBridge, LogBridge
 from labapp.gui.calibration_wizard import CalibrationWizard
 from labapp.gui.design_launcher import DesignLauncher
 from labapp.gui.device_panel import SIMULATED, DevicePanel
 from labapp.gui.live_view import LiveView
-from labapp.gui.plots import PlotsPanel
-from labapp.gui.run_browser import RunBrowser
+from labapp.gui.plots import PlotsPanel, hmm
+from labapp.gui.run_browser import RunBrowser, interrupted_runs
 from labapp.gui.run_controls import RunControls
 from labapp.jobs.run import new_run, resumable, resume_run
 from labapp.jobs.series import new_series
 
 UI_MS = 100
+PREFERRED_SIZE = (1500, 950)
+"""The window's size where the screen has room; smaller screens get their available area."""
+TITLE_BAR_PX = 32
+"""Room left for the window manager's title bar when fitting the window to the screen."""
+LOG_HEIGHT_PX = 110
+GAP_FACTOR = 2.5
+"""A frame arriving more than this many intervals after the previous one marks a gap on the plots."""
 
 
 def decode_preview(data: bytes | None = None, path: str | None = None) -> np.ndarray | None:
@@ -58,6 +91,8 @@ class MainWindow(QMainWindow):
         Offer the simulated bench (SimulatedCamera + Heidolph emulator + a dissolving sample object).
     speed : float, optional
         Simulated time acceleration (``inf``: as fast as frames render).
+    sample : str
+        The simulated bench's sample object.
     """
 
     def __init__(self, data_dir: Path, simulate: bool = False, speed: float | None = None,
@@ -66,14 +101,21 @@ class MainWindow(QMainWindow):
         self.setWindowTitle("Shape from Release: bench" + (" (simulated)" if simulate else ""))
         self.data_dir = Path(data_dir)
         self.simulate, self.speed, self.sample = simulate, speed if simulate else None, sample
+        self.settings = persist.app_settings()
         self.engine = Engine(make_clock(self.speed))
         self.status = RunStatus()
         self.engine.subscribe(self.status.update)       # before the bridge: the status is current when a signal lands
         self.bridge = EngineBridge(self.engine, self)
         self.sim: SimulatedBench | None = None
         self.procedure = None
+        self.run_config: RunConfig | None = None
         self.latest_frame: str | None = None
         self.crop: tuple[int, int, int] | None = None
+        self.build_task: BackgroundTask | None = None
+        self._then: Callable[[Bench], None] | None = None
+        self._closed = False
+        self._close_ready = False
+        self._last_frame_t: float | None = None
 
         self.devices = DevicePanel(simulate)
         self.controls = RunControls(simulate)
@@ -85,32 +127,42 @@ class MainWindow(QMainWindow):
         self.messages = QPlainTextEdit()
         self.messages.setReadOnly(True)
         self.messages.setMaximumBlockCount(2000)
+        self.progress = QProgressBar()
+        self.progress.setMaximumWidth(360)
+        self.progress.setTextVisible(True)
+        self.progress.hide()
 
-        tabs = QTabWidget()
-        tabs.addTab(self.devices, "Devices")
-        tabs.addTab(self.controls, "Run")
-        tabs.addTab(self.wizard, "Calibration")
+        self.bench_tabs = QTabWidget()
+        for widget, title in ((self.devices, "Devices"), (self.controls, "Run"), (self.wizard, "Calibration")):
+            self.bench_tabs.addTab(_scrolled(widget), title)
         self.tabs = QTabWidget()
         self.tabs.addTab(self._live_page(), "Live")
         self.tabs.addTab(self.browser, "Runs")
         self.tabs.addTab(self.design, "Design")
         self.setCentralWidget(self.tabs)
-        dock = QDockWidget("bench", self)
-        dock.setWidget(tabs)
-        self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, dock)
-        log_dock = QDockWidget("event log", self)
-        log_dock.setWidget(self.messages)
-        self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, log_dock)
+        self.bench_dock = QDockWidget("bench", self)
+        self.bench_dock.setObjectName("bench")
+        self.bench_dock.setWidget(self.bench_tabs)
+        self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.bench_dock)
+        self.log_dock = QDockWidget("event log", self)
+        self.log_dock.setObjectName("event log")
+        self.log_dock.setWidget(self.messages)
+        self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.log_dock)
+        self.resizeDocks([self.log_dock], [LOG_HEIGHT_PX], Qt.Orientation.Vertical)
+        self.resizeDocks([self.bench_dock], [390], Qt.Orientation.Horizontal)
+        self._menus()
+        self.statusBar().addPermanentWidget(self.progress)
 
         self.bridge.frame.connect(self.on_frame)
         self.bridge.level.connect(self.on_level)
-        self.log_bridge = LogBridge(parent=self)          # driver reconnects/retries, engine warnings
+        self.log_bridge = LogBridge(loggers=("drivers", "labapp", "analysis"), parent=self)
         self.log_bridge.message.connect(self.on_message)
         self.bridge.preview.connect(self.on_preview)
         self.bridge.reading.connect(self.devices.show_reading)
         self.bridge.state.connect(self.on_state)
         self.bridge.prompt.connect(self.on_prompt)
         self.bridge.message.connect(self.on_message)
+        self.bridge.event.connect(self.on_event)
         self.bridge.done.connect(self.on_done)
         self.devices.connect_button.clicked.connect(self.connect_devices)
         self.controls.start_requested.connect(self.start_run)
@@ -123,36 +175,221 @@ class MainWindow(QMainWindow):
         self.browser.resume_requested.connect(self.resume_run)
         self.wizard.simulation.bench_calibration = lambda: self.controls.calibration.text().strip() or None
         self.wizard.simulation.simcal_activated.connect(self.set_simcal)
+        self.design.simcal_requested.connect(self.set_simcal)
         self.browser.design_requested.connect(self.design_from_run)
         self.live.crop_changed.connect(self.on_crop)
         self.timer = QTimer(self)
         self.timer.timeout.connect(self.refresh)
         self.timer.start(UI_MS)
+        self.close_timer = QTimer(self)
+        self.close_timer.timeout.connect(self._close_when_idle)
         self.statusBar().showMessage("idle")
         if simulate:
             self.crop = SimulatedBench.default_crop()
             self.live.set_geometry(*self.crop)
+        self.restore_settings()
+        self.fit_to_screen()
+        self.resume_box: QMessageBox | None = None
+        QTimer.singleShot(0, self.offer_resume)
 
+    # -- layout -------------------------------------------------------------------------------------------
     def _live_page(self) -> QWidget:
         split = QSplitter()
         split.addWidget(self.live)
         split.addWidget(self.plots)
-        split.setSizes([500, 500])
+        split.setStretchFactor(0, 1)
+        split.setStretchFactor(1, 1)
+        split.setChildrenCollapsible(False)
         return split
+
+    def _menus(self) -> None:
+        file_menu = self.menuBar().addMenu("&File")
+        for text, slot, shortcut in (("Open run...", self.open_run, QKeySequence.StandardKey.Open),
+                                     ("Load simulation calibration...", self.load_simcal, None),
+                                     ("Load method...", self.load_method, None),
+                                     ("Save method...", self.save_method, None),
+                                     ("Quit", self.close, QKeySequence.StandardKey.Quit)):
+            action = QAction(text, self)
+            action.triggered.connect(slot)
+            if shortcut is not None:
+                action.setShortcut(shortcut)
+            file_menu.addAction(action)
+        self.view_menu = self.menuBar().addMenu("&View")
+        for dock in (self.bench_dock, self.log_dock):
+            self.view_menu.addAction(dock.toggleViewAction())
+
+    def fit_to_screen(self, available: QRect | None = None) -> None:
+        """Size the window to :data:`PREFERRED_SIZE`, or to the screen's available area (less a title bar) where
+        that is smaller, and place it inside that area."""
+        if available is None:
+            screen = self.screen() or QGuiApplication.primaryScreen()
+            available = screen.availableGeometry()
+        width = min(PREFERRED_SIZE[0], available.width())
+        height = min(PREFERRED_SIZE[1], available.height() - TITLE_BAR_PX)
+        self.resize(width, height)
+        self.move(available.x() + (available.width() - width) // 2,
+                  available.y() + max(0, (available.height() - TITLE_BAR_PX - height) // 2))
+
+    # -- settings ---------------------------------------------------------------------------------------------
+    def restore_settings(self) -> None:
+        """The last run's settings and the last simulation calibration, as the previous session left them."""
+        last = persist.last_run(self.settings)
+        if last is not None:
+            self.apply_run_settings(*last)
+        simcal = str(self.settings.value(persist.LAST_SIMCAL, "") or "")
+        if simcal and Path(simcal).is_file():
+            try:
+                self.set_simcal(simcal)
+            except Exception as exc:      # a file changed since: say so, start without it
+                self.on_message("warning", f"the last simulation calibration {simcal} does not load: {exc}")
+
+    def apply_run_settings(self, config: RunConfig, calibration: str) -> None:
+        """Show ``config``'s run and bath settings (not the object's) and ``calibration`` in the forms."""
+        c = self.controls
+        c.name.setText(config.name)
+        c.interval.set_stored(config.interval_s)
+        c.max_hours.set_stored(config.max_duration_s)
+        c.stop_on_steady.setChecked(config.stop_on_steady)
+        for name, box in self.devices.bath_fields.items():
+            box.set_stored(getattr(config.bath, name))
+        if not calibration or Path(calibration).is_file():
+            c.calibration.setText(calibration)
+
+    def current_run_settings(self) -> RunConfig:
+        """The run controls' and device panel's settings (UsageError on a bad value)."""
+        return self.controls.config(self.devices.bath())
+
+    def save_method(self, path: str | None = None) -> Path | None:
+        """Save the run and bath settings and the calibration as a method template."""
+        try:
+            config = self.current_run_settings()
+        except Exception as exc:
+            self.on_message("error", f"cannot save the method: {exc}")
+            return None
+        if not path:
+            folder = self.data_dir / "methods"
+            folder.mkdir(parents=True, exist_ok=True)
+            path, _ = QFileDialog.getSaveFileName(self, "save method", str(folder / f"{config.name}{persist.METHOD_SUFFIX}"),
+                                                  f"method (*{persist.METHOD_SUFFIX})")
+            if not path:
+                return None
+        saved = persist.write_method(Path(path), config, self.controls.calibration.text().strip())
+        self.on_message("info", f"method saved: {saved}")
+        return saved
+
+    def load_method(self, path: str | None = None) -> bool:
+        """Fill the forms from a method template."""
+        if not path:
+            path, _ = QFileDialog.getOpenFileName(self, "load method", str(self.data_dir / "methods"),
+                                                  f"method (*{persist.METHOD_SUFFIX});;JSON (*.json)")
+            if not path:
+                return False
+        try:
+            config, calibration = persist.read_method(Path(path))
+        except UsageError as exc:
+            self.on_message("error", str(exc))
+            return False
+        self.apply_run_settings(config, calibration)
+        if calibration and not Path(calibration).is_file():
+            self.on_message("warning", f"{path}: its calibration {calibration} does not exist; choose one")
+        self.on_message("info", f"method loaded: {path}")
+        return True
+
+    def lock_settings(self, locked: bool) -> None:
+        """Make the run's and the bath's settings read-only while a procedure records."""
+        c, d = self.controls, self.devices
+        for widget in (c.name, c.object_name, c.object_mass, c.interval, c.max_hours, c.notes, c.calibration,
+                       *d.bath_fields.values()):
+            widget.setReadOnly(locked)
+        for widget in (c.stop_on_steady, c.auto_drop, d.camera, d.hotplate, d.connect_button):
+            widget.setEnabled(not locked and (widget is not c.auto_drop or self.simulate))
+        tip = "locked while a procedure records" if locked else ""
+        for widget in (c.name, c.interval, c.max_hours, *d.bath_fields.values()):
+            widget.setStatusTip(tip)
 
     # -- building benches ---------------------------------------------------------------------------------
     def make_bench(self) -> Bench:
-        """The bench the device panel describes (the simulated one is kept until the bath's water changes)."""
+        """The bench the device panel describes, built now in the calling thread (the simulated one is kept
+        until the bath's water changes). The window itself builds benches through :meth:`with_bench`."""
         if self.devices.camera_spec() == SIMULATED:
-            water_g = self.devices.bath().water_g
-            if self.sim is not None and self.sim.scene.water_g != water_g:
-                self.sim.close()
-                self.sim = None
-            if self.sim is None:
-                self.sim = SimulatedBench(self.engine.clock, sample=self.sample,
-                                          with_hotplate=self.devices.hotplate_spec() == SIMULATED, water_g=water_g)
+            if not self._sim_current(self.devices.bath().water_g):
+                self._set_sim(self._new_sim(self.devices.bath().water_g,
+                                            self.devices.hotplate_spec() == SIMULATED, self.engine.clock))
             return self.sim.bench()
         return make_bench(self.devices.camera_spec(), self.devices.hotplate_spec(), self.devices.settings())
+
+    def _sim_current(self, water_g: float) -> bool:
+        return self.sim is not None and self.sim.scene.water_g == water_g
+
+    def _new_sim(self, water_g: float, with_hotplate: bool, clock) -> SimulatedBench:
+        return SimulatedBench(clock, sample=self.sample, with_hotplate=with_hotplate, water_g=water_g)
+
+    def _set_sim(self, sim: SimulatedBench | None) -> None:
+        if self.sim is not None and self.sim is not sim:
+            self.sim.close()
+        self.sim = sim
+
+    @property
+    def building(self) -> bool:
+        """True while a bench is being built in the background."""
+        return self.build_task is not None and self.build_task.running
+
+    def with_bench(self, then: Callable[[Bench], None], doing: str = "connecting") -> None:
+        """Call ``then(bench)`` in the GUI thread with the device panel's bench, built in a worker thread (a
+        simulated bench takes seconds to build; opening real devices may wait on a port)."""
+        if self.building:
+            self.on_message("warning", "still building the bench; wait for it to finish")
+            return
+        try:
+            camera, hotplate, bath = self.devices.camera_spec(), self.devices.hotplate_spec(), self.devices.bath()
+            cam_settings = self.devices.settings()
+        except Exception as exc:
+            self.on_message("error", f"cannot build the bench: {exc}")
+            return
+        if camera == SIMULATED and self._sim_current(bath.water_g):
+            then(self.sim.bench())
+            return
+        clock = self.engine.clock
+
+        def build(progress):
+            if camera == SIMULATED:
+                return self._new_sim(bath.water_g, hotplate == SIMULATED, clock)
+            return make_bench(camera, hotplate, cam_settings)
+        self._then = then
+        self.build_task = BackgroundTask(build, self)
+        self.build_task.finished.connect(self._bench_built)
+        self.build_task.failed.connect(self._bench_failed)
+        self._set_connecting(True, doing)
+        self.build_task.start()
+
+    def _bench_built(self, built) -> None:
+        self._set_connecting(False)
+        then, self._then = self._then, None
+        if self._closed:
+            if isinstance(built, SimulatedBench):
+                built.close()
+            return
+        if isinstance(built, SimulatedBench):
+            self._set_sim(built)
+            built = built.bench()
+        if then is not None:
+            then(built)
+
+    def _bench_failed(self, message: str) -> None:
+        self._set_connecting(False)
+        self._then = None
+        self.on_message("error", f"cannot build the bench: {message}")
+
+    def _set_connecting(self, busy: bool, doing: str = "connecting") -> None:
+        button = self.devices.connect_button
+        if busy:
+            self._button_text = button.text()
+            button.setText(f"{doing}...")
+            self.statusBar().showMessage(f"{doing}... (building the bench)")
+        else:
+            button.setText(getattr(self, "_button_text", button.text()))
+        button.setEnabled(not busy)
+        self.controls.start_button.setEnabled(not busy and not self.engine.running)
 
     def _start(self, procedure) -> bool:
         if self.engine.running:
@@ -161,15 +398,17 @@ class MainWindow(QMainWindow):
         self.procedure = procedure
         self.engine.start(procedure)
         self.controls.set_running(True)
+        self.lock_settings(not isinstance(procedure, PreviewProcedure))
         return True
 
     # -- actions ------------------------------------------------------------------------------------------
     def connect_devices(self) -> None:
-        """Connect, one preview frame, one reading (in the engine's thread)."""
-        try:
-            self._start(PreviewProcedure(self.make_bench()))
-        except (ValueError, ImportError, OSError) as exc:
-            self.on_message("error", f"cannot build the bench: {exc}")
+        """Connect, one preview frame, one reading (the bench built in a worker, the procedure in the engine's
+        thread)."""
+        if self.engine.running:
+            self.on_message("warning", "the engine is busy; stop the current procedure first")
+            return
+        self.with_bench(lambda bench: self._start(PreviewProcedure(bench)), "connecting")
 
     def _calibration(self) -> BenchCalibration | None:
         text = self.controls.calibration.text().strip()
@@ -177,44 +416,66 @@ class MainWindow(QMainWindow):
 
     def start_run(self) -> None:
         """Start a run with the run controls' settings."""
+        if self.engine.running:
+            self.on_message("warning", "the engine is busy; stop the current procedure first")
+            return
         try:
             config = self.controls.config(self.devices.bath().on_clock(self.engine.clock.speed))
-            calibration, bench = self._calibration(), self.make_bench()
+            calibration = self._calibration()
         except Exception as exc:
             self.on_message("error", f"cannot start: {exc}")
             return
-        self.plots.clear()
-        self.plots.set_water(config.bath.water_g)
-        if calibration is not None:
-            g = calibration.geometry
-            self.live.set_geometry(g.x, g.y, g.size, g.grid, g.mirror_col)
+        self.with_bench(lambda bench: self._start_run(config, calibration, bench), "starting")
+
+    def _start_run(self, config: RunConfig, calibration: BenchCalibration | None, bench: Bench) -> None:
         try:
             proc = new_run(config, bench, self.data_dir, calibration)
         except UsageError as exc:
             self.on_message("error", f"cannot start: {exc}")
             return
-        self._start(proc)
+        self._prepare_plots(config)
+        if calibration is not None:
+            g = calibration.geometry
+            self.live.set_geometry(g.x, g.y, g.size, g.grid, g.mirror_col)
+        if self._start(proc):
+            persist.remember_run(self.settings, config, self.controls.calibration.text().strip())
+
+    def _prepare_plots(self, config: RunConfig | None) -> None:
+        self.run_config = config
+        self._last_frame_t = None
+        self.plots.clear()
+        if config is not None:
+            self.plots.set_water(config.bath.water_g)
+            self.plots.set_object_mass(config.object_mass_g)
+            self.plots.set_setpoint_band(config.bath.setpoint_c, config.bath.tolerance_c)
 
     def resume_run(self, folder: str) -> None:
         """Resume acquisition into an interrupted run folder."""
-        if self.engine.running:
+        if self.engine.running or self.building:
             self.on_message("warning", "the engine is busy; stop the current procedure first")
             return
         try:
-            simulated = resumable(folder).record.simulated
+            snap = resumable(folder)
+            simulated = snap.record.simulated
             if simulated != (self.devices.camera_spec() == SIMULATED):
                 raise UsageError(f"{folder} was recorded on a {'simulated' if simulated else 'real'} bench; "
                                  f"choose {'the simulated' if simulated else 'a real'} camera in the device panel")
             if simulated:
                 self.engine.clock = resume_clock(Path(folder), self.speed)
-                if self.sim is not None:
-                    self.sim.close()
-                    self.sim = None
-            proc = resume_run(Path(folder), self.make_bench(), self._calibration())
+                self._set_sim(None)
+            config = RunConfig.from_dict(snap.record.config) if snap.record.config else None
         except Exception as exc:
             self.on_message("error", f"cannot resume {folder}: {exc}")
             return
-        self.plots.clear()
+        self.with_bench(lambda bench: self._resume_run(folder, config, bench), "resuming")
+
+    def _resume_run(self, folder: str, config: RunConfig | None, bench: Bench) -> None:
+        try:
+            proc = resume_run(Path(folder), bench, self._calibration())
+        except Exception as exc:
+            self.on_message("error", f"cannot resume {folder}: {exc}")
+            return
+        self._prepare_plots(config)
         self.tabs.setCurrentIndex(0)
         self._start(proc)
 
@@ -231,7 +492,14 @@ class MainWindow(QMainWindow):
         the device panel's bath and the wizard's masses."""
         try:
             masses, bath = self.wizard.masses_g(), self.devices.bath()
-            proc = new_series(self.make_bench(), self.data_dir, self.live.geometry_px(), bath=bath, masses_g=masses,
+        except Exception as exc:
+            self.wizard.show_result(f"cannot start: {exc}")
+            return
+        self.with_bench(lambda bench: self._start_calibration(bench, masses, bath), "starting")
+
+    def _start_calibration(self, bench: Bench, masses, bath) -> None:
+        try:
+            proc = new_series(bench, self.data_dir, self.live.geometry_px(), bath=bath, masses_g=masses,
                               clock_speed=self.engine.clock.speed)
         except Exception as exc:
             self.wizard.show_result(f"cannot start: {exc}")
@@ -248,13 +516,83 @@ class MainWindow(QMainWindow):
         self.wizard.set_asking(False, "fitting ...")
         self.engine.answer(PromptKind.ADDED_MASS, "")
 
+    def open_run(self, path: str | None = None) -> None:
+        """Show any run folder (inside the data directory or not) in the run browser."""
+        if not path:
+            path = QFileDialog.getExistingDirectory(self, "open run", str(self.data_dir))
+            if not path:
+                return
+        try:
+            self.browser.open_folder(Path(path))
+        except UsageError as exc:
+            self.on_message("error", str(exc))
+            return
+        self.tabs.setCurrentWidget(self.browser)
+
+    def load_simcal(self, path: str | None = None) -> None:
+        """Make a ``simcal.json`` file the active simulation calibration."""
+        if not path:
+            path, _ = QFileDialog.getOpenFileName(self, "simulation calibration", str(self.data_dir),
+                                                  "simulation calibration (simcal.json *.json)")
+            if not path:
+                return
+        try:
+            self.set_simcal(path)
+        except UsageError as exc:
+            self.on_message("error", str(exc))
+
+    def offer_resume(self) -> None:
+        """At startup: name the interrupted runs in the data directory and offer to resume the newest."""
+        runs = interrupted_runs(self.data_dir)
+        if not runs:
+            return
+        newest = runs[0]
+        names = "\n".join(f"  {snap.path.name} ({len(snap.frames)} frames)" for snap in runs[:8])
+        box = QMessageBox(QMessageBox.Icon.Question, "interrupted runs",
+                          f"{len(runs)} run(s) in {self.data_dir} stopped without finishing:\n{names}\n\n"
+                          f"Resume {newest.path.name} now? (Later: Runs tab, Resume acquisition.)", parent=self)
+        self.resume_button = box.addButton("Resume newest", QMessageBox.ButtonRole.AcceptRole)
+        box.addButton("Show in Runs", QMessageBox.ButtonRole.ActionRole)
+        box.addButton("Not now", QMessageBox.ButtonRole.RejectRole)
+        box.buttonClicked.connect(lambda button: self._resume_answer(button, runs))
+        self.resume_box = box
+        box.open()
+
+    def _resume_answer(self, button, runs) -> None:
+        role = self.resume_box.buttonRole(button)
+        if role == QMessageBox.ButtonRole.RejectRole:
+            return
+        self.tabs.setCurrentWidget(self.browser)
+        self.browser.refresh()
+        self.browser.select(runs[0].path)
+        if role == QMessageBox.ButtonRole.AcceptRole:
+            self.resume_run(str(runs[0].path))
+
     # -- slots for engine events --------------------------------------------------------------------------
     def on_frame(self, frame: FrameStored) -> None:
         """A run frame was stored: plot it, remember it for the live view."""
         self.latest_frame = frame.path
+        interval = self.run_config.interval_s if self.run_config is not None else None
+        if self._last_frame_t is not None and interval and frame.t_s - self._last_frame_t > GAP_FACTOR * interval:
+            self.plots.mark("gap", self._last_frame_t, "gap", end_s=frame.t_s)
+        self._last_frame_t = frame.t_s
         self.plots.add_frame(frame.t_s, frame.conc_g_per_kg)
         # the bath plot shows the reading logged with each frame: one time base with the release curve
         self.plots.add_reading(frame.t_s, frame.plate_c, frame.probe_c, frame.speed_rpm)
+
+    def on_event(self, event) -> None:
+        """Marks on the plots: the drop, a resume, steady state and faults."""
+        t = self.status.t_s
+        if isinstance(event, StateChanged) and event.phase == Phase.ACQUIRING:
+            if event.resumed:
+                self.plots.mark("resume", t if t is not None else 0.0, "resumed")
+            else:
+                self.plots.mark("drop", 0.0, "drop")
+        elif isinstance(event, Message) and t is not None and self.status.phase == Phase.ACQUIRING:
+            if event.topic == "steady":
+                self.plots.mark("steady", t, "steady state")
+            elif event.level == "error":
+                self.plots.mark("fault", t, event.topic or "fault")
 
     def on_level(self, level: CalibrationLevel) -> None:
         """A calibration-series frame was stored: show it in the live view."""
@@ -289,6 +627,7 @@ class MainWindow(QMainWindow):
     def on_done(self, done: Done) -> None:
         """A procedure ended."""
         self.controls.set_running(False)
+        self.lock_settings(False)
         self.wizard.set_asking(False, "")
         proc = self.procedure
         if isinstance(proc, CalibrationProcedure):
@@ -301,14 +640,16 @@ class MainWindow(QMainWindow):
         self.browser.refresh()
 
     def set_simcal(self, path: str) -> None:
-        """Make a ``simcal.json`` the active simulation calibration of the design launcher and run browser."""
+        """Make a ``simcal.json`` the active simulation calibration of the design launcher and run browser
+        (remembered for the next session)."""
         self.design.set_simcal(Path(path))
         self.browser.simcal = self.design.simcal
+        self.settings.setValue(persist.LAST_SIMCAL, str(Path(path).resolve()))
         self.on_message("info", f"active simulation calibration: {path}")
 
     def design_from_run(self, path: str) -> None:
         """The run browser asks for a design from a run: the launcher takes it as its target."""
-        self.design.source.setText(path)
+        self.design.use_target(path)
         self.tabs.setCurrentWidget(self.design)
 
     def on_crop(self, x: int, y: int, size: int) -> None:
@@ -316,31 +657,100 @@ class MainWindow(QMainWindow):
         self.crop = (x, y, size)
 
     def refresh(self) -> None:
-        """~10 Hz: status line and the newest frame."""
-        self.statusBar().showMessage(self.status.line())
+        """~10 Hz: status line, run progress and the newest frame."""
+        if not self.building and not self.close_timer.isActive():
+            self.statusBar().showMessage(self.status.line())
+        self._show_progress()
         if self.latest_frame is not None:
             rgb = decode_preview(path=self.latest_frame)
             if rgb is not None:
                 self.live.set_frame(rgb, Path(self.latest_frame).name)
             self.latest_frame = None
 
-    def closeEvent(self, event) -> None:  # noqa: N802 (Qt override)
-        """Stop any procedure (heating off) and the simulated devices before closing."""
+    def _show_progress(self) -> None:
+        config, t = self.run_config, self.status.t_s
+        recording = self.engine.running and config is not None and self.status.phase == Phase.ACQUIRING
+        self.progress.setVisible(recording)
+        if not recording or t is None:
+            return
+        total = config.max_duration_s
+        self.progress.setRange(0, max(1, int(total)))
+        self.progress.setValue(int(min(max(t, 0.0), total)))
+        left = max(total - t, 0.0)
+        self.progress.setFormat(f"{hmm(t)} of {hmm(total)}, {hmm(left)} left"
+                                + (" at most (steady-state stop)" if config.stop_on_steady else ""))
+
+    # -- closing --------------------------------------------------------------------------------------------
+    def busy_work(self) -> list[str]:
+        """What would be cut short by closing now."""
+        work = []
         if self.engine.running:
-            if QMessageBox.question(self, "quit", "A procedure is running. Stop it and quit?") != \
-                    QMessageBox.StandardButton.Yes:
+            name = getattr(getattr(self.procedure, "run", None), "path", None)
+            work.append(f"the {getattr(self.procedure, 'name', 'procedure')}"
+                        + (f" recording into {Path(name).name}" if name else "")
+                        + " (it is stopped: heating off, the folder finalised)")
+        if self.design.busy:
+            work.append(f"the design in {self.design.out_dir} (it stops at its next checkpoint; Design tab, "
+                        "Resume... continues it)")
+        if self.design.sweep.busy:
+            work.append(f"the sweep in {self.design.sweep.sweep_dir} (running designs checkpoint, queued ones "
+                        "do not start; Sweep again resumes it)")
+        if self.building:
+            work.append("building the bench")
+        return work
+
+    def closeEvent(self, event) -> None:  # noqa: N802 (Qt override)
+        """Ask before cutting anything short; stop it and close once it has finished (never blocking)."""
+        if not self._close_ready:
+            work = self.busy_work()
+            if work and not self.close_timer.isActive():
+                text = "Quitting now stops:\n- " + "\n- ".join(work) + "\n\nStop and quit?"
+                if QMessageBox.question(self, "quit", text, QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No,
+                                        QMessageBox.StandardButton.No) != QMessageBox.StandardButton.Yes:
+                    event.ignore()
+                    return
+            if work:
+                self.begin_close()
                 event.ignore()
                 return
-            self.engine.stop()
-            self.engine.join(30)
         self.shutdown()
         super().closeEvent(event)
 
+    def begin_close(self) -> None:
+        """Stop everything that runs and close the window once it has all finished."""
+        if self.engine.running:
+            self.engine.stop("window closed")
+        self.design.stop()
+        self.design.sweep.stop()
+        self.centralWidget().setEnabled(False)
+        self.bench_dock.setEnabled(False)
+        self.statusBar().showMessage("stopping... the window closes when the procedure, design or sweep has stopped")
+        self.on_message("info", "stopping before quitting ...")
+        self.close_timer.start(UI_MS)
+
+    def _close_when_idle(self) -> None:
+        if self.busy_work():
+            return
+        self.close_timer.stop()
+        self._close_ready = True
+        self.close()
+
     def shutdown(self) -> None:
         """Release the simulated bench and the bridge (also used by tests)."""
+        self._closed = True
         self.timer.stop()
+        self.close_timer.stop()
         self.bridge.detach()
         self.log_bridge.detach()
-        if self.sim is not None:
-            self.sim.close()
-            self.sim = None
+        self._set_sim(None)
+
+
+def _scrolled(widget: QWidget) -> QScrollArea:
+    """``widget`` in a scroll area: a long form never forces the dock wider or taller than the screen."""
+    area = QScrollArea()
+    area.setWidget(widget)
+    area.setWidgetResizable(True)
+    area.setFrameShape(QScrollArea.Shape.NoFrame)
+    area.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAsNeeded)
+    return area
+

@@ -7,16 +7,33 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
+from labapp.gui.plots import time_plot
 from labapp.jobs.calibrate_sim import SimCalFile
 from labapp.jobs.physical import predict_mesh
 from labapp.records.curvefiles import PhysicalCurve, read_physical_curve
 
 
-def run_curve(run: Path) -> PhysicalCurve:
+def physical_curve(run: Path) -> PhysicalCurve:
     """A run's physical curve: its ``analysis/curve.csv`` when analysed, else the run analysed now with its
     own calibration."""
     analysed = Path(run) / "analysis" / "curve.csv"
     return read_physical_curve(analysed if analysed.is_file() else run)
+
+
+Curve = tuple[str, np.ndarray, np.ndarray, bool]
+"""An overlay curve: label, time (s), released (g), dashed (a prediction)."""
+
+
+def run_curve(run: Path) -> Curve:
+    """A run as an overlay curve (slow for a run never analysed: call it off the GUI thread)."""
+    curve = physical_curve(run)
+    return Path(run).name, np.asarray(curve.t_s), np.asarray(curve.released_g), False
+
+
+def prediction_curve(mesh: str, simcal: SimCalFile) -> Curve:
+    """A mesh's release predicted through ``simcal`` as an overlay curve (a simulation: off the GUI thread)."""
+    t, grams = predict_mesh(mesh, simcal)
+    return f"{Path(mesh).name} predicted ({simcal.cal.model})", np.asarray(t), np.asarray(grams), True
 
 
 class PhysicalOverlay(QWidget):
@@ -24,8 +41,7 @@ class PhysicalOverlay(QWidget):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.plot = pg.PlotWidget(title="overlay: released (g) over time since drop (h)")
-        self.plot.setLabel("bottom", "time since drop (h)")
+        self.plot = time_plot("overlay: released (g) over time since drop")
         self.plot.setLabel("left", "released (g)")
         self.plot.addLegend()
         self.curves: list[tuple[str, np.ndarray, np.ndarray]] = []
@@ -35,18 +51,16 @@ class PhysicalOverlay(QWidget):
         """Draw one curve (s, g)."""
         pen = pg.mkPen(pg.intColor(len(self.curves), hues=9), width=2,
                        style=pg.QtCore.Qt.PenStyle.DashLine if dashed else pg.QtCore.Qt.PenStyle.SolidLine)
-        self.plot.plot(np.asarray(t_s) / 3600.0, np.asarray(released_g), pen=pen, name=label)
+        self.plot.plot(np.asarray(t_s), np.asarray(released_g), pen=pen, name=label)
         self.curves.append((label, np.asarray(t_s), np.asarray(released_g)))
 
     def add_run(self, run: Path) -> None:
         """Overlay a run (analysed if it has no ``analysis/curve.csv`` yet)."""
-        curve = run_curve(run)
-        self.add(Path(run).name, curve.t_s, curve.released_g)
+        self.add(*run_curve(run))
 
     def add_prediction(self, mesh: str, simcal: SimCalFile) -> None:
         """Overlay a mesh's release predicted through ``simcal`` (dashed)."""
-        t, grams = predict_mesh(mesh, simcal)
-        self.add(f"{Path(mesh).name} predicted ({simcal.cal.model})", t, grams, dashed=True)
+        self.add(*prediction_curve(mesh, simcal))
 
     def clear(self) -> None:
         """Remove every curve."""

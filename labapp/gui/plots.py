@@ -1,4 +1,6 @@
-"""Release curve (raw and Savitzky-Golay smoothed; g/kg left axis, released g right axis) and bath plots.
+"""Release curve (raw and Savitzky-Golay smoothed; g/kg left axis, released g or % of the weighed mass right axis)
+and bath plots (plate, probe, stirring, the setpoint band), on a time axis in h:mm like the status line, with
+marks for the drop, steady state, gaps, resumes and faults.
 
 Data arrive by ``add_frame``/``add_reading`` (cheap appends, any rate); the plots redraw from a ~10 Hz
 timer only when something changed, so a fast simulated run never floods the event loop.
@@ -9,42 +11,96 @@ import math
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import QTimer
-from PySide6.QtWidgets import QVBoxLayout, QWidget
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QSplitter, QVBoxLayout, QWidget
 
 from analysis import smooth_curve
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
 from labapp.acquisition.settings import WATER
 
 REDRAW_MS = 100
+DEGREES_C = "\u00b0C"
+TIME_LABEL = "time since drop (h:mm)"
+_STEPS_S = (1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600, 7200, 3 * 3600, 6 * 3600, 12 * 3600, 86400)
+
+#: Colour of each kind of mark (any other kind is drawn magenta).
+MARK_COLOURS: dict[str, tuple[int, int, int]] = {
+    "drop": (0, 170, 0), "steady": (30, 110, 255), "gap": (150, 150, 150), "resume": (0, 190, 190),
+    "fault": (230, 0, 0), "alarm": (230, 0, 0), "excursion": (255, 140, 0),
+}
+
+
+def hmm(t_s: float, seconds: bool = False) -> str:
+    """Seconds as ``H:MM`` (``H:MM:SS`` with ``seconds``), the units of the status line."""
+    sign, t = ("-" if t_s < 0 else ""), int(round(abs(t_s)))
+    text = f"{sign}{t // 3600}:{t // 60 % 60:02d}"
+    return text + f":{t % 60:02d}" if seconds else text
+
+
+class TimeAxis(pg.AxisItem):
+    """A bottom axis in seconds whose ticks read ``H:MM`` (``H:MM:SS`` below a minute's spacing), at round
+    steps of seconds, minutes or hours."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("bottom", **kwargs)
+        self.enableAutoSIPrefix(False)
+
+    def tickSpacing(self, minVal: float, maxVal: float, size: float):  # noqa: N802, N803 (pyqtgraph override)
+        span = max(maxVal - minVal, 1e-9)
+        fit = max(size / 90.0, 1.0)                # at most one label per ~90 px
+        major = next((s for s in _STEPS_S if span / s <= fit), _STEPS_S[-1] * math.ceil(span / fit / _STEPS_S[-1]))
+        minor = next((s for s in reversed(_STEPS_S) if s < major and major % s == 0), major / 2)
+        return [(float(major), 0.0), (float(minor), 0.0)]
+
+    def tickStrings(self, values, scale, spacing):  # noqa: N802 (pyqtgraph override)
+        return [hmm(v, seconds=spacing < 60) for v in values]
+
+
+def time_plot(title: str) -> pg.PlotWidget:
+    """A plot whose x axis is time since the drop in ``H:MM``."""
+    widget = pg.PlotWidget(title=title, axisItems={"bottom": TimeAxis()})
+    widget.setLabel("bottom", TIME_LABEL)
+    widget.setMinimumHeight(120)
+    return widget
 
 
 class PlotsPanel(QWidget):
     """Live plots of one run. ``water_g`` sets the released-mass axis (g = g/kg x kg of water). The smoothed
-    curve uses the analysis' Savitzky-Golay window and order, the curve the steady-state stop judges."""
+    curve uses the analysis' Savitzky-Golay window and order, the curve the steady-state stop judges.
+
+    ``orientation``: the release and bath plots above each other (vertical) or side by side, in a splitter
+    the operator can move.
+    """
 
     def __init__(self, parent: QWidget | None = None, water_g: float = WATER.default,
-                 smooth_window_s: float = DEFAULT_WINDOW_S, smooth_order: int = DEFAULT_ORDER) -> None:
+                 smooth_window_s: float = DEFAULT_WINDOW_S, smooth_order: int = DEFAULT_ORDER,
+                 orientation: Qt.Orientation = Qt.Orientation.Vertical) -> None:
         super().__init__(parent)
         self.smooth_window_s, self.smooth_order = smooth_window_s, smooth_order
         self.t_s: list[float] = []
         self.conc: list[float] = []
         self.bath: dict[str, list[float]] = {"t_s": [], "plate_c": [], "probe_c": [], "speed_rpm": []}
+        self.marks: list[tuple[str, float, str]] = []
+        self._mark_items: list[pg.GraphicsObject] = []
+        self.object_mass_g: float | None = None
         self._dirty = False
-        self.graphics = pg.GraphicsLayoutWidget()
-        self.release = self.graphics.addPlot(row=0, col=0, title="release")
-        self.release.setLabel("bottom", "time since drop", units="s")
+        self.release_widget = time_plot("release")
+        self.release = self.release_widget.getPlotItem()
         self.release.setLabel("left", "concentration (g/kg)")
         self.release.showAxis("right")
-        self.release.setLabel("right", "released (g)")
         self.release.addLegend(offset=(10, 10))
         self.raw_curve = self.release.plot([], [], pen=None, symbol="o", symbolSize=4, symbolBrush=(120, 120, 255),
                                            name="measured")
         self.smooth_curve = self.release.plot([], [], pen=pg.mkPen("r", width=2), name="Savitzky-Golay")
-        self.temps = self.graphics.addPlot(row=1, col=0, title="bath")
-        self.temps.setLabel("bottom", "time since drop", units="s")
-        self.temps.setLabel("left", "temperature (C)")
+        self.bath_widget = time_plot("bath")
+        self.temps = self.bath_widget.getPlotItem()
+        self.temps.setLabel("left", f"temperature ({DEGREES_C})")
         self.temps.addLegend(offset=(10, 10))
+        self.band = pg.LinearRegionItem(orientation="horizontal", movable=False, brush=pg.mkBrush(255, 140, 0, 40),
+                                        pen=pg.mkPen((255, 140, 0, 120), style=Qt.PenStyle.DotLine))
+        self.band.setZValue(-10)
+        self.band.hide()
+        self.temps.addItem(self.band, ignoreBounds=True)
         self.plate_curve = self.temps.plot([], [], pen=pg.mkPen((255, 140, 0), width=2), name="plate")
         self.probe_curve = self.temps.plot([], [], pen=pg.mkPen((0, 200, 0), width=2), name="probe")
         self.speed_view = pg.ViewBox()
@@ -53,16 +109,33 @@ class PlotsPanel(QWidget):
         self.temps.getAxis("right").linkToView(self.speed_view)
         self.temps.getAxis("right").setLabel("stirring (rpm)")
         self.speed_view.setXLink(self.temps)
-        self.speed_curve = pg.PlotCurveItem(pen=pg.mkPen((150, 150, 150), width=1, style=pg.QtCore.Qt.PenStyle.DashLine))
+        self.speed_curve = pg.PlotCurveItem(pen=pg.mkPen((150, 150, 150), width=1, style=Qt.PenStyle.DashLine))
         self.speed_view.addItem(self.speed_curve)
         self.temps.vb.sigResized.connect(self._sync_views)
+        self.temps.setXLink(self.release)
         for plot in (self.release, self.temps):
-            for side in ("left", "right", "bottom"):
+            for side in ("left", "right"):
                 plot.getAxis(side).enableAutoSIPrefix(False)  # no "(x0.001)" rescaling of g/kg, g or s
+        self.percent = QCheckBox("released as % of the weighed mass")
+        self.percent.setToolTip("right axis in % of the object's weighed mass (needs the mass)")
+        self.percent.setEnabled(False)
+        self.percent.toggled.connect(self._scale_right_axis)
         self.set_water(water_g)
+        self.splitter = QSplitter(orientation)
+        self.splitter.addWidget(self.release_widget)
+        self.splitter.addWidget(self.bath_widget)
+        self.splitter.setStretchFactor(0, 1)
+        self.splitter.setStretchFactor(1, 1)
+        self.splitter.setChildrenCollapsible(False)
+        options = QHBoxLayout()
+        options.setContentsMargins(4, 0, 4, 0)
+        options.addWidget(self.percent)
+        options.addStretch(1)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
-        layout.addWidget(self.graphics)
+        layout.setSpacing(0)
+        layout.addWidget(self.splitter, 1)
+        layout.addLayout(options)
         self.timer = QTimer(self)
         self.timer.timeout.connect(self.redraw)
         self.timer.start(REDRAW_MS)
@@ -70,14 +143,62 @@ class PlotsPanel(QWidget):
     def set_water(self, water_g: float) -> None:
         """Scale the released-mass axis for ``water_g`` g of water."""
         self.water_g = water_g
-        self.release.getAxis("right").setScale(water_g / 1000.0)
+        self._scale_right_axis()
+
+    def set_object_mass(self, mass_g: float | None) -> None:
+        """The object's weighed mass (None: not weighed), for the % axis."""
+        self.object_mass_g = mass_g if mass_g else None
+        self.percent.setEnabled(self.object_mass_g is not None)
+        if self.object_mass_g is None:
+            self.percent.setChecked(False)
+        self._scale_right_axis()
+
+    def _scale_right_axis(self) -> None:
+        axis = self.release.getAxis("right")
+        if self.percent.isChecked() and self.object_mass_g:
+            axis.setScale(self.water_g / 1000.0 / self.object_mass_g * 100.0)
+            axis.setLabel(f"released (% of {self.object_mass_g:g} g)")
+        else:
+            axis.setScale(self.water_g / 1000.0)
+            axis.setLabel("released (g)")
+
+    def set_setpoint_band(self, setpoint_c: float | None, tolerance_c: float | None) -> None:
+        """Shade setpoint +- tolerance on the bath plot (None: no band)."""
+        if setpoint_c is None or tolerance_c is None:
+            self.band.hide()
+            return
+        self.band.setRegion((setpoint_c - tolerance_c, setpoint_c + tolerance_c))
+        self.band.show()
+
+    def mark(self, kind: str, t_s: float, text: str = "", end_s: float | None = None) -> None:
+        """Mark time ``t_s`` (s since the drop) on both plots: a labelled vertical line, or a shaded span to
+        ``end_s`` (a gap). ``kind``: drop, steady, gap, resume, fault, alarm, excursion or any other word."""
+        colour = MARK_COLOURS.get(kind, (200, 0, 200))
+        self.marks.append((kind, float(t_s), text))
+        for plot in (self.release, self.temps):
+            if end_s is not None and end_s > t_s:
+                item = pg.LinearRegionItem(values=(t_s, end_s), movable=False, brush=pg.mkBrush(*colour, 50),
+                                           pen=pg.mkPen((*colour, 120)))
+            else:
+                item = pg.InfiniteLine(pos=t_s, angle=90, movable=False,
+                                       pen=pg.mkPen(colour, width=1.5, style=Qt.PenStyle.DashLine))
+            if plot is self.release and text:          # labelled on the release plot only
+                label = pg.InfLineLabel(item if isinstance(item, pg.InfiniteLine) else item.lines[0], text=text,
+                                        position=0.92, rotateAxis=(1, 0), anchor=(1, 1), color=colour)
+                label.setZValue(20)
+            plot.addItem(item, ignoreBounds=True)
+            self._mark_items.append((plot, item))
 
     def clear(self) -> None:
-        """Forget all data (a new run)."""
+        """Forget all data and marks (a new run)."""
         self.t_s.clear()
         self.conc.clear()
         for values in self.bath.values():
             values.clear()
+        for plot, item in self._mark_items:
+            plot.removeItem(item)
+        self._mark_items.clear()
+        self.marks.clear()
         self._dirty = True
 
     def add_frame(self, t_s: float, conc_g_per_kg: float) -> None:

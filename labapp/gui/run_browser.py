@@ -2,19 +2,23 @@
 f2 between two runs or a run and its prediction."""
 from __future__ import annotations
 
+import csv
 import logging
 import math
 import time
 from pathlib import Path
 
-from PySide6.QtCore import Signal
+from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
     QDoubleSpinBox,
     QHBoxLayout,
+    QHeaderView,
     QLabel,
     QLineEdit,
     QPushButton,
     QSpinBox,
+    QSplitter,
+    QTabWidget,
     QTreeWidget,
     QTreeWidgetItem,
     QVBoxLayout,
@@ -25,13 +29,13 @@ from analysis import RunCurve
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
 from labapp.errors import UsageError
 from labapp.gui.bridge import BackgroundTask
-from labapp.gui.overlay import PhysicalOverlay
+from labapp.gui.overlay import PhysicalOverlay, prediction_curve, run_curve
 from labapp.gui.plots import PlotsPanel
 from labapp.jobs.analyse import analyse_run
 from labapp.jobs.compare import Comparison, compare_curves
 from labapp.jobs.run import resumable
 from labapp.jobs.verify import verify as verify_folder
-from labapp.records.outpaths import ANALYSIS_SUBFOLDER
+from labapp.records.outpaths import ANALYSIS_SUBFOLDER, folder_kind
 from labapp.records.runrecord import RecordKind, RecordStatus
 from labapp.records.storage import RunSnapshot, StorageError, finalise_run, read_run
 
@@ -47,6 +51,21 @@ def list_runs(data_dir: Path) -> list[RunSnapshot]:
         except StorageError as exc:
             log.warning("skipping %s: %s", path.parent, exc)
     return runs
+
+
+def interrupted_runs(data_dir: Path) -> list[RunSnapshot]:
+    """The acquisition runs under ``data_dir`` that stopped without finishing and can be resumed, newest first."""
+    return [snap for snap in list_runs(data_dir) if snap.status == RecordStatus.INTERRUPTED
+            and snap.record.kind == RecordKind.RUN and not snap.live]
+
+
+def frame_files(folder: Path) -> list[str]:
+    """The frames listed in a folder's ``frames.csv`` (any layout), else its JPEG files."""
+    try:
+        with open(folder / "frames.csv", newline="") as fh:
+            return [row["file"] for row in csv.DictReader(fh) if row.get("file")]
+    except (OSError, KeyError, csv.Error):
+        return sorted(p.name for p in folder.glob("*.jp*g"))
 
 
 class RunBrowser(QWidget):
@@ -66,6 +85,15 @@ class RunBrowser(QWidget):
         self.tree.setHeaderLabels(["run", "kind", "status", "frames", "created"])
         self.tree.setSelectionMode(QTreeWidget.SelectionMode.ExtendedSelection)
         self.tree.itemSelectionChanged.connect(self._selected)
+        self.tree.setTextElideMode(Qt.TextElideMode.ElideMiddle)      # 20261202-...-name keeps both ends
+        self.tree.setUniformRowHeights(True)
+        header = self.tree.header()
+        header.setStretchLastSection(False)
+        header.setSectionResizeMode(0, QHeaderView.ResizeMode.Stretch)
+        for column in range(1, 5):
+            header.setSectionResizeMode(column, QHeaderView.ResizeMode.ResizeToContents)
+        self.opened: list[Path] = []
+        """Folders opened from elsewhere (File > Open run...), listed after the data directory's runs."""
         self.window = QDoubleSpinBox()
         self.window.setRange(11.0, 7200.0)
         self.window.setValue(DEFAULT_WINDOW_S)
@@ -80,7 +108,7 @@ class RunBrowser(QWidget):
                                            "curves_physical.csv or any t_s,released_g CSV)")
         self.info = QLabel("")
         self.info.setWordWrap(True)
-        self.plots = PlotsPanel()
+        self.plots = PlotsPanel(orientation=Qt.Orientation.Horizontal)
         self.overlay = PhysicalOverlay()
         self.simcal = None                     # the active simulation calibration (set by the main window)
         self.mesh = QLineEdit("")
@@ -113,16 +141,33 @@ class RunBrowser(QWidget):
         settings.addWidget(QLabel("order"))
         settings.addWidget(self.order)
         settings.addWidget(self.calibration, 1)
+        top = QWidget()
+        top_layout = QVBoxLayout(top)
+        top_layout.setContentsMargins(0, 0, 0, 0)
+        top_layout.addWidget(self.tree, 1)
+        top_layout.addLayout(buttons)
+        top_layout.addLayout(settings)
+        top_layout.addWidget(self.prediction)
+        top_layout.addWidget(self.info)
+        overlay_page = QWidget()
+        overlay_layout = QVBoxLayout(overlay_page)
+        overlay_layout.setContentsMargins(0, 0, 0, 0)
+        overlay_layout.addWidget(self.overlay, 1)
+        overlay_layout.addLayout(overlay_buttons)
+        self.views = QTabWidget()
+        self.views.addTab(self.plots, "release and bath")
+        self.views.addTab(overlay_page, "overlay (g over h)")
+        self.splitter = QSplitter(Qt.Orientation.Vertical)
+        self.splitter.addWidget(top)
+        self.splitter.addWidget(self.views)
+        self.splitter.setStretchFactor(0, 2)
+        self.splitter.setStretchFactor(1, 3)
+        self.splitter.setChildrenCollapsible(False)
         layout = QVBoxLayout(self)
-        layout.addWidget(self.tree, 1)
-        layout.addLayout(buttons)
-        layout.addLayout(settings)
-        layout.addWidget(self.prediction)
-        layout.addWidget(self.info)
-        layout.addWidget(self.plots, 2)
-        layout.addLayout(overlay_buttons)
-        layout.addWidget(self.overlay, 2)
+        layout.setContentsMargins(2, 2, 2, 2)
+        layout.addWidget(self.splitter)
         self.task: BackgroundTask | None = None
+        self.overlay_task: BackgroundTask | None = None
         self.refresh()
 
     def refresh(self) -> None:
@@ -130,10 +175,40 @@ class RunBrowser(QWidget):
         self.tree.clear()
         for snap in list_runs(self.data_dir):
             created = time.strftime("%Y-%m-%d %H:%M", time.localtime(snap.record.created_unix_s or 0))
-            item = QTreeWidgetItem([snap.path.name, snap.record.kind, snap.status, str(len(snap.frames)), created])
-            item.setData(0, 256, str(snap.path))
-            self.tree.addTopLevelItem(item)
+            self._add_item(snap.path, [snap.path.name, snap.record.kind, snap.status, str(len(snap.frames)), created])
+        for path in self.opened:
+            try:
+                snap = read_run(path)
+                row = [path.name, snap.record.kind, snap.status, str(len(snap.frames)),
+                       time.strftime("%Y-%m-%d %H:%M", time.localtime(snap.record.created_unix_s or 0))]
+            except StorageError:
+                row = [path.name, str(folder_kind(path) or "-"), "not a run record", str(len(frame_files(path))), ""]
+            self._add_item(path, row)
         self._selected()
+
+    def _add_item(self, path: Path, row: list[str]) -> None:
+        item = QTreeWidgetItem([str(v) for v in row])
+        item.setData(0, 256, str(path))
+        item.setToolTip(0, str(path))
+        self.tree.addTopLevelItem(item)
+
+    def open_folder(self, path: Path) -> None:
+        """List a run folder from anywhere (a run record, or a folder of frames the analysis reads) and select it.
+
+        Raises
+        ------
+        UsageError
+            When ``path`` is not a folder or holds no frames.
+        """
+        path = Path(path).resolve()
+        if not path.is_dir():
+            raise UsageError(f"{path} is not a folder")
+        if not (path / "run.json").is_file() and not frame_files(path):
+            raise UsageError(f"{path} holds no run.json and no frames: not a run folder")
+        if path.parent.resolve() != self.data_dir.resolve() and path not in self.opened:
+            self.opened.append(path)
+        self.refresh()
+        self.select(path)
 
     def selected_path(self) -> Path | None:
         """The selected run folder."""
@@ -157,20 +232,54 @@ class RunBrowser(QWidget):
         try:
             snap = read_run(path) if has else None
         except StorageError as exc:
-            self.info.setText(str(exc))
-            snap, has = None, False
+            snap = None
+            if has:
+                self.info.setText(f"{path}: not a run record of this application ({exc}); a folder of "
+                                  f"{len(frame_files(path))} frames: Reanalyse reads it with a calibration JSON")
         for b in (self.analyse_button, self.verify_button):
             b.setEnabled(has)
+        self.verify_button.setEnabled(snap is not None)
         interrupted = has and snap.status == RecordStatus.INTERRUPTED
         self.resume_button.setEnabled(interrupted and snap.record.kind == RecordKind.RUN)
         self.finalise_button.setEnabled(interrupted)
         if snap is None:
+            if has:
+                self.plots.clear()
+                self._show_analysis(path)
             return
         self.info.setText(f"{snap.path}: {snap.status}, {len(snap.frames)} frames, {len(snap.record.gaps)} gaps"
                           + (f", torn last row of {snap.torn_bytes} bytes" if snap.torn_bytes else ""))
         self.plots.clear()
         for f in snap.frames:
             self.plots.add_reading(f.t_s, f.plate_c, f.probe_c, f.speed_rpm)
+        config = snap.record.config or {}
+        self.plots.set_setpoint_band(config.get("setpoint_c"), config.get("tolerance_c"))
+        self.plots.set_object_mass(snap.record.object_mass_g)
+        if snap.frames:
+            self.plots.mark("drop", 0.0, "drop")
+        for gap in snap.record.gaps:
+            self.plots.mark("gap", gap.after_t_s, "gap", end_s=gap.before_t_s)
+        self._show_analysis(path)
+
+    def _show_analysis(self, path: Path) -> None:
+        """The release curve of an analysed run (``RUN/analysis/curve.csv``), if it has one."""
+        curve_csv = self.analysis_dir(path) / "curve.csv"
+        if not curve_csv.is_file():
+            return
+        try:
+            with open(curve_csv, newline="") as fh:
+                rows = list(csv.DictReader(fh))
+            for row in rows:
+                self.plots.add_frame(float(row["t_s"]), float(row["conc_g_per_kg"]))
+        except (OSError, KeyError, ValueError) as exc:
+            log.warning("%s: cannot show the curve: %s", curve_csv, exc)
+
+    def analysis_dir(self, path: Path) -> Path:
+        """Where a folder's analysis goes: ``RUN/analysis`` for the data directory's runs and opened run records;
+        for an opened folder of another layout, ``DATA/analyses/<name>`` (the folder itself is not written)."""
+        if path.parent.resolve() == self.data_dir.resolve() or _is_record(path):
+            return path / ANALYSIS_SUBFOLDER
+        return self.data_dir / "analyses" / path.name
 
     def reanalyse(self) -> None:
         """Analyse the selected run with the chosen calibration and smoothing (in the background), writing
@@ -184,9 +293,10 @@ class RunBrowser(QWidget):
             self.info.setText(f"no calibration: {cal_path} does not exist; choose a calibration JSON")
             return
         window, order = self.window.value(), self.order.value()
+        out = self.analysis_dir(path)
 
         def work(progress):
-            return analyse_run(path, cal_path, path / ANALYSIS_SUBFOLDER, window_s=window, order=order,
+            return analyse_run(path, cal_path, out, window_s=window, order=order,
                                     progress=lambda done, total: progress((done, total))).curve
         self.task = BackgroundTask(work, self)
         self.task.progress.connect(self._progress)
@@ -243,21 +353,34 @@ class RunBrowser(QWidget):
 
     def overlay_runs(self) -> None:
         """Add every selected run to the physical overlay (grams over hours)."""
-        for path in [Path(item.data(0, 256)) for item in self.tree.selectedItems()]:
-            try:
-                self.overlay.add_run(path)
-            except UsageError as exc:
-                self.info.setText(str(exc))
+        paths = self.selected_paths()
+        if paths:
+            self._overlay_in_background(lambda: [run_curve(p) for p in paths])
+
+    def _overlay_in_background(self, compute) -> None:
+        """Compute curves (analysing a run, simulating a mesh) off the GUI thread, then draw them."""
+        if self.overlay_task is not None and self.overlay_task.running:
+            self.info.setText("the overlay is still computing the previous curve")
+            return
+        self.overlay_task = BackgroundTask(lambda progress: compute(), self)
+        self.overlay_task.finished.connect(self._overlay_ready)
+        self.overlay_task.failed.connect(self.info.setText)
+        self.info.setText("computing the overlay ...")
+        self.overlay_task.start()
+
+    def _overlay_ready(self, curves) -> None:
+        for label, t_s, grams, dashed in curves:
+            self.overlay.add(label, t_s, grams, dashed=dashed)
+        self.info.setText(f"overlay: {len(self.overlay.curves)} curves")
+        self.views.setCurrentIndex(1)
 
     def overlay_prediction(self) -> None:
         """Add the mesh's predicted release through the active simulation calibration to the overlay."""
         if self.simcal is None:
             self.info.setText("no active simulation calibration: make one in the calibration wizard first")
             return
-        try:
-            self.overlay.add_prediction(self.mesh.text().strip(), self.simcal)
-        except UsageError as exc:
-            self.info.setText(str(exc))
+        mesh, simcal = self.mesh.text().strip(), self.simcal
+        self._overlay_in_background(lambda: [prediction_curve(mesh, simcal)])
 
     def _design(self) -> None:
         path = self.selected_path()
@@ -287,3 +410,11 @@ class RunBrowser(QWidget):
         if path is not None:
             lines = verify_folder(path).lines()
             self.info.setText("\n".join(lines[:11] + lines[-1:]))
+
+
+def _is_record(path: Path) -> bool:
+    try:
+        read_run(path)
+    except StorageError:
+        return False
+    return True

@@ -109,6 +109,11 @@ class SweepPanel(QGroupBox):
         self._folders: dict[str, str] = {}
         self._stop = threading.Event()
 
+    @property
+    def busy(self) -> bool:
+        """True while a sweep runs."""
+        return self.task is not None and self.task.running
+
     def spec(self) -> SweepSpec:
         """The sweep spec of the fields; raises ValueError naming a bad field."""
         target, fixed, simcal = self.base_settings()
@@ -144,8 +149,10 @@ class SweepPanel(QGroupBox):
         self.status.setText(f"starting {len(spec.combinations)} designs on {workers} workers into {sweep_dir} ...")
 
     def stop(self) -> None:
-        """Running designs checkpoint and stop; queued ones do not start."""
+        """Running designs checkpoint and stop; queued ones do not start (Sweep again resumes the sweep)."""
         self._stop.set()
+        if self.busy:
+            self.status.setText("stopping: running designs stop at their next checkpoint, queued ones do not start")
 
     def _progress(self, p: Progress) -> None:
         eta = "-" if p.eta_s is None else f"{p.eta_s / 60:.1f} min"

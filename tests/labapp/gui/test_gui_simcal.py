@@ -65,7 +65,8 @@ def test_simulation_step_calibrates_shows_the_fit_and_activates(qtbot, tmp_path,
     assert "no active simulation calibration" in browser.info.text()
     browser.simcal = launcher.simcal
     browser.mesh.setText(str(calibration_set[0][1]))
-    browser.overlay_prediction()
+    browser.overlay_prediction()                                # simulated off the GUI thread
+    qtbot.waitUntil(lambda: len(browser.overlay.curves) == 1, timeout=60_000)
     browser.overlay.add_run(calibration_set[0][0])
     labels = [c[0] for c in browser.overlay.curves]
     assert labels[0].startswith("sphere.stl predicted (") and labels[1] == "sphere.csv"
