@@ -199,6 +199,11 @@ def fine_source_release(mesh, dx_mm: float, total_time_mm: float, dtau_mm: float
     return simulate(solid, fine_dx, total_time_mm=total_time_mm, dtau_mm=dtau_mm).released_mm3
 
 
+NOT_CONVERGED_REL_RMSE = 0.05
+"""A run ended by its evaluation limit whose binary solid misses the target by more than this rel. RMSE gets
+the warning that it did not converge, with the limit to raise."""
+
+
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
                   history: list[list[float]], config, *, status: DesignStatus,
                   session_seconds: float) -> DesignOutputs:
@@ -255,6 +260,11 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     pieces = count_pieces(solid)
     if pieces > 1:
         warnings.append(f"the solid has {pieces} separate pieces")
+    missed = rel_rmse(binary_curve, target.released_mm3)
+    if status == DesignStatus.MAX_ITER and missed > NOT_CONVERGED_REL_RMSE:
+        warnings.append(f"did not converge: the evaluation limit ({config.max_iter}) ended the run with the binary "
+                        f"solid {missed:.1%} off the target (rel. RMSE above {NOT_CONVERGED_REL_RMSE:.0%}); raise it, "
+                        f"e.g. sfr design --resume --out {out_dir} --max-iter {2 * config.max_iter}")
     facts = assess(solid, space.dx_mm, warn_channel_mm=config.warn_channel_mm)
     warnings += list(facts.warnings)
     np.savez_compressed(out_dir / "density.npz", rho_hat=best_x, rho=rho, rho_full=rho_full, solid=solid,

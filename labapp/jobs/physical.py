@@ -22,7 +22,7 @@ import numpy as np
 from design.errors import DesignError
 from design.files.pipeline import input_grid
 from design.files.records import load_summary
-from design.files.rundir import run_design
+from design.files.rundir import finished_run, run_design
 from design.forward.simulator import simulate
 from labapp.jobs.calibrate_sim import SimCalError, SimCalFile, curve_of
 from labapp.jobs.compare import prediction_metrics
@@ -216,6 +216,10 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
         A physical target without a calibration, or an unreadable target.
     """
     out_dir = Path(out_dir)
+    if resume:  # a run that finished with all its outputs: nothing to do, nothing written
+        done = finished_run(out_dir, config)
+        if done is not None and (simcal is None or "simcal" in done.outputs.summary):
+            return done, done.outputs.summary if simcal is not None else None
     record = out_dir / "target_measured.json"
     measured: PhysicalCurve | None = None
     if config is not None and is_physical(config.target):
@@ -233,7 +237,10 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
     elif resume and record.is_file():
         measured = _read_measured(record)
     result = run_design(config, out_dir, on_iteration=on_iteration, should_stop=should_stop, resume=resume)
-    summary = write_design_physical(result.out_dir, simcal, measured) if simcal is not None else None
+    summary = None
+    if simcal is not None:  # written last; a run whose outputs lack it (cut short) gets it now
+        summary = (result.outputs.summary if result.unchanged and "simcal" in result.outputs.summary
+                   else write_design_physical(result.out_dir, simcal, measured))
     return result, summary
 
 

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from labapp.cli.argtypes import finite_float, nonnegative_float, positive_float, positive_int
-from labapp.errors import UsageError
+from labapp.errors import EXIT_FAILED, UsageError
 from labapp.jobs.meshunits import MM_PER_UNIT
 
 log = logging.getLogger(__name__)
@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ICO stiffness interpolation: simp (p = 3, default) or ramp (q = 3)")
     parser.add_argument("--resolution", type=positive_int,
                         help="voxels along the domain's longest side (even; default 64)")
-    parser.add_argument("--units", default="mm", choices=tuple(MM_PER_UNIT),
+    parser.add_argument("--units", choices=tuple(MM_PER_UNIT),
                         help="units of a mesh target's coordinates (default mm); copied into the run scaled to mm")
     parser.add_argument("--domain-mm", type=positive_float, nargs=3, metavar=("X", "Y", "Z"),
                         help="design domain size, mm (default: source bounding box plus margin, cubic for nfc)")
@@ -82,8 +82,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warn-channel-mm", type=nonnegative_float, help="warn below this channel width, mm")
     parser.add_argument("--formats", nargs="*", default=[], choices=("3mf", "obj"), help="extra mesh formats")
     parser.add_argument("--allow-infeasible", action="store_true", help="optimise even if the target fails checks")
-    parser.add_argument("--resume", action="store_true", help="continue the stopped run in --out, on the copy of "
-                        "its target taken at the start (a warning if the original has changed since)")
+    parser.add_argument("--resume", action="store_true", help="continue the stopped run in --out with everything it "
+                        "started with: the copy of its target (a warning if the original has changed since), its "
+                        "calibration and settings (options given must match them; --max-iter may raise the limit); "
+                        "a finished run is left as it is")
     parser.add_argument("--simcal", metavar="SIMCAL.json",
                         help="simulation calibration (sfr calibrate-sim): maps a measured target to simulation "
                              "units and adds the design's predicted release in grams over seconds "
@@ -127,43 +129,55 @@ def run(args: argparse.Namespace) -> int:
     from design.inverse.status import DesignStatus
     from labapp.jobs.calibrate_sim import load_simcal
     from labapp.jobs.design import design as design_job
+    from labapp.jobs.design import failed_design
 
     try:
+        options = _given_options(args)
         if args.resume:
             config = None
         else:
             if not args.target:
                 raise UsageError("--target is required (unless --resume)")
             # options left out take DesignConfig's defaults, the ones the GUI starts from too
-            given = {k: v for k, v in (("space", args.space), ("resolution", args.resolution),
-                                       ("max_iter", args.max_iter), ("starts", args.starts),
-                                       ("rate_window_vox", args.rate_window),
-                                       ("rate_span", tuple(args.rate_span) if args.rate_span else None),
-                                       ("robust_eta", args.robust_eta), ("layers", args.layers),
-                                       ("ico_coarsen", args.ico_coarsen), ("stiffness_law", args.stiffness_law),
-                                       ("bounds", args.bounds), ("line_search", args.line_search),
-                                       ("warn_channel_mm", args.warn_channel_mm))
-                     if v is not None}
-            config = DesignConfig(target=args.target, **given,
-                                  domain_mm=tuple(args.domain_mm) if args.domain_mm else None,
-                                  height_mm=args.height, w_binary=args.w_binary, radius_vox=args.radius,
-                                  radius_mm=args.radius_mm, allow_pieces=args.allow_pieces,
-                                  **({} if args.w_connect is None else {"w_connect": args.w_connect}),
-                                  beta=args.beta, beta_final=args.beta_final, w_rate=args.w_rate,
-                                  preset=args.preset, w_fab=args.w_fab,
-                                  **({"optimizer": args.optimizer} if args.optimizer else {}),
-                                  allow_infeasible=args.allow_infeasible,
-                                  formats=tuple(args.formats))
-        max_iter = config.max_iter if config else _stored_max_iter(args.out)
+            config = DesignConfig(**options)
+        max_iter = config.max_iter if config else max(args.max_iter or 0, _stored_max_iter(args.out))
+        if args.calibration and args.resume:
+            raise UsageError(f"--calibration is used when a run starts, to convert a measured target (kept in "
+                             f"{args.out}); drop it to resume")
         simcal = load_simcal(args.simcal) if args.simcal else None
         bench = BenchCalibration.load(args.calibration) if args.calibration else None
         result, physical = design_job(config, args.out, resume=args.resume, units=args.units, simcal=simcal,
                                        bench_calibration=bench, on_iteration=_progress(max_iter),
-                                       on_warning=lambda message: print(f"\nwarning: {message}", file=sys.stderr))
+                                       on_warning=lambda message: print(f"\nwarning: {message}", file=sys.stderr),
+                                       options=options if args.resume else None)
     finally:
         print(file=sys.stderr)          # ends the progress line, also before an error's line
     s = physical or result.outputs.summary
+    if result.unchanged:
+        print(f"already finished: nothing to do ({result.out_dir} is left as it is)")
     for line in summary_lines(s, result.out_dir):
         print(line)
     log.debug("summary %s", json.dumps(s))
-    return 0 if result.status != DesignStatus.INTERRUPTED else 130
+    if result.status == DesignStatus.INTERRUPTED:
+        return 130
+    failure = failed_design(s)
+    if failure is not None and result.status.finished:
+        print(f"error: {failure}", file=sys.stderr)
+        return EXIT_FAILED
+    return 0
+
+
+def _given_options(args: argparse.Namespace) -> dict:
+    """The design settings given on the command line, as `DesignConfig` fields (``target`` included)."""
+    pairs = (("target", args.target), ("space", args.space), ("resolution", args.resolution),
+             ("max_iter", args.max_iter), ("starts", args.starts), ("rate_window_vox", args.rate_window),
+             ("rate_span", tuple(args.rate_span) if args.rate_span else None), ("robust_eta", args.robust_eta),
+             ("layers", args.layers), ("ico_coarsen", args.ico_coarsen), ("stiffness_law", args.stiffness_law),
+             ("bounds", args.bounds), ("line_search", args.line_search), ("warn_channel_mm", args.warn_channel_mm),
+             ("domain_mm", tuple(args.domain_mm) if args.domain_mm else None), ("height_mm", args.height),
+             ("w_binary", args.w_binary), ("radius_vox", args.radius), ("radius_mm", args.radius_mm),
+             ("allow_pieces", args.allow_pieces or None), ("w_connect", args.w_connect), ("beta", args.beta),
+             ("beta_final", args.beta_final), ("w_rate", args.w_rate), ("preset", args.preset),
+             ("w_fab", args.w_fab), ("optimizer", args.optimizer or None),
+             ("allow_infeasible", args.allow_infeasible or None), ("formats", tuple(args.formats) or None))
+    return {name: value for name, value in pairs if value is not None}
