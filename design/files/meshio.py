@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import logging
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +69,15 @@ def checked_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> trimesh.Trimesh
     return solid
 
 
+_UNREADABLE = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error)
+"""What reading an empty, truncated or foreign ``.npy``/``.npz`` raises."""
+
+
+def _reason(exc: BaseException) -> str:
+    text = str(exc) or type(exc).__name__
+    return f"{text}: the file is empty, truncated or not a NumPy array file"
+
+
 def load_density(path: str | Path, dx_mm: float | None = None) -> tuple[np.ndarray, float]:
     """Load a density array and its voxel size.
 
@@ -95,18 +106,27 @@ def load_density(path: str | Path, dx_mm: float | None = None) -> tuple[np.ndarr
         raise DesignError(f"{path}: no such file")
     try:
         data = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise DesignError(f"{path}: cannot read array ({exc})") from exc
+    except _UNREADABLE as exc:
+        raise DesignError(f"{path}: cannot read array ({_reason(exc)})") from exc
     if suffix == ".npz":
+        if not isinstance(data, np.lib.npyio.NpzFile):
+            raise DesignError(f"{path}: not an .npz archive (it holds a single array); save rho and dx_mm with np.savez")
         with data:
             missing = {"rho", "dx_mm"} - set(data.files)
             if missing:
                 raise DesignError(f"{path}: missing array(s) {sorted(missing)}; found {sorted(data.files)}")
-            rho, stored = data["rho"], check_positive("dx_mm", data["dx_mm"], str(path))
+            try:
+                rho, stored_dx = data["rho"], data["dx_mm"]
+            except _UNREADABLE as exc:
+                raise DesignError(f"{path}: cannot read its arrays ({_reason(exc)})") from exc
+            stored = check_positive("dx_mm", stored_dx, str(path))
         if dx_mm is not None and not np.isclose(check_positive("dx_mm", dx_mm), stored, rtol=1e-9):
             raise DesignError(f"{path}: stores dx_mm = {stored:g}, which contradicts the requested {dx_mm:g}")
         dx = stored
     else:
+        if isinstance(data, np.lib.npyio.NpzFile):
+            data.close()
+            raise DesignError(f"{path}: an .npz archive named .npy; rename it to .npz (with arrays rho and dx_mm)")
         if dx_mm is None:
             raise DesignError(f"{path}: a .npy array has no voxel size; give one (--voxel-size)")
         rho, dx = data, check_positive("dx_mm", dx_mm, str(path))

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -151,8 +152,13 @@ def _multistart(config: DesignConfig, out_dir: Path, on_iteration: IterationCall
     (out_dir / MULTISTART).write_text(json.dumps(
         {"coarse_resolution": choice.coarse_resolution, "refined": start_name(choice.refined),
          "best_J": {start_name(k): value for k, value in enumerate(choice.best_values)}}, indent=2))
-    with np.load(folders.folder(choice.refined) / "density.npz") as data:
-        x_coarse, dx_coarse = data["rho_hat"], float(data["dx_mm"])
+    density = folders.folder(choice.refined) / "density.npz"
+    try:
+        with np.load(density, allow_pickle=False) as data:
+            x_coarse, dx_coarse = data["rho_hat"], float(data["dx_mm"])
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+        raise DesignError(f"{density}: the chosen coarse start's density cannot be read ({exc}); remove "
+                          f"{density.parent} to run that start again") from exc
     return refine_start(x_coarse, dx_coarse)
 
 
@@ -197,6 +203,32 @@ def _complete_outputs(out_dir: Path, saved: Checkpoint) -> DesignSummary | None:
     if saved.status is not None and summary.get("status") != saved.status:
         return None
     return summary
+
+
+def finished_run(out_dir: str | Path, config: DesignConfig | None = None) -> DesignResult | None:
+    """What resuming ``out_dir`` (with ``config``, as `run_design`) would do when it has nothing to do: the
+    run finished and wrote all its outputs (``unchanged``); else None. Reads the records only.
+
+    Raises
+    ------
+    DesignError
+        For a folder without a readable ``config.json`` or checkpoint, or a ``config`` the run cannot
+        resume with.
+    """
+    out_dir = Path(out_dir)
+    stored = load_config(out_dir)
+    config = _resume_config(out_dir, stored, config)
+    ckpt = out_dir / CHECKPOINT
+    if not ckpt.exists():
+        return None
+    saved = load_checkpoint(ckpt, variables=False)
+    summary = _complete_outputs(out_dir, saved) if _finished(saved, out_dir, config) else None
+    if summary is None:
+        return None
+    log.info("%s already finished (%s after %d evaluations): nothing to do", out_dir, summary["status"],
+             len(saved.history))
+    return DesignResult(out_dir, DesignStatus(summary["status"]), len(saved.history), float(saved.best_value),
+                        DesignOutputs(out_dir / SUMMARY, summary), unchanged=True)
 
 
 def _problem(config: DesignConfig, out_dir: Path) -> Problem:
@@ -266,19 +298,15 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     ckpt = out_dir / CHECKPOINT
     saved = None
     if resume:
+        done = finished_run(out_dir, config)
+        if done is not None:
+            return done
         stored = load_config(out_dir)
         config = _resume_config(out_dir, stored, config)
         if ckpt.exists():
             saved = load_checkpoint(ckpt)
-        if saved is not None and _finished(saved, out_dir, config):
-            summary = _complete_outputs(out_dir, saved)
-            if summary is not None:
-                log.info("%s already finished (%s after %d evaluations): nothing to do", out_dir, summary["status"],
-                         len(saved.history))
-                return DesignResult(out_dir, DesignStatus(summary["status"]), len(saved.history),
-                                    float(saved.best_value), DesignOutputs(out_dir / SUMMARY, summary), unchanged=True)
-            if saved.status is not None:  # the optimisation ended, its outputs did not all get written
-                return _rewrite_outputs(out_dir, stored, saved)
+        if saved is not None and saved.status is not None and _finished(saved, out_dir, config):
+            return _rewrite_outputs(out_dir, stored, saved)  # the optimisation ended, not all outputs got written
         if config != stored:  # a raised evaluation limit
             save_config(out_dir, config)
     else:

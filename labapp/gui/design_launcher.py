@@ -406,8 +406,8 @@ class DesignLauncher(QWidget):
         simcal = self.simcal
         self._max_iter = config.max_iter if config is not None else _stored_max_iter(out_dir)
 
-        def work(progress):
-            return design_job(config, out_dir, resume=resume, simcal=simcal,
+        def work(progress):  # a resume uses the calibration the run started with, kept in its folder
+            return design_job(config, out_dir, resume=resume, simcal=None if resume else simcal,
                               on_iteration=lambda k, x, terms: progress((k, terms, mid_slice(x, k))),
                               should_stop=self._stop.is_set)
         self.task = BackgroundTask(work, self)
