@@ -42,6 +42,8 @@ MTAD_PCT = 10.0
 SIGNIF = 0.05
 BOUNDS_PCT = (1.0, 85.0)
 NSF = (1, 2)
+MAX_CONDITION = 1e10
+"""Condition number of the pooled covariance above which it is taken as singular."""
 
 
 def _signif(x: np.ndarray, digits: int) -> np.ndarray:
@@ -155,11 +157,11 @@ def hotelling_two(reference: np.ndarray, test: np.ndarray, signif: float = SIGNI
                             f"(use fewer time points or more units)")
     s = ((n1 - 1) * np.cov(m1, rowvar=False, ddof=1).reshape(p, p)
          + (n2 - 1) * np.cov(m2, rowvar=False, ddof=1).reshape(p, p)) / (n1 + n2 - 2)
-    try:
-        s_inv = np.linalg.inv(s)
-    except np.linalg.LinAlgError as exc:
-        raise AnalysisError("the pooled covariance matrix of the units is singular (identical or collinear "
-                            "units); the multivariate tests cannot be computed") from exc
+    if not np.all(np.isfinite(s)) or np.linalg.cond(s) > MAX_CONDITION:
+        raise AnalysisError(f"the pooled covariance matrix of the units at the {p} time points is singular "
+                            f"(units that differ only in proportion, or identical ones); the multivariate "
+                            f"tests cannot be computed")
+    s_inv = np.linalg.inv(s)
     d = m2.mean(axis=0) - m1.mean(axis=0)
     dm = float(math.sqrt(max(float(d @ s_inv @ d), 0.0)))
     df1, df2 = p, n1 + n2 - p - 1

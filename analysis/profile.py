@@ -261,6 +261,24 @@ def _time_points(reference: ReleaseProfile, test: ReleaseProfile, span: tuple[fl
                    f"(both are densely sampled)")
 
 
+def sampling_times(reference: ReleaseProfile, test: ReleaseProfile, *, reference_total: float | None = None,
+                   cutoff_pct: float = CUTOFF_PCT) -> tuple[np.ndarray, str]:
+    """The time points f2 is computed on when none are given, before any rule cuts them, and how they
+    were chosen: the samples of the sparser curve when it has at most ``MAX_SAMPLED_POINTS`` (a sampled
+    dissolution test), else a regular grid of round steps with about ``GRID_POINTS`` points up to the
+    reference's 85 % time, over the common span. Points at time zero or before are left out.
+
+    Raises
+    ------
+    AnalysisError
+        Different units, no common time span, a reference with no release.
+    """
+    span = _check_pair(reference, test)
+    total = _reference_total(reference, reference_total)
+    pts, how = _time_points(reference, test, span, total, cutoff_pct)
+    return pts[pts > 0], how
+
+
 def similarity(reference: ReleaseProfile, test: ReleaseProfile, *, times: Sequence[float] | None = None,
                reference_total: float | None = None, cutoff_pct: float = CUTOFF_PCT,
                rule: str = "either") -> Similarity:

@@ -1,11 +1,21 @@
-"""Comparing two release curves the way dissolution scientists do: f1/f2, MDT, DE and model fits.
+"""Comparing release curves the way dissolution scientists do: f1/f2 under a regulator's rule, MDT, DE, model
+fits, and for replicate units the CV per time point, the bootstrap of f2 and the multivariate tests.
 
-The job behind ``sfr compare`` and the run browser's f2: any two physical curve files of the project
-(read by :mod:`labapp.records.curvefiles`) in, a :class:`Comparison` out. The first curve is the reference: both
-are expressed in percent of its weighed mass (its final release when the mass is not recorded).
+The job behind ``sfr compare`` and the run browser's f2. Two inputs:
+
+- two curves (:func:`compare_curves`, a :class:`Comparison`): any physical curve files of the project, read by
+  :mod:`labapp.records.curvefiles`; the first is the reference;
+- two replicate sets (:func:`compare_sets`, a :class:`SetComparison`): several curves per product, or one CSV of
+  unit columns per product (``t_min`` or ``t_s`` or ``t_h``, then one column of percent released per unit).
+
+One rule for 100 %, stated in every table and JSON (``percent_basis``): each curve is in percent of its own
+weighed mass when the mass is recorded for every curve compared, else in percent of its own final value. A
+run given as its folder and as its ``curve.csv`` therefore gives the same numbers whenever both are compared
+under the same basis.
 """
 from __future__ import annotations
 
+import csv
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -13,19 +23,28 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.bootstrap import DEFAULT_SEED, ESTIMATORS, INTERVALS, BootstrapF2, bootstrap_f2
 from analysis.errors import AnalysisError
+from analysis.msd import MTAD_PCT, SIGNIF, MsdResult, msd_test
 from analysis.profile import (
-    F2Interval,
+    MAX_SAMPLED_POINTS,
     ReleaseProfile,
     Similarity,
-    bootstrap_f2,
     dissolution_efficiency,
     mean_dissolution_time,
     mean_profile,
+    sampling_times,
     similarity,
 )
+from analysis.regulatory import RULE_NAMES, RuleCheck, check_rule, get_rule
 from analysis.release_models import ModelFit, best_fit, fit_release_models
-from labapp.records.curvefiles import PhysicalCurve, read_physical_curve
+from analysis.replicates import TIME_UNITS_MIN, ReplicateSet
+from labapp.records.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
+
+DEFAULT_RULE = "ema"
+"""The regulator's rule ``sfr compare`` follows unless told otherwise."""
+BASIS_MASS = "weighed mass"
+BASIS_FINAL = "final value"
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,21 +78,36 @@ class CurveSummary:
 
 @dataclass(frozen=True, eq=False)
 class Comparison:
-    """The result of :func:`compare_curves`: the two (mean) curves, their summaries, f1/f2 and the optional
-    bootstrap interval of f2."""
+    """The result of :func:`compare_curves`: the two curves (g, with the 100 % of ``percent_basis``), their
+    summaries and f1/f2 under the rule's 85 % cut.
+
+    Attributes
+    ----------
+    profile_a, profile_b : ReleaseProfile
+        The reference (A) and the test (B), in s and g; ``amount_total`` is each one's 100 %.
+    a, b : CurveSummary
+    similarity : Similarity
+        f1/f2 with each curve in percent of its own 100 %.
+    rule : str
+        The regulator's rule (one of ``analysis.regulatory.RULE_NAMES``).
+    percent_basis : str
+        ``"weighed mass"`` or ``"final value"``: what 100 % is, for both curves.
+    """
 
     profile_a: ReleaseProfile
     profile_b: ReleaseProfile
     a: CurveSummary
     b: CurveSummary
     similarity: Similarity
-    interval: F2Interval | None = None
+    rule: str = DEFAULT_RULE
+    percent_basis: str = BASIS_FINAL
 
     def to_dict(self) -> dict:
-        """The JSON of ``sfr compare --json``."""
+        """The JSON of ``sfr compare A B --json``."""
         s = self.similarity
-        out = {
-            "reference": self.a.source, "test": self.b.source,
+        return {
+            "reference": self.a.source, "test": self.b.source, "rule": self.rule,
+            "percent_basis": self.percent_basis, "percent_basis_text": basis_text(self.percent_basis),
             "f1": s.f1, "f2": s.f2, "similar": s.similar, "reason": s.reason,
             "points_used": s.points_used, "times_s": s.times.tolist(),
             "reference_pct": [round(x, 4) for x in s.reference_pct.tolist()],
@@ -83,11 +117,6 @@ class Comparison:
             "best_fit_a": fit_dict(self.a.best), "best_fit_b": fit_dict(self.b.best),
             "fits_a": [fit_dict(f) for f in self.a.fits], "fits_b": [fit_dict(f) for f in self.b.fits],
         }
-        if self.interval is not None:
-            i = self.interval
-            out["f2_bootstrap"] = {"lower": i.lower, "upper": i.upper, "level": i.level, "mean": i.boot_mean,
-                                   "n_boot": i.n_boot, "seed": i.seed, "n_a": i.n_reference, "n_b": i.n_test}
-        return out
 
 
 def fit_dict(fit: ModelFit | None) -> dict | None:
@@ -161,40 +190,66 @@ def prediction_metrics(t_s: np.ndarray, reference_g: np.ndarray, predicted_g: np
     return out
 
 
-def _read_group(paths: Sequence[str | Path], calibration, name: str) -> list[ReleaseProfile]:
-    return [profile_of(read_physical_curve(p, calibration=calibration), f"{name}: {p}" if len(paths) > 1 else str(p))
-            for p in paths]
+def basis_text(basis: str) -> str:
+    """The sentence every table prints for the 100 % rule."""
+    if basis == BASIS_MASS:
+        return "100 % = each curve's weighed mass (recorded for every curve)"
+    if basis == BASIS_FINAL:
+        return "100 % = each curve's final value (the weighed mass is not recorded for every curve)"
+    return "100 % as given in the units file (percent released per unit)"
 
 
-def compare_profiles(a: Sequence[ReleaseProfile], b: Sequence[ReleaseProfile], *, until_s: float | None = None,
-                     times_s: Sequence[float] | None = None, rule: str = "either", n_boot: int = 0,
-                     seed: int = 0) -> Comparison:
-    """Compare a reference (``a``) with a test (``b``), each one curve or several replicates.
+def percent_basis(curves: Sequence[PhysicalCurve]) -> str:
+    """The 100 % rule: every curve's weighed mass when all are known, else every curve's final value."""
+    return BASIS_MASS if all(c.object_mass_g is not None for c in curves) else BASIS_FINAL
+
+
+def _profile(curve: PhysicalCurve, basis: str, label: str) -> ReleaseProfile:
+    return ReleaseProfile(curve.t_s, curve.released_g, "s", "g", curve.object_mass_g if basis == BASIS_MASS else None,
+                          label)
+
+
+def _percent(profile: ReleaseProfile) -> ReleaseProfile:
+    """The curve in percent of its own 100 %."""
+    total = profile.amount_total
+    if not (math.isfinite(total) and total > 0):
+        raise AnalysisError(f"{profile.label}: releases {total:g} {profile.amount_unit} in total; percent released "
+                            f"needs a curve with a positive release")
+    return ReleaseProfile(profile.t, 100.0 * profile.released / total, profile.time_unit, "%", 100.0, profile.label)
+
+
+def _cut_of(rule: str) -> str:
+    return "reference" if get_rule(rule).cut == "reference" else "either"
+
+
+def compare_profiles(a: ReleaseProfile, b: ReleaseProfile, *, until_s: float | None = None,
+                     times_s: Sequence[float] | None = None, rule: str = DEFAULT_RULE,
+                     percent_basis: str = BASIS_FINAL) -> Comparison:
+    """Compare a reference curve ``a`` with a test curve ``b``.
 
     Parameters
     ----------
-    a, b : sequence of ReleaseProfile
-        Replicates are averaged (:func:`analysis.mean_profile`) for f1/f2, MDT, DE and the fits.
+    a, b : ReleaseProfile
+        In s and g; each one's ``amount_total`` is its 100 % (see :func:`percent_basis`).
     until_s : float, optional
         MDT and DE up to this time, s (default: the end of the shorter curve, the same for both).
-    times_s, rule
-        As for :func:`analysis.similarity`.
-    n_boot : int
-        With replicates, the bootstrap samples of the f2 confidence interval (0: none).
-    seed : int
-        Seed of the bootstrap.
+    times_s : sequence of float, optional
+        f1/f2 time points (default: see :func:`analysis.profile.sampling_times`).
+    rule : str
+        The regulator whose 85 % cut applies (one curve per product: the CV rule cannot be checked).
+    percent_basis : str
+        Recorded in the result.
     """
-    ref = a[0] if len(a) == 1 else mean_profile(a, "mean of A")
-    test = b[0] if len(b) == 1 else mean_profile(b, "mean of B")
-    sim = similarity(ref, test, times=times_s, rule=rule)
-    until = min(ref.t[-1], test.t[-1]) if until_s is None else until_s
-    interval = bootstrap_f2(a, b, n_boot=n_boot, seed=seed, times=times_s, rule=rule) if n_boot else None
-    return Comparison(ref, test, summarize(ref, until), summarize(test, until), sim, interval)
+    sim = similarity(_percent(a), _percent(b), times=times_s, rule=_cut_of(rule))
+    sim = Similarity(sim.f1, sim.f2, sim.times, sim.reference_pct, sim.test_pct, sim.reason,
+                     sim.notes + (f"{get_rule(rule).agency} rule; one curve per product: the CV rule is not checked",))
+    until = min(a.t[-1], b.t[-1]) if until_s is None else until_s
+    return Comparison(a, b, summarize(a, until), summarize(b, until), sim, get_rule(rule).name, percent_basis)
 
 
-def compare_curves(a: str | Path | Sequence[str | Path], b: str | Path | Sequence[str | Path], *,
-                   calibration=None, **options) -> Comparison:
-    """Read two curve files (or two groups of replicate files) and compare them; see :func:`compare_profiles`.
+def compare_curves(a: str | Path, b: str | Path, *, calibration=None, until_s: float | None = None,
+                   times_s: Sequence[float] | None = None, rule: str = DEFAULT_RULE) -> Comparison:
+    """Read two curve files (the reference ``a``, the test ``b``) and compare them; see :func:`compare_profiles`.
 
     Raises
     ------
@@ -203,25 +258,252 @@ def compare_curves(a: str | Path | Sequence[str | Path], b: str | Path | Sequenc
     analysis.AnalysisError
         Curves that cannot be compared (no common time span, a reference without release, ...).
     """
-    group_a = [a] if isinstance(a, (str, Path)) else list(a)
-    group_b = [b] if isinstance(b, (str, Path)) else list(b)
-    return compare_profiles(_read_group(group_a, calibration, "A"), _read_group(group_b, calibration, "B"), **options)
+    curves = [read_physical_curve(p, calibration=calibration) for p in (a, b)]
+    basis = percent_basis(curves)
+    pa, pb = (_profile(c, basis, str(p)) for c, p in zip(curves, (a, b)))
+    return compare_profiles(pa, pb, until_s=until_s, times_s=times_s, rule=rule, percent_basis=basis)
 
 
+# ---------------------------------------------------------------- replicate sets
+@dataclass(frozen=True, eq=False)
+class SetComparison:
+    """The result of :func:`compare_sets`.
+
+    Attributes
+    ----------
+    reference, test : ReplicateSet
+        Percent released of each unit at the common time points.
+    check : RuleCheck
+        Mean, CV per point, the rule's verdict and f1/f2 on the means.
+    bootstrap : BootstrapF2 or None
+        With ``n_boot``: the five estimators and four intervals.
+    msd : MsdResult or None
+        Tsong's MSD and Hoffelder's T^2 (None when they cannot be computed: ``msd_error`` says why).
+    msd_error : str or None
+    mean_reference, mean_test : CurveSummary or None
+        MDT, DE and model fits of the mean curves (in %; None for a single time point).
+    percent_basis : str
+    sources_reference, sources_test : tuple of str
+    notes : tuple of str
+        How the time points were chosen.
+    """
+
+    reference: ReplicateSet
+    test: ReplicateSet
+    check: RuleCheck
+    bootstrap: BootstrapF2 | None
+    msd: MsdResult | None
+    msd_error: str | None
+    mean_reference: CurveSummary | None
+    mean_test: CurveSummary | None
+    percent_basis: str
+    sources_reference: tuple[str, ...]
+    sources_test: tuple[str, ...]
+    notes: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict:
+        """The JSON of ``sfr compare --reference ... --test ... --json``."""
+        def summary(s: CurveSummary | None) -> dict | None:
+            return None if s is None else {"mdt": s.mdt_s, "de_pct": s.de_pct, "until": s.until_s,
+                                           "best_fit": fit_dict(s.best), "fits": [fit_dict(f) for f in s.fits]}
+
+        return {"reference": list(self.sources_reference), "test": list(self.sources_test),
+                "percent_basis": self.percent_basis, "percent_basis_text": basis_text(self.percent_basis),
+                "time_unit": self.reference.time_unit, "notes": list(self.notes),
+                "reference_sd": self.reference.without_time_zero().sd.tolist(),
+                "test_sd": self.test.without_time_zero().sd.tolist(),
+                **self.check.to_dict(),
+                "bootstrap": None if self.bootstrap is None else self.bootstrap.to_dict(),
+                "msd": None if self.msd is None else self.msd.to_dict(), "msd_error": self.msd_error,
+                "mean_reference": summary(self.mean_reference), "mean_test": summary(self.mean_test)}
+
+
+UNIT_TIME_COLUMNS = {"t_s": "s", "t_min": "min", "t_h": "h"}
+"""The first column of a units CSV and the time unit it names."""
+
+
+def read_units_csv(path: str | Path, label: str) -> ReplicateSet:
+    """A CSV of unit columns: ``t_min`` (or ``t_s``, ``t_h``), then one column of percent released per unit.
+
+    Raises
+    ------
+    CurveFileError
+        An unreadable file, a first column that names no time unit, a cell that is not a number (row and
+        column named), fewer than one unit.
+    """
+    path = Path(path)
+    try:
+        with open(path, newline="") as fh:
+            rows = [r for r in csv.reader(fh) if any(c.strip() for c in r)]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CurveFileError(f"{path}: cannot read ({exc})") from exc
+    if not rows:
+        raise CurveFileError(f"{path}: empty file; expected a header t_min,unit1,unit2,...")
+    header = [h.strip() for h in rows[0]]
+    unit = UNIT_TIME_COLUMNS.get(header[0])
+    if unit is None or len(header) < 2:
+        raise CurveFileError(f"{path}: header {','.join(header)}; a units file starts with one of "
+                             f"{', '.join(UNIT_TIME_COLUMNS)} and has one column of percent released per unit")
+    values = np.empty((len(rows) - 1, len(header)))
+    for r, row in enumerate(rows[1:], start=1):
+        for c, name in enumerate(header):
+            try:
+                values[r - 1, c] = float(row[c])
+            except (IndexError, ValueError):
+                cell = row[c] if c < len(row) else "<missing>"
+                raise CurveFileError(f"{path}: row {r}: {name} = {cell!r} is not a number") from None
+    try:
+        return ReplicateSet(values[:, 0], values[:, 1:].T, unit, label, tuple(header[1:]))
+    except AnalysisError as exc:
+        raise CurveFileError(f"{path}: {exc}") from exc
+
+
+def _is_units_csv(path: Path) -> bool:
+    if not (path.is_file() and path.suffix.lower() == ".csv"):
+        return False
+    try:
+        with open(path, newline="") as fh:
+            header = next(csv.reader(fh), [])
+    except (OSError, UnicodeDecodeError):
+        return False
+    return bool(header) and header[0].strip() in UNIT_TIME_COLUMNS and "released_g" not in header
+
+
+def _set_from_curves(curves: Sequence[PhysicalCurve], basis: str, times_s: np.ndarray, label: str) -> ReplicateSet:
+    units = []
+    for c in curves:
+        if times_s[0] < c.t_s[0] - 1e-9 or times_s[-1] > c.t_s[-1] + 1e-9:
+            raise AnalysisError(f"{c.source}: sampled {c.t_s[0]:g}..{c.t_s[-1]:g} s; the time points "
+                                f"{times_s[0]:g}..{times_s[-1]:g} s lie outside it")
+        units.append(_percent(_profile(c, basis, c.source)).at(times_s))
+    return ReplicateSet(times_s, np.array(units), "s", label, tuple(c.source for c in curves))
+
+
+def _common_times(ref: Sequence[PhysicalCurve], test: Sequence[PhysicalCurve], basis: str,
+                  times_s: Sequence[float] | None) -> tuple[np.ndarray, str]:
+    curves = list(ref) + list(test)
+    lo, hi = max(float(c.t_s[0]) for c in curves), min(float(c.t_s[-1]) for c in curves)
+    if lo >= hi:
+        raise AnalysisError("the curves have no time span in common: "
+                            + ", ".join(f"{c.source} {c.t_s[0]:g}..{c.t_s[-1]:g} s" for c in curves))
+    if times_s is not None:
+        pts = np.asarray(times_s, dtype=float)
+        if pts.ndim != 1 or pts.size == 0 or np.any(np.diff(pts) <= 0) or not np.all(np.isfinite(pts)):
+            raise AnalysisError(f"times {list(np.ravel(pts))}: expected finite, strictly increasing times in s")
+        outside = pts[(pts < lo - 1e-9) | (pts > hi + 1e-9)]
+        if outside.size:
+            raise AnalysisError(f"time points {', '.join(f'{t:g}' for t in outside)} s lie outside the span "
+                                f"{lo:g}..{hi:g} s that every curve covers")
+        return pts, f"the {pts.size} requested time points"
+    first = curves[0].t_s
+    if first.size <= MAX_SAMPLED_POINTS and all(c.t_s.shape == first.shape and np.allclose(c.t_s, first)
+                                                 for c in curves):
+        return first.copy(), "every curve's own sampling times"
+    mean_ref = mean_profile([_percent(_profile(c, basis, c.source)) for c in ref], "mean reference")
+    mean_test = mean_profile([_percent(_profile(c, basis, c.source)) for c in test], "mean test")
+    pts, how = sampling_times(mean_ref, mean_test)
+    pts = pts[(pts >= lo) & (pts <= hi)]
+    return pts, how.replace("both curves", "every curve")
+
+
+def _read_set(sources: Sequence[str | Path], calibration, label: str) -> tuple[ReplicateSet | None,
+                                                                               list[PhysicalCurve]]:
+    paths = [Path(p) for p in sources]
+    if not paths:
+        raise CurveFileError(f"no {label} given")
+    units = [p for p in paths if _is_units_csv(p)]
+    if units:
+        if len(paths) > 1:
+            raise CurveFileError(f"{label}: a units file ({units[0]}) holds every unit of a product; give it alone, "
+                                 f"not with other files")
+        return read_units_csv(units[0], label), []
+    return None, [read_physical_curve(p, calibration=calibration) for p in paths]
+
+
+def _mean_summary(s: ReplicateSet, curves: Sequence[PhysicalCurve], basis: str, label: str) -> CurveSummary | None:
+    try:
+        if curves:
+            mean = mean_profile([_percent(_profile(c, basis, c.source)) for c in curves], label)
+        else:
+            mean = ReleaseProfile(s.times, s.mean, s.time_unit, "%", 100.0, label)
+        return summarize(mean)
+    except AnalysisError:
+        return None
+
+
+def compare_sets(reference: Sequence[str | Path], test: Sequence[str | Path], *, calibration=None,
+                 rule: str = DEFAULT_RULE, times_s: Sequence[float] | None = None, n_boot: int = 0,
+                 seed: int = DEFAULT_SEED, mtad: float = MTAD_PCT, signif: float = SIGNIF) -> SetComparison:
+    """Compare the replicate units of a reference and a test product.
+
+    Parameters
+    ----------
+    reference, test : sequence of str or Path
+        Each product's curves (one per unit: run folders, curve CSVs), or one units CSV.
+    calibration : analysis.BenchCalibration, optional
+        For run folders without their own calibration.
+    rule : str
+        One of ``analysis.regulatory.RULE_NAMES``.
+    times_s : sequence of float, optional
+        Time points for curves, s (default: their common sampling times, or a regular grid); a units CSV
+        brings its own.
+    n_boot : int
+        Bootstrap samples of f2 (0: none; else >= 100).
+    seed : int
+        R's ``set.seed`` value of the bootstrap (bootf2's default 306).
+    mtad, signif : float
+        Of Tsong's MSD and Hoffelder's T^2.
+
+    Raises
+    ------
+    labapp.records.curvefiles.CurveFileError
+        A file that cannot be read.
+    analysis.AnalysisError
+        Sets that cannot be compared (different time points, no common span, a bad setting).
+    """
+    get_rule(rule)
+    ref_set, ref_curves = _read_set(reference, calibration, "reference")
+    test_set, test_curves = _read_set(test, calibration, "test")
+    notes = []
+    if (ref_set is None) != (test_set is None):
+        raise CurveFileError("give both products as units files, or both as curves (one per unit)")
+    if ref_set is None:
+        basis = percent_basis(ref_curves + test_curves)
+        pts, how = _common_times(ref_curves, test_curves, basis, times_s)
+        notes.append(f"time points: {how}")
+        ref_set = _set_from_curves(ref_curves, basis, pts, "reference")
+        test_set = _set_from_curves(test_curves, basis, pts, "test")
+    else:
+        if times_s is not None:
+            raise CurveFileError("--times applies to curves; a units file brings its own time points")
+        basis = "units file"
+    check = check_rule(test_set, ref_set, rule)
+    boot = None
+    if n_boot:
+        boot = bootstrap_f2(test_set, ref_set, rule, n_boot=n_boot, seed=seed)
+    msd, msd_error = None, None
+    try:
+        msd = msd_test(ref_set, test_set, mtad=mtad, signif=signif)
+    except AnalysisError as exc:
+        msd_error = str(exc)
+    return SetComparison(ref_set, test_set, check, boot, msd, msd_error,
+                         _mean_summary(ref_set, ref_curves, basis, "mean reference"),
+                         _mean_summary(test_set, test_curves, basis, "mean test"), basis,
+                         tuple(str(p) for p in reference), tuple(str(p) for p in test), tuple(notes))
+
+
+# ---------------------------------------------------------------- tables and pictures
 def format_table(c: Comparison) -> str:
-    """The short table ``sfr compare`` prints."""
+    """The short table ``sfr compare A B`` prints."""
     s = c.similarity
-    lines = [f"A (reference): {c.a.source}  [100 % = {c.a.total_g:.4g} g]", f"B (test):      {c.b.source}"]
+    lines = [f"A (reference): {c.a.source}  [100 % = {c.a.total_g:.4g} g]",
+             f"B (test):      {c.b.source}  [100 % = {c.b.total_g:.4g} g]", basis_text(c.percent_basis)]
     if s.f2 is None:
         lines.append(f"f2: not reported: {s.reason}")
     else:
         verdict = "similar (f2 >= 50)" if s.similar else "not similar (f2 < 50)"
         lines.append(f"f2 = {s.f2:.2f}, f1 = {s.f1:.2f}: {verdict}; {s.points_used} points "
                      f"{', '.join(f'{t:g}' for t in s.times)} s")
-    if c.interval is not None:
-        i = c.interval
-        lines.append(f"f2 bootstrap {i.level:.0%} interval {i.lower:.2f} .. {i.upper:.2f} "
-                     f"({i.n_boot} samples, seed {i.seed}, {i.n_reference} + {i.n_test} curves)")
     lines += [f"  note: {n}" for n in s.notes]
     lines.append(f"{'':24}{'A':>14}{'B':>14}")
     lines.append(f"{'MDT (s)':24}{c.a.mdt_s:>14.1f}{c.b.mdt_s:>14.1f}")
@@ -232,22 +514,78 @@ def format_table(c: Comparison) -> str:
     return "\n".join(lines)
 
 
+def _num(v: float | None, fmt: str = ".2f") -> str:
+    return "n/a" if v is None or not math.isfinite(v) else format(v, fmt)
+
+
+def format_set_table(c: SetComparison) -> str:
+    """The table ``sfr compare --reference ... --test ...`` prints: one row per time point, the rule's verdict,
+    the bootstrap, the multivariate tests and the mean curves' MDT, DE and best fit."""
+    k = c.check
+    r, t = c.reference.without_time_zero(), c.test.without_time_zero()
+    unit = r.time_unit
+    lines = [f"reference: {r.n_units} unit(s)  ({', '.join(c.sources_reference)})",
+             f"test:      {t.n_units} unit(s)  ({', '.join(c.sources_test)})",
+             basis_text(c.percent_basis),
+             f"rule: {k.rule.agency} ({k.rule.source})"]
+    lines += [f"  note: {n}" for n in c.notes]
+    head = (f"{'time (' + unit + ')':>10} {'min':>7} | {'ref mean':>8} {'SD':>6} {'CV %':>6} | "
+            f"{'test mean':>9} {'SD':>6} {'CV %':>6} | f2 point")
+    lines += [head, "-" * len(head)]
+    for i, time in enumerate(r.times):
+        used = "early" if i < k.early else "yes"
+        used = used if i < k.used else "-"
+        lines.append(f"{time:>10g} {r.times_min[i]:>7.4g} | {r.mean[i]:>8.2f} {r.sd[i]:>6.2f} {r.cv_pct[i]:>6.2f} | "
+                     f"{t.mean[i]:>9.2f} {t.sd[i]:>6.2f} {t.cv_pct[i]:>6.2f} | {used}")
+    if k.f2 is not None:
+        verdict = "similar (f2 >= 50)" if k.similar else "not similar (f2 < 50)"
+        lines.append(f"f2 = {k.f2:.2f}, f1 = {k.f1:.2f} on the means: {verdict}; {k.used} points")
+    elif k.similar_without_f2:
+        lines.append(f"similar without f2: {k.refused}")
+    else:
+        lines.append(f"f2 refused: {k.refused}")
+    lines += [f"  warning: {w}" for w in k.warnings]
+    if c.bootstrap is not None:
+        b = c.bootstrap
+        lines.append(f"bootstrap of f2: {b.n_boot} samples over units, seed {b.seed} (R's set.seed), "
+                     f"{b.level:.0%} intervals; similar when the lower bound >= 50")
+        lines.append(f"{'estimator':>10} {'value':>7} {'boot mean':>9} | "
+                     + " | ".join(f"{kind:^15}" for kind in INTERVALS))
+        for e in ESTIMATORS:
+            cells = " | ".join(f"{_num(lo):>7}..{_num(hi):<7}" for lo, hi in (b.interval(e, kind) for kind in INTERVALS))
+            lines.append(f"{e:>10} {_num(b.estimates[e]):>7} {_num(b.boot_mean[e]):>9} | {cells}")
+    if c.msd is not None:
+        m = c.msd
+        lines.append(f"MSD (Tsong, MIMCR) on {m.times.size} points, MTAD {m.mtad:g} %, alpha {m.signif:g}: "
+                     f"D_M = {m.dm:.3f}, {1 - m.signif:.0%} region up to {m.obs_upper:.3f}, limit {m.sim_limit:.3f}: "
+                     f"{'similar' if m.tsong_similar else 'not similar'}")
+        lines.append(f"T^2 equivalence (Hoffelder): T^2 = {m.t2:.4g}, F = {m.f:.4g}, p = {m.p_hoffelder:.4g}: "
+                     f"{'equivalent' if m.hoffelder_similar else 'not shown equivalent'} (p < {m.signif:g})")
+    else:
+        lines.append(f"MSD and T^2: not computed: {c.msd_error}")
+    for name, s in (("reference", c.mean_reference), ("test", c.mean_test)):
+        if s is not None:
+            best = s.best
+            lines.append(f"mean {name}: MDT {s.mdt_s:.4g} {unit}, DE {s.de_pct:.2f} %; best fit "
+                         f"{best.describe() if best else 'none could be ranked'}")
+    return "\n".join(lines)
+
+
 def plot_comparison(c: Comparison, path: str | Path) -> None:
-    """Both curves in percent of A's total, the f2 points marked, and the best fits dashed."""
+    """Both curves in percent of their 100 %, the f2 points marked, and the best fits dashed."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
-    total = c.a.total_g
     for profile, summary, colour, name in ((c.profile_a, c.a, "C0", "A"), (c.profile_b, c.b, "C1", "B")):
-        ax.plot(profile.t / 60.0, 100 * profile.released / total, color=colour, label=f"{name}: {Path(summary.source).name}")
+        ax.plot(profile.t / 60.0, 100 * profile.released / profile.amount_total, color=colour,
+                label=f"{name}: {Path(summary.source).name}")
         best = summary.best
         if best is not None:
             t = np.linspace(0, profile.t[-1], 300)
-            ax.plot(t / 60.0, best.percent_at(t) * summary.total_g / total, "--", color=colour, lw=0.9,
-                    label=f"{name} {best.model} fit")
+            ax.plot(t / 60.0, best.percent_at(t), "--", color=colour, lw=0.9, label=f"{name} {best.model} fit")
     s = c.similarity
     ax.plot(s.times / 60.0, s.reference_pct, "o", color="C0", ms=4)
     ax.plot(s.times / 60.0, s.test_pct, "o", color="C1", ms=4)
@@ -255,9 +593,43 @@ def plot_comparison(c: Comparison, path: str | Path) -> None:
     title = f"f2 = {s.f2:.1f}, f1 = {s.f1:.1f}" if s.f2 is not None else f"f2 not reported: {s.reason}"
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("time (min)")
-    ax.set_ylabel("released (% of A's mass)")
+    ax.set_ylabel(f"released (% of each curve's {c.percent_basis})")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def plot_sets(c: SetComparison, path: str | Path) -> None:
+    """Every unit thin, the means with SD bars, the f2 points filled."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
+    scale = TIME_UNITS_MIN[c.reference.time_unit]
+    for s, colour in ((c.reference, "C0"), (c.test, "C1")):
+        tm = s.times * scale
+        for row in s.units:
+            ax.plot(tm, row, color=colour, lw=0.5, alpha=0.35)
+        ax.errorbar(tm, s.mean, yerr=s.sd, color=colour, lw=1.4, capsize=2, label=f"{s.label} ({s.n_units} units)")
+    k = c.check
+    ax.plot(k.used_times * scale, k.reference_mean[:k.used], "o", color="C0", ms=4)
+    ax.plot(k.used_times * scale, k.test_mean[:k.used], "o", color="C1", ms=4)
+    ax.axhline(85, color="0.6", lw=0.6, ls=":")
+    ax.set_title(f"{k.rule.agency}: " + (f"f2 = {k.f2:.1f}" if k.f2 is not None else k.refused), fontsize=8)
+    ax.set_xlabel("time (min)")
+    ax.set_ylabel("released (%)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+__all__ = ["BASIS_FINAL", "BASIS_MASS", "Comparison", "CurveSummary", "DEFAULT_RULE", "RULE_NAMES", "SetComparison",
+           "basis_text", "compare_curves", "compare_profiles", "compare_sets", "fit_dict", "format_set_table",
+           "format_table", "percent_basis", "plot_comparison", "plot_sets", "prediction_metrics", "read_units_csv",
+           "release_summary", "summarize"]

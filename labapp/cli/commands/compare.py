@@ -1,4 +1,6 @@
-"""`sfr compare`: f1/f2, MDT, DE and model fits of two release curves (A is the reference)."""
+"""`sfr compare`: f1/f2 under a regulator's rule, MDT, DE and model fits of two release curves (A is the
+reference); with replicate units (`--reference ... --test ...`), the CV per time point, the bootstrap of f2,
+Tsong's MSD and Hoffelder's T^2."""
 from __future__ import annotations
 
 import argparse
@@ -6,27 +8,42 @@ import argparse
 from labapp.cli.argtypes import nonnegative_int, positive_float
 
 NAME = "compare"
-HELP = "compare two release curves as dissolution testing does: f1/f2, MDT, DE, model fits (A is the reference)"
+HELP = ("compare release curves as dissolution testing does: f1/f2 under a regulator's rule, MDT, DE, model fits; "
+        "replicate units: CV, bootstrap f2, MSD and T^2")
+RULES = ("ema", "fda", "who", "canada", "anvisa")
+"""The names of ``analysis.regulatory.RULE_NAMES`` (kept here so that ``sfr --help`` imports no numerics)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr compare`."""
     for name, role in (("a", "reference"), ("b", "test")):
-        parser.add_argument(name, metavar=name.upper(),
-                            help=f"the {role}: curve.csv, release_physical.csv, curves_physical.csv, a run folder, "
-                                 f"a t_s,released_g CSV, or replicates separated by commas (averaged)")
+        parser.add_argument(name, metavar=name.upper(), nargs="?",
+                            help=f"the {role} curve: curve.csv, release_physical.csv, curves_physical.csv, a run "
+                                 f"folder, or a t_s,released_g CSV")
+    parser.add_argument("--reference", nargs="+", action="extend", metavar="UNIT",
+                        help="replicate units of the reference: one curve or run folder per unit (repeatable), or "
+                             "one CSV with t_min (or t_s, t_h) and one column of percent released per unit")
+    parser.add_argument("--test", nargs="+", action="extend", metavar="UNIT",
+                        help="replicate units of the test, as --reference")
+    parser.add_argument("--rule", choices=RULES, default="ema",
+                        help="the regulator whose f2 rule applies: the 85 %% cut, the CV limits at the early and "
+                             "later points, and whether a CV failure refuses f2 or warns (default ema)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     parser.add_argument("--plot", nargs="?", const="compare.png", metavar="PNG",
-                        help="also draw both curves with their f2 points and best fits (default compare.png)")
+                        help="also draw the curves with their f2 points (default compare.png)")
     parser.add_argument("--until", type=positive_float, metavar="S",
-                        help="MDT and DE up to this time, s (default: the end of the shorter curve)")
+                        help="two curves: MDT and DE up to this time, s (default: the end of the shorter curve)")
     parser.add_argument("--times", metavar="S,S,...",
-                        help="f1/f2 time points, s (default: the sparser curve's samples, or a regular grid)")
-    parser.add_argument("--rule", choices=("either", "both"), default="either",
-                        help="the point after 85 %% is where either curve (EMA, default) or both (FDA) pass it")
+                        help="f2 time points, s (default: the curves' common samples, or a regular grid)")
     parser.add_argument("--bootstrap", type=nonnegative_int, default=0, metavar="N",
-                        help="with replicates: a 90 %% bootstrap interval of f2 from N samples (e.g. 10000)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
+                        help="replicate units: bootstrap f2 over units with N samples (e.g. 10000): five estimators, "
+                             "normal, basic, percentile and BCa 90 %% intervals")
+    parser.add_argument("--seed", type=int, default=306,
+                        help="R's set.seed value of the bootstrap (default 306, bootf2's; the same seed draws the "
+                             "same samples as bootf2)")
+    parser.add_argument("--mtad", type=positive_float, default=10.0, metavar="PCT",
+                        help="replicate units: largest tolerable mean difference per point of the MSD and T^2 tests, "
+                             "%% (default 10)")
     parser.add_argument("--calibration", help="bench calibration JSON for run folders without calibration.json")
 
 
@@ -42,33 +59,57 @@ def _times(text: str | None) -> list[float] | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Compare, then print the table or the JSON; draw the picture with --plot."""
+    """Compare two curves or two sets of units, then print the table or the JSON; draw with --plot."""
     import json
 
     from labapp.errors import UsageError
-    from labapp.jobs.compare import compare_curves, format_table, plot_comparison
+    from labapp.jobs.compare import (
+        compare_curves,
+        compare_sets,
+        format_set_table,
+        format_table,
+        plot_comparison,
+        plot_sets,
+    )
     from labapp.records.outpaths import check_out
 
-    a = [p for p in args.a.split(",") if p]
-    b = [p for p in args.b.split(",") if p]
-    if args.bootstrap and max(len(a), len(b)) < 2:
-        raise UsageError("--bootstrap needs replicate curves: give A or B as several files separated by commas")
-    if args.bootstrap < 0:
+    sets = args.reference is not None or args.test is not None
+    if sets:
+        if args.a is not None or args.b is not None:
+            raise UsageError("give either two curves A B, or replicate units with --reference and --test, not both")
+        if not args.reference or not args.test:
+            raise UsageError("replicate units need both --reference UNIT... and --test UNIT...")
+        if args.until is not None:
+            raise UsageError("--until applies to two curves; the mean curves of replicate units run to their end")
+        inputs = args.reference + args.test
+    else:
+        if args.a is None or args.b is None:
+            raise UsageError("give two curves A (the reference) and B (the test), or replicate units with "
+                             "--reference UNIT... --test UNIT...")
+        if args.bootstrap:
+            raise UsageError("--bootstrap needs replicate units: give each product's units with --reference and --test")
+        inputs = [args.a, args.b]
+    if args.bootstrap and args.bootstrap < 100:
         raise UsageError(f"--bootstrap {args.bootstrap}: expected a number of samples >= 100, or 0 for none")
-    plot = check_out(args.plot, "compare", a + b, file=True, option="--plot") if args.plot else None
+    if not 0 < args.mtad <= 50:
+        raise UsageError(f"--mtad {args.mtad:g}: expected a percentage in (0, 50]")
+    plot = check_out(args.plot, "compare", inputs, file=True, option="--plot") if args.plot else None
     calibration = None
     if args.calibration:
         from analysis import BenchCalibration
 
         calibration = BenchCalibration.load(args.calibration)
-    result = compare_curves(a, b, calibration=calibration, until_s=args.until, times_s=_times(args.times),
-                            rule=args.rule, n_boot=args.bootstrap, seed=args.seed)
-    if args.json:
-        print(json.dumps(result.to_dict(), indent=2))
+    if sets:
+        result = compare_sets(args.reference, args.test, calibration=calibration, rule=args.rule,
+                              times_s=_times(args.times), n_boot=args.bootstrap, seed=args.seed, mtad=args.mtad)
+        text, draw = format_set_table, plot_sets
     else:
-        print(format_table(result))
+        result = compare_curves(args.a, args.b, calibration=calibration, until_s=args.until,
+                                times_s=_times(args.times), rule=args.rule)
+        text, draw = format_table, plot_comparison
+    print(json.dumps(result.to_dict(), indent=2) if args.json else text(result))
     if plot is not None:
-        plot_comparison(result, plot)
+        draw(result, plot)
         if not args.json:
             print(f"wrote {plot}")
     return 0
