@@ -1,5 +1,7 @@
-"""Release-profile metrics of dissolution testing: f1/f2 with the regulatory time-point rules, a bootstrap
-confidence interval for f2, mean dissolution time (MDT) and dissolution efficiency (DE).
+"""Release-profile metrics of dissolution testing: f1/f2 of two curves with the regulatory time-point rules,
+mean dissolution time (MDT) and dissolution efficiency (DE). Replicate units, the regulators' CV rules, the
+bootstrap of f2 and the multivariate tests are in :mod:`analysis.replicates`, :mod:`analysis.regulatory`,
+:mod:`analysis.bootstrap` and :mod:`analysis.msd`.
 
 Definitions (Moore and Flanner 1996; FDA guidance "Dissolution testing of immediate release solid oral
 dosage forms", 1997; EMA "Guideline on the investigation of bioequivalence", 2010, appendix I; Costa and
@@ -24,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -153,39 +155,6 @@ class Similarity:
     def similar(self) -> bool | None:
         """f2 >= 50, or None when f2 is not reported."""
         return None if self.f2 is None else self.f2 >= SIMILAR_F2
-
-
-@dataclass(frozen=True, eq=False)
-class F2Interval:
-    """A bootstrap confidence interval of f2 over replicate curves (resampled with replacement).
-
-    Attributes
-    ----------
-    f2 : float
-        f2 of the mean profiles.
-    lower, upper : float
-        Percentile interval of the bootstrap f2 values at ``level``.
-    level : float
-        Two-sided confidence level (0.90: the EMA criterion reads the lower bound against 50).
-    boot_mean : float
-        Mean of the bootstrap f2 values.
-    n_boot, seed : int
-    n_reference, n_test : int
-        Replicate curves per group.
-    similarity : Similarity
-        The points and percent values of the mean profiles.
-    """
-
-    f2: float
-    lower: float
-    upper: float
-    level: float
-    boot_mean: float
-    n_boot: int
-    seed: int
-    n_reference: int
-    n_test: int
-    similarity: Similarity = field(repr=False)
 
 
 def f1_f2(reference_pct: np.ndarray, test_pct: np.ndarray) -> tuple[float, float]:
@@ -392,70 +361,6 @@ def mean_profile(curves: Sequence[ReleaseProfile], label: str = "mean") -> Relea
     values = np.array([c.at(grid) for c in curves]).mean(axis=0)
     total = float(np.mean([c.amount_total for c in curves]))
     return ReleaseProfile(grid, values, curves[0].time_unit, curves[0].amount_unit, total, label)
-
-
-def bootstrap_f2(references: Sequence[ReleaseProfile], tests: Sequence[ReleaseProfile], *, n_boot: int = 10000,
-                 seed: int = 0, level: float = 0.90, times: Sequence[float] | None = None,
-                 cutoff_pct: float = CUTOFF_PCT, rule: str = "either") -> F2Interval:
-    """Bootstrap confidence interval of f2 between two groups of replicate curves.
-
-    As the R package bootf2 does: the time points come from the mean profiles under the rules of
-    :func:`similarity`; each bootstrap sample draws the same number of curves with replacement within
-    each group, and f2 of the two resampled mean profiles is recorded; the interval is the percentile
-    interval of those f2 values.
-
-    Parameters
-    ----------
-    references, tests : sequence of ReleaseProfile
-        Replicate curves of the reference and of the test (units as in :func:`similarity`); at least
-        one group needs two or more curves.
-    n_boot : int
-        Bootstrap samples (default 10000, >= 100).
-    seed : int
-        Seed of the resampling; the same seed gives the same interval.
-    level : float
-        Two-sided confidence level in (0, 1) (default 0.90).
-    times, cutoff_pct, rule
-        As for :func:`similarity`.
-
-    Returns
-    -------
-    F2Interval
-
-    Raises
-    ------
-    AnalysisError
-        Too few curves, a bad setting, or when the rules leave too few points (the reason is named).
-    """
-    references, tests = list(references), list(tests)
-    if not references or not tests or max(len(references), len(tests)) < 2:
-        raise AnalysisError(f"a bootstrap of f2 needs replicate curves: got {len(references)} reference and "
-                            f"{len(tests)} test curve(s); give at least 2 in one group")
-    if int(n_boot) < 100:
-        raise AnalysisError(f"n_boot={n_boot!r}; use at least 100 bootstrap samples")
-    if not 0 < level < 1:
-        raise AnalysisError(f"level={level!r} must lie in (0, 1)")
-    mean_ref = mean_profile(references, "mean reference")
-    mean_test = mean_profile(tests, "mean test")
-    lo, hi = _check_pair(mean_ref, mean_test)
-    if times is None:
-        sparse = min(references + tests, key=lambda c: c.t.size)
-        if sparse.t.size <= MAX_SAMPLED_POINTS:
-            times = sparse.t[(sparse.t >= lo) & (sparse.t <= hi)]
-    base = similarity(mean_ref, mean_test, times=times, cutoff_pct=cutoff_pct, rule=rule)
-    if base.f2 is None:
-        raise AnalysisError(f"no f2 for the mean profiles: {base.reason}")
-    total = mean_ref.amount_total
-    ref = np.array([c.at(base.times) for c in references]) * (100.0 / total)
-    test = np.array([c.at(base.times) for c in tests]) * (100.0 / total)
-    rng = np.random.default_rng(seed)
-    ref_boot = ref[rng.integers(0, len(ref), (int(n_boot), len(ref)))].mean(axis=1)
-    test_boot = test[rng.integers(0, len(test), (int(n_boot), len(test)))].mean(axis=1)
-    _, f2s = f1_f2(ref_boot, test_boot)
-    tail = 50.0 * (1.0 - level)
-    lower, upper = np.percentile(f2s, [tail, 100.0 - tail])
-    return F2Interval(float(base.f2), float(lower), float(upper), float(level), float(f2s.mean()), int(n_boot),
-                      int(seed), len(references), len(tests), base)
 
 
 def _from_zero(profile: ReleaseProfile, until: float | None) -> tuple[np.ndarray, np.ndarray]:

@@ -15,6 +15,7 @@ verify a folder                :func:`labapp.jobs.verify.verify`               `
 calibrate the simulation       :func:`labapp.jobs.calibrate_sim.calibrate_sim`  ``calibrate-sim``
 evaluate the forward model     :func:`labapp.jobs.evaluate.evaluate_models`    ``evaluate``
 compare release curves         :func:`labapp.jobs.compare.compare_curves`      ``compare``
+compare replicate units        :func:`labapp.jobs.compare.compare_sets`        ``compare --test``
 the demo                       :func:`labapp.jobs.demo.run_demo`               ``demo``
 =============================  ==============================================  ==========================
 

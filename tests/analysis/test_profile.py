@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from analysis import AnalysisError
-from analysis.profile import ReleaseProfile, bootstrap_f2, dissolution_efficiency, f1_f2, mean_dissolution_time, similarity
+from analysis.profile import ReleaseProfile, dissolution_efficiency, f1_f2, mean_dissolution_time, similarity
 
 # Tsong, Hammerstrom, Sathe and Shah, "Statistical assessment of mean differences between two dissolution
 # data sets", Drug Inf. J. 30:1105-1112 (1996), table 1: % released of 6 reference and 6 test tablets.
@@ -146,35 +146,6 @@ def test_two_dense_curves_use_a_regular_grid_of_round_steps():
     assert np.allclose(step, step[0]) and step[0] % 60 == 0  # whole minutes
     assert 5 <= result.points_used <= 12
     assert "regular grid" in result.notes[0]
-
-
-def test_bootstrap_is_seeded_brackets_the_estimate_and_agrees_with_an_independent_loop():
-    refs = [_pct(DIP1_MIN, row, f"R{i}") for i, row in enumerate(DIP1_REF)]
-    tests = [_pct(DIP1_MIN, row, f"T{i}") for i, row in enumerate(DIP1_TEST)]
-    a = bootstrap_f2(refs, tests, n_boot=2000, seed=7)
-    b = bootstrap_f2(refs, tests, n_boot=2000, seed=7)
-    assert (a.lower, a.upper) == (b.lower, b.upper)
-    assert a.f2 == pytest.approx(40.83405, abs=1e-5)
-    assert a.lower < a.f2 < a.upper and a.similarity.points_used == 7
-    # an independent percentile bootstrap: a plain loop over tablet draws, another seed
-    rng = np.random.default_rng(12345)
-    keep = slice(0, 7)
-    boots = []
-    for _ in range(2000):
-        r = DIP1_REF[rng.choice(6, 6)].mean(axis=0)[keep]
-        t = DIP1_TEST[rng.choice(6, 6)].mean(axis=0)[keep]
-        boots.append(_f2_written_differently(r, t))
-    lo, hi = np.percentile(boots, [5, 95])
-    assert a.lower == pytest.approx(lo, abs=0.3) and a.upper == pytest.approx(hi, abs=0.3)  # Monte Carlo error
-
-
-def test_bootstrap_of_identical_replicates_collapses_to_the_estimate():
-    ref = _pct(DIP1_MIN, DIP1_REF.mean(axis=0))
-    test = _pct(DIP1_MIN, DIP1_TEST.mean(axis=0))
-    interval = bootstrap_f2([ref, ref], [test, test], n_boot=200)
-    assert interval.lower == pytest.approx(interval.f2) and interval.upper == pytest.approx(interval.f2)
-    with pytest.raises(AnalysisError, match="needs replicate curves"):
-        bootstrap_f2([ref], [test])
 
 
 def test_mdt_and_de_match_closed_forms():

@@ -214,3 +214,10 @@ def test_bad_replicate_input_is_named(curves, capsys, args, message):
     tmp, a, b = curves
     assert main(args(tmp, a, b)) == 2
     assert message in capsys.readouterr().err
+
+
+def test_the_commands_rule_names_are_the_analysis_ones():
+    from analysis.regulatory import RULE_NAMES
+    from labapp.cli.commands.compare import RULES
+
+    assert RULES == RULE_NAMES
