@@ -8,6 +8,25 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
+def _test_operator() -> None:
+    """Every test (and every `sfr` subprocess it starts) acts as the operator "tester" of a users file of its
+    own: recording needs a named operator. Tests of the operator checks set their own."""
+    import tempfile
+
+    from labapp.records.operators import OperatorError, add_user, load_users
+
+    users = os.environ.setdefault("SFR_USERS", os.path.join(tempfile.mkdtemp(prefix="sfr-users-"), "users.json"))
+    os.environ.setdefault("SFR_OPERATOR", "tester")
+    try:
+        if "tester" not in load_users():
+            add_user("tester", "tester-password", users)
+    except OperatorError:
+        pass
+
+
+_test_operator()
+
+
 def pytest_configure(config):
     """In the controlling process only: fill numba's on-disk cache, so that parallel workers and the
     `sfr` subprocesses the tests start load compiled kernels instead of compiling (and writing the

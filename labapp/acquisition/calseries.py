@@ -35,6 +35,8 @@ from labapp.acquisition.settings import (
     to_record,
 )
 from labapp.errors import UsageError
+from labapp.records.audit import Action
+from labapp.records.audit import append as audit
 from labapp.records.storage import MASSES_CSV, RunFolder, atomic_write, create_run
 
 CALIBRATION_FILE = "bench_calibration.json"
@@ -266,6 +268,8 @@ class CalibrationProcedure:
         self.session.note("info", "calibration", f"fitted {len(self.masses)} levels "
                           f"({conc.min():.3g}..{conc.max():.3g} g/kg), {good}/{cal.good.size} good cells; "
                           f"saved {CALIBRATION_FILE}")
+        audit(self.run.path, Action.CALIBRATE, f"bench calibration fitted from {len(self.masses)} levels, {good}/"
+              f"{cal.good.size} good cells: {CALIBRATION_FILE} (SHA-256 {self.run.record.files[CALIBRATION_FILE]})")
 
 
 def image_shape(path: Path) -> tuple[int, int]:

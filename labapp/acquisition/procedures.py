@@ -31,6 +31,8 @@ from labapp.acquisition.settings import (
     from_record,
     to_record,
 )
+from labapp.records.audit import Action
+from labapp.records.audit import append as audit
 from labapp.records.runrecord import RecordStatus
 from labapp.records.storage import RunFolder, check_disk_space, create_run, free_bytes, open_run, read_run
 
@@ -106,6 +108,8 @@ class RunProcedure:
         self.config, self.bench, self.data_dir = config, bench, Path(data_dir)
         self.calibration = calibration
         self.resume_path: Path | None = None
+        self.record_extra: dict[str, Any] = {}
+        """Further ``run.json`` fields of a new run (the method it follows: ``method``)."""
         self.run: RunFolder | None = None
         self.session: BenchSession | None = None
         self.analyzer = LiveAnalyzer(calibration) if calibration is not None else None
@@ -141,7 +145,7 @@ class RunProcedure:
             meta = dict(kind="run", config=cfg.to_dict(), water_g=cfg.bath.water_g,
                         object_mass_g=cfg.object_mass_g, object_name=cfg.object_name, notes=cfg.notes,
                         interval_s=cfg.interval_s, simulated=self.bench.simulated, bench=self.bench.description,
-                        **_geometry_meta(self.calibration))
+                        **_geometry_meta(self.calibration), **self.record_extra)
             self.run = create_run(self.data_dir, cfg.name, meta)
             if self.calibration is not None:
                 self.run.add_file("calibration.json", _calibration_bytes(self.calibration))
@@ -171,6 +175,7 @@ class RunProcedure:
             session.t0_unix_s = engine.clock.now()
             run.update(t0_unix_s=session.t0_unix_s)
             session.note("info", "drop", "object dropped: time zero")
+            audit(run.path, Action.DROP, "object dropped: time zero")
         else:
             session.start_stirring(cfg.bath.speed_rpm)
             last = run.frames[-1].t_s if run.frames else 0.0

@@ -19,6 +19,7 @@ import sys
 import traceback
 
 from labapp.cli import commands
+from labapp.cli.operator import add_operator_option
 from labapp.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, LabError
 
 #: The commands in the order of a lab's workflow (bench set-up, measurement, simulation and design,
@@ -64,6 +65,8 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
         p.set_defaults(_run=module.run)
+        if getattr(module, "RECORDS", False):
+            add_operator_option(p, module.run, module.RECORDS)
     return parser
 
 

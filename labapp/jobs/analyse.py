@@ -11,6 +11,9 @@ from analysis import BenchCalibration, RunCurve, analyze_run, write_cells_csv, w
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
 from labapp.figures.release_plot import draw_release
 from labapp.jobs.compare import release_summary
+from labapp.records import operators
+from labapp.records.audit import Action
+from labapp.records.audit import append as audit
 from labapp.records.outpaths import ANALYSIS_SUBFOLDER, FolderKind, check_out
 
 
@@ -53,6 +56,8 @@ def analyse_run(run: str | Path, calibration: str | Path, out: str | Path | None
     run = Path(run)
     default_out = run / ANALYSIS_SUBFOLDER
     out = Path(out) if out is not None else default_out
+    into_record = (run / "run.json").is_file() and run.resolve() in out.resolve().parents
+    operator = operators.require(f"analysing {run} into its record") if into_record else None
     inputs = [calibration] if out.resolve() == default_out.resolve() else [calibration, run]
     out = check_out(out, FolderKind.ANALYSIS, inputs)
     cal = BenchCalibration.load(calibration)
@@ -68,6 +73,9 @@ def analyse_run(run: str | Path, calibration: str | Path, out: str | Path | None
     if plot:
         files.append(out / "curve.png")
         _plot_curve(curve, files[-1])
+    if into_record:
+        audit(run, Action.REANALYSE, f"analysed {len(curve.files)} frames into {out.relative_to(run)} with "
+              f"calibration {Path(calibration).name}", operator=operator)
     return AnalysisOutputs(curve, out, tuple(files))
 
 

@@ -1,12 +1,16 @@
 """Calibrate the bench: a calibration-series folder to its per-cell Beer-Lambert fit (`sfr calibrate-bench`)."""
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
 from analysis import CropGeometry, default_geometry
 from labapp.acquisition.calseries import fit_series, image_shape, read_masses
 from labapp.acquisition.settings import WATER
 from labapp.errors import UsageError
+from labapp.records import operators
+from labapp.records.audit import Action
+from labapp.records.audit import append as audit
 from labapp.records.outpaths import check_out
 from labapp.records.storage import MASSES_CSV, RUN_JSON, RecordReadError, read_record
 
@@ -31,6 +35,7 @@ def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WA
     if not folder.is_dir():
         raise UsageError(f"{folder} is not a folder; give the calibration-series folder holding {MASSES_CSV}")
     out = check_out(out, "calibration", [folder / MASSES_CSV], file=True)
+    operator = operators.require(f"calibrating from {folder}") if (folder / RUN_JSON).is_file() else None
     WATER.check(water_g, "calibrate_series")
     files, masses = read_masses(folder)
     crop = crop or _recorded_crop(folder)
@@ -42,6 +47,9 @@ def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WA
     cal = fit_series(files, masses, geometry, water_g, camera, reduce)
     out.parent.mkdir(parents=True, exist_ok=True)
     cal.save(out)
+    if (folder / RUN_JSON).is_file():
+        audit(folder, Action.CALIBRATE, f"bench calibration fitted from {len(files)} images: {out.resolve()} "
+              f"(SHA-256 {hashlib.sha256(out.read_bytes()).hexdigest()})", operator=operator)
     return cal
 
 

@@ -22,6 +22,9 @@ import numpy as np
 from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, SimCal, fit_simcal, leave_one_out
 from analysis.simcal import DEFAULT_MAX_OFFSET_S, MODELS
 from labapp.errors import UsageError
+from labapp.records import operators
+from labapp.records.audit import Action
+from labapp.records.audit import append as audit
 from labapp.records.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
 from labapp.records.jsonfile import read_format
 from labapp.records.outpaths import FolderKind, check_out
@@ -214,6 +217,7 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
     set_csv, out_dir = Path(set_csv), Path(out_dir)
     rows = read_set(set_csv)
     _check_out(out_dir, [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)])
+    operator = operators.require(f"calibrating the simulator into {out_dir}")
     bench = None
     if bench_calibration is not None:
         try:
@@ -283,6 +287,7 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         "max_offset_s": max_offset_s,
         "inputs_sha256": _input_hashes(set_csv, bench_calibration, rows),
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "operator": operator,
     }
     say(0.96, f"writing {out_dir} ...")
     atomic_write(out_dir / "simcal.json", (json.dumps(doc, indent=2) + "\n").encode())
@@ -293,6 +298,8 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
     plot_loo(loos[chosen], [f"{r.run.name}\n{r.mesh.name}" for r in rows], out_dir / "simcal.png",
              f"leave-one-out predictions ({chosen} model, {fit.cal.seconds_per_mm:.0f} s/mm, "
              f"{fit.cal.g_per_mm3 * 1000:.3f} g/cm^3)")
+    audit(out_dir, Action.CALIBRATE, f"simulation calibration simcal.json from {n} runs of {set_csv.name}: "
+          f"{chosen} model, {fit.cal.seconds_per_mm:.1f} s/mm", operator=operator)
     say(1.0, f"{chosen} model: {fit.cal.seconds_per_mm:.1f} s/mm, mean leave-one-out error "
              f"{100 * mean_loo[chosen]:.2f}% of the weighed mass")
     return SimCalRun(doc, loos[chosen], out_dir / "simcal.json")

@@ -26,6 +26,9 @@ from design.files.rundir import finished_run, run_design
 from design.forward.simulator import simulate
 from labapp.jobs.calibrate_sim import SimCalError, SimCalFile, curve_of
 from labapp.jobs.compare import prediction_metrics
+from labapp.records import operators
+from labapp.records.audit import Action
+from labapp.records.audit import append as audit
 from labapp.records.curvefiles import CURVE_FILES, PhysicalCurve
 from labapp.records.storage import atomic_write
 
@@ -220,6 +223,7 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
         done = finished_run(out_dir, config)
         if done is not None and (simcal is None or "simcal" in done.outputs.summary):
             return done, done.outputs.summary if simcal is not None else None
+    operator = operators.require(f"designing into {out_dir}")
     record = out_dir / "target_measured.json"
     measured: PhysicalCurve | None = None
     if config is not None and is_physical(config.target):
@@ -236,12 +240,29 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
         config = dataclasses.replace(config, target=str(target_csv.resolve()))
     elif resume and record.is_file():
         measured = _read_measured(record)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    audit(out_dir, Action.RESUME if resume else Action.DESIGN,
+          "design resumed" if resume else f"design started: target {config.target}, space {config.space}, "
+          f"resolution {config.resolution}", operator=operator)
     result = run_design(config, out_dir, on_iteration=on_iteration, should_stop=should_stop, resume=resume)
     summary = None
     if simcal is not None:  # written last; a run whose outputs lack it (cut short) gets it now
         summary = (result.outputs.summary if result.unchanged and "simcal" in result.outputs.summary
                    else write_design_physical(result.out_dir, simcal, measured))
+    _name_operator(result.out_dir, operator)
+    audit(out_dir, Action.DESIGN_END, f"design {result.status}", operator=operator)
     return result, summary
+
+
+def _name_operator(design_dir: Path, operator: str) -> None:
+    """Add ``operator`` (who ran the design) to the design's ``summary.json``, when it has one."""
+    path = design_dir / "summary.json"
+    if path.is_file():
+        summary = json.loads(path.read_text())
+        if summary.get("operator") == operator:
+            return
+        summary["operator"] = operator
+        atomic_write(path, (json.dumps(summary, indent=2) + "\n").encode())
 
 
 def _write_measured(path: Path, curve: PhysicalCurve) -> None:

@@ -5,6 +5,7 @@ from pathlib import Path
 
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench
+from labapp.acquisition.methods import Method
 from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.errors import UsageError
 from labapp.records.outpaths import FolderKind, check_data_dir, folder_kind
@@ -13,15 +14,20 @@ from labapp.records.storage import RunSnapshot, StorageError, read_run
 
 
 def new_run(config: RunConfig, bench: Bench, data_dir: str | Path,
-            calibration: BenchCalibration | None = None) -> RunProcedure:
+            calibration: BenchCalibration | None = None, method: Method | None = None) -> RunProcedure:
     """A :class:`labapp.acquisition.procedures.RunProcedure` for a new run in ``data_dir`` (checked, nothing written).
+
+    ``method``: the method file the run follows (``config`` made by :meth:`Method.apply`); ``run.json`` cites it.
 
     Raises
     ------
     UsageError
         If ``data_dir`` is a file or lies inside a record or another command's folder.
     """
-    return RunProcedure(config, bench, check_data_dir(data_dir), calibration)
+    proc = RunProcedure(config, bench, check_data_dir(data_dir), calibration)
+    if method is not None:
+        proc.record_extra["method"] = method.citation()
+    return proc
 
 
 def resumable(folder: str | Path) -> RunSnapshot:

@@ -148,6 +148,11 @@ class RunRecord:
     reference_file: str | None
     reference_t_unix_s: float | None
     calibration_file: str | None
+    operator: str | None
+    """Who started the run (an operator of the users file, or the demo operator); None: not recorded. Every
+    later action and its operator is in the folder's ``audit.jsonl``."""
+    method: Mapping[str, Any] | None
+    """The method file the run followed: ``{name, path, sha256}``; None: none."""
     stored: Mapping[str, Any]
 
     @classmethod
@@ -183,4 +188,4 @@ class RunRecord:
                    crop=data.get("crop"), grid=data.get("grid"), mirror_col=data.get("mirror_col"),
                    reduce=data.get("reduce"), reference_file=data.get("reference_file"),
                    reference_t_unix_s=data.get("reference_t_unix_s"), calibration_file=data.get("calibration_file"),
-                   stored=dict(stored))
+                   operator=data.get("operator"), method=data.get("method"), stored=dict(stored))

@@ -33,6 +33,9 @@ import psutil
 
 from analysis.decode import IMAGE_SUFFIXES
 from labapp.errors import LabError
+from labapp.records import operators
+from labapp.records.audit import AUDIT_FILE, FINISH_ACTIONS, SIGNATURES_FILE, Action
+from labapp.records.audit import append as audit
 from labapp.records.runrecord import FORMAT, Gap, RecordFormatError, RecordKind, RecordStatus, RunRecord
 
 log = logging.getLogger(__name__)
@@ -387,6 +390,8 @@ class RunFolder:
             raise StorageError(f"status {status!r} is not one of {tuple(s.value for s in RecordStatus)}") from None
         self.update(status=status, writer_pid=None, writer_started=None, finished_unix_s=time.time())
         self.event("info", "finished", f"run {status} with {len(self.frames)} frames")
+        if status in FINISH_ACTIONS:
+            audit(self.path, FINISH_ACTIONS[status], f"{self.record.kind} {status} with {len(self.frames)} frames")
 
     def close(self) -> None:
         """Close the manifests (``run.json`` is always complete on disk already)."""
@@ -419,6 +424,9 @@ def create_run(data_dir: Path, name: str, meta: dict[str, Any]) -> RunFolder:
         ``created_unix_s`` are added.
     """
     data_dir = Path(data_dir)
+    operator = operators.require(f"recording {meta.get('kind', 'a run')}")
+    if operator == operators.DEMO_OPERATOR and not meta.get("simulated", True):
+        raise operators.OperatorError(f"the demo operator {operator!r} records only on the simulated bench")
     data_dir.mkdir(parents=True, exist_ok=True)
     base = timestamp_name(name)
     for k in range(1, 1000):
@@ -431,16 +439,19 @@ def create_run(data_dir: Path, name: str, meta: dict[str, Any]) -> RunFolder:
     else:
         raise StorageError(f"could not find a free run folder name for {base!r} in {data_dir}")
     full = dict(meta, name=name, status=RecordStatus.RUNNING, created_unix_s=time.time(), gaps=[], format=FORMAT,
-                **_writer())
+                operator=operator, **_writer())
     atomic_write(path / RUN_JSON, json.dumps(full, indent=2, sort_keys=True).encode())
     run = RunFolder(read_run(path))
     run.event("info", "created", f"run folder {path.name} created")
+    audit(path, Action.START, f"{meta.get('kind', 'run')} {path.name} created", operator=operator)
     log.info("created run folder %s", path)
     return run
 
 
-def open_run(path: Path) -> RunFolder:
+def open_run(path: Path, action: Action = Action.RESUME, reason: str | None = None) -> RunFolder:
     """Reopen an interrupted or finished run for writing (resume); marks it ``running`` by this process.
+
+    The audit trail gets an ``action`` entry (``resume``, or ``finalise``) by the current operator.
 
     Raises
     ------
@@ -450,6 +461,8 @@ def open_run(path: Path) -> RunFolder:
     snapshot = read_run(path)
     if snapshot.live and snapshot.record.writer_pid != os.getpid():
         raise StorageError(f"{path} is being written by process {snapshot.record.writer_pid}; not reopening it")
+    audit(path, action, f"{snapshot.record.kind} reopened ({snapshot.status}, {len(snapshot.frames)} frames)",
+          reason=reason)
     run = RunFolder(snapshot)
     if snapshot.status == RecordStatus.INTERRUPTED:
         run.event("warning", "interrupted", "the process writing this run stopped without finishing it")
@@ -457,9 +470,9 @@ def open_run(path: Path) -> RunFolder:
     return run
 
 
-def finalise_run(path: Path) -> None:
+def finalise_run(path: Path, reason: str | None = None) -> None:
     """Close an interrupted run without resuming it: its status becomes ``stopped``; nothing else changes."""
-    run = open_run(path)
+    run = open_run(path, Action.FINALISE, reason)
     run.event("info", "finalised", "finalised by the operator without resuming")
     run.finish(RecordStatus.STOPPED)
     run.close()
@@ -572,7 +585,7 @@ def _verify_record(path: Path) -> VerifyReport:
             missing.append(name)
         elif sha256_file(target) != digest:
             mismatched.append(name)
-    own = {FRAMES_CSV, EVENTS_LOG, RUN_JSON, ANALYSIS_DIR}
+    own = {FRAMES_CSV, EVENTS_LOG, RUN_JSON, ANALYSIS_DIR, AUDIT_FILE, SIGNATURES_FILE}
     if kind == RecordKind.CALIBRATION_SERIES:
         own.add(MASSES_CSV)
         problems += _check_masses(path, seen, required=True)
@@ -674,7 +687,8 @@ def _verify_unrecorded(path: Path) -> VerifyReport:
                              "calibration series or image folder"])
     unlisted = [name for name in images if name not in listed]
     others = [p.name for p in entries if p.name not in listed and p.name not in unlisted
-              and p.name not in (FRAMES_CSV, RUN_JSON, MASSES_CSV, EVENTS_LOG, ANALYSIS_DIR)]
+              and p.name not in (FRAMES_CSV, RUN_JSON, MASSES_CSV, EVENTS_LOG, ANALYSIS_DIR, AUDIT_FILE,
+                                 SIGNATURES_FILE)]
     notes = ["no checksums: files are checked for presence only"] if kind != "plain image folder (no manifest)" \
         else [f"{len(images)} images; no manifest, so nothing can be missing or altered"]
     if others:

@@ -13,6 +13,8 @@ from labapp.errors import UsageError
 NAME = "analyze"
 HELP = ("turn a run folder or image folder into a release curve (curve.csv, cells.csv, summary.json, curve.png); "
         "several runs: on Dask, one summary table")
+RECORDS = True
+"""Acts as a named operator (``--operator``, ``$SFR_OPERATOR``): see :mod:`labapp.cli.operator`."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

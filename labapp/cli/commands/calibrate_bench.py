@@ -22,6 +22,8 @@ from labapp.cli.argtypes import add_setting, add_settings
 NAME = "calibrate-bench"
 HELP = ("fit the bench calibration (transmittance vs concentration per cell) from a masses.csv image series; "
         "--record captures the series on the bench first")
+RECORDS = True
+"""Acts as a named operator (``--operator``, ``$SFR_OPERATOR``): see :mod:`labapp.cli.operator`."""
 _REDUCE = dataclasses.replace(REDUCE, default=None, note=f"default {REDUCE.default} for a fit of FOLDER, "
                                                          f"{SERIES_REDUCE.default} with --record")
 _SETTLE = dataclasses.replace(SETTLE, default=None, note=f"default {SETTLE.default:g} s with --simulate, 0 s on a "

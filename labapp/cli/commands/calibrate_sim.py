@@ -9,6 +9,8 @@ from labapp.cli.argtypes import nonnegative_float, positive_int
 
 NAME = "calibrate-sim"
 HELP = "fit seconds per mm and grams per mm^3 from measured runs and their meshes (simcal.json, loo.csv, simcal.png)"
+RECORDS = True
+"""Acts as a named operator (``--operator``, ``$SFR_OPERATOR``): see :mod:`labapp.cli.operator`."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -9,6 +9,9 @@ from labapp.cli.argtypes import positive_float
 NAME = "demo"
 HELP = ("the whole loop on the simulated bench: calibration series, runs of sample objects, calibrate-sim, a run "
         "of a further object, a design from its measured curve, one picture")
+RECORDS = "optional"
+"""Acts as ``--operator`` or ``$SFR_OPERATOR`` when given, else as the built-in demo operator (no users file
+needed): see :mod:`labapp.cli.operator`."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,7 +35,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"sfr demo: measure -> calibrate -> design on the simulated bench, in {out}", flush=True)
     if not args.verbose:   # the injected faults are the point of the run's event log, not of the terminal
         logging.getLogger().setLevel(logging.ERROR)
-    r = run_demo(out, sample=args.sample, interval_s=args.interval, progress=lambda s: print(s, flush=True))
+    from labapp.records import operators
+
+    operator = operators.current() or operators.DEMO_OPERATOR
+    print(f"operator: {operator}" + (" (built-in: records only on the simulated bench)"
+                                     if operator == operators.DEMO_OPERATOR else ""), flush=True)
+    with operators.acting_as(operator):
+        r = run_demo(out, sample=args.sample, interval_s=args.interval, progress=lambda s: print(s, flush=True))
     print()
     print(f"done in {r.wall_s:.0f} s (wall)")
     print(f"  time scale            {r.seconds_per_mm:.1f} s/mm calibrated, {r.true_seconds_per_mm:.1f} s/mm hidden "

@@ -15,6 +15,8 @@ log = logging.getLogger(__name__)
 
 NAME = "design"
 HELP = "design a printable shape whose release matches a target curve (mesh, CSV or analytic)"
+RECORDS = True
+"""Acts as a named operator (``--operator``, ``$SFR_OPERATOR``): see :mod:`labapp.cli.operator`."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -11,6 +11,8 @@ from labapp.cli.argtypes import add_setting, add_settings, setting_values
 
 NAME = "run"
 HELP = "acquire a release run (real bench or --simulate) with a live status line; --resume continues one"
+RECORDS = True
+"""Acts as a named operator (``--operator``, ``$SFR_OPERATOR``): see :mod:`labapp.cli.operator`."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,6 +29,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "simulated); a finished run or any other folder is refused untouched")
     parser.add_argument("--calibration", help="bench calibration JSON (live concentration, steady-state stop); "
                         "with --simulate and none given, a simulated calibration series runs first")
+    parser.add_argument("--method", metavar="METHOD.json", help="method file (sfr method save): its bath, interval, "
+                        "stop rule and calibration are the run's (an option contradicting it is refused); run.json "
+                        "records its path and SHA-256")
     parser.add_argument("--name", default="run", help="run name (part of the folder name)")
     parser.add_argument("--object", default="", help="object description")
     for setting in (OBJECT_MASS, INTERVAL, MAX_DURATION):
@@ -69,6 +74,13 @@ def run(args: argparse.Namespace) -> int:
                            stop_on_steady=not args.no_steady_stop, object_mass_g=args.object_mass_g,
                            object_name=args.object, notes=args.notes, auto_drop=simulate or args.auto_drop,
                            bath=BathSettings(**setting_values(args, BATH_SETTINGS)))
+    method = None
+    if args.method and not args.resume:
+        from labapp.acquisition.methods import load_method
+
+        method = load_method(args.method)
+        config = method.apply(config)
+        args.calibration = method.check_calibration(args.calibration)
     speed = (math.inf if args.speed == 0 else args.speed) if simulate else None
     calibration = BenchCalibration.load(args.calibration) if args.calibration else None
     sim = None
@@ -98,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         if args.resume:
             proc = resume_run(Path(args.resume), bench, calibration)
         else:
-            proc = new_run(config, bench, Path(args.out), calibration)
+            proc = new_run(config, bench, Path(args.out), calibration, method=method)
         return _drive(proc, clock, RunStatus())
     finally:
         if sim is not None:

@@ -9,6 +9,8 @@ from labapp.cli.argtypes import positive_int
 
 NAME = "sweep"
 HELP = "run a grid of design settings (TOML spec) on a local Dask cluster or a scheduler; sweep.csv + contact sheet"
+RECORDS = True
+"""Acts as a named operator (``--operator``, ``$SFR_OPERATOR``): see :mod:`labapp.cli.operator`."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,0 +1,238 @@
+"""Operators: the local users file, salted password hashes, and the operator this process acts as.
+
+Every recorded action (a run started, a drop, a stop, an analysis written into a record, a calibration, a
+design, a signature) names the operator who did it. Operators are the users of a local JSON file
+(:func:`users_path`: ``$SFR_USERS``, else ``$XDG_CONFIG_HOME/shape-from-release/users.json``, else
+``~/.config/shape-from-release/users.json``), each with a per-user random salt and an scrypt hash of the
+password (``hashlib.scrypt``, compared in constant time with ``hmac.compare_digest``). A user is never
+deleted, only disabled, so that the names in old audit trails keep meaning one person.
+
+The process acts as one operator at a time (:func:`log_in`, :func:`acting_as`; the ``SFR_OPERATOR``
+environment variable when nothing is set). The simulated demo acts as the built-in :data:`DEMO_OPERATOR`,
+which is not in any users file and records only on the simulated bench.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import hmac
+import json
+import os
+import secrets
+import time
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from labapp.errors import UsageError
+
+__all__ = ["DEMO_OPERATOR", "MIN_PASSWORD_CHARS", "OPERATOR_ENV", "USERS_ENV", "OperatorError", "User", "acting_as",
+           "add_user", "check_password", "current", "load_users", "log_in", "log_out", "require", "set_enabled",
+           "users_path"]
+
+USERS_ENV = "SFR_USERS"
+"""Environment variable naming the users file (tests, a shared lab configuration)."""
+OPERATOR_ENV = "SFR_OPERATOR"
+"""Environment variable naming the operator when no ``--operator`` is given and nobody logged in."""
+DEMO_OPERATOR = "demo (simulated bench)"
+"""The built-in operator of ``sfr demo``: needs no users file, records only on the simulated bench."""
+MIN_PASSWORD_CHARS = 8
+USERS_FORMAT = 1
+"""The layout of the users file this version writes (its ``format`` key)."""
+_SCRYPT = {"n": 2 ** 14, "r": 8, "p": 1, "dklen": 32}
+"""scrypt cost parameters of a new hash (stored with each hash, so that they can be raised later)."""
+_MAX_NAME = 64
+
+
+class OperatorError(UsageError):
+    """No operator, an unknown or disabled one, or a bad users file; the message says what to do."""
+
+
+@dataclass(frozen=True)
+class User:
+    """One operator of the users file: the name, whether enabled, when created (UTC ISO 8601), and the scrypt
+    salt and hash (hex) with the cost parameters they were made with."""
+
+    name: str
+    enabled: bool
+    created_utc: str
+    salt: str
+    hash: str
+    n: int
+    r: int
+    p: int
+
+
+def utc_now() -> str:
+    """Now as UTC ISO 8601 with milliseconds: ``2026-12-03T10:15:02.123Z``."""
+    now = time.time()
+    return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(now)) + f".{int(now % 1 * 1000):03d}Z"
+
+
+def users_path() -> Path:
+    """Where the users file is: ``$SFR_USERS``, else the per-user configuration folder."""
+    if os.environ.get(USERS_ENV):
+        return Path(os.environ[USERS_ENV])
+    base = Path(os.environ.get("XDG_CONFIG_HOME") or Path.home() / ".config")
+    return base / "shape-from-release" / "users.json"
+
+
+def _hash(password: str, salt: bytes, n: int, r: int, p: int) -> str:
+    return hashlib.scrypt(password.encode(), salt=salt, n=n, r=r, p=p, dklen=_SCRYPT["dklen"],
+                          maxmem=256 * n * r + (1 << 20)).hex()
+
+
+def load_users(path: Path | None = None) -> dict[str, User]:
+    """The users of the users file by name (empty when the file does not exist).
+
+    Raises
+    ------
+    OperatorError
+        If the file cannot be read or is not a users file of a layout this version knows.
+    """
+    path = users_path() if path is None else Path(path)
+    if not path.exists():
+        return {}
+    try:
+        data = json.loads(path.read_text())
+        if not isinstance(data, dict) or data.get("format") != USERS_FORMAT:
+            raise ValueError(f"not a users file of format {USERS_FORMAT}")
+        return {u["name"]: User(**u) for u in data["users"]}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise OperatorError(f"{path}: the users file cannot be read ({exc})") from None
+
+
+def _save(users: dict[str, User], path: Path) -> None:
+    """Write the users file atomically, readable by its owner only."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.part")
+    data = json.dumps({"format": USERS_FORMAT, "users": [asdict(u) for u in users.values()]}, indent=2) + "\n"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def _check_name(name: str) -> str:
+    if not isinstance(name, str) or not name.strip() or name != name.strip() or len(name) > _MAX_NAME \
+            or not name.isprintable():
+        raise OperatorError(f"operator name {name!r}: expected 1 to {_MAX_NAME} printable characters without "
+                            "leading or trailing spaces")
+    if name == DEMO_OPERATOR:
+        raise OperatorError(f"operator name {name!r} is the built-in demo operator's")
+    return name
+
+
+def add_user(name: str, password: str, path: Path | None = None) -> User:
+    """Add an operator with a new random salt and the scrypt hash of ``password``.
+
+    Raises
+    ------
+    OperatorError
+        For a bad or existing name, or a password shorter than :data:`MIN_PASSWORD_CHARS`.
+    """
+    path = users_path() if path is None else Path(path)
+    _check_name(name)
+    if len(password) < MIN_PASSWORD_CHARS:
+        raise OperatorError(f"the password of {name!r} must have at least {MIN_PASSWORD_CHARS} characters")
+    users = load_users(path)
+    if name in users:
+        raise OperatorError(f"operator {name!r} exists in {path} (users are disabled, never replaced)")
+    salt = secrets.token_bytes(16)
+    user = User(name, True, utc_now(), salt.hex(), _hash(password, salt, _SCRYPT["n"], _SCRYPT["r"], _SCRYPT["p"]),
+                _SCRYPT["n"], _SCRYPT["r"], _SCRYPT["p"])
+    users[name] = user
+    _save(users, path)
+    return user
+
+
+def set_enabled(name: str, enabled: bool, path: Path | None = None) -> User:
+    """Enable or disable an operator (a disabled operator can neither act nor sign)."""
+    path = users_path() if path is None else Path(path)
+    users = load_users(path)
+    if name not in users:
+        raise OperatorError(f"no operator {name!r} in {path}")
+    users[name] = User(**dict(asdict(users[name]), enabled=enabled))
+    _save(users, path)
+    return users[name]
+
+
+def check_password(name: str, password: str, path: Path | None = None) -> bool:
+    """Whether ``password`` is the enabled operator ``name``'s (constant-time comparison of the hashes)."""
+    user = load_users(path).get(name)
+    if user is None or not user.enabled:
+        return False
+    return hmac.compare_digest(_hash(password, bytes.fromhex(user.salt), user.n, user.r, user.p), user.hash)
+
+
+def _known(name: str) -> str:
+    """``name`` when it is an enabled operator of the users file (or the demo operator)."""
+    if name == DEMO_OPERATOR:
+        return name
+    users = load_users()
+    if name not in users:
+        hint = "create it with 'sfr users add NAME'" if users else f"no users file at {users_path()}; create " \
+               "an operator with 'sfr users add NAME'"
+        raise OperatorError(f"operator {name!r} is not in the users file ({hint})")
+    if not users[name].enabled:
+        raise OperatorError(f"operator {name!r} is disabled in {users_path()}")
+    return name
+
+
+_session: str | None = None
+
+
+def log_in(name: str) -> str:
+    """Act as ``name`` from now on in this process (checked against the users file)."""
+    global _session
+    _session = _known(name)
+    return _session
+
+
+def log_out() -> None:
+    """Act as nobody (``SFR_OPERATOR`` applies again)."""
+    global _session
+    _session = None
+
+
+@contextlib.contextmanager
+def acting_as(name: str) -> Iterator[str]:
+    """Act as ``name`` inside the ``with`` block, then as before."""
+    global _session
+    before = _session
+    log_in(name)
+    try:
+        yield name
+    finally:
+        _session = before
+
+
+def current() -> str | None:
+    """The operator this process acts as: the one logged in, else ``$SFR_OPERATOR``, else None.
+
+    Raises
+    ------
+    OperatorError
+        If the name in ``SFR_OPERATOR`` is not an enabled operator.
+    """
+    if _session is not None:
+        return _session
+    env = os.environ.get(OPERATOR_ENV, "").strip()
+    return _known(env) if env else None
+
+
+def require(action: str) -> str:
+    """The operator doing ``action``; refused when there is none (no operator, no recorded action).
+
+    Raises
+    ------
+    OperatorError
+        Naming the action and how to give an operator.
+    """
+    name = current()
+    if name is None:
+        raise OperatorError(f"no operator: {action} is recorded under an operator's name; give --operator NAME or "
+                            f"set {OPERATOR_ENV} (create one with 'sfr users add NAME')")
+    return name
