@@ -93,11 +93,17 @@ def _ico(max_iter: int) -> DesignConfig:
                         max_iter=max_iter, checkpoint_every=4)
 
 
-def test_an_interrupted_ico_run_resumes_exactly(tmp_path):
+@pytest.fixture(scope="module")
+def ico_whole(tmp_path_factory) -> Path:
+    """An uninterrupted ico run of 10 evaluations."""
+    out = tmp_path_factory.mktemp("ico") / "whole"
+    assert run_design(_ico(10), out).iterations == 10
+    return out
+
+
+def test_an_interrupted_ico_run_resumes_exactly(ico_whole, tmp_path):
     """The ICO term's warm starts (each layer's last solution) are part of the checkpoint: without them the
     resumed PCG solves start elsewhere and the run drifts from the uninterrupted one."""
-    whole = run_design(_ico(10), tmp_path / "whole")
-    assert whole.iterations == 10
 
     def interrupt(k, x, terms):
         if k == 5:
@@ -106,19 +112,18 @@ def test_an_interrupted_ico_run_resumes_exactly(tmp_path):
     first = run_design(_ico(10), tmp_path / "cut", on_iteration=interrupt)
     assert first.status == "interrupted" and first.iterations == 5
     run_design(None, tmp_path / "cut", resume=True)
-    a = np.loadtxt(tmp_path / "whole" / "history.csv", delimiter=",", skiprows=1)
+    a = np.loadtxt(ico_whole / "history.csv", delimiter=",", skiprows=1)
     b = np.loadtxt(tmp_path / "cut" / "history.csv", delimiter=",", skiprows=1)
     np.testing.assert_allclose(b[:, 1:5], a[:, 1:5], rtol=1e-9, atol=0)  # J, J_fit, J_binary, J_fab
-    sa = json.loads((tmp_path / "whole" / "summary.json").read_text())["ico"]
+    sa = json.loads((ico_whole / "summary.json").read_text())["ico"]
     sb = json.loads((tmp_path / "cut" / "summary.json").read_text())["ico"]
     assert sa["pcg_iterations_mean"] == sb["pcg_iterations_mean"]
 
 
-def test_an_ico_run_cut_by_its_limit_continues_exactly_with_a_higher_one(tmp_path):
-    whole = run_design(_ico(10), tmp_path / "whole")
+def test_an_ico_run_cut_by_its_limit_continues_exactly_with_a_higher_one(ico_whole, tmp_path):
     run_design(_ico(6), tmp_path / "cut")
-    assert run_design(_ico(10), tmp_path / "cut", resume=True).iterations == whole.iterations
-    a = np.loadtxt(tmp_path / "whole" / "history.csv", delimiter=",", skiprows=1)
+    assert run_design(_ico(10), tmp_path / "cut", resume=True).iterations == 10
+    a = np.loadtxt(ico_whole / "history.csv", delimiter=",", skiprows=1)
     b = np.loadtxt(tmp_path / "cut" / "history.csv", delimiter=",", skiprows=1)
     np.testing.assert_allclose(b[:, 1:5], a[:, 1:5], rtol=1e-9, atol=0)
 
