@@ -529,13 +529,14 @@ def format_set_table(c: SetComparison) -> str:
              basis_text(c.percent_basis),
              f"rule: {k.rule.agency} ({k.rule.source})"]
     lines += [f"  note: {n}" for n in c.notes]
-    head = (f"{'time (' + unit + ')':>10} {'min':>7} | {'ref mean':>8} {'SD':>6} {'CV %':>6} | "
-            f"{'test mean':>9} {'SD':>6} {'CV %':>6} | f2 point")
+    minutes = unit != "min"  # the CV rules name their early points in minutes
+    head = (f"{'time (' + unit + ')':>10}" + (f" {'min':>7}" if minutes else "")
+            + f" | {'ref mean':>8} {'SD':>6} {'CV %':>6} | {'test mean':>9} {'SD':>6} {'CV %':>6} | f2 point")
     lines += [head, "-" * len(head)]
     for i, time in enumerate(r.times):
-        used = "early" if i < k.early else "yes"
-        used = used if i < k.used else "-"
-        lines.append(f"{time:>10g} {r.times_min[i]:>7.4g} | {r.mean[i]:>8.2f} {r.sd[i]:>6.2f} {r.cv_pct[i]:>6.2f} | "
+        used = ("early (CV <= 20 %)" if i < k.early else "yes") if i < k.used else "-"
+        lines.append(f"{time:>10g}" + (f" {r.times_min[i]:>7.4g}" if minutes else "")
+                     + f" | {r.mean[i]:>8.2f} {r.sd[i]:>6.2f} {r.cv_pct[i]:>6.2f} | "
                      f"{t.mean[i]:>9.2f} {t.sd[i]:>6.2f} {t.cv_pct[i]:>6.2f} | {used}")
     if k.f2 is not None:
         verdict = "similar (f2 >= 50)" if k.similar else "not similar (f2 < 50)"
@@ -550,7 +551,7 @@ def format_set_table(c: SetComparison) -> str:
         lines.append(f"bootstrap of f2: {b.n_boot} samples over units, seed {b.seed} (R's set.seed), "
                      f"{b.level:.0%} intervals; similar when the lower bound >= 50")
         lines.append(f"{'estimator':>10} {'value':>7} {'boot mean':>9} | "
-                     + " | ".join(f"{kind:^15}" for kind in INTERVALS))
+                     + " | ".join(f"{kind:^16}" for kind in INTERVALS))
         for e in ESTIMATORS:
             cells = " | ".join(f"{_num(lo):>7}..{_num(hi):<7}" for lo, hi in (b.interval(e, kind) for kind in INTERVALS))
             lines.append(f"{e:>10} {_num(b.estimates[e]):>7} {_num(b.boot_mean[e]):>9} | {cells}")
