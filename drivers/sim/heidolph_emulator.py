@@ -220,6 +220,12 @@ class HeidolphEmulator:
             self._relink_at = self._clock() + down_s
         log.info("emulator: link dropped for %.2f s", down_s)
 
+    def disturb_water(self, delta_c: float) -> None:
+        """Fault: the water's temperature jumps by ``delta_c`` C (cold water poured in: negative)."""
+        with self._lock:
+            self._advance()
+            self._plate = replace(self._plate, water_c=self._plate.water_c + delta_c)
+
     def trip_watchdog(self) -> None:
         """Fault: show "PC Err" now, as if the connection check had expired."""
         with self._lock:

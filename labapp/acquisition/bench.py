@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from drivers.camera.base import DSLR_FRAME_BYTES, Camera, CameraError, CameraSettings, Capture, CaptureMissed
 from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import Message, Phase, Reading, StateChanged
+from labapp.acquisition.events import Alarm, AlarmKind, Message, Phase, Reading, StateChanged
 from labapp.acquisition.monitor import HotplateMonitor
 from labapp.acquisition.settings import KEEPALIVE, BathSettings
 from labapp.errors import LabError
@@ -20,6 +20,24 @@ PUBLISHED = "published_as_event"
 """Attribute set on log records that are also published as engine events."""
 
 
+def bath_c(reading: HotplateReading) -> float:
+    """The bath's temperature of a reading, C: the probe's, else the plate's (no probe plugged in)."""
+    return reading.probe_c if reading.probe_c is not None else reading.plate_c
+
+
+def heat_timeout_text(setpoint_c: float, tolerance_c: float, hold_s: float, timeout_s: float,
+                      last: HotplateReading | None) -> str:
+    """The sentence that ends a procedure whose bath never became stable."""
+    if last is None:
+        now = "no reading of the hotplate arrived"
+    else:
+        now = (f"the last reading was {bath_c(last):.1f} C ({'probe' if last.probe_c is not None else 'plate, no probe'}), "
+               f"heating {'on' if last.heating else 'OFF'} at a setpoint of {last.setpoint_c:g} C")
+    return (f"the bath did not hold {setpoint_c:g} +/- {tolerance_c:g} C for {hold_s:g} s within the heating timeout of "
+            f"{timeout_s:g} s; {now}. A hotplate only heats: a setpoint below the bath's room temperature is never "
+            "reached (choose no heating)")
+
+
 class ProcedureError(LabError):
     """A procedure cannot go on (bath never stable, camera gone for good); the message says why."""
 
@@ -29,7 +47,8 @@ class Bench:
     """A camera, an optional hotplate, and hooks through which a simulated bench follows the procedure.
 
     ``on_drop(t_unix_s)`` is called when the object goes in (time zero, also again on resume);
-    ``on_add_mass(total_g)`` when a calibration step adds filament (cumulative mass). ``frame_bytes`` is
+    ``on_add_mass(total_g)`` when a calibration step adds filament (cumulative mass); ``on_new_beaker()`` when
+    a new run or series starts with fresh water (a simulated bench empties its beaker). ``frame_bytes`` is
     what one capture takes on disk, bytes, for the disk-space check before a run.
     """
 
@@ -39,6 +58,7 @@ class Bench:
     simulated: bool = False
     on_drop: Callable[[float], None] | None = None
     on_add_mass: Callable[[float], None] | None = None
+    on_new_beaker: Callable[[], None] | None = None
     description: str = ""
     frame_bytes: int = DSLR_FRAME_BYTES
 
@@ -59,6 +79,8 @@ class BenchSession:
         self.camera_failures = 0
         self.last_error = ""
         self._pending: list[tuple[str, str, str]] = []
+        self._band: tuple[float, float] | None = None       # (setpoint, excursion) watched after the drop
+        self._outside = False
 
     def attach(self, run: RunFolder) -> None:
         """Log into ``run`` from now on, starting with the notes made before it existed."""
@@ -73,8 +95,9 @@ class BenchSession:
             return None
         return (self.engine.clock.now() if t_unix_s is None else t_unix_s) - self.t0_unix_s
 
-    def note(self, level: str, kind: str, message: str) -> None:
-        """Record an event in ``events.log`` and publish it (``info``, ``warning`` or ``error``)."""
+    def note(self, level: str, kind: str, message: str, alarm: AlarmKind | None = None) -> None:
+        """Record an event in ``events.log`` and publish it (``info``, ``warning`` or ``error``); with
+        ``alarm``, also publish an :class:`labapp.acquisition.events.Alarm` of that kind."""
         # also published as a Message event: marked so that the GUI's log handler does not show it twice
         log.log(_LEVELS.get(level, logging.INFO), "%s: %s", kind, message, extra={PUBLISHED: True})
         if level in ("warning", "error"):
@@ -84,6 +107,12 @@ class BenchSession:
         else:
             self._pending.append((level, kind, message))
         self.engine.emit(Message(level if level in ("info", "warning", "error") else "info", message, topic=kind))
+        if alarm is not None:
+            self.engine.emit(Alarm(alarm, message, self.t_s()))
+
+    def _monitor_report(self, level: str, kind: str, message: str) -> None:
+        """The monitor's report: a lost or re-established link is a link-fault alarm."""
+        self.note(level, kind, message, AlarmKind.LINK_FAULT if level != "info" else None)
 
     def connect(self, setpoint_c: float | None, speed_rpm: float | None) -> None:
         """Connect and configure the camera; connect the hotplate, set it up and start heating."""
@@ -99,7 +128,7 @@ class BenchSession:
         # poll every keepalive_s of procedure time, so that on an accelerated clock the reading logged with a
         # frame is as recent as on the real bench (the serial link itself bounds the rate)
         poll_s = max(self.keepalive_s / max(self.engine.clock.speed, 1.0), min(self.keepalive_s, 0.05))
-        self.monitor = HotplateMonitor(hp, self.note, poll_s=poll_s, on_reading=self._publish_reading)
+        self.monitor = HotplateMonitor(hp, self._monitor_report, poll_s=poll_s, on_reading=self._publish_reading)
         if setpoint_c is not None:
             self.monitor.command(hp.set_temperature, setpoint_c)
             self.monitor.command(hp.start_heating)
@@ -113,6 +142,25 @@ class BenchSession:
     def _publish_reading(self, reading: HotplateReading) -> None:
         self.engine.emit(Reading(reading.plate_c, reading.probe_c, reading.speed_rpm, reading.setpoint_c,
                                  reading.setpoint_rpm, reading.heating, reading.stirring, self.t_s()))
+        if self._band is not None:
+            self._check_band(bath_c(reading))
+
+    def watch_bath(self, setpoint_c: float | None, excursion_c: float) -> None:
+        """From now on, raise a temperature-excursion alarm whenever the bath (probe, else plate) leaves
+        ``setpoint_c`` +/- ``excursion_c`` (C), and note when it is back; nothing without a setpoint."""
+        self._band = None if setpoint_c is None or self.monitor is None else (setpoint_c, excursion_c)
+        self._outside = False
+
+    def _check_band(self, temp_c: float) -> None:
+        setpoint_c, excursion_c = self._band
+        outside = abs(temp_c - setpoint_c) > excursion_c
+        if outside and not self._outside:
+            self.note("warning", "temperature", f"bath at {temp_c:.1f} C, outside the setpoint {setpoint_c:g} +/- "
+                      f"{excursion_c:g} C", AlarmKind.TEMPERATURE_EXCURSION)
+        elif self._outside and not outside:
+            self.note("info", "temperature", f"bath back within {setpoint_c:g} +/- {excursion_c:g} C "
+                      f"({temp_c:.1f} C)")
+        self._outside = outside
 
     def wait_stable(self, setpoint_c: float, tolerance_c: float, hold_s: float, timeout_s: float,
                     step_s: float) -> None:
@@ -132,9 +180,9 @@ class BenchSession:
         if self.engine.should_stop():
             return
         if not ok:
-            last = self.monitor.latest
-            raise ProcedureError(f"bath did not reach {setpoint_c} +/- {tolerance_c} C for {hold_s} s within "
-                                 f"{timeout_s} s (last reading: {last})")
+            message = heat_timeout_text(setpoint_c, tolerance_c, hold_s, timeout_s, self.monitor.latest)
+            self.engine.emit(Alarm(AlarmKind.HEAT_TIMEOUT, message))    # the error itself ends the procedure
+            raise ProcedureError(message)
         self.note("info", "stable", f"bath stable at {setpoint_c} +/- {tolerance_c} C for {hold_s:.0f} s")
 
     def wait_bath(self, bath: BathSettings) -> None:
@@ -171,11 +219,11 @@ class BenchSession:
             cap = self.bench.camera.capture()
         except CaptureMissed as exc:
             self.camera_failures += 1
-            self.note("warning", "camera-missed", f"frame missed: {exc}")
+            self.note("warning", "camera-missed", f"frame missed: {exc}", AlarmKind.CAMERA_FAULT)
             return None
         except CameraError as exc:
             self.camera_failures += 1
-            self.note("warning", "camera-error", f"capture failed: {exc}")
+            self.note("warning", "camera-error", f"capture failed: {exc}", AlarmKind.CAMERA_FAULT)
             if self.camera_failures >= 3:
                 self._reinit_camera()
             return None
@@ -193,7 +241,9 @@ class BenchSession:
             self.note("warning", "camera-error", f"camera re-initialisation failed: {exc}")
 
     def close(self) -> None:
-        """Heating and stirring off, devices closed; every step best effort and logged."""
+        """Heating and stirring off (and one last reading published, which shows it), devices closed; every
+        step best effort and logged."""
+        self._band = None
         if self.monitor is not None:
             self.monitor.stop()
             for step in (self.bench.hotplate.stop_heating, self.bench.hotplate.stop_stirring):
@@ -202,6 +252,7 @@ class BenchSession:
                 except HotplateError as exc:
                     self.note("warning", "hotplate", f"{step.__name__} failed: {exc}")
             self.note("info", "hotplate", "heating and stirring switched off")
+            self.monitor.poll()
         for device in (self.bench.hotplate, self.bench.camera):
             if device is None:
                 continue

@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,8 +22,8 @@ from PIL import Image
 
 from analysis import BenchCalibration, CropGeometry, decode_image, fit_bench_calibration, read_cells
 from labapp.acquisition.bench import Bench, BenchSession
-from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import CalibrationLevel, Outcome, Phase, PromptKind, StateChanged
+from labapp.acquisition.engine import ABORT, Engine
+from labapp.acquisition.events import AlarmKind, CalibrationLevel, Outcome, Phase, PromptKind, StateChanged
 from labapp.acquisition.settings import (
     GRID,
     MIRROR_COL,
@@ -94,7 +95,8 @@ def read_masses(folder: Path) -> tuple[list[Path], np.ndarray]:
 
 
 def fit_series(files: list[Path], masses_g: np.ndarray, geometry: CropGeometry, water_g: float,
-               camera: dict[str, str] | None = None, reduce: int = 1) -> BenchCalibration:
+               camera: dict[str, str] | None = None, reduce: int = 1,
+               progress: Callable[[int, int], None] | None = None) -> BenchCalibration:
     """Fit the per-cell Beer-Lambert calibration (paper section 4.2) of a series of images.
 
     Parameters
@@ -110,6 +112,8 @@ def fit_series(files: list[Path], masses_g: np.ndarray, geometry: CropGeometry, 
         Camera settings to record.
     reduce : int
         Decode downscaling.
+    progress : callable, optional
+        ``progress(done, total)`` after each image; it may raise ``KeyboardInterrupt`` to stop there.
 
     Raises
     ------
@@ -121,7 +125,12 @@ def fit_series(files: list[Path], masses_g: np.ndarray, geometry: CropGeometry, 
         raise UsageError(f"{len(missing)} image(s) of the series do not exist: {', '.join(missing[:3])}"
                          + (" ..." if len(missing) > 3 else ""))
     shape = image_shape(files[0])
-    cells = np.array([read_cells(f, geometry, reduce=reduce, expect_shape=shape) for f in files])
+    read = []
+    for f in files:
+        read.append(read_cells(f, geometry, reduce=reduce, expect_shape=shape))
+        if progress is not None:
+            progress(len(read), len(files))
+    cells = np.array(read)
     conc = np.asarray(masses_g, float) / water_g * 1000.0
     return fit_bench_calibration(cells, conc, geometry, water_g, camera or {}, image_shape=shape, reduce=reduce)
 
@@ -167,10 +176,20 @@ class SeriesConfig:
         return CropGeometry(x, y, size, grid=self.grid, mirror_col=self.mirror_col)
 
 
+@dataclass(frozen=True)
+class RedoLevel:
+    """An answer to the mass prompt: capture the last level again (a bubble, a hand in the picture); the new
+    frame replaces the level's capture in ``masses.csv``, the old one stays in the folder and the
+    replacement is written to ``events.log``."""
+
+
 class CalibrationProcedure:
     """Capture a calibration series into a new folder under ``data_dir`` and fit it.
 
-    After a complete run, :attr:`calibration_path` is the saved calibration (None if fewer than 3 levels).
+    The operator answers each mass prompt with the next cumulative mass (above the last one: a mass already
+    captured is refused and asked again, nothing is captured), :class:`RedoLevel` to capture the last level
+    again, or an empty answer to finish. After a complete run, :attr:`calibration_path` is the saved
+    calibration (None if fewer than 3 levels).
     """
 
     name = "calibration"
@@ -190,6 +209,8 @@ class CalibrationProcedure:
         engine.emit(StateChanged(Phase.OPENED, folder=str(self.run.path)))
         self.session = BenchSession(self.bench, engine, self.run, keepalive_s=cfg.bath.keepalive_s)
         self.session.t0_unix_s = engine.clock.now()
+        if self.bench.on_new_beaker is not None:
+            self.bench.on_new_beaker()
         self.session.connect(cfg.bath.setpoint_c, cfg.bath.speed_rpm)
 
     def execute(self, engine: Engine) -> None:
@@ -200,8 +221,11 @@ class CalibrationProcedure:
         engine.emit(StateChanged(Phase.CALIBRATING))
         mass = 0.0
         auto = list(cfg.masses_g)
+        capture = True
         while not engine.should_stop():
-            self._capture_level(engine, mass)
+            if capture:
+                self._capture_level(engine, mass)
+            capture = True
             if cfg.masses_g:
                 if not auto:
                     break
@@ -215,42 +239,72 @@ class CalibrationProcedure:
                                 f"cumulative added mass in g (now {mass:g} g); leave empty to finish and fit.")
             if answer is None or answer == "":
                 break
+            if isinstance(answer, RedoLevel):
+                self._redo_level(engine, mass)
+                capture = False
+                continue
             new = float(answer)
             if not new > mass:
-                session.note("warning", "mass", f"cumulative mass {new} g is not above {mass} g; ignored")
+                captured = any(m == new for _, m in self.masses)
+                session.note("warning", "mass", f"{new:g} g is {'a level already captured' if captured else 'below'} "
+                             f"the cumulative {mass:g} g; nothing captured. Enter a higher cumulative mass, or redo "
+                             "the last level")
+                capture = False
                 continue
             mass = new
             if self.bench.on_add_mass is not None:
                 self.bench.on_add_mass(mass)
             engine.clock.sleep(cfg.settle_s, engine.should_stop)
+        if engine.stop_reason == ABORT:
+            session.note("info", "calibration", f"aborted with {len(self.masses)} levels captured; not fitted")
+            return
         if len(self.masses) >= 3:
-            self._fit()
+            try:
+                self._fit()
+            except Exception as exc:
+                session.note("error", "calibration", f"the fit of {len(self.masses)} levels failed: "
+                             f"{type(exc).__name__}: {exc}", AlarmKind.FIT_FAILED)
+                raise
         else:
-            session.note("warning", "calibration", f"only {len(self.masses)} levels captured; 3 are needed to fit")
+            session.note("warning", "calibration", f"only {len(self.masses)} levels captured; 3 are needed to fit",
+                         AlarmKind.FIT_FAILED)
 
     def shutdown(self, engine: Engine, outcome: Outcome) -> None:
         """Heating off, devices closed, final status written."""
         if self.session is not None:
             self.session.close()
         if self.run is not None:
-            self.run.finish(outcome)
+            self.run.finish(Outcome.STOPPED if outcome == Outcome.INTERRUPTED else outcome)   # a series never resumes
             self.run.close()
 
-    def _capture_level(self, engine: Engine, mass_g: float) -> None:
+    def _redo_level(self, engine: Engine, mass_g: float) -> None:
+        if not self.masses or self.masses[-1][1] != mass_g:
+            self.session.note("warning", "calibration", f"no capture at {mass_g:g} g to redo")
+            return
+        old = self.masses[-1][0]
+        if self._capture_level(engine, mass_g, replace=True):
+            self.session.note("info", "redo", f"level {mass_g:g} g captured again by the operator: "
+                              f"{self.masses[-1][0]} replaces {old} in {MASSES_CSV} ({old} stays in the folder)")
+
+    def _capture_level(self, engine: Engine, mass_g: float, replace: bool = False) -> bool:
         cap = self.session.capture() or self.session.capture()
         if cap is None:
             self.session.note("warning", "calibration", f"no frame at {mass_g} g: the camera failed twice")
-            return
+            return False
         index = len(self.run.frames)
         name = f"cal_{index:03d}{Path(cap.file_name).suffix.lower() or '.jpg'}"
         self.run.add_frame(name, cap.data, self.session.t_s(cap.t_unix_s), cap.t_unix_s)
+        if replace:
+            self.masses.pop()
         self.masses.append((name, mass_g))
         rows = ",".join(MASS_COLUMNS) + "\n" + "".join(f"{f},{m:.6f}\n" for f, m in self.masses)
         atomic_write(self.run.path / MASSES_CSV, rows.encode())
+        self.run.update()  # seals the new masses (labapp.records.seal)
         conc = mass_g / (self.config.bath.water_g / 1000.0)
         engine.emit(CalibrationLevel(index, name, str(self.run.path / name), self.session.t_s(), mass_g, conc,
                                      len(self.masses)))
         self.session.note("info", "level", f"{name}: {mass_g:g} g added, {conc:.4f} g/kg")
+        return True
 
     def _fit(self) -> None:
         cfg = self.config

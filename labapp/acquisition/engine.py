@@ -20,6 +20,12 @@ from labapp.errors import LabError
 
 log = logging.getLogger(__name__)
 
+ABORT = "abort"
+"""The stop reason of :meth:`Engine.abort`."""
+INTERRUPT = "interrupt"
+"""The stop reason of :meth:`Engine.interrupt`."""
+_OUTCOME_OF_REASON = {ABORT: Outcome.ABORTED, INTERRUPT: Outcome.INTERRUPTED}
+
 
 def _log_failure(what: str, exc: Exception) -> None:
     """Log a procedure's failure: an expected one (a device, a record, bad settings) in one line at info
@@ -97,7 +103,7 @@ class Engine:
 
     @property
     def stop_reason(self) -> str:
-        """``""`` while running; else ``operator``, ``abort`` or the reason a procedure gave."""
+        """``""`` while running; else ``operator``, ``abort``, ``interrupt`` or the reason a procedure gave."""
         return self._stop_reason
 
     def stop(self, reason: str = "operator") -> None:
@@ -110,7 +116,12 @@ class Engine:
 
     def abort(self) -> None:
         """Stop as soon as possible; the outcome is :attr:`Outcome.ABORTED`."""
-        self.stop("abort")
+        self.stop(ABORT)
+
+    def interrupt(self) -> None:
+        """Stop as :meth:`stop` does (heating off, devices closed), but leave a run resumable: the outcome
+        is :attr:`Outcome.INTERRUPTED` (a signal to the process, the window closing)."""
+        self.stop(INTERRUPT)
 
     def answer(self, prompt: PromptKind, value: Any = True) -> None:
         """Answer an operator prompt (e.g. ``answer(PromptKind.DROP)`` or ``answer(PromptKind.ADDED_MASS, 0.25)``)."""
@@ -162,7 +173,7 @@ class Engine:
             outcome = Outcome.FAILED
             self.emit(Message("error", f"{type(exc).__name__}: {exc}", topic=procedure.name, fatal=True))
         if outcome != Outcome.FAILED and self.should_stop():
-            outcome = Outcome.ABORTED if self._stop_reason == "abort" else Outcome.STOPPED
+            outcome = _OUTCOME_OF_REASON.get(self._stop_reason, Outcome.STOPPED)
         try:
             procedure.shutdown(self, outcome)
         except Exception as exc:

@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
-__all__ = ["CalibrationLevel", "Done", "EngineEvent", "FrameStored", "Message", "Outcome", "Phase", "Preview",
-           "Prompt", "PromptKind", "Reading", "StateChanged"]
+__all__ = ["Alarm", "AlarmKind", "CalibrationLevel", "Done", "EngineEvent", "FrameStored", "Message", "Outcome", "Phase",
+           "Preview", "Prompt", "PromptKind", "Reading", "StateChanged"]
 
 Level = Literal["info", "warning", "error"]
 
@@ -48,6 +48,26 @@ class Outcome(enum.StrEnum):
     """Stopped on request (the data so far is kept and finalised)."""
     ABORTED = "aborted"
     FAILED = "failed"
+    INTERRUPTED = "interrupted"
+    """Interrupted by a signal (SIGINT, SIGTERM) or by closing the window: heating off, the run folder left
+    resumable (``run.json`` reads ``interrupted``)."""
+
+
+class AlarmKind(enum.StrEnum):
+    """What went wrong (:class:`Alarm`): failures the operator must see, not only read in the log."""
+
+    HEAT_TIMEOUT = "heat-timeout"
+    """The bath did not become stable within the heating timeout."""
+    FIT_FAILED = "fit-failed"
+    """The calibration series' fit failed."""
+    CAMERA_FAULT = "camera-fault"
+    """A capture was missed or failed."""
+    LINK_FAULT = "link-fault"
+    """The hotplate's link was lost (or dropped and re-established by the driver)."""
+    TEMPERATURE_EXCURSION = "temperature-excursion"
+    """The bath left setpoint +/- the run's excursion tolerance during acquisition."""
+    REFERENCE_OFFSET = "reference-offset"
+    """The reference frame does not read as clear water on the calibration's zero level."""
 
 
 @dataclass(frozen=True)
@@ -142,6 +162,16 @@ class Message(EngineEvent):
     message: str
     topic: str = ""
     fatal: bool = False
+
+
+@dataclass(frozen=True)
+class Alarm(EngineEvent):
+    """A failure the operator must acknowledge: ``kind``, the text, and ``t_s`` (s since the drop; None
+    before it). The same text is also published as a :class:`Message` and written to ``events.log``."""
+
+    kind: AlarmKind
+    message: str
+    t_s: float | None = None
 
 
 @dataclass(frozen=True)

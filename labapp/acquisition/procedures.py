@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from analysis import BenchCalibration
+from analysis import BenchCalibration, reference_offset
 from labapp.acquisition.bench import Bench, BenchSession, ProcedureError
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import FrameStored, Outcome, Phase, Preview, PromptKind, StateChanged
+from labapp.acquisition.events import AlarmKind, FrameStored, Outcome, Phase, Preview, PromptKind, StateChanged
 from labapp.acquisition.live import LiveAnalyzer, is_steady
 from labapp.acquisition.settings import (
     FRAME_BYTES,
@@ -25,6 +25,7 @@ from labapp.acquisition.settings import (
     MAX_DURATION,
     MIN_DURATION,
     OBJECT_MASS,
+    REFERENCE_ALARM_G_PER_KG,
     RUN_SETTINGS,
     BathSettings,
     check_settings,
@@ -138,6 +139,8 @@ class RunProcedure:
             self.data_dir.mkdir(parents=True, exist_ok=True)
             check_disk_space(self.data_dir, cfg.frame_bytes_estimate or self.bench.frame_bytes, n_frames)
         self.session = BenchSession(self.bench, engine, None, keepalive_s=cfg.bath.keepalive_s)
+        if self.resume_path is None and self.bench.on_new_beaker is not None:
+            self.bench.on_new_beaker()
         self.session.connect(cfg.bath.setpoint_c, cfg.bath.speed_rpm)
         if self.resume_path is not None:
             self.run = open_run(self.resume_path)
@@ -185,13 +188,19 @@ class RunProcedure:
         self._acquire(engine)
 
     def shutdown(self, engine: Engine, outcome: Outcome) -> None:
-        """Heating off, devices closed, final status written (always runs)."""
+        """Heating off, devices closed, final status written (always runs); an interrupted run is released
+        without a final status, so that it reads ``interrupted`` and can be resumed."""
         if self.session is not None:
             self.session.close()
         if self.run is not None:
             if outcome == Outcome.FAILED and engine.error is not None:
                 self.run.event("error", "failed", f"{type(engine.error).__name__}: {engine.error}")
-            self.run.finish(_STATUS[outcome])
+            if outcome == Outcome.INTERRUPTED:
+                self.run.event("warning", "interrupted", f"acquisition interrupted with {len(self.run.frames)} frames; "
+                               "heating off, the run can be resumed")
+                self.run.update(writer_pid=None, writer_started=None)
+            else:
+                self.run.finish(_STATUS[outcome])
             self.run.close()
 
     # -- steps -------------------------------------------------------------------------------------------
@@ -205,17 +214,29 @@ class RunProcedure:
         self._use_reference()
 
     def _use_reference(self) -> None:
+        """Anchor the live analysis on the reference frame, and check it as the offline analysis does: a
+        reference that does not read as clear water on the calibration's zero level (beyond
+        ``analysis.reference_offset``'s 3 sigma) is logged, and raises an alarm beyond
+        :data:`labapp.acquisition.settings.REFERENCE_ALARM_G_PER_KG` (before the drop on a new run)."""
         if self.analyzer is None:
             return
         try:
             self.analyzer.set_reference(self.run.path / "reference.jpg")
         except Exception as exc:
             self.session.note("warning", "reference", f"reference frame unusable for live analysis "
-                              f"({type(exc).__name__}: {exc}); the calibration's zero level is used")
+                              f"({type(exc).__name__}: {exc}); the calibration's zero level is used",
+                              AlarmKind.REFERENCE_OFFSET)
+            return
+        est, message = reference_offset(self.analyzer.reference_cells, self.calibration)
+        if message:
+            alarm = abs(est.conc_g_per_kg) > REFERENCE_ALARM_G_PER_KG
+            hint = "; check the beaker holds clear water before the drop" if alarm and self.session.t0_unix_s is None else ""
+            self.session.note("warning", "reference", message + hint, AlarmKind.REFERENCE_OFFSET if alarm else None)
 
     def _acquire(self, engine: Engine) -> None:
         cfg, session, clock = self.config, self.session, engine.clock
         engine.emit(StateChanged(Phase.ACQUIRING, folder=str(self.run.path), t0_unix_s=session.t0_unix_s))
+        session.watch_bath(cfg.bath.setpoint_c, cfg.bath.excursion_c)
         slot = math.floor(max(session.t_s(), 0.0) / cfg.interval_s) + (1 if self.run.frames else 0)
         while not engine.should_stop():
             clock.sleep(session.t0_unix_s + slot * cfg.interval_s - clock.now(), engine.should_stop)

@@ -20,11 +20,11 @@ from analysis.decode import REDUCE_FACTORS
 from drivers.hotplate import HEIDOLPH_HEI_TEC, HotplateConfig
 from labapp.errors import UsageError
 
-__all__ = ["ADDED_MASS", "BATH_SETTINGS", "FRAME_BYTES", "GRID", "HEAT_TIMEOUT", "HOLD", "INSTANT_STABLE_STEP_S",
-           "INTERVAL", "KEEPALIVE", "LOW_SPACE", "MAX_DURATION", "MIN_DURATION", "MIRROR_COL", "OBJECT_MASS", "REDUCE",
-           "RUN_SETTINGS", "SERIES_REDUCE", "SERIES_SETTINGS", "SETPOINT", "SETTLE", "SIM_SPEED", "STABLE_STEP",
-           "STIRRING", "TOLERANCE", "WATER", "BathSettings", "Setting", "check_settings", "from_record",
-           "parse_masses", "to_record"]
+__all__ = ["ADDED_MASS", "BATH_SETTINGS", "BathSettings", "EXCURSION", "FRAME_BYTES", "GRID", "HEAT_TIMEOUT", "HOLD",
+           "INSTANT_STABLE_STEP_S", "INTERVAL", "KEEPALIVE", "LOW_SPACE", "MAX_DURATION", "MIN_DURATION", "MIRROR_COL",
+           "OBJECT_MASS", "REDUCE", "REFERENCE_ALARM_G_PER_KG", "ROOM_TEMPERATURE_C", "RUN_SETTINGS", "SERIES_REDUCE",
+           "SERIES_SETTINGS", "SETPOINT", "SETTLE", "SIM_SPEED", "STABLE_STEP", "STIRRING", "Setting", "TOLERANCE", "WATER",
+           "check_settings", "from_record", "parse_masses", "to_record"]
 
 Number = float | int
 
@@ -151,15 +151,24 @@ _PLATE = HotplateConfig()
 _TEMP_C = _PLATE.setpoint_range("temperature")
 _SPEED_RPM = _PLATE.setpoint_range("speed")
 
+ROOM_TEMPERATURE_C = 25.0
+"""The lowest bath setpoint, C: a hotplate only heats, and a bath starts at room temperature (about 20-25 C), so
+a lower setpoint would never be reached and the procedure would wait out its heating timeout. For a bath
+at room temperature choose no setpoint (no heating)."""
+
 # -- the bath (shared by a release run and a calibration series) -----------------------------------------------
 WATER = Setting("water_g", "water in the beaker", "g", 500.0, low=0.0, low_open=True, flag="--water-g",
                 note="paper section 4.2")
-SETPOINT = Setting("setpoint_c", "bath temperature", "C", 70.0, *_TEMP_C, optional=True, flag="--setpoint",
-                   note="what the hotplate driver accepts")
+SETPOINT = Setting("setpoint_c", "bath temperature", "C", 70.0, max(_TEMP_C[0], ROOM_TEMPERATURE_C), _TEMP_C[1],
+                   optional=True, flag="--setpoint",
+                   note="from room temperature up to what the hotplate driver accepts (a hotplate only heats)")
 STIRRING = Setting("speed_rpm", "stirring speed", "rpm", 150.0, *_SPEED_RPM, optional=True, decimals=0, flag="--rpm",
                    note="what the hotplate driver accepts")
 TOLERANCE = Setting("tolerance_c", "stable-bath tolerance", "C", 0.5, low=0.0, low_open=True, decimals=2,
                     flag="--tolerance", note="the bath is stable once within setpoint +/- this for the hold time")
+EXCURSION = Setting("excursion_c", "temperature alarm band during acquisition", "C", 2.0, low=0.0, low_open=True,
+                    decimals=1, flag="--excursion",
+                    note="an alarm is raised when the bath leaves setpoint +/- this after the drop")
 HOLD = Setting("hold_s", "stable-bath hold time", "s", 120.0, low=0.0, low_open=True, decimals=0, flag="--hold")
 HEAT_TIMEOUT = Setting("heat_timeout_s", "heating timeout", "s", 2 * 3600.0, low=0.0, low_open=True, decimals=0,
                        flag="--heat-timeout", note="a bath not stable by then fails the procedure")
@@ -167,7 +176,7 @@ STABLE_STEP = Setting("stable_step_s", "bath check interval while heating", "s",
 KEEPALIVE = Setting("keepalive_s", "hotplate poll interval", "s", 2.0, low=0.0, high=HEIDOLPH_HEI_TEC.watchdog_s,
                     low_open=True, high_open=True, decimals=2,
                     note="below the plate's connection check")
-BATH_SETTINGS = (WATER, SETPOINT, STIRRING, TOLERANCE, HOLD, HEAT_TIMEOUT, STABLE_STEP, KEEPALIVE)
+BATH_SETTINGS = (WATER, SETPOINT, STIRRING, TOLERANCE, EXCURSION, HOLD, HEAT_TIMEOUT, STABLE_STEP, KEEPALIVE)
 
 INSTANT_STABLE_STEP_S = 60.0
 """Bath check interval on an instant clock (time moves only when a procedure sleeps), s."""
@@ -185,6 +194,11 @@ FRAME_BYTES = Setting("frame_bytes_estimate", "bytes of one frame for the disk-s
 LOW_SPACE = Setting("low_space_bytes", "free space below which a warning is logged", "B", 2_000_000_000, low=0.0,
                     integer=True, decimals=0)
 RUN_SETTINGS = (INTERVAL, MAX_DURATION, MIN_DURATION, OBJECT_MASS, FRAME_BYTES, LOW_SPACE)
+
+REFERENCE_ALARM_G_PER_KG = 0.1
+"""A run's reference frame (clear water) reading further than this from the calibration's zero level, g/kg, and
+beyond the offline analysis' 3 sigma (``analysis.reference_offset``), raises an alarm before the drop; a
+smaller significant offset is logged as a warning, as the offline analysis does."""
 
 # -- a calibration series ------------------------------------------------------------------------------------
 SETTLE = Setting("settle_s", "wait after each addition", "s", 600.0, low=0.0, decimals=0, flag="--settle",
@@ -242,6 +256,7 @@ class BathSettings:
     setpoint_c: float | None = SETPOINT.default
     speed_rpm: float | None = STIRRING.default
     tolerance_c: float = TOLERANCE.default
+    excursion_c: float = EXCURSION.default
     hold_s: float = HOLD.default
     heat_timeout_s: float = HEAT_TIMEOUT.default
     stable_step_s: float = STABLE_STEP.default

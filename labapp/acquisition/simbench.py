@@ -230,10 +230,15 @@ class SimulatedBench:
         """Calibration: the cumulative dissolved filament mass is now ``total_g`` g."""
         self.added_mass_g = total_g
 
+    def new_beaker(self) -> None:
+        """Fresh clear water: no object, no filament (each new run or series starts with one)."""
+        self.t_drop = None
+        self.added_mass_g = 0.0
+
     def bench(self) -> Bench:
         """The devices and hooks, for a procedure."""
         return Bench(_ClockedCamera(self.camera, self.clock), self.hotplate, CameraSettings(), simulated=True,
-                     on_drop=self.drop, on_add_mass=self.add_mass,
+                     on_drop=self.drop, on_add_mass=self.add_mass, on_new_beaker=self.new_beaker,
                      description=f"simulated bench ({self.release.name}, {self.release.mass_g:.2f} g, "
                                  f"x{self.clock.speed:g} time)",
                      frame_bytes=3 * self.scene.width * self.scene.height)  # a JPEG is below its raw RGB
@@ -251,6 +256,12 @@ class SimulatedBench:
         """The hotplate's serial link goes dead for ``down_s`` s (emulator clock)."""
         if self.emulator is not None:
             self.emulator.drop_link(down_s)
+
+    def cool_bath(self, delta_c: float) -> None:
+        """The water's temperature drops by ``delta_c`` C at once (cold water poured in, a draught); the
+        plate's controller then heats it back."""
+        if self.emulator is not None:
+            self.emulator.disturb_water(-delta_c)
 
     def close(self) -> None:
         """Stop the emulator (the procedure has closed the driver already)."""

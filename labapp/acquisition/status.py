@@ -28,6 +28,8 @@ class RunStatus:
         self.plate_c: float | None = None
         self.probe_c: float | None = None
         self.speed_rpm: float | None = None
+        self.heating: bool | None = None
+        self.setpoint_c: float | None = None
         self.last_error = ""
         self.warnings = 0
         self.outcome: Outcome | None = None
@@ -44,6 +46,7 @@ class RunStatus:
                     self.conc = self.conc if math.isnan(event.conc_g_per_kg) else event.conc_g_per_kg
                 case Reading():
                     self.plate_c, self.probe_c, self.speed_rpm = event.plate_c, event.probe_c, event.speed_rpm
+                    self.heating, self.setpoint_c = event.heating, event.setpoint_c
                     if event.t_s is not None:
                         self.t_s = event.t_s
                 case Message(level="warning" | "error"):
@@ -55,13 +58,16 @@ class RunStatus:
                     self.phase, self.outcome = f"done ({event.outcome})", event.outcome
 
     def line(self, width: int = 160) -> str:
-        """``[phase] t=H:MM:SS frames N conc C g/kg plate P C probe Q C S rpm | last error``."""
+        """``[phase] t=H:MM:SS frames N conc C g/kg plate P C probe Q C S rpm heating ON (70 C) | last error``
+        (``heating OFF`` once the plate reports it off, e.g. after the run switched it off)."""
         def num(v: float | None, fmt: str) -> str:
             return "-" if v is None else format(v, fmt)
         with self._lock:
             text = (f"[{self.phase}] t={hms(self.t_s)} frames {self.frames} conc {num(self.conc, '.3f')} g/kg "
                     f"plate {num(self.plate_c, '.1f')} C probe {num(self.probe_c, '.1f')} C "
                     f"{num(self.speed_rpm, '.0f')} rpm")
+            if self.heating is not None:
+                text += f" heating ON ({self.setpoint_c:g} C)" if self.heating else " heating OFF"
             if self.last_error:
                 text += f" | {self.warnings} warnings, last: {self.last_error}"
         return text[:width]

@@ -17,6 +17,7 @@ from PySide6.QtCore import QObject, Signal
 from labapp.acquisition.bench import PUBLISHED
 from labapp.acquisition.engine import Engine
 from labapp.acquisition.events import (
+    Alarm,
     CalibrationLevel,
     Done,
     EngineEvent,
@@ -33,8 +34,8 @@ log = logging.getLogger(__name__)
 
 class EngineBridge(QObject):
     """Re-emits every engine event as ``event`` and by type as ``frame`` (:class:`FrameStored`), ``level``
-    (:class:`CalibrationLevel`), ``preview``, ``reading``, ``state``, ``prompt``, ``done`` (each carrying the
-    typed event) and ``message(level, text)``."""
+    (:class:`CalibrationLevel`), ``preview``, ``reading``, ``state``, ``prompt``, ``alarm``, ``done`` (each
+    carrying the typed event) and ``message(level, text)``."""
 
     event = Signal(object)
     frame = Signal(object)
@@ -44,6 +45,7 @@ class EngineBridge(QObject):
     state = Signal(object)
     message = Signal(str, str)
     prompt = Signal(object)
+    alarm = Signal(object)
     done = Signal(object)
 
     def __init__(self, engine: Engine, parent: QObject | None = None) -> None:
@@ -68,6 +70,8 @@ class EngineBridge(QObject):
                 self.message.emit(ev.level, ev.message)
             case Prompt():
                 self.prompt.emit(ev)
+            case Alarm():
+                self.alarm.emit(ev)
             case Done():
                 self.done.emit(ev)
 
@@ -77,13 +81,14 @@ class EngineBridge(QObject):
 
 
 class LogBridge(QObject):
-    """Log records of ``loggers`` at ``level`` and above (driver reconnects and retries, engine warnings) as
-    the ``message(level, text)`` signal, delivered in the GUI thread; records also published as engine
-    events (``labapp.acquisition.bench.PUBLISHED``) are skipped, they arrive through :class:`EngineBridge`."""
+    """Log records of ``loggers`` at ``level`` and above (driver reconnects and retries, engine warnings, the
+    analysis' warnings with their text) as the ``message(level, text)`` signal, delivered in the GUI thread;
+    records also published as engine events (``labapp.acquisition.bench.PUBLISHED``) are skipped, they
+    arrive through :class:`EngineBridge`."""
 
     message = Signal(str, str)
 
-    def __init__(self, loggers: tuple[str, ...] = ("drivers", "labapp"), level: int = logging.WARNING,
+    def __init__(self, loggers: tuple[str, ...] = ("drivers", "labapp", "analysis"), level: int = logging.WARNING,
                  parent: QObject | None = None) -> None:
         super().__init__(parent)
         bridge = self

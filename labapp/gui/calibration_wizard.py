@@ -31,11 +31,14 @@ from labapp.records.storage import timestamp_name
 
 class CalibrationWizard(QWidget):
     """Guides a calibration series. Emits ``start_requested``; while the engine asks for a mass, the operator
-    enters it and presses "Capture" (``mass_entered(value)``) or "Finish and fit" (``finish_requested``).
-    The bath (water, temperature, stirring) is set in the device panel."""
+    enters it and presses "Capture" (``mass_entered(value)``), "Redo last level" (``redo_requested``: the
+    last level is captured again and replaces its frame) or "Finish and fit" (``finish_requested``). A mass
+    not above the last one is refused by the series, which asks again without capturing. The bath (water,
+    temperature, stirring) is set in the device panel."""
 
     start_requested = Signal()
     mass_entered = Signal(float)
+    redo_requested = Signal()
     finish_requested = Signal()
 
     def __init__(self, simulate: bool, data_dir: Path | None = None, parent: QWidget | None = None) -> None:
@@ -51,16 +54,22 @@ class CalibrationWizard(QWidget):
         self.result_label.setWordWrap(True)
         self.start_button = QPushButton("Start series")
         self.capture_button = QPushButton("Capture")
+        self.redo_button = QPushButton("Redo last level")
+        self.redo_button.setToolTip("capture the last level again (a bubble, a hand in the picture); the new frame "
+                                    "replaces it in masses.csv and the replacement is logged")
         self.finish_button = QPushButton("Finish and fit")
         self.start_button.clicked.connect(self.start_requested)
         self.capture_button.clicked.connect(self._capture)
+        self.redo_button.clicked.connect(self.redo_requested)
         self.finish_button.clicked.connect(self.finish_requested)
+        self.mass.problem_changed.connect(self._mass_checked)
+        self._asking = False
         box = QGroupBox("calibration series (paper section 4.2)")
         form = QFormLayout(box)
         form.addRow("simulated masses", self.masses)
-        form.addRow("cumulative mass added", self.mass)
+        self.mass.add_to(form, "cumulative mass added")
         row = QHBoxLayout()
-        for b in (self.start_button, self.capture_button, self.finish_button):
+        for b in (self.start_button, self.capture_button, self.redo_button, self.finish_button):
             row.addWidget(b)
         layout = QVBoxLayout(self)
         layout.addWidget(box)
@@ -83,9 +92,14 @@ class CalibrationWizard(QWidget):
     def _capture(self) -> None:
         self.mass_entered.emit(self.mass.stored())
 
+    def _mass_checked(self, problem: str) -> None:
+        self.capture_button.setEnabled(self._asking and not problem)
+
     def set_asking(self, asking: bool, text: str) -> None:
-        """Enable the capture/finish buttons while the engine waits for a mass."""
-        self.capture_button.setEnabled(asking)
+        """Enable the capture/redo/finish buttons while the engine waits for a mass."""
+        self._asking = asking
+        self.capture_button.setEnabled(asking and not self.mass.problem())
+        self.redo_button.setEnabled(asking)
         self.finish_button.setEnabled(asking)
         if text:
             self.step_label.setText(text)

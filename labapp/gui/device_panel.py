@@ -1,17 +1,34 @@
 """Device panel: pick the camera and hotplate (real ports or simulated), camera settings, the bath, connect,
-readouts."""
+readouts.
+
+The hotplate's readouts come from the engine's monitor, which polls the plate off the GUI thread while a
+procedure holds the bench (every ``keepalive_s`` of the engine's clock); the last one is published after the
+heating was switched off. The heater's state (heating ON or OFF, setpoint, bath, stirring) is shown in one
+prominent line, and every readout turns grey with "stale since hh:mm:ss" once no reading has arrived for
+:data:`STALE_AFTER_S`.
+"""
 from __future__ import annotations
 
+import time
+
+from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QPushButton, QVBoxLayout, QWidget
 
 from drivers.camera.base import CameraSettings
 from labapp.acquisition.devices import CAMERA_SPECS
 from labapp.acquisition.events import Reading
-from labapp.acquisition.settings import BATH_SETTINGS, BathSettings
-from labapp.gui.fields import add_rows
+from labapp.acquisition.settings import BATH_SETTINGS, KEEPALIVE, SETPOINT, BathSettings
+from labapp.gui.fields import add_rows, problems
 
 SIMULATED = "simulated"
 NO_HOTPLATE = "none"
+STALE_AFTER_S = 3 * KEEPALIVE.default
+"""Wall-clock seconds without a hotplate reading after which the readouts are shown as stale: three of the
+monitor's polls missed (it polls at least every ``keepalive_s``, 2 s by default)."""
+STALE_CHECK_MS = 500
+HEATING_ON_STYLE = "QLabel { background-color: #ffb347; color: black; font-weight: bold; padding: 4px; }"
+HEATING_OFF_STYLE = "QLabel { background-color: #cfe3ff; color: black; font-weight: bold; padding: 4px; }"
+STALE_STYLE = "QLabel { background-color: #dddddd; color: #777777; padding: 4px; }"
 
 
 def serial_ports() -> list[str]:
@@ -47,6 +64,17 @@ class DevicePanel(QWidget):
         self.connect_button = QPushButton("Connect / preview")
         self.connect_button.setToolTip("connect both devices, take one preview frame and one reading")
         self.readouts = {key: QLabel("-") for key in ("plate_c", "probe_c", "speed_rpm", "setpoint_c", "state")}
+        self.heater = QLabel("hotplate: no reading yet (Connect)")
+        self.heater.setWordWrap(True)
+        self.heater.setStyleSheet(STALE_STYLE)
+        self.stale_label = QLabel("")
+        self.stale_label.setStyleSheet("color: #777777;")
+        self.stale_after_s = STALE_AFTER_S
+        self.last_reading: Reading | None = None
+        self._received_s: float | None = None          # time.monotonic() of the last reading
+        self._received_wall: float | None = None       # time.time() of the last reading, for "stale since"
+        self.stale = True
+        self._look: tuple[bool, bool] | None = None
         devices = QGroupBox("devices")
         form = QFormLayout(devices)
         form.addRow("camera", self.camera)
@@ -58,9 +86,12 @@ class DevicePanel(QWidget):
         sform.addRow("ISO", self.iso)
         sform.addRow("format", self.image_format)
         bath = QGroupBox("bath (runs and calibration series)")
-        self.bath_fields = add_rows(QFormLayout(bath), tuple(s for s in BATH_SETTINGS if s.flag))
+        self.bath_fields = add_rows(QFormLayout(bath), tuple(s for s in BATH_SETTINGS if s.flag),
+                                    none_text={SETPOINT.name: "no heating"})
         readout = QGroupBox("hotplate")
         rform = QFormLayout(readout)
+        rform.addRow(self.heater)
+        rform.addRow(self.stale_label)
         for key, label in (("plate_c", "plate (C)"), ("probe_c", "probe (C)"), ("speed_rpm", "stirring (rpm)"),
                            ("setpoint_c", "setpoint (C)"), ("state", "heating / stirring")):
             rform.addRow(label, self.readouts[key])
@@ -71,6 +102,9 @@ class DevicePanel(QWidget):
             layout.addWidget(w)
         layout.addLayout(buttons)
         layout.addStretch(1)
+        self.stale_timer = QTimer(self)
+        self.stale_timer.timeout.connect(self.check_stale)
+        self.stale_timer.start(STALE_CHECK_MS)
 
     def camera_spec(self) -> str:
         """The chosen camera (``simulated`` or a spec of :data:`labapp.acquisition.devices.CAMERA_SPECS`)."""
@@ -80,6 +114,10 @@ class DevicePanel(QWidget):
         """The chosen hotplate port, ``simulated``, or None for no hotplate."""
         text = self.hotplate.currentText().strip()
         return None if text in ("", NO_HOTPLATE) else text
+
+    def problems(self) -> list[str]:
+        """What is wrong in the bath's fields (empty: nothing)."""
+        return problems(self.bath_fields)
 
     def bath(self) -> BathSettings:
         """The bath settings of the fields (the others: their defaults; UsageError for a bad value)."""
@@ -95,9 +133,45 @@ class DevicePanel(QWidget):
         """Slot: show one hotplate reading (an engine :class:`labapp.acquisition.events.Reading`)."""
         def fmt(v: float | None, spec: str) -> str:
             return "no probe" if v is None else format(v, spec)
+        self.last_reading = reading
+        self._received_s, self._received_wall = time.monotonic(), time.time()
         self.readouts["plate_c"].setText(fmt(reading.plate_c, ".1f"))
         self.readouts["probe_c"].setText(fmt(reading.probe_c, ".1f"))
         self.readouts["speed_rpm"].setText(fmt(reading.speed_rpm, ".0f"))
         self.readouts["setpoint_c"].setText(fmt(reading.setpoint_c, ".1f"))
         self.readouts["state"].setText(f"{'on' if reading.heating else 'off'} / "
                                        f"{'on' if reading.stirring else 'off'}")
+        bath = reading.probe_c if reading.probe_c is not None else reading.plate_c
+        where = "bath" if reading.probe_c is not None else "plate (no probe)"
+        stirring = f"stirring {reading.speed_rpm:.0f} rpm" if reading.stirring else "stirring off"
+        if reading.heating:
+            self.heater.setText(f"HEATING ON: setpoint {reading.setpoint_c:.1f} C, {where} {bath:.1f} C, {stirring}")
+        else:
+            self.heater.setText(f"HEATING OFF: {where} {bath:.1f} C, {stirring}")
+        self._set_stale(False)
+
+    def heater_text(self) -> str:
+        """The heater's line as shown (with the stale note when it is)."""
+        return self.heater.text() + (f" ({self.stale_label.text()})" if self.stale and self.last_reading else "")
+
+    def check_stale(self) -> None:
+        """Grey the readouts once no reading arrived for :attr:`stale_after_s` (wall clock)."""
+        if self._received_s is not None and time.monotonic() - self._received_s > self.stale_after_s:
+            self._set_stale(True)
+
+    def _set_stale(self, stale: bool) -> None:
+        if stale and self._received_wall is not None:
+            since = time.strftime("%H:%M:%S", time.localtime(self._received_wall))
+            self.stale_label.setText(f"stale since {since}: no reading for more than {self.stale_after_s:g} s "
+                                     "(the plate is polled while a procedure holds the bench)")
+        elif not stale:
+            self.stale_label.setText("")
+        heating = self.last_reading is not None and self.last_reading.heating
+        look = (stale, heating)
+        if look == self._look:
+            return
+        self._look = look
+        self.stale = stale
+        self.heater.setStyleSheet(STALE_STYLE if stale else HEATING_ON_STYLE if heating else HEATING_OFF_STYLE)
+        for label in self.readouts.values():
+            label.setStyleSheet("color: #999999;" if stale else "")

@@ -1,29 +1,45 @@
-"""Run controls: the run's settings, start / object dropped / stop / abort, and the active calibration."""
+"""Run controls: the run's settings, start / object dropped / stop, abort kept apart, and the active calibration.
+
+Start stays disabled, with the reason shown under it, while a field holds a value outside its range or the
+settings cannot work together (a steady-state stop without a calibration); Stop and Abort ask first
+(:mod:`labapp.gui.dialogs`), naming the run and what cannot be undone.
+"""
 from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
 
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (
     QCheckBox,
     QFileDialog,
     QFormLayout,
-    QGridLayout,
     QGroupBox,
     QHBoxLayout,
+    QLabel,
     QLineEdit,
     QPushButton,
     QVBoxLayout,
     QWidget,
 )
 
+from labapp.acquisition.events import Phase, StateChanged
 from labapp.acquisition.procedures import RunConfig
-from labapp.acquisition.settings import INTERVAL, MAX_DURATION, OBJECT_MASS, BathSettings
-from labapp.gui.fields import SettingBox
+from labapp.acquisition.settings import EXCURSION, INTERVAL, MAX_DURATION, OBJECT_MASS, BathSettings
+from labapp.gui import dialogs
+from labapp.gui.fields import SettingBox, problems
+
+NO_CALIBRATION_STEADY = ("stop at steady state needs a bench calibration (the live concentration decides it): "
+                         "choose a calibration, or untick it")
+ABORT_STYLE = "QPushButton { color: white; background-color: #a01010; font-weight: bold; padding: 4px 12px; }"
 
 
 class RunControls(QWidget):
-    """Settings form and buttons. Emits ``start_requested``, ``drop_confirmed``, ``stop_requested``,
-    ``abort_requested``; the main window wires them to the engine and calls :meth:`set_running`. The bath
-    (water, temperature, stirring) is set in the device panel."""
+    """Settings form and buttons. Emits ``start_requested``, ``drop_confirmed``, and ``stop_requested`` /
+    ``abort_requested`` once the operator confirmed; the main window wires them to the engine, calls
+    :meth:`set_running`, feeds :meth:`follow` with the engine's state changes (the run's name for the
+    questions) and adds the device panel's checks with :meth:`watch`. The bath (water, temperature,
+    stirring, the alarm band) is set in the device panel."""
 
     start_requested = Signal()
     drop_confirmed = Signal()
@@ -47,12 +63,14 @@ class RunControls(QWidget):
         browse = QPushButton("...")
         browse.clicked.connect(self._browse)
         self.notes = QLineEdit("")
+        self.band_label = QLabel("")
+        self.band_label.setWordWrap(True)
         form_box = QGroupBox("run")
         form = QFormLayout(form_box)
         form.addRow("name", self.name)
         form.addRow("object", self.object_name)
         for box in (self.object_mass, self.interval, self.max_hours):
-            form.addRow(box.setting.label, box)
+            box.add_to(form, box.setting.label)
         form.addRow("", self.stop_on_steady)
         form.addRow("", self.auto_drop)
         cal_row = QHBoxLayout()
@@ -60,21 +78,42 @@ class RunControls(QWidget):
         cal_row.addWidget(browse)
         form.addRow("calibration", cal_row)
         form.addRow("notes", self.notes)
+        form.addRow("temperature alarm", self.band_label)
         self.start_button = QPushButton("Start")
         self.drop_button = QPushButton("Object dropped")
         self.stop_button = QPushButton("Stop")
+        self.stop_button.setToolTip("finish the run cleanly: heating off, the run finalised as 'stopped' (asks first)")
         self.abort_button = QPushButton("Abort")
+        self.abort_button.setStyleSheet(ABORT_STYLE)
+        self.abort_button.setToolTip("end at once: heating off, the run marked 'aborted' (asks first)")
+        self.start_reason = QLabel("")
+        self.start_reason.setStyleSheet("color: #b00000;")
+        self.start_reason.setWordWrap(True)
         self.start_button.clicked.connect(self.start_requested)
         self.drop_button.clicked.connect(self.drop_confirmed)
-        self.stop_button.clicked.connect(self.stop_requested)
-        self.abort_button.clicked.connect(self.abort_requested)
-        grid = QGridLayout()
-        for i, b in enumerate((self.start_button, self.drop_button, self.stop_button, self.abort_button)):
-            grid.addWidget(b, i // 2, i % 2)
+        self.stop_button.clicked.connect(self.ask_stop)
+        self.abort_button.clicked.connect(self.ask_abort)
+        row = QHBoxLayout()
+        for b in (self.start_button, self.drop_button, self.stop_button):
+            row.addWidget(b)
+        abort_box = QGroupBox("end at once")
+        abort_row = QHBoxLayout(abort_box)
+        abort_row.addStretch(1)
+        abort_row.addWidget(self.abort_button)
         layout = QVBoxLayout(self)
         layout.addWidget(form_box)
-        layout.addLayout(grid)
-        layout.addStretch(1)
+        layout.addLayout(row)
+        layout.addWidget(self.start_reason)
+        layout.addStretch(1)                   # Abort at the far end of the panel, away from Stop
+        layout.addWidget(abort_box)
+        self.checks: list[Callable[[], list[str]]] = []
+        """Further checks before Start (each returns the problems it finds): the device panel's bath."""
+        self.procedure, self.run_name = "", ""
+        self._running, self._waiting_drop = False, False
+        for box in (self.object_mass, self.interval, self.max_hours):
+            box.problem_changed.connect(self.update_start)
+        self.stop_on_steady.toggled.connect(self.update_start)
+        self.calibration.textChanged.connect(self.update_start)
         self.set_running(False)
 
     def _browse(self) -> None:
@@ -89,9 +128,67 @@ class RunControls(QWidget):
                          object_mass_g=self.object_mass.stored(), object_name=self.object_name.text(),
                          notes=self.notes.text(), auto_drop=self.auto_drop.isChecked(), bath=bath)
 
+    # -- checks before Start ----------------------------------------------------------------------------------
+    def watch(self, boxes: dict[str, SettingBox]) -> None:
+        """Check ``boxes`` (the device panel's bath) before Start too, and show their alarm band here."""
+        self.checks.append(lambda: problems(boxes))
+        for box in boxes.values():
+            box.problem_changed.connect(self.update_start)
+        setpoint, band = boxes.get("setpoint_c"), boxes.get(EXCURSION.name)
+        if setpoint is not None and band is not None:
+            def show() -> None:
+                if setpoint.is_none():
+                    self.band_label.setText("none: the bath is not heated (no setpoint)")
+                else:
+                    self.band_label.setText(f"an alarm when the bath leaves {setpoint.value():g} +/- {band.value():g} "
+                                            "C after the drop (set in Devices, bath)")
+            setpoint.valueChanged.connect(show)
+            band.valueChanged.connect(show)
+            show()
+        self.update_start()
+
+    def start_problems(self) -> list[str]:
+        """Why Start cannot be pressed now (empty: it can): values out of range, a calibration file that does
+        not exist, a steady-state stop without a calibration."""
+        found = problems([self.object_mass, self.interval, self.max_hours])
+        for check in self.checks:
+            found += check()
+        cal = self.calibration.text().strip()
+        if cal and not Path(cal).is_file():
+            found.append(f"the calibration {cal} does not exist")
+        if self.stop_on_steady.isChecked() and not cal:
+            found.append(NO_CALIBRATION_STEADY)
+        return found
+
+    def update_start(self, *_args) -> None:
+        """Enable Start when nothing runs and nothing is wrong; say why not under it."""
+        found = [] if self._running else self.start_problems()
+        self.start_button.setEnabled(not self._running and not found)
+        self.start_reason.setText("Start is disabled: " + "; ".join(found) if found else "")
+        self.start_reason.setVisible(bool(found))
+
+    # -- running ----------------------------------------------------------------------------------------------
+    def follow(self, state: StateChanged) -> None:
+        """Slot for the engine's state changes: which procedure runs and its folder's name."""
+        if state.phase == Phase.STARTING:
+            self.procedure, self.run_name = state.procedure or "", ""
+        if state.folder:
+            self.run_name = Path(state.folder).name
+
+    def ask_stop(self) -> None:
+        """Stop, once the operator confirmed."""
+        if dialogs.confirm(self, dialogs.stop_question(self.procedure, self.run_name)):
+            self.stop_requested.emit()
+
+    def ask_abort(self) -> None:
+        """Abort, once the operator confirmed."""
+        if dialogs.confirm(self, dialogs.abort_question(self.procedure, self.run_name)):
+            self.abort_requested.emit()
+
     def set_running(self, running: bool, waiting_drop: bool = False) -> None:
         """Enable the buttons that make sense now."""
-        self.start_button.setEnabled(not running)
+        self._running, self._waiting_drop = running, waiting_drop
         self.drop_button.setEnabled(running and waiting_drop)
         self.stop_button.setEnabled(running)
         self.abort_button.setEnabled(running)
+        self.update_start()

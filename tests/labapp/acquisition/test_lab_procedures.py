@@ -109,7 +109,7 @@ def test_operator_stop_while_waiting_for_the_drop(tmp_path, calibration):
 def test_config_guards():
     with pytest.raises(ValueError, match=r"RunConfig.interval_s must be > 0 s, got 0"):
         RunConfig(interval_s=0)
-    with pytest.raises(ValueError, match=r"BathSettings.setpoint_c must be in \[0, 100\] C, got 400"):
+    with pytest.raises(ValueError, match=r"BathSettings.setpoint_c must be in \[25, 100\] C, got 400"):
         RunConfig(bath=BathSettings(setpoint_c=400))
     with pytest.raises(ValueError, match="increasing"):
         SeriesConfig(crop=(0, 0, 100), masses_g=(0.5, 0.25))

@@ -9,9 +9,11 @@ from labapp.acquisition.calseries import SeriesConfig
 from labapp.acquisition.procedures import RunConfig
 from labapp.acquisition.settings import (
     BATH_SETTINGS,
+    EXCURSION,
     KEEPALIVE,
     MAX_DURATION,
     OBJECT_MASS,
+    ROOM_TEMPERATURE_C,
     SETPOINT,
     STIRRING,
     WATER,
@@ -39,7 +41,8 @@ OLD_SERIES_CONFIG = {
 
 def test_the_hotplate_limits_are_the_drivers():
     plate = HotplateConfig()
-    assert (SETPOINT.low, SETPOINT.high) == (0.0, min(plate.max_temp_c, HEIDOLPH_HEI_TEC.setpoints["temperature"].high))
+    assert (SETPOINT.low, SETPOINT.high) == (ROOM_TEMPERATURE_C,
+                                             min(plate.max_temp_c, HEIDOLPH_HEI_TEC.setpoints["temperature"].high))
     assert (STIRRING.low, STIRRING.high) == (0.0, min(plate.max_speed_rpm, HEIDOLPH_HEI_TEC.setpoints["speed"].high))
     assert KEEPALIVE.high == HEIDOLPH_HEI_TEC.watchdog_s and KEEPALIVE.high_open
     with pytest.raises(UsageError, match=r"BathSettings.speed_rpm must be in \[0, 600\] rpm, got 700"):
@@ -74,10 +77,11 @@ def test_a_run_json_written_before_the_bath_type_still_reads():
     assert config.bath == BathSettings(water_g=450.0, setpoint_c=60.0, speed_rpm=200.0, tolerance_c=0.3, hold_s=90.0,
                                        heat_timeout_s=3600.0)
     assert config.object_mass_g == 1.7 and config.max_duration_s == 7200.0
-    assert config.to_dict() == OLD_RUN_CONFIG          # and is written in the same layout
+    # written in the same layout, with the settings declared since at their defaults
+    assert config.to_dict() == {**OLD_RUN_CONFIG, "excursion_c": EXCURSION.default}
     series = SeriesConfig.from_dict(OLD_SERIES_CONFIG)
     assert series.crop == (100, 200, 160) and series.masses_g == (0.25, 0.5, 1.0) and series.bath.stable_step_s == 60
-    assert series.to_dict() == OLD_SERIES_CONFIG
+    assert series.to_dict() == {**OLD_SERIES_CONFIG, "excursion_c": EXCURSION.default}
 
 
 def test_keys_this_version_does_not_know_are_ignored():
@@ -95,7 +99,7 @@ def test_an_option_is_made_from_its_declaration(capsys):
     assert BathSettings(**setting_values(args, BATH_SETTINGS)) == BathSettings(setpoint_c=55.0)
     help_text = parser.format_help()
     assert "--stable-step" not in help_text and "--keepalive" not in help_text   # technical: no option
-    for argv, says in ((["--setpoint", "150"], "--setpoint: '150': expected a number in [0, 100] C"),
+    for argv, says in ((["--setpoint", "150"], "--setpoint: '150': expected a number in [25, 100] C"),
                        (["--rpm", "700"], "--rpm: '700': expected a number in [0, 600] rpm"),
                        (["--max-hours", "0"], "--max-hours: '0': expected a number > 0 h")):
         with pytest.raises(SystemExit):

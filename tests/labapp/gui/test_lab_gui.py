@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
+from labapp.gui import dialogs
 from labapp.gui.live_view import grid_segments, mirrored_x
 from labapp.gui.main_window import MainWindow
 from labapp.records.storage import read_run, verify_run
@@ -12,8 +13,9 @@ from labapp.records.storage import read_run, verify_run
 FIGURES = Path(__file__).resolve().parents[3] / "docs" / "figures"
 
 
-def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration):
+def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration, monkeypatch):
     _, cal_path = sim_calibration
+    monkeypatch.setattr(dialogs, "confirm", lambda parent, question: True)     # Stop: the operator confirms
     win = MainWindow(tmp_path / "runs", simulate=True, speed=200.0, sample="sphere")
     qtbot.addWidget(win)
     win.resize(1500, 950)
@@ -22,12 +24,16 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration):
         win.connect_devices()                                     # connect: one preview frame and one reading
         # the window hears of the end through a queued signal, after the engine's own state changes
         qtbot.waitUntil(lambda: win.engine.outcome == "complete" and not win.engine.running
-                        and win.controls.start_button.isEnabled(), timeout=60_000)
+                        and not win.controls.stop_button.isEnabled(), timeout=60_000)
+        # no calibration yet and "stop at steady state" ticked: Start says why it is disabled
+        assert not win.controls.start_button.isEnabled() and "needs a bench calibration" in \
+            win.controls.start_reason.text()
         assert win.live.image.image is not None and win.devices.readouts["plate_c"].text() != "-"
 
         win.controls.calibration.setText(str(cal_path))
         win.controls.max_hours.setValue(48.0)  # 864 s at 200x: the test, not the clock, ends the run
         win.controls.stop_on_steady.setChecked(False)
+        assert win.controls.start_button.isEnabled()
         win.controls.start_button.click()
         try:
             qtbot.waitUntil(win.controls.drop_button.isEnabled, timeout=120_000)   # bath stable, reference taken
