@@ -10,7 +10,8 @@ from pyqtgraph.util.garbage_collector import GarbageCollector
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QApplication
 
-from labapp.errors import UsageError
+from labapp.errors import EXIT_USAGE, UsageError
+from labapp.gui.login import ask_operator
 from labapp.gui.main_window import MainWindow
 from labapp.gui.syslibs import xcb_problem
 
@@ -40,8 +41,12 @@ def launch(data_dir: Path, simulate: bool, speed: float | None, sample: str, cal
     if problem:
         raise UsageError(problem)
     app = QApplication.instance() or QApplication(sys.argv[:1])
+    operator = ask_operator(simulate)      # no operator, nothing recorded: the GUI does not start
+    if operator is None:
+        return EXIT_USAGE
     collector = gui_thread_garbage_collector()
     window = MainWindow(Path(data_dir), simulate=simulate, speed=speed, sample=sample)
+    window.setWindowTitle(f"{window.windowTitle()} - operator: {operator}")
     if calibration:
         window.controls.calibration.setText(calibration)
     window.show()

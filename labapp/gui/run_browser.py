@@ -31,6 +31,7 @@ from labapp.errors import UsageError
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.overlay import PhysicalOverlay, prediction_curve, run_curve
 from labapp.gui.plots import PlotsPanel
+from labapp.gui.signing import save_report, sign_record
 from labapp.jobs.analyse import analyse_run
 from labapp.jobs.compare import Comparison, compare_curves
 from labapp.jobs.run import resumable
@@ -127,12 +128,15 @@ class RunBrowser(QWidget):
         self.resume_button = QPushButton("Resume acquisition")
         self.finalise_button = QPushButton("Finalise")
         self.verify_button = QPushButton("Verify")
+        self.sign_button = QPushButton("Sign...")
+        self.report_button = QPushButton("Report...")
         self.compare_button = QPushButton("f2")
         self.compare_button.setToolTip("f2 (and f1, MDT, DE) of two selected runs, the first selected the "
                                        "reference, or of the selected run and the prediction")
         for b, slot in ((self.refresh_button, self.refresh), (self.analyse_button, self.reanalyse),
                         (self.resume_button, self._resume), (self.finalise_button, self._finalise),
-                        (self.verify_button, self._verify), (self.compare_button, self.compare)):
+                        (self.verify_button, self._verify), (self.compare_button, self.compare),
+                        (self.sign_button, self._sign), (self.report_button, self._report)):
             b.clicked.connect(slot)
             buttons.addWidget(b)
         settings = QHBoxLayout()
@@ -410,6 +414,22 @@ class RunBrowser(QWidget):
         if path is not None:
             lines = verify_folder(path).lines()
             self.info.setText("\n".join(lines[:11] + lines[-1:]))
+
+    def _sign(self) -> None:
+        path = self.selected_path()
+        if path is not None and sign_record(path, self) is not None:
+            self._verify()
+
+    def _report(self) -> None:
+        path = self.selected_path()
+        if path is not None:
+            try:
+                out = save_report(path, self)
+            except UsageError as exc:
+                self.info.setText(f"no report: {exc}")
+                return
+            if out is not None:
+                self.info.setText(f"report written: {out}")
 
 
 def _is_record(path: Path) -> bool:
