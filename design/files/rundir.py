@@ -245,10 +245,19 @@ def _problem(config: DesignConfig, out_dir: Path) -> Problem:
     return problem
 
 
+def _check_size(saved: Checkpoint, problem: Problem, out_dir: Path) -> None:
+    """Refuse a checkpoint whose design variables do not fit the run's design space."""
+    size = int(np.prod(problem.space.var_shape))
+    if saved.x.size != size or saved.best_x.size != size:
+        raise DesignError(f"{out_dir / CHECKPOINT}: holds {saved.x.size} design variables, the run's configuration "
+                          f"{size} ({CONFIG} changed since it was written?); restore the files or start a new run")
+
+
 def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint) -> DesignResult:
     """The outputs of a run whose optimisation finished, from its last checkpoint: its best design, history
     and status, with the objective as the run left it (`restore_objective`: the final beta)."""
     problem = _problem(config, out_dir)
+    _check_size(saved, problem, out_dir)
     objective = build_objective(problem, config)
     restore_objective(objective, saved, config)
     log.info("%s: optimisation finished (%s); writing its outputs", out_dir, saved.status)
@@ -319,6 +328,8 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         out_dir.mkdir(parents=True, exist_ok=True)
         save_config(out_dir, config)
     problem = _problem(config, out_dir)
+    if saved is not None:
+        _check_size(saved, problem, out_dir)
     objective = build_objective(problem, config)
     if saved is not None:
         log.info("resuming %s at evaluation %d", out_dir, len(saved.history))

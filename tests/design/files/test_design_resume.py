@@ -1,5 +1,6 @@
 """What a design resume guarantees: a finished run is left as it is, outputs cut short are written from the
 finished state (at its final beta), settings cannot change, an ico run resumes exactly, bad checkpoints."""
+import dataclasses
 import hashlib
 import json
 import os
@@ -135,6 +136,16 @@ def test_an_empty_or_truncated_checkpoint_is_one_clear_error(finished, tmp_path,
     data = (copy / CHECKPOINT).read_bytes()
     (copy / CHECKPOINT).write_bytes(data[: len(data) // 2] if content is None else content)
     with pytest.raises(DesignError, match=r"checkpoint\.npz: not a readable design checkpoint"):
+        run_design(None, copy, resume=True)
+
+
+def test_a_checkpoint_of_another_grid_is_refused(finished, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(finished, copy)
+    saved = load_checkpoint(copy / CHECKPOINT)
+    (copy / "summary.json").unlink()
+    save_checkpoint(copy / CHECKPOINT, dataclasses.replace(saved, x=saved.x[:10], best_x=saved.best_x[:10]))
+    with pytest.raises(DesignError, match=r"checkpoint\.npz: holds 10 design variables"):
         run_design(None, copy, resume=True)
 
 
