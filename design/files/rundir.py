@@ -3,7 +3,8 @@
 A run folder holds ``config.json`` (the `DesignConfig`), ``feasibility.txt`` (the target's check),
 ``checkpoint.npz`` (the optimiser's `Checkpoint`, rewritten atomically every few evaluations) and, once the
 run stops, the outputs of `design.files.outputs`; the three records and their formats are
-`design.files.records`. A multi-start run (`DesignConfig.starts` > 1) keeps its coarse runs as ordinary run
+`design.files.records`. A run with physical correction keeps where its rounds stand in ``rounds.npz``
+(`design.files.rounds`). A multi-start run (`DesignConfig.starts` > 1) keeps its coarse runs as ordinary run
 folders in ``starts/NN`` and its choice in ``multistart.json``; the refinement runs in the folder itself.
 """
 from __future__ import annotations
@@ -32,14 +33,15 @@ from design.files.records import (
     save_config,
     stored_form,
 )
+from design.files.rounds import ROUNDS, RoundFile
 from design.files.targets_io import load_problem
+from design.inverse.defect import optimise_physical
 from design.inverse.multistart import coarse_start, refine_start, refinement_phase, start_name
 from design.inverse.optimize import (
     Checkpoint,
     IterationCallback,
     StartDesign,
     build_objective,
-    optimise,
     restore_objective,
     with_phase,
 )
@@ -335,8 +337,8 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         start = _multistart(config, out_dir, on_iteration, should_stop)
     if config.starts > 1:
         on_iteration = with_phase(on_iteration, refinement_phase(config.resolution))
-    outcome = optimise(objective, problem, config, CheckpointFile(ckpt), saved=saved, start=start,
-                       on_iteration=on_iteration, should_stop=should_stop)
+    outcome, objective = optimise_physical(objective, problem, config, CheckpointFile(ckpt), RoundFile(out_dir / ROUNDS),
+                                           saved=saved, start=start, on_iteration=on_iteration, should_stop=should_stop)
     outputs = write_outputs(out_dir, problem, objective, outcome.best_x, outcome.history, config,
                             status=outcome.status, session_seconds=outcome.session_seconds)
     log.info("design %s after %d evaluations: %s", outcome.status, outcome.iterations, outputs.summary_path)

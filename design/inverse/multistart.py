@@ -120,7 +120,7 @@ def coarse_start(config: DesignConfig, runs: CoarseRuns, *,
     ----------
     config : DesignConfig
         The full-resolution run; every coarse start uses it at `coarse_resolution`, with the same
-        iteration limit and a single start.
+        iteration limit, a single start and no physical correction.
     runs : CoarseRuns
         Runs the starts not finished yet (a finished start is not run again).
     on_iteration : callable, optional
@@ -137,7 +137,8 @@ def coarse_start(config: DesignConfig, runs: CoarseRuns, *,
     KeyboardInterrupt
         When a coarse run was interrupted (Ctrl-C); resuming continues with that start.
     """
-    coarse = replace(config, resolution=coarse_resolution(config.resolution), starts=1)
+    # the coarse runs only rank the starts by J: the refinement corrects the print (design.inverse.defect)
+    coarse = replace(config, resolution=coarse_resolution(config.resolution), starts=1, physical_correction="none")
     values = []
     for k in range(config.starts):
         if not runs.finished(k):

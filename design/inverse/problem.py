@@ -78,6 +78,17 @@ ANALYTIC_W_RATE = 1.0
 """Default weight of the rate-fit term J_rate for analytic (zero-order / accel) targets; 0 for the
 others, whose curves come from shapes or measurements
 (docs/design.md#analytic-targets-rate-term-robust-formulation-beta-64)."""
+PHYSICAL_CORRECTIONS = ("defect", "none")
+"""`DesignConfig.physical_correction` choices: "defect", the defect-correction rounds of `design.inverse.defect`
+that aim the print's release, judged by the reference evaluator, at the target; "none", the design grid's
+release alone (as in the paper). Why "defect" is the default: docs/design.md#physical-correction."""
+CORRECTION_SPACES = ("nfc", "extruded")
+"""The design spaces whose runs correct the print by default (`DesignConfig.physical_correction` None); ICO
+runs, whose evaluations carry the elasticity solves, default to "none"."""
+CORRECTION_ROUNDS = 2
+"""Default defect-correction rounds (`DesignConfig.correction_rounds`)."""
+CORRECTION_EVALS_SHARE = 0.1
+"""Default evaluations of each correction round, as a share of `DesignConfig.max_iter` (at least 1)."""
 ANALYTIC_DEFAULTS: dict[str, dict[str, float]] = {
     "nfc": {"robust_eta": 0.1, "beta_final": 64.0},
     "extruded": {"robust_eta": 0.1, "beta_final": 64.0, "w_connect": 10.0},
@@ -191,6 +202,14 @@ class DesignConfig:
         Points of the tau grid (1001 gives dtau = T/1000, section 3.4).
     formats : tuple of str
         Mesh formats to export besides STL ("3mf", "obj").
+    physical_correction : str or None
+        One of `PHYSICAL_CORRECTIONS`: how the run makes its print's true release meet the target. None =
+        "defect" in `CORRECTION_SPACES`, else "none".
+    correction_rounds : int
+        Defect-correction rounds after the optimisation (`design.inverse.defect`), 1 to 10.
+    correction_evals : int or None
+        Objective evaluations of each round, part of ``max_iter``; None = `CORRECTION_EVALS_SHARE` of ``max_iter``
+        (at least 1).
     """
 
     target: str
@@ -231,6 +250,9 @@ class DesignConfig:
     allow_infeasible: bool = False
     samples: int = 1001
     formats: tuple[str, ...] = ()
+    physical_correction: str | None = None
+    correction_rounds: int = CORRECTION_ROUNDS
+    correction_evals: int | None = None
 
     def __post_init__(self) -> None:
         if self.space not in SPACE_CHOICES:
@@ -307,6 +329,17 @@ class DesignConfig:
         if self.optimizer == "lbfgs" and self.bounds != "cosine":
             raise DesignError("the 'lbfgs' optimiser is unconstrained: it needs bounds='cosine' (box bounds: "
                               "choose an nlopt optimizer)")
+        if self.physical_correction is None:
+            object.__setattr__(self, "physical_correction",
+                               PHYSICAL_CORRECTIONS[0] if self.space in CORRECTION_SPACES else "none")
+        if self.physical_correction not in PHYSICAL_CORRECTIONS:
+            raise DesignError(f"physical_correction must be one of {PHYSICAL_CORRECTIONS}, got "
+                              f"{self.physical_correction!r}")
+        if self.correction_evals is None:
+            object.__setattr__(self, "correction_evals", max(1, int(round(CORRECTION_EVALS_SHARE * self.max_iter))))
+        if not 1 <= self.correction_rounds <= 10 or not self.correction_evals >= 1:
+            raise DesignError(f"need correction_rounds in [1, 10] and correction_evals >= 1; got "
+                              f"{self.correction_rounds}, {self.correction_evals}")
         bad = set(self.formats) - {"3mf", "obj"}
         if bad:
             raise DesignError(f"extra mesh formats must be among 3mf, obj; got {sorted(bad)}")
