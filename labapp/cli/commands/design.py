@@ -75,6 +75,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=positive_float, metavar="MM",
                         help="extrusion height, mm (default: the source's height, else the domain's)")
     parser.add_argument("--max-iter", type=positive_int, help="maximum objective evaluations (default 500)")
+    parser.add_argument("--physical-correction", metavar="{defect,none}",
+                        help="how the printed solid's true release is made to meet the target: defect (default: "
+                             "rounds that re-aim the design grid by the bias the reference evaluator finds in the "
+                             "print, within --max-iter) or none (the design grid's release alone)")
+    parser.add_argument("--correction-rounds", type=positive_int, metavar="N",
+                        help="defect-correction rounds (default 2, each 10%% of --max-iter)")
     parser.add_argument("--bounds", choices=("cosine", "box"),
                         help="how L-BFGS keeps rho_hat in [0, 1] (default cosine)")
     parser.add_argument("--optimizer", help="lbfgs (default: lean L-BFGS, exact resume) or nlopt's LD_LBFGS, "
@@ -148,10 +154,13 @@ def run(args: argparse.Namespace) -> int:
                              f"{args.out}); drop it to resume")
         simcal = load_simcal(args.simcal) if args.simcal else None
         bench = BenchCalibration.load(args.calibration) if args.calibration else None
-        result, physical = design_job(config, args.out, resume=args.resume, units=args.units, simcal=simcal,
-                                       bench_calibration=bench, on_iteration=_progress(max_iter),
-                                       on_warning=lambda message: print(f"\nwarning: {message}", file=sys.stderr),
-                                       options=options if args.resume else None)
+        interrupt.set_hint(f"the best design so far is saved in {args.out}; resume with: sfr design --resume "
+                           f"--out {args.out}")
+        with folder_lock(args.out):
+            result, physical = design_job(config, args.out, resume=args.resume, units=args.units, simcal=simcal,
+                                           bench_calibration=bench, on_iteration=_progress(max_iter),
+                                           on_warning=lambda message: print(f"\nwarning: {message}", file=sys.stderr),
+                                           options=options if args.resume else None)
     finally:
         print(file=sys.stderr)          # ends the progress line, also before an error's line
     s = physical or result.outputs.summary
@@ -181,5 +190,6 @@ def _given_options(args: argparse.Namespace) -> dict:
              ("allow_pieces", args.allow_pieces or None), ("w_connect", args.w_connect), ("beta", args.beta),
              ("beta_final", args.beta_final), ("w_rate", args.w_rate), ("preset", args.preset),
              ("w_fab", args.w_fab), ("optimizer", args.optimizer or None),
-             ("allow_infeasible", args.allow_infeasible or None), ("formats", tuple(args.formats) or None))
+             ("allow_infeasible", args.allow_infeasible or None), ("formats", tuple(args.formats) or None),
+             ("physical_correction", args.physical_correction), ("correction_rounds", args.correction_rounds))
     return {name: value for name, value in pairs if value is not None}
