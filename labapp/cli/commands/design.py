@@ -154,13 +154,10 @@ def run(args: argparse.Namespace) -> int:
                              f"{args.out}); drop it to resume")
         simcal = load_simcal(args.simcal) if args.simcal else None
         bench = BenchCalibration.load(args.calibration) if args.calibration else None
-        interrupt.set_hint(f"the best design so far is saved in {args.out}; resume with: sfr design --resume "
-                           f"--out {args.out}")
-        with folder_lock(args.out):
-            result, physical = design_job(config, args.out, resume=args.resume, units=args.units, simcal=simcal,
-                                           bench_calibration=bench, on_iteration=_progress(max_iter),
-                                           on_warning=lambda message: print(f"\nwarning: {message}", file=sys.stderr),
-                                           options=options if args.resume else None)
+        result, physical = design_job(config, args.out, resume=args.resume, units=args.units, simcal=simcal,
+                                       bench_calibration=bench, on_iteration=_progress(max_iter),
+                                       on_warning=lambda message: print(f"\nwarning: {message}", file=sys.stderr),
+                                       options=options if args.resume else None)
     finally:
         print(file=sys.stderr)          # ends the progress line, also before an error's line
     s = physical or result.outputs.summary
