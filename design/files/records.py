@@ -267,8 +267,15 @@ def migrate_checkpoint(stored: Mapping[str, np.ndarray], what: str = CHECKPOINT)
     return record
 
 
-def load_checkpoint(path: Path) -> Checkpoint:
+_VARIABLES = ("x", "best_x")
+_STATES = ("lbfgs_", "fab_")
+
+
+def load_checkpoint(path: Path, *, variables: bool = True) -> Checkpoint:
     """The `Checkpoint` in a ``checkpoint.npz`` (`migrate_checkpoint`).
+
+    With ``variables=False`` only the history, stage, beta and status are read (a large run's design
+    variables and optimiser state stay on disk): ``x`` and ``best_x`` are empty, ``lbfgs`` and ``fab`` too.
 
     Raises
     ------
@@ -279,7 +286,10 @@ def load_checkpoint(path: Path) -> Checkpoint:
     what = str(path)
     try:
         with np.load(path, allow_pickle=False) as data:
-            stored = {name: data[name] for name in data.files}
+            stored = {name: data[name] for name in data.files
+                      if variables or not (name in _VARIABLES or name.startswith(_STATES))}
+        if not variables:
+            stored.update(x=np.empty(0), best_x=np.empty(0))
         record = migrate_checkpoint(stored, what)
         status = str(record["status"])
         checkpoint = Checkpoint(
