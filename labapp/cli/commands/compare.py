@@ -61,6 +61,7 @@ def _times(text: str | None) -> list[float] | None:
 def run(args: argparse.Namespace) -> int:
     """Compare two curves or two sets of units, then print the table or the JSON; draw with --plot."""
     import json
+    from pathlib import Path
 
     from labapp.errors import UsageError
     from labapp.jobs.compare import (
@@ -88,6 +89,10 @@ def run(args: argparse.Namespace) -> int:
                              "--reference UNIT... --test UNIT...")
         if args.bootstrap:
             raise UsageError("--bootstrap needs replicate units: give each product's units with --reference and --test")
+        for name, value in (("A", args.a), ("B", args.b)):
+            if "," in value and not Path(value).exists():
+                raise UsageError(f"{name} {value!r}: replicate units are given as --reference UNIT... --test UNIT..., "
+                                 f"not separated by commas")
         inputs = [args.a, args.b]
     if args.bootstrap and args.bootstrap < 100:
         raise UsageError(f"--bootstrap {args.bootstrap}: expected a number of samples >= 100, or 0 for none")

@@ -209,6 +209,7 @@ def test_replicate_curves_are_set_on_common_points_with_a_seeded_bootstrap(tmp_p
     (lambda d, a, b: ["compare", "--reference", _units_csv(d / "v.csv", [5, 10], [[1, 2]], "time"), "--test", b],
      "no column t_s"),
     (lambda d, a, b: ["compare", "--reference", a, "--test", b, "--mtad", "60"], "--mtad 60: expected a percentage"),
+    (lambda d, a, b: ["compare", f"{a},{a}", b], "not separated by commas"),
 ])
 def test_bad_replicate_input_is_named(curves, capsys, args, message):
     tmp, a, b = curves
@@ -221,3 +222,17 @@ def test_the_commands_rule_names_are_the_analysis_ones():
     from labapp.cli.commands.compare import RULES
 
     assert RULES == RULE_NAMES
+
+
+def test_the_who_rule_cuts_two_curves_where_the_reference_passes_85_percent(tmp_path, capsys):
+    t = np.array([0, 600, 1200, 1800, 2400, 3000.0])
+    ref = _csv(tmp_path / "r.csv", t, [0, 0.30, 0.55, 0.75, 0.90, 0.98])   # above 85 % (of 0.98) at 2400 s
+    test = _csv(tmp_path / "t.csv", t, [0, 0.50, 0.88, 0.95, 0.97, 0.98])  # at 1200 s
+    got = {}
+    for rule in ("ema", "who"):
+        assert main(["compare", ref, test, "--rule", rule, "--json"]) == 0
+        got[rule] = json.loads(capsys.readouterr().out)
+    assert got["ema"]["times_s"] == [600, 1200] and got["ema"]["f2"] is None  # 2 points: refused
+    assert got["who"]["times_s"] == [600, 1200, 1800, 2400] and got["who"]["rule"] == "who"
+    r, s = np.array([0.30, 0.55, 0.75, 0.90]) / 0.98 * 100, np.array([0.50, 0.88, 0.95, 0.97]) / 0.98 * 100
+    assert got["who"]["f2"] == pytest.approx(100 - 25 * np.log10(1 + np.mean((r - s) ** 2)))
