@@ -4,10 +4,12 @@
 
 Runs every case of `CASES` through `labapp.jobs.design.design`, the job `sfr design` calls, with
 `design.inverse.problem.DesignConfig`'s defaults for everything but the target, the design space and
-the resolution, and writes a Markdown page: the software versions, the defaults used (read from
-`DesignConfig` and from each case's resolved configuration, never restated here), one table row per
-case and a figure of the release curves. ``--quick`` runs the same cases at `QUICK_RESOLUTION` (a smoke
-test of a few minutes) and prints the page instead of writing it unless ``--out`` is given.
+the resolution, and once more without the physical correction (``physical_correction="none"``), and writes a
+Markdown page: the software versions, the defaults used (read from `DesignConfig` and from each case's resolved
+configuration, never restated here), one table row per case, the print's true fit (`true_fit`, by the reference
+evaluator) beside the design grid's before and after the correction, and a figure of the release curves.
+``--quick`` runs the same cases at `QUICK_RESOLUTION` (a smoke test of several minutes) and prints the page
+instead of writing it unless ``--out`` is given.
 
 Progress goes to stderr. Ctrl-C stops the running design at its next evaluation, writes nothing and
 exits with 130 (a second Ctrl-C leaves at once). The design run folders go to a temporary folder,
@@ -122,12 +124,40 @@ def _progress(prefix: str, max_iter: int):
     return show
 
 
-def run_case(case: Case, resolution: int, folder: Path, stop: _Stop, prefix: str) -> dict:
-    """Design one case into ``folder``; returns its row of figures (``status`` "stopped" when interrupted)."""
+BEFORE, AFTER = "none", None
+"""The two runs of each case: without the physical correction (``physical_correction="none"``, before) and with
+`DesignConfig`'s default (after)."""
+
+
+def true_fit(case: Case, folder: Path) -> float | None:
+    """The printed solid's true fit: rel. RMSE of ``design.stl``'s release against the target's physical
+    release, both by the reference evaluator (`design.forward.reference`; an analytic target's curve is
+    physical as it is). None without a printed solid."""
+    import numpy as np
+    import trimesh
+
+    from design.forward.reference import reference_release
+    from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
+    from design.inverse.objective import rel_rmse
+
+    stl = folder / "design.stl"
+    if not stl.exists():
+        return None
+    data = np.genfromtxt(folder / "curves.csv", delimiter=",", names=True)
+    tau = data["tau_mm"]
+    goal = (reference_release(sample_shape(case.target), tau).released_mm3 if case.target in SAMPLE_SHAPES
+            else data["target_mm3"])
+    return rel_rmse(reference_release(trimesh.load_mesh(stl), tau).released_mm3, goal)
+
+
+def run_case(case: Case, resolution: int, folder: Path, stop: _Stop, prefix: str,
+             correction: str | None = AFTER) -> dict:
+    """Design one case into ``folder`` (``correction``: `DesignConfig.physical_correction`, None = its default);
+    returns its row of figures (``status`` "stopped" when interrupted)."""
     from design.errors import DesignError
     from labapp.jobs.design import design
 
-    config = _config(case, resolution)
+    config = dataclasses.replace(_config(case, resolution), physical_correction=correction)
     start = time.perf_counter()
     try:
         result, _ = design(config, folder, on_iteration=_progress(prefix, config.max_iter),
@@ -144,7 +174,8 @@ def run_case(case: Case, resolution: int, folder: Path, stop: _Stop, prefix: str
                 density=s["rel_rmse_density"], binary=s["rel_rmse_binary"], fine=s["rel_rmse_fine"],
                 fine_factor=s["fine_factor"], pieces=s["pieces"], mass_g=s["print_mass_g"],
                 voids=s["enclosed_voids"], rate_dev=s["rate_dev_mid80_vs_target"]["fine"], seconds=s["seconds"],
-                wall=wall, software=s["software"], folder=result.out_dir, warnings=s["warnings"])
+                wall=wall, software=s["software"], folder=result.out_dir, warnings=s["warnings"],
+                true=true_fit(case, result.out_dir))
 
 
 def _warm_up(folder: Path, stop: _Stop) -> None:
@@ -205,8 +236,35 @@ def figure(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | None, quick: bool) -> str:
-    """The Markdown of docs/results.md."""
+def _before_after(rows: list[dict], before: dict) -> list[str]:
+    """The table of true fits beside design-grid fits, without and with the physical correction."""
+    lines = [
+        "## The print's true fit, before and after the physical correction",
+        "",
+        "Each case designed twice, with `--physical-correction none` (before: the design grid's release alone) and",
+        "with the default (after: the defect-correction rounds of `design.inverse.defect`, within the same",
+        "evaluations); [design.md](design.md#physical-correction) says how they work. The **true** fit is the",
+        "printed solid's (`design.stl`) release against the target's physical release, both by the reference",
+        "evaluator (`design.forward.reference`: exact surface distances); the design-grid fit is the printed",
+        "solid re-voxelised on the design grid against the target there (`rel_rmse_binary`).",
+        "",
+        "| case | space | design grid, before | **true, before** | design grid, after | **true, after** "
+        "| pieces, before / after | seconds, before / after |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        b = before.get((r["case"].target, r["case"].space))
+        if b is None or "folder" not in r or "folder" not in b:
+            continue
+        lines.append(f"| {r['case'].label} | {r['case'].space} | {percent_text(b['binary'])} | "
+                     f"**{percent_text(b['true'])}** | {percent_text(r['binary'])} | **{percent_text(r['true'])}** | "
+                     f"{b['pieces']} / {r['pieces']} | {b['wall']:.0f} / {r['wall']:.0f} |")
+    return lines + [""]
+
+
+def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | None, quick: bool,
+         before: dict | None = None) -> str:
+    """The Markdown of docs/results.md (``before``: the runs without the physical correction, by (target, space))."""
     from design.files.outputs import FINE_FACTOR, software_versions
 
     done = [r for r in rows if "folder" in r]
@@ -240,18 +298,18 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
         "## Results",
         "",
         "| case | space | evaluations | status | rel. RMSE, density (design grid) | rel. RMSE, printed solid "
-        "(design grid) | **rel. RMSE, printed solid (finer grid)** | rate deviation (finer grid) | pieces "
-        "| print mass (g) | enclosed voids | seconds |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "(design grid) | rel. RMSE, printed solid (finer grid) | **rel. RMSE, printed solid (true)** | rate deviation "
+        "(finer grid) | pieces | print mass (g) | enclosed voids | seconds |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         if "folder" not in r:
             lines.append(f"| {r['case'].label} | {r['case'].space} | - | {r['status']}: "
-                         f"{r['error']} | - | - | - | - | - | - | - | {r['wall']:.0f} |")
+                         f"{r['error']} | - | - | - | - | - | - | - | - | {r['wall']:.0f} |")
             continue
         lines.append(f"| {r['case'].label} | {r['case'].space} | {r['iterations']} | "
                      f"{r['status']} | {percent_text(r['density'])} | {percent_text(r['binary'])} | "
-                     f"**{percent_text(r['fine'])}** | "
+                     f"{percent_text(r['fine'])} | **{percent_text(r['true'])}** | "
                      f"{percent_text(r['rate_dev']) if _zero_order(r['case']) else '-'} | "
                      f"{r['pieces']} | {r['mass_g']:.3f} | {r['voids']} | {r['wall']:.0f} |")
 
@@ -269,8 +327,11 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
         "  paper plots). A diagnostic too: on the design grid the voxelisation error of the grid itself, which",
         "  the optimiser has learnt to use, is part of both curves.",
         f"- **printed solid (finer grid)**: the same mesh simulated on voxels {FINE_FACTOR} times smaller, against",
-        "  the target on that grid (for a mesh target, its source re-simulated there; `rel_rmse_fine`). This",
-        "  is the closer estimate of what the print releases, and the figure to judge a design by.",
+        "  the target on that grid (for a mesh target, its source re-simulated there; `rel_rmse_fine`).",
+        "- **printed solid (true)**: `design.stl`'s release by the reference evaluator (exact surface distances,",
+        "  `design.forward.reference`) against the target's physical release (a sample shape's by the same",
+        "  evaluator, an analytic target's curve as it is): what the print does, and the figure to judge a",
+        "  design by.",
         "- **rate deviation** (zero-order targets): the largest deviation of the printed solid's release rate",
         "  from the target's constant rate over the target's middle 80% (10% to 90% released), in 20 equal",
         "  windows, on the finer grid (`rate_dev_mid80_vs_target`, `design.inverse.rate`).",
@@ -279,6 +340,8 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
         "  output writing included (the kernels are compiled before the first case).",
         "",
     ]
+    if before:
+        lines += _before_after(rows, before)
     warned = [(r, w) for r in rows for w in r.get("warnings", ())]
     if warned:
         lines += ["What the runs warned about (`warnings` in `summary.json`, also printed by `sfr design`):", ""]
@@ -323,6 +386,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, stop)
     begin = time.perf_counter()
     rows: list[dict] = []
+    before: dict[tuple[str, str], dict] = {}
     with tempfile.TemporaryDirectory(prefix="results_page_") as tmp:
         runs = args.keep or Path(tmp)
         runs.mkdir(parents=True, exist_ok=True)
@@ -331,17 +395,22 @@ def main(argv: list[str] | None = None) -> int:
             for i, case in enumerate(CASES, 1):
                 prefix = f"[{i}/{len(CASES)}] {case.target} {case.space}:"
                 print(f"{prefix} designing at resolution {resolution} ...", file=sys.stderr, flush=True)
-                row = run_case(case, resolution, runs / f"{case.target}_{case.space}", stop, prefix)
-                if stop.event.is_set() or row["status"] in ("stopped", "interrupted"):
+                plain = run_case(case, resolution, runs / f"{case.target}_{case.space}_none", stop,
+                                 prefix + " (no correction)", BEFORE)
+                row = plain if stop.event.is_set() else run_case(case, resolution, runs / f"{case.target}_{case.space}",
+                                                                  stop, prefix)
+                if stop.event.is_set() or {plain["status"], row["status"]} & {"stopped", "interrupted"}:
                     print("stopped: no page written", file=sys.stderr)
                     return 130
+                before[(case.target, case.space)] = plain
                 rows.append(row)
                 if "folder" not in row:
                     print(f"{prefix} {row['status']}: {row['error']}", file=sys.stderr, flush=True)
                     continue
                 print(f"{prefix} {row['status']} after {row['iterations']} evaluations, {row['wall']:.0f} s; "
-                      f"printed solid {percent_text(row['binary'])} (design grid), {percent_text(row['fine'])} (finer grid), "
-                      f"{row['pieces']} piece(s)", file=sys.stderr, flush=True)
+                      f"printed solid {percent_text(row['binary'])} (design grid), {percent_text(row['true'])} (true; "
+                      f"{percent_text(plain.get('true'))} without correction), {row['pieces']} piece(s)",
+                      file=sys.stderr, flush=True)
         except KeyboardInterrupt:
             print("\ninterrupted: no page written", file=sys.stderr)
             return 130
@@ -352,7 +421,7 @@ def main(argv: list[str] | None = None) -> int:
             figures.mkdir(parents=True, exist_ok=True)
             figure_name = f"figures/{out.stem}_cases.png"
             figure(rows, out.parent / figure_name)
-        text = page(rows, resolution, minutes, figure_name, args.quick)
+        text = page(rows, resolution, minutes, figure_name, args.quick, before)
         if out is None:
             print(text)
         else:
