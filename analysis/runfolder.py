@@ -119,7 +119,8 @@ def analyze_run(folder: str | Path, calibration: BenchCalibration, *, interval_s
     workers : int, optional
         Decoding threads (default: all cores).
     progress : callable, optional
-        ``progress(done, total)`` after every frame.
+        ``progress(done, total)`` after every frame. It may raise ``KeyboardInterrupt`` to stop the analysis
+        there: the frames analysed so far are kept in the cell cache (``cache_dir``) and the exception propagates.
     reduce : {1, 2, 4, 8}, optional
         Decode downscaling (default: the calibration's).
     cache_dir : str or Path, optional
@@ -165,10 +166,18 @@ def analyze_run(folder: str | Path, calibration: BenchCalibration, *, interval_s
     n = len(frames.files)
     results: list[tuple[str, np.ndarray | None, str | None]] = []
     with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
-        for done, result in enumerate(pool.map(work, frames.files), start=1):
-            results.append(result)
-            if progress is not None:
-                progress(done, n)
+        try:
+            for done, result in enumerate(pool.map(work, frames.files), start=1):
+                results.append(result)
+                if progress is not None:
+                    progress(done, n)   # a safe point: ``progress`` may raise KeyboardInterrupt to stop here
+        except KeyboardInterrupt:
+            # the frames being decoded finish, the others are not started; the ones done stay in the cache
+            pool.shutdown(wait=True, cancel_futures=True)
+            cache.update((ident, cells) for ident, cells, _ in results if cells is not None)
+            if cache_path is not None and cache:
+                _save_cache(cache_path, key, cache)
+            raise
     keep = []
     for i, (ident, cells, error) in enumerate(results):
         if cells is None:

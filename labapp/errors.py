@@ -12,11 +12,13 @@ The mapping of these and the other packages' errors to exit codes is in :func:`l
 """
 from __future__ import annotations
 
-__all__ = ["EXIT_FAILED", "EXIT_OK", "EXIT_USAGE", "JobFailed", "LabError", "UsageError"]
+__all__ = ["EXIT_FAILED", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "JobFailed", "LabError", "UsageError"]
 
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+"""Ctrl-C or SIGTERM stopped the command (at a safe point: what it wrote is consistent)."""
 
 
 class LabError(Exception):

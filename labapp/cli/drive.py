@@ -1,15 +1,16 @@
 """Walk an acquisition procedure from the terminal: the engine in its thread, a live status line, Ctrl-C (or a
 service manager's SIGTERM) as a clean stop and a second Ctrl-C as an abort (`sfr run`,
-`sfr calibrate-bench --record`)."""
+`sfr calibrate-bench --record`). The signals are recorded through :mod:`labapp.cli.interrupt`, so ``sfr``
+exits with 130 after the clean stop."""
 from __future__ import annotations
 
 import shutil
-import signal
 import sys
 from collections.abc import Callable
 
 from labapp.acquisition.engine import Engine, Procedure
 from labapp.acquisition.status import RunStatus
+from labapp.cli import interrupt
 
 _quiet: list[bool] = []
 
@@ -43,25 +44,13 @@ def drive(engine: Engine, procedure: Procedure, status: RunStatus,
     outcome.
     """
     show = _status_printer(status)
-    interrupts = []
-
-    def on_sigint(signum, frame) -> None:
-        interrupts.append(signum)
-        if len(interrupts) == 1:
-            write_line("\nstopping cleanly (heating off, folder finalised); Ctrl-C again aborts")
-            engine.stop()
-        else:
-            engine.abort()
-    previous = signal.signal(signal.SIGINT, on_sigint)
-    previous_term = signal.signal(signal.SIGTERM, on_sigint)   # a service manager's stop: the same clean stop
-    try:
+    with interrupt.handling("stopping cleanly (heating off, folder finalised); Ctrl-C again aborts",
+                            on_first=engine.stop, on_second=engine.abort):
+        interrupt.check()   # Ctrl-C while the bench was being set up: nothing started
         engine.start(procedure)
         started()
         while engine.join(0.25) is None:
             show()
         show()
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        signal.signal(signal.SIGTERM, previous_term)
     write_line("")
     return engine.outcome

@@ -18,7 +18,7 @@ def test_emulate_then_probe_then_ctrl_c(tmp_path):
         assert out.returncode == 0, out.stderr
         assert f"probe {path}: Heidolph reply: plate 2" in out.stdout
         emu.send_signal(signal.SIGINT)
-        assert emu.wait(timeout=10) == 0
+        assert emu.wait(timeout=10) == 130                  # Ctrl-C ends every command with 130
         assert not os.path.exists(path)
     finally:
         emu.kill()

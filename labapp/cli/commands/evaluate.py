@@ -24,13 +24,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print the table, say where everything is."""
+    from labapp.cli import interrupt
     from labapp.jobs.evaluate import evaluate_models, markdown_table
+    from labapp.records.lock import folder_lock
 
     def progress(fraction: float, message: str) -> None:
         print(f"[{100 * fraction:3.0f}%] {message}", file=sys.stderr, flush=True)
+        interrupt.check()   # a safe point between the job's steps
 
-    result = evaluate_models(args.set, args.calibration, args.out, resolution=args.resolution, seeds=args.seeds,
-                             progress=progress)
+    interrupt.set_hint(f"the evaluation in {args.out} is incomplete; rerun the same command into a new folder")
+    with folder_lock(args.out):
+        result = evaluate_models(args.set, args.calibration, args.out, resolution=args.resolution, seeds=args.seeds,
+                                 progress=progress)
     print(markdown_table(result.doc))
     mc = result.doc["mc_calibration"]
     print(f"Monte Carlo tuned on all objects: A = {mc['a_per_s']:.4g} 1/s, E_a = {mc['ea_j_per_mol'] / 1000:.3g} "
