@@ -244,6 +244,7 @@ class RunProcedure:
                 return
             self._frame(engine)
             slot = max(slot + 1, math.ceil(session.t_s() / cfg.interval_s))
+            cfg = self.config        # an audited change during the run (labapp.jobs.run.change_setting) applies
             if session.t_s() >= cfg.max_duration_s:
                 session.note("info", "max-duration", f"maximum duration {cfg.max_duration_s:.0f} s reached")
                 return

@@ -69,6 +69,7 @@ class ReportData:
     audit: Any = None
     signatures: list[Any] = field(default_factory=list)
     references: list[tuple[str, np.ndarray, np.ndarray]] = field(default_factory=list)
+    n_frames: int = 0
 
 
 def _read_curve(folder: Path, curve: Path | None, calibration: BenchCalibration | None):
@@ -126,6 +127,7 @@ def collect(folder: str | Path, *, references: tuple[str | Path, ...] = (), rule
     data = ReportData(folder, snap.record, str(snap.status), record_hash(folder), source, t_s, released, raw, mass,
                       summary, calibration=calibration,
                       calibration_sha=sha256_file(cal_file) if cal_file.is_file() else None)
+    data.n_frames = len(snap.frames)
     data.warnings = warnings + [f"event log: {line.split(chr(9), 4)[-1]}" for line in snap.events()
                                 if "\tWARNING\t" in line or "\tERROR\t" in line]
     if mass is None:
@@ -147,7 +149,7 @@ def collect(folder: str | Path, *, references: tuple[str | Path, ...] = (), rule
     _acceptance(data, test)
     report = verify(folder)
     data.integrity = [f"sfr verify: {'OK' if report.ok else 'FAILED: ' + report.reason}"] + \
-        [f"problem: {p}" for p in report.problems]
+        [f"problem: {p}" for p in report.problems if p != report.reason]
     data.audit = check_trail(folder)
     data.signatures = check_signatures(folder)
     return data
@@ -250,10 +252,11 @@ def _page_one(page: _Page, d: ReportData) -> None:
     page.line(f"record {d.folder.resolve()}")
     page.line(f"status {d.status}; record SHA-256 {d.record_hash}")
     page.heading("Record")
-    page.pairs([("started by", r.operator or "not recorded"), ("created", _utc(r.created_unix_s)),
-                ("time zero (drop)", _utc(r.t0_unix_s)), ("finished", _utc(r.finished_unix_s)),
-                ("frames, gaps, resumes", f"{len(d.t_s)} curve points, {len(r.gaps)} gap(s), resumed {r.resumed} "
-                                          "time(s)")])
+    clock = " (simulated bench clock)" if r.simulated else ""
+    page.pairs([("started by", r.operator or "not recorded"), ("folder created", _utc(r.created_unix_s)),
+                ("time zero (drop)", _utc(r.t0_unix_s) + clock), ("finished", _utc(r.finished_unix_s)),
+                ("frames", f"{d.n_frames} recorded, {len(d.t_s)} on the curve; {len(r.gaps)} gap(s); resumed "
+                           f"{r.resumed} time(s)")])
     page.heading("Method and settings")
     m = d.method
     rows = [("method", f"{m.name} ({m.path}, SHA-256 {m.sha256[:16]}...)" if m else (d.method_note or "none"))]
@@ -287,9 +290,9 @@ def _plot(page: _Page, d: ReportData) -> None:
     ax = page.fig.add_axes([0.1, 0.07, 0.78, height - 0.02])
     hours = d.t_s / 3600.0
     total = d.mass_g or float(np.max(d.released_g))
+    ax.plot(hours, d.released_g, "-", lw=1.3, color="C0", label="release (smoothed)", zorder=2)
     if d.raw_g is not None:
-        ax.plot(hours, d.raw_g, ".", ms=2.0, color="0.55", label="measured points (raw)")
-    ax.plot(hours, d.released_g, "-", lw=1.6, color="C0", label="release (smoothed)")
+        ax.plot(hours, d.raw_g, "o", ms=1.6, mew=0, color="0.2", alpha=0.55, label="measured points (raw)", zorder=3)
     for k, (name, t_ref, g_ref) in enumerate(d.references):
         ax.plot(t_ref / 3600.0, g_ref, "--", lw=1.2, color=f"C{k + 1}", label=f"reference {Path(name).name}")
     if d.mass_g:
@@ -321,7 +324,7 @@ def _page_two(page: _Page, d: ReportData, rule: str) -> None:
     s = d.summary
     page.heading("Metrics")
     basis = "the weighed mass" if d.mass_g else "the final release"
-    page.pairs([("mean dissolution time", f"{s.mdt_s / 60:.1f} min ({s.mdt_s / 3600:.2f} h)"),
+    page.pairs([("mean dissolution time", f"{s.mdt_s / 60:.1f} min ({s.mdt_s / 3600:.2f} h; to {s.until_s / 3600:.2f} h)"),
                 ("dissolution efficiency", f"{s.de_pct:.1f} % (to {s.until_s / 3600:.2f} h)"),
                 ("final release", f"{d.released_g[-1]:.4f} g = {100 * d.released_g[-1] / s.total_g:.1f} % of {basis}"
                                   f" at {d.t_s[-1] / 3600:.2f} h")])

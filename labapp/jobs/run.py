@@ -1,13 +1,17 @@
 """Start or resume an acquisition run: the procedure the engine walks (`sfr run`, `sfr run --resume`)."""
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench
 from labapp.acquisition.methods import Method
 from labapp.acquisition.procedures import RunConfig, RunProcedure
+from labapp.acquisition.settings import MAX_DURATION, MIN_DURATION
 from labapp.errors import UsageError
+from labapp.records.audit import Action
+from labapp.records.audit import append as audit
 from labapp.records.outpaths import FolderKind, check_data_dir, folder_kind
 from labapp.records.runrecord import RecordKind, RecordStatus
 from labapp.records.storage import RunSnapshot, StorageError, read_run
@@ -78,3 +82,35 @@ def resume_run(folder: str | Path, bench: Bench, calibration: BenchCalibration |
         raise UsageError(f"{folder} was recorded on a {'simulated' if snap.record.simulated else 'real'} "
                          f"bench; it cannot be resumed on a {'simulated' if bench.simulated else 'real'} one")
     return RunProcedure.resume(Path(folder), bench, calibration)
+
+
+CHANGEABLE = (MAX_DURATION, MIN_DURATION)
+"""The settings a recording run may change (the acquisition reads them at every frame); every other setting
+is fixed while the run records."""
+
+
+def change_setting(proc: RunProcedure, name: str, value: float, reason: str) -> None:
+    """Change a setting of the run ``proc`` is recording, as the current operator, with ``reason``: the new
+    value applies from the next frame and the change (old and new value, who, why) is in the audit trail.
+
+    Raises
+    ------
+    UsageError
+        For a setting that cannot change during a run, no reason, a value out of range, or no run recording.
+    labapp.records.operators.OperatorError
+        When the process acts as nobody.
+    """
+    settings = {s.name: s for s in CHANGEABLE}
+    if name not in settings:
+        raise UsageError(f"{name} cannot change while a run records (only {', '.join(settings)} can); settings are "
+                         "fixed at the start")
+    if not reason or not reason.strip():
+        raise UsageError(f"changing {name} during a run needs a reason (it is recorded in the audit trail)")
+    if proc.run is None or proc.run.status != RecordStatus.RUNNING:
+        raise UsageError("no run is recording; a setting changes only during a run")
+    setting = settings[name]
+    setting.check(value, "change_setting")
+    old = getattr(proc.config, name)
+    audit(proc.run.path, Action.CHANGE_SETTING, f"{name}: {setting.shown(old):g} -> {setting.shown(value):g} "
+          f"{setting.display_unit}", reason=reason)
+    proc.config = dataclasses.replace(proc.config, **{name: value})
