@@ -27,7 +27,7 @@ CONFIG = "config.json"
 SUMMARY = "summary.json"
 CHECKPOINT = "checkpoint.npz"
 
-CONFIG_FORMAT = 1
+CONFIG_FORMAT = 2
 """The layout of ``config.json`` this version writes: the `DesignConfig` fields and ``format``."""
 SUMMARY_FORMAT = 1
 """The layout of ``summary.json`` this version writes (`DesignSummary`)."""
@@ -74,7 +74,14 @@ def _config_0_to_1(stored: dict[str, Any]) -> dict[str, Any]:
     return record
 
 
-_CONFIG_UPGRADES = {0: _config_0_to_1}
+def _config_1_to_2(stored: dict[str, Any]) -> dict[str, Any]:
+    """Layout 1 predates the physical correction: its runs aimed at the design grid's release alone."""
+    record = dict(stored, format=2)
+    record.setdefault("physical_correction", "none")
+    return record
+
+
+_CONFIG_UPGRADES = {0: _config_0_to_1, 1: _config_1_to_2}
 """``layout -> function`` making the next layout of ``config.json``; one entry per format change."""
 
 

@@ -31,7 +31,7 @@ def _history(folder):
 
 def test_every_record_of_a_run_carries_its_format(tmp_path):
     run_design(DesignConfig(max_iter=4, **SMALL), tmp_path)
-    assert json.loads((tmp_path / "config.json").read_text())["format"] == CONFIG_FORMAT == 1
+    assert json.loads((tmp_path / "config.json").read_text())["format"] == CONFIG_FORMAT == 2
     assert json.loads((tmp_path / "summary.json").read_text())["format"] == SUMMARY_FORMAT == 1
     with np.load(tmp_path / "checkpoint.npz") as saved:
         assert int(saved["format"]) == CHECKPOINT_FORMAT == 2
@@ -43,11 +43,12 @@ def test_every_record_of_a_run_carries_its_format(tmp_path):
 def test_a_format_less_config_reads_its_missing_options_as_the_run_had_them():
     stored = {"target": "sphere", "space": "nfc", "beta": 3.0, "beta_final": None}
     record = migrate_config(stored)
-    assert record["format"] == 1 and record["beta_final"] == 3.0  # None always meant a fixed beta
+    assert record["format"] == 2 and record["beta_final"] == 3.0  # None always meant a fixed beta
     assert (record["rate_span"], record["optimizer"], record["allow_pieces"], record["connect_planes"],
             record["connect_tail"], record["line_search"]) == ((0.0, 1.0), "LD_LBFGS", True, False, 0.0, "strong-wolfe")
     current = migrate_config({"format": 1, "target": "sphere", "beta": 3.0, "beta_final": None})
     assert current["beta_final"] == 3.0 and "optimizer" not in current  # layout 1 stores every option
+    assert current["physical_correction"] == "none" == record["physical_correction"]  # but the correction came later
     assert stored == {"target": "sphere", "space": "nfc", "beta": 3.0, "beta_final": None}  # not changed
 
 
@@ -62,8 +63,8 @@ def test_a_format_less_summary_reads_the_facts_recorded_since_as_not_recorded():
 
 @pytest.mark.parametrize("migrate", [migrate_config, migrate_summary])
 def test_a_newer_or_malformed_format_is_refused(migrate):
-    with pytest.raises(DesignError, match="format 2 is newer than this version reads"):
-        migrate({"format": 2})
+    with pytest.raises(DesignError, match="format 3 is newer than this version reads"):
+        migrate({"format": 3})
     with pytest.raises(DesignError, match="format '1' is not a layout number"):
         migrate({"format": "1"})
 
