@@ -20,9 +20,12 @@ cell spreads its volume h^3 uniformly over arrival times [T_c - h/2, T_c + h/2],
 and the variance (h^2 / 12) of the arrival times over a cube cut by planar level sets of any
 orientation; the part of that ramp before the cell's wetting time (0 at the bath, w_R at a void's
 wall, and negative signed distances outside the surface) is not solid and releases nothing. The
-curve is therefore exactly 0 at tau = 0, and second-order in h away from the medial axis: the first
-two moments of each cell's arrival times are right. The sum of the ramps estimates the volume; the
-curve is scaled so that it ends at the mesh's exact volume (signed tetrahedra).
+curve is therefore exactly 0 at tau = 0, and second-order in h where T is smooth: the first two
+moments of each cell's arrival times are right. Where T is not smooth (on the medial axis, where two
+fronts meet, next to a void's wall) a cell is split into SPLIT^3 sub-cells evaluated the same way; a
+flat ridge (the mid-plane of a plate) would otherwise cost a first-order error. The sum of the ramps
+estimates the volume; the curve is scaled so that it ends at the mesh's exact volume (signed
+tetrahedra). Lattice points more than BAND cells outside the solid are only classified, not measured.
 
 Error estimate: the same quadrature on a lattice twice as coarse (one eighth of the cost). For a
 second-order quadrature the fine curve's error is about a third of the difference between the two;

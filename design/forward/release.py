@@ -1,8 +1,15 @@
 """The discrete release curve of eqs. (6)-(7) and its vector-Jacobian product.
 
 Voxel i contributes w_i clamp((tau - u_i) / L_i + 1, 0, 1) with w_i = rho_i dx^3 and L_i = n_i dx
-(eq. 6). Written with r(x) = max(x, 0), that ramp is w_i / L_i (r(tau - t0_i) - r(tau - u_i)) with
-t0_i = u_i - L_i, and r sampled on the grid tau_k = k dtau has a second difference that is non-zero
+(eq. 6): it dissolves at a constant rate over (t0_i, u_i), t0_i = u_i - L_i. No voxel dissolves
+before the bath touches the solid at tau = 0, so where eq. (6)'s ramp would start earlier
+(0 < u_i < L_i: a voxel on an edge or corner of the solid, whose upwind neighbours on two or three
+axes are the bath, so that eq. (5) gives u_i = L_i / sqrt(2) or L_i / sqrt(3)) the voxel dissolves
+over (0, u_i) instead: t0_i = max(u_i - L_i, 0). With eq. (6) as written those voxels would release
+part of themselves at tau = 0, about 1.7% of a sphere's volume at 64 voxels across.
+
+Written with r(x) = max(x, 0), the ramp is w_i / l_i (r(tau - t0_i) - r(tau - u_i)) with
+l_i = u_i - t0_i, and r sampled on the grid tau_k = k dtau has a second difference that is non-zero
 at two samples only. Accumulating those second differences and summing twice gives the exact samples
 of eq. (7) in O(N + K) (section 3.4). The adjoint uses prefix sums of the curve's cotangent, also
 O(N + K).
@@ -32,14 +39,22 @@ def _add_kink(acc, t, value, dtau):
                 acc[1] += v * j
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _ramp_start(u, length):
+    """t0 = u - L, or 0 where that would precede the bath's contact (0 < u < L)."""
+    t0 = u - length
+    return 0.0 if (t0 < 0.0 < u) else t0
+
+
 @njit(cache=True, nogil=True)
 def _second_differences(u, length, weight, dtau, k_count):
     acc = np.zeros(k_count)
     for i in range(u.shape[0]):
         if weight[i] == 0.0:
             continue
-        slope = weight[i] / length[i]
-        _add_kink(acc, u[i] - length[i], slope, dtau)
+        t0 = _ramp_start(u[i], length[i])
+        slope = weight[i] / (u[i] - t0)
+        _add_kink(acc, t0, slope, dtau)
         _add_kink(acc, u[i], -slope, dtau)
     return acc
 
@@ -53,7 +68,8 @@ def ramp_release(u_mm: np.ndarray, length_mm: np.ndarray, weight_mm3: np.ndarray
     u_mm : (N,) ndarray of float, mm
         Dissolution time of each voxel.
     length_mm : (N,) ndarray of float, mm
-        Ramp length n_i dx of each voxel (eq. 6), > 0.
+        Ramp length n_i dx of each voxel (eq. 6), > 0; a ramp that would start before tau = 0 starts
+        at 0 (module docstring).
     weight_mm3 : (N,) ndarray of float, mm^3
         Solid volume rho_i dx^3 of each voxel (times any mirror multiplicity).
     dtau_mm : float
@@ -83,17 +99,23 @@ def _vjp_kernel(u, length, weight, dtau, g):
     length_bar = np.zeros(n)
     weight_bar = np.zeros(n)
     for i in range(n):
-        t0 = u[i] - length[i]
+        t0 = _ramp_start(u[i], length[i])
+        span = u[i] - t0
         # samples on the ramp: t0 < tau_k <= u_i; after it the ramp is 1
         ka = min(max(np.int64(np.floor(t0 / dtau)) + 1, 0), k_count)
         kb = min(max(np.int64(np.floor(u[i] / dtau)) + 1, 0), k_count)
         s0 = p0[kb] - p0[ka]
         s1 = p1[kb] - p1[ka]
-        ramp = (dtau * s1 - t0 * s0) / length[i]  # sum_k g_k s_k over the ramp
+        ramp = (dtau * s1 - t0 * s0) / span  # sum_k g_k s_k over the ramp
         weight_bar[i] = ramp + (p0[k_count] - p0[kb])
-        # d s_k / d u_i = -1 / L_i and d s_k / d L_i = (1 - s_k) / L_i on the ramp (eq. 6)
-        u_bar[i] = -weight[i] / length[i] * s0
-        length_bar[i] = weight[i] / length[i] * (s0 - ramp)
+        if t0 == 0.0 and u[i] < length[i]:
+            # s_k = tau_k / u_i on (0, u_i]: d s_k / d u_i = -s_k / u_i, independent of L_i
+            u_bar[i] = -weight[i] / span * ramp
+            length_bar[i] = 0.0
+        else:
+            # d s_k / d u_i = -1 / L_i and d s_k / d L_i = (1 - s_k) / L_i on the ramp (eq. 6)
+            u_bar[i] = -weight[i] / span * s0
+            length_bar[i] = weight[i] / span * (s0 - ramp)
     return u_bar, length_bar, weight_bar
 
 

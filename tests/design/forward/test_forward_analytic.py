@@ -51,3 +51,12 @@ def test_first_order_convergence(name):
     # fronts are exact and only its corners err, so it converges faster (ratio 3.7)
     ratio = coarse / fine
     assert ratio > 1.6 and (name == "cube" or ratio < 2.6)
+
+
+def test_release_starts_at_zero():
+    # the bath touches the solid at tau = 0: nothing is released then (eq. 6's ramps start no earlier)
+    inside, _, half_width, _ = SHAPES["sphere"]
+    dx, (x, y, z) = _centres(64, half_width)
+    r = simulate(inside(x, y, z).astype(float), dx)
+    assert r.released_mm3[0] == 0.0
+    assert r.released_mm3[1] < 2 * r.dtau_mm * 4 * np.pi  # about area x dtau, not a jump

@@ -6,8 +6,9 @@ from design.forward.release import ramp_release, ramp_release_vjp
 
 
 def _literal(u, length, weight, tau):
-    # eq. (6)-(7) summed term by term
-    s = (tau[None, :] - u[:, None]) / length[:, None] + 1.0
+    # eq. (6)-(7) summed term by term, each ramp starting no earlier than tau = 0
+    start = np.where((u > 0) & (u < length), 0.0, u - length)
+    s = (tau[None, :] - start[:, None]) / (u - start)[:, None]
     return (weight[:, None] * np.clip(s, 0.0, 1.0)).sum(axis=0)
 
 
@@ -16,7 +17,8 @@ def _cases():
     u = rng.uniform(0.0, 3.0, 200)
     length = rng.uniform(1e-7, 0.5, 200)
     u[:5] = [0.0113, 0.2037, 2.5013, 3.4011, 1.00042]  # off the tau grid (kinks)
-    length[:5] = [0.3, 0.25, 1.0, 0.5, 1e-6]
+    length[:5] = [0.3, 0.25, 1.0, 0.5, 1e-6]  # the first two would start before tau = 0
+    u[5], length[5] = -0.2, 0.1  # wholly before tau = 0: released at the first sample
     weight = rng.uniform(0.0, 2.0, 200)
     weight[7] = 0.0
     return u, length, weight
@@ -52,3 +54,16 @@ def test_vjp_matches_central_differences():
     exact = u_bar @ d[0] + length_bar @ d[1] + weight_bar @ d[2]
     # piecewise-linear in (u, L): central differences are exact away from kinks; 1e-6 covers round-off
     assert exact == pytest.approx(fd, rel=1e-6)
+
+
+def test_no_ramp_releases_before_tau_zero():
+    # ramps of eq. (6) that would start before 0 (u < L) start at 0: nothing is released at tau = 0,
+    # and each such voxel is released linearly over (0, u)
+    u = np.array([0.05, 0.3, 0.7])
+    length = np.array([0.1, 1.0, 0.5])
+    weight = np.array([1.0, 2.0, 4.0])
+    curve = ramp_release(u, length, weight, 0.05, 21)
+    assert curve[0] == 0.0
+    np.testing.assert_allclose(curve[[1, 2, 6, 10, 14]],
+                               [1.0 + 2 * 0.05 / 0.3, 1.0 + 2 * 0.1 / 0.3, 3.0 + 4 * 0.1 / 0.5, 3.0 + 4 * 0.3 / 0.5, 7.0],
+                               rtol=1e-12)
