@@ -24,12 +24,13 @@ from PySide6.QtWidgets import (
     QScrollArea,
     QSplitter,
     QTabWidget,
+    QVBoxLayout,
     QWidget,
 )
 
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench
-from labapp.acquisition.calseries import CalibrationProcedure
+from labapp.acquisition.calseries import CalibrationProcedure, RedoLevel
 from labapp.acquisition.clock import make_clock
 from labapp.acquisition.devices import make_bench
 from labapp.acquisition.engine import Engine
@@ -48,7 +49,8 @@ from labapp.acquisition.procedures import PreviewProcedure, RunConfig
 from labapp.acquisition.simbench import SimulatedBench, resume_clock
 from labapp.acquisition.status import RunStatus
 from labapp.errors import UsageError
-from labapp.gui import persist
+from labapp.gui import dialogs, persist
+from labapp.gui.alarms import AlarmBanner
 from labapp.gui.bridge import BackgroundTask, EngineBridge, LogBridge
 from labapp.gui.calibration_wizard import CalibrationWizard
 from labapp.gui.design_launcher import DesignLauncher
@@ -139,7 +141,13 @@ class MainWindow(QMainWindow):
         self.tabs.addTab(self._live_page(), "Live")
         self.tabs.addTab(self.browser, "Runs")
         self.tabs.addTab(self.design, "Design")
-        self.setCentralWidget(self.tabs)
+        self.alarms = AlarmBanner(self.plots)
+        central = QWidget()
+        column = QVBoxLayout(central)
+        column.setContentsMargins(0, 0, 0, 0)
+        column.addWidget(self.alarms)
+        column.addWidget(self.tabs, 1)
+        self.setCentralWidget(central)
         self.bench_dock = QDockWidget("bench", self)
         self.bench_dock.setObjectName("bench")
         self.bench_dock.setWidget(self.bench_tabs)
@@ -164,6 +172,10 @@ class MainWindow(QMainWindow):
         self.bridge.message.connect(self.on_message)
         self.bridge.event.connect(self.on_event)
         self.bridge.done.connect(self.on_done)
+        self.bridge.alarm.connect(self.alarms.raise_alarm)
+        self.bridge.state.connect(self.controls.follow)
+        self.controls.watch(self.devices.bath_fields)
+        self.wizard.redo_requested.connect(self.redo_level)
         self.devices.connect_button.clicked.connect(self.connect_devices)
         self.controls.start_requested.connect(self.start_run)
         self.controls.drop_confirmed.connect(self.confirm_drop)
@@ -389,7 +401,10 @@ class MainWindow(QMainWindow):
         else:
             button.setText(getattr(self, "_button_text", button.text()))
         button.setEnabled(not busy)
-        self.controls.start_button.setEnabled(not busy and not self.engine.running)
+        if busy:
+            self.controls.start_button.setEnabled(False)
+        else:
+            self.controls.update_start()
 
     def _start(self, procedure) -> bool:
         if self.engine.running:
@@ -415,7 +430,11 @@ class MainWindow(QMainWindow):
         return BenchCalibration.load(text) if text else None
 
     def start_run(self) -> None:
-        """Start a run with the run controls' settings."""
+        """Start a run with the run controls' settings (refused, with the reasons, while Start is disabled)."""
+        found = self.controls.start_problems()
+        if found:
+            self.on_message("error", "cannot start: " + "; ".join(found))
+            return
         if self.engine.running:
             self.on_message("warning", "the engine is busy; stop the current procedure first")
             return
@@ -510,6 +529,11 @@ class MainWindow(QMainWindow):
         """The operator entered the cumulative mass for the next capture."""
         self.wizard.set_asking(False, f"capturing at {mass_g:g} g ...")
         self.engine.answer(PromptKind.ADDED_MASS, mass_g)
+
+    def redo_level(self) -> None:
+        """Capture the series' last level again (it replaces that level's frame)."""
+        self.wizard.set_asking(False, "capturing the last level again ...")
+        self.engine.answer(PromptKind.ADDED_MASS, RedoLevel())
 
     def finish_calibration(self) -> None:
         """No more levels: fit and save."""
@@ -685,10 +709,9 @@ class MainWindow(QMainWindow):
         """What would be cut short by closing now."""
         work = []
         if self.engine.running:
-            name = getattr(getattr(self.procedure, "run", None), "path", None)
-            work.append(f"the {getattr(self.procedure, 'name', 'procedure')}"
-                        + (f" recording into {Path(name).name}" if name else "")
-                        + " (it is stopped: heating off, the folder finalised)")
+            folder = getattr(getattr(self.procedure, "run", None), "path", None)
+            work.append(dialogs.interrupt_effect(getattr(self.procedure, "name", "procedure"),
+                                                 Path(folder).name if folder else ""))
         if self.design.busy:
             work.append(f"the design in {self.design.out_dir} (it stops at its next checkpoint; Design tab, "
                         "Resume... continues it)")
@@ -704,9 +727,7 @@ class MainWindow(QMainWindow):
         if not self._close_ready:
             work = self.busy_work()
             if work and not self.close_timer.isActive():
-                text = "Quitting now stops:\n- " + "\n- ".join(work) + "\n\nStop and quit?"
-                if QMessageBox.question(self, "quit", text, QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No,
-                                        QMessageBox.StandardButton.No) != QMessageBox.StandardButton.Yes:
+                if not dialogs.confirm(self, dialogs.close_question(work)):
                     event.ignore()
                     return
             if work:
@@ -719,7 +740,7 @@ class MainWindow(QMainWindow):
     def begin_close(self) -> None:
         """Stop everything that runs and close the window once it has all finished."""
         if self.engine.running:
-            self.engine.stop("window closed")
+            self.engine.interrupt()           # heating off; a run stays resumable
         self.design.stop()
         self.design.sweep.stop()
         self.centralWidget().setEnabled(False)

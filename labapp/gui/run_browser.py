@@ -28,6 +28,7 @@ from PySide6.QtWidgets import (
 from analysis import RunCurve
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
 from labapp.errors import UsageError
+from labapp.gui import dialogs
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.overlay import PhysicalOverlay, prediction_curve, run_curve
 from labapp.gui.plots import PlotsPanel
@@ -353,7 +354,8 @@ class RunBrowser(QWidget):
             self.plots.add_frame(float(t), float(c))
         final = curve.conc_smooth_g_per_kg[-1] if len(curve.t_s) else math.nan
         self.info.setText(f"{len(curve.t_s)} frames analysed; final {final:.4f} g/kg = "
-                          f"{final * curve.water_g / 1000:.4f} g released; {len(curve.warnings)} warnings")
+                          f"{final * curve.water_g / 1000:.4f} g released"
+                          + "".join(f"\nwarning: {w}" for w in curve.warnings))
 
     def overlay_runs(self) -> None:
         """Add every selected run to the physical overlay (grams over hours)."""
@@ -405,6 +407,8 @@ class RunBrowser(QWidget):
     def _finalise(self) -> None:
         path = self.selected_path()
         if path is not None:
+            if not dialogs.confirm(self, dialogs.finalise_question(path.name, len(read_run(path).frames))):
+                return
             finalise_run(path)
             self.refresh()
             self.select(path)
