@@ -5,12 +5,16 @@ Each command module defines ``NAME`` (the subcommand), ``HELP`` (one line),
 ``run`` so that ``sfr --help`` stays instant.
 
 Errors are mapped to exit codes in one place, :func:`exit_code`: 0 success, 1 the job failed, 2 bad
-input or usage (argparse's own errors are 2 as well), 130 interrupted with Ctrl-C. A command raises;
-:func:`main` prints one line on stderr (``--debug`` adds the traceback).
+input or usage (argparse's own errors are 2 as well), 130 interrupted with Ctrl-C or SIGTERM. A command
+raises; :func:`main` prints one line on stderr (``--debug``, before or after the command, adds the
+traceback). While a command runs, Ctrl-C and SIGTERM are recorded, not raised (:mod:`labapp.cli.interrupt`):
+the command stops at its next safe point and :func:`main` ends with one ``interrupted: ...`` line. A command
+module that handles signals itself (the GUI) sets ``SIGNALS = False``.
 """
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import logging
 import os
@@ -18,15 +22,17 @@ import pkgutil
 import sys
 import traceback
 
-from labapp.cli import commands
+from labapp.cli import commands, interrupt
 from labapp.cli.operator import add_operator_option
-from labapp.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, LabError
+from labapp.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, LabError
 
 #: The commands in the order of a lab's workflow (bench set-up, measurement, simulation and design,
 #: then the tools); commands not named here are listed after them, alphabetically.
 WORKFLOW = ("devices", "calibrate-bench", "run", "verify", "analyze", "calibrate-sim", "simulate", "design",
             "sweep", "compare", "lab", "demo", "emulate")
-EXIT_INTERRUPTED = 130
+#: Errors of the file system that an ``--out`` on a full, read-only or foreign disk raises: bad input (exit 2).
+OUT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM})
+FINISHED_WHEN_INTERRUPTED = "the command had finished its work when the signal came; its outputs are complete"
 
 
 def _command_modules() -> list:
@@ -60,11 +66,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"sfr {_version()}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
+    # the same two options after the command (sfr design --debug ...); SUPPRESS keeps the value given before it
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log debug messages")
+    common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                        help="show the traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in _command_modules():
-        p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
+        p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP, parents=[common])
         module.add_arguments(p)
-        p.set_defaults(_run=module.run)
+        p.set_defaults(_run=module.run, _signals=getattr(module, "SIGNALS", True))
         if getattr(module, "RECORDS", False):
             add_operator_option(p, module.run, module.RECORDS)
     return parser
@@ -86,25 +97,35 @@ def exit_code(exc: BaseException) -> int:
 
     2 (bad input or usage): :class:`labapp.errors.UsageError`, ``design.DesignError`` and
     ``analysis.AnalysisError`` (their messages name the input at fault), ``ValueError`` from a settings
-    check, a missing input file. 1 (the job failed): every other error, device errors included.
+    check, a missing input file, an output on a full, read-only or forbidden disk (:data:`OUT_ERRNOS`).
+    130: ``KeyboardInterrupt``. 1 (the job failed): every other error, device errors included.
     """
     from analysis import AnalysisError
     from design.errors import DesignError
 
+    if isinstance(exc, KeyboardInterrupt):
+        return EXIT_INTERRUPTED
     if isinstance(exc, LabError):
         return exc.exit_code
     if isinstance(exc, (DesignError, AnalysisError, ValueError, FileNotFoundError, NotADirectoryError)):
         return EXIT_USAGE
+    if isinstance(exc, OSError) and exc.errno in OUT_ERRNOS:
+        return EXIT_USAGE
     return EXIT_FAILED
 
 
-def error_line(exc: BaseException) -> str:
-    """One line for the operator: the message, whitespace collapsed; an unexpected error names its type."""
+def error_line(exc: BaseException, out: str | None = None) -> str:
+    """One line for the operator: the message, whitespace collapsed; an unexpected error names its type; a full or
+    read-only disk names the file (or the command's ``--out``, ``out``, when the error does not)."""
     from analysis import AnalysisError
     from design.errors import DesignError
     from drivers.errors import DriverError
 
     text = " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, OSError) and exc.errno in OUT_ERRNOS:
+        where = exc.filename or (out if out else "its output")
+        return f"cannot write {where}: {exc.strerror or os.strerror(exc.errno)}" + \
+            ("" if exc.filename else "; free space or choose a writable --out")
     expected = (LabError, DesignError, AnalysisError, DriverError, ValueError, OSError)
     if not isinstance(exc, expected):
         return f"internal error ({type(exc).__name__}: {text}); rerun with --debug for the traceback"
@@ -120,9 +141,40 @@ def _quiet_stdout() -> None:
         pass
 
 
+def _run_command(args: argparse.Namespace) -> int:
+    """Run the parsed command; 130 with one ``interrupted: ...`` line if Ctrl-C or SIGTERM came."""
+    if not args._signals:
+        with interrupt.suspended():
+            return int(args._run(args) or 0)
+    interrupt.check()   # a signal during start-up: stop before the command begins
+    code = int(args._run(args) or 0)
+    if interrupt.requested():   # 130 from the command: it stopped early; else it had finished all the same
+        sys.stdout.flush()
+        print(f"interrupted: {interrupt.hint() if code == EXIT_INTERRUPTED else FINISHED_WHEN_INTERRUPTED}",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
+    return code
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the `sfr` console script; returns the process exit code."""
-    argv = sys.argv[1:] if argv is None else list(argv)
+    """Entry point of the `sfr` console script; returns the process exit code.
+
+    Ctrl-C and SIGTERM are recorded from here on (:mod:`labapp.cli.interrupt`), also while the commands load;
+    called with ``argv`` (in-process, e.g. from tests) the previous handlers are restored on return.
+    """
+    interrupt.reset()
+    if argv is None:    # the process's own command line: signals stay recorded until the process has exited
+        interrupt.install()
+        try:
+            return _main(sys.argv[1:])
+        finally:
+            interrupt.ignore_while_exiting()
+    with interrupt.handling():
+        return _main(list(argv))
+
+
+def _main(argv: list[str]) -> int:
+    args = None
     try:
         if not argv:
             print(command_list())
@@ -131,11 +183,11 @@ def main(argv: list[str] | None = None) -> int:
             args = build_parser().parse_args(argv)
             logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                                 format="%(levelname)s %(name)s: %(message)s")
-            code = int(args._run(args) or 0)
+            code = _run_command(args)
         sys.stdout.flush()      # a reader that closed early (head) is noticed here, not at interpreter exit
         return code
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        print(f"interrupted: {interrupt.hint()}", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         _quiet_stdout()
@@ -143,10 +195,15 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit:
         raise
     except Exception as exc:
-        if "--debug" in argv:
+        if getattr(args, "debug", False) or "--debug" in argv:
             traceback.print_exc()
         command = next((a for a in argv if not a.startswith("-")), "")
-        print(f"sfr {command}: {error_line(exc)}".replace("sfr : ", "sfr: "), file=sys.stderr)
+        out = getattr(args, "out", None)
+        print(f"sfr {command}: {error_line(exc, out if isinstance(out, str) else None)}".replace("sfr : ", "sfr: "),
+              file=sys.stderr)
+        if interrupt.requested():   # the error ended a command that was being stopped: it is still an interruption
+            print(f"interrupted: {interrupt.hint()}", file=sys.stderr)
+            return EXIT_INTERRUPTED
         return exit_code(exc)
 
 

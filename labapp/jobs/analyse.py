@@ -9,12 +9,17 @@ from typing import Any
 
 from analysis import BenchCalibration, RunCurve, analyze_run, write_cells_csv, write_curve_csv
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S
+from labapp.errors import UsageError
 from labapp.figures.release_plot import draw_release
 from labapp.jobs.compare import release_summary
 from labapp.records import operators
 from labapp.records.audit import Action
 from labapp.records.audit import append as audit
-from labapp.records.outpaths import ANALYSIS_SUBFOLDER, FolderKind, check_out
+from labapp.records.lock import folder_lock
+from labapp.records.outpaths import ANALYSIS_SUBFOLDER, FolderKind, OutPathError, check_out
+
+RUN_CALIBRATION = "calibration.json"
+"""A run's own bench calibration, used when none is given (as ``sfr design`` and ``sfr compare`` do)."""
 
 
 @dataclass(frozen=True)
@@ -26,7 +31,36 @@ class AnalysisOutputs:
     files: tuple[Path, ...]
 
 
-def analyse_run(run: str | Path, calibration: str | Path, out: str | Path | None = None, *,
+def run_calibration(run: str | Path, calibration: str | Path | None) -> Path:
+    """The bench calibration to analyse ``run`` with: ``calibration`` if given, else the run's own.
+
+    Raises
+    ------
+    UsageError
+        When none is given and the run holds no ``calibration.json``.
+    """
+    if calibration is not None:
+        return Path(calibration)
+    own = Path(run) / RUN_CALIBRATION
+    if not own.is_file():
+        raise UsageError(f"{run} holds no {RUN_CALIBRATION} of its own; give the bench calibration with "
+                         "--calibration CAL.json (made by sfr calibrate-bench)")
+    return own
+
+
+def _check_out(out: Path, inputs: list, run: Path) -> Path:
+    """`check_out` for the analysis folder of ``run``, naming a source package (``analysis/`` of a checkout) as such."""
+    try:
+        return check_out(out, FolderKind.ANALYSIS, inputs, analysed=run)
+    except OutPathError:
+        if (Path(out) / "__init__.py").is_file():
+            raise OutPathError(f"--out {Path(out).resolve()} is a Python package of the software (it holds "
+                               "__init__.py), not an output folder; leave --out out to write RUN/analysis, or "
+                               "give a new folder name") from None
+        raise
+
+
+def analyse_run(run: str | Path, calibration: str | Path | None = None, out: str | Path | None = None, *,
                 interval_s: float | None = None, water_g: float | None = None, window_s: float | None = None,
                 order: int | None = None, workers: int | None = None, reduce: int | None = None,
                 plot: bool = True, progress: Callable[[int, int], None] | None = None) -> AnalysisOutputs:
@@ -37,19 +71,21 @@ def analyse_run(run: str | Path, calibration: str | Path, out: str | Path | None
     ----------
     run : path
         Run folder or plain image folder.
-    calibration : path
-        Bench calibration JSON.
+    calibration : path, optional
+        Bench calibration JSON (default: the run's own ``calibration.json``, :func:`run_calibration`).
     out : path, optional
         Output folder (default ``RUN/analysis``); it also holds the cell cache.
     window_s, order : optional
         Savitzky-Golay window (s) and order (defaults: ``analysis.curve.DEFAULT_WINDOW_S``/``DEFAULT_ORDER``).
     progress : callable, optional
-        ``progress(done, total)`` frames.
+        ``progress(done, total)`` frames; it may raise ``KeyboardInterrupt`` to stop after a frame (the frames
+        analysed so far stay in the cell cache of ``out``, no other output is written).
 
     Raises
     ------
     UsageError
-        For an ``--out`` that would overwrite something.
+        For an ``--out`` that would overwrite something or is being written by another command, or a run
+        without a calibration of its own when none is given.
     analysis.AnalysisError
         For unreadable frames, manifests or calibrations (the message names them).
     """
@@ -58,21 +94,22 @@ def analyse_run(run: str | Path, calibration: str | Path, out: str | Path | None
     out = Path(out) if out is not None else default_out
     into_record = (run / "run.json").is_file() and run.resolve() in out.resolve().parents
     operator = operators.require(f"analysing {run} into its record") if into_record else None
+    calibration = run_calibration(run, calibration)
     inputs = [calibration] if out.resolve() == default_out.resolve() else [calibration, run]
-    out = check_out(out, FolderKind.ANALYSIS, inputs)
+    out = _check_out(out, inputs, run)
     cal = BenchCalibration.load(calibration)
-    out.mkdir(parents=True, exist_ok=True)
-    curve = analyze_run(run, cal, interval_s=interval_s, workers=workers, progress=progress, reduce=reduce,
-                        cache_dir=out, water_g=water_g,
-                        window_s=DEFAULT_WINDOW_S if window_s is None else window_s,
-                        order=DEFAULT_ORDER if order is None else order)
-    files = [out / "curve.csv", out / "cells.csv", out / "summary.json"]
-    write_curve_csv(curve, files[0])
-    write_cells_csv(curve, files[1])
-    files[2].write_text(json.dumps(_analysis_summary(curve, run), indent=2) + "\n")
-    if plot:
-        files.append(out / "curve.png")
-        _plot_curve(curve, files[-1])
+    with folder_lock(out):
+        curve = analyze_run(run, cal, interval_s=interval_s, workers=workers, progress=progress, reduce=reduce,
+                            cache_dir=out, water_g=water_g,
+                            window_s=DEFAULT_WINDOW_S if window_s is None else window_s,
+                            order=DEFAULT_ORDER if order is None else order)
+        files = [out / "curve.csv", out / "cells.csv", out / "summary.json"]
+        write_curve_csv(curve, files[0])
+        write_cells_csv(curve, files[1])
+        files[2].write_text(json.dumps(_analysis_summary(curve, run), indent=2) + "\n")
+        if plot:
+            files.append(out / "curve.png")
+            _plot_curve(curve, files[-1])
     if into_record:
         audit(run, Action.REANALYSE, f"analysed {len(curve.files)} frames into {out.relative_to(run)} with "
               f"calibration {Path(calibration).name}", operator=operator)

@@ -2,7 +2,11 @@
 from __future__ import annotations
 
 import hashlib
+import logging
+from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 from analysis import CropGeometry, default_geometry
 from labapp.acquisition.calseries import fit_series, image_shape, read_masses
@@ -14,14 +18,51 @@ from labapp.records.audit import append as audit
 from labapp.records.outpaths import check_out
 from labapp.records.storage import MASSES_CSV, RUN_JSON, RecordReadError, read_record
 
+log = logging.getLogger(__name__)
+
+PLAUSIBLE_MAX_G_PER_KG = 100.0
+"""The highest concentration a calibration level plausibly has, g/kg: 10 % w/w, i.e. 50 g of filament in the
+500 g bath of paper section 4.2. A series covers what a release run reaches, and a run ends at a few g/kg
+(a 1-2 g printed object in 500 g of water); levels a thousand times that are masses typed in mg."""
+
+
+def implausible_levels(masses_g: np.ndarray, water_g: float, source: str = MASSES_CSV) -> list[str]:
+    """Warnings for cumulative masses whose concentrations no calibration series plausibly has (mg typed as g).
+
+    Parameters
+    ----------
+    masses_g : (L,) ndarray of float
+        Cumulative added masses, g.
+    water_g : float
+        Water in the beaker, g.
+    source : str
+        The file the masses come from, for the message.
+    """
+    masses_g = np.asarray(masses_g, dtype=float)
+    if masses_g.size == 0:
+        return []
+    top = float(masses_g.max())
+    conc = top / water_g * 1000.0
+    if conc <= PLAUSIBLE_MAX_G_PER_KG:
+        return []
+    return [f"{source}: the levels reach {conc:.4g} g/kg ({top:g} g added to {water_g:g} g of water), above the "
+            f"0-{PLAUSIBLE_MAX_G_PER_KG:g} g/kg a dye solution on this bench plausibly has (a release run ends at a "
+            f"few g/kg: a 1-2 g object in {water_g:g} g of water). added_mass_g is the cumulative mass in grams; "
+            f"these look like milligrams (in grams the top level would be {conc / 1000.0:.4g} g/kg)"]
+
 
 def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WATER.default,
                      crop: tuple[int, int, int] | None = None, grid: int = 10, mirror_col: float | None = None,
-                     mirror: bool = True, reduce: int = 1, camera: dict[str, str] | None = None):
+                     mirror: bool = True, reduce: int = 1, camera: dict[str, str] | None = None,
+                     progress: Callable[[int, int], None] | None = None,
+                     on_warning: Callable[[str], None] | None = None):
     """Fit the bench calibration of a series folder (images + ``masses.csv``) and save it to ``out``.
 
     ``crop`` (x, y, size px) defaults to the series' recorded crop (``run.json``), else
-    ``analysis.default_geometry``. Returns the ``analysis.BenchCalibration``.
+    ``analysis.default_geometry``. Masses whose concentrations no series plausibly has
+    (:func:`implausible_levels`) are reported through ``on_warning`` (default: the log) before the fit.
+    ``progress(done, total)`` is called after each image and may raise ``KeyboardInterrupt`` to stop there
+    (nothing is written). Returns the ``analysis.BenchCalibration``.
 
     Raises
     ------
@@ -38,13 +79,15 @@ def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WA
     operator = operators.require(f"calibrating from {folder}") if (folder / RUN_JSON).is_file() else None
     WATER.check(water_g, "calibrate_series")
     files, masses = read_masses(folder)
+    for message in implausible_levels(masses, water_g, str(folder / MASSES_CSV)):
+        (on_warning or log.warning)(message)
     crop = crop or _recorded_crop(folder)
     if crop:
         geometry = CropGeometry(*crop, grid, mirror_col, mirror)
     else:
         base = default_geometry(image_shape(files[0]) if files[0].is_file() else (0, 0), grid)
         geometry = CropGeometry(base.x, base.y, base.size, grid, mirror_col, mirror)
-    cal = fit_series(files, masses, geometry, water_g, camera, reduce)
+    cal = fit_series(files, masses, geometry, water_g, camera, reduce, progress=progress)
     out.parent.mkdir(parents=True, exist_ok=True)
     cal.save(out)
     if (folder / RUN_JSON).is_file():

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import datetime as _dt
+import hashlib
 import json
 import math
 from collections.abc import Callable
@@ -28,7 +29,7 @@ from labapp.records.audit import append as audit
 from labapp.records.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
 from labapp.records.jsonfile import read_format
 from labapp.records.outpaths import FolderKind, check_out
-from labapp.records.storage import atomic_write, sha256_file
+from labapp.records.storage import FRAMES_CSV, atomic_write, sha256_file
 
 FORMAT = "sfr-simcal/1"
 """``format`` of ``simcal.json``."""
@@ -36,6 +37,8 @@ FORWARD_MODEL = "design.forward.simulator: fast marching, eqs. 2-10"
 """The simulator a calibration holds for; a file naming another is refused."""
 DEFAULT_RESOLUTION = 64
 """Voxels along each mesh's longest side when calibrating (``sfr simulate``'s default)."""
+MIN_RESOLUTION, MAX_RESOLUTION = 8, 512
+"""The resolutions a calibration accepts, voxels along each mesh's longest side."""
 SET_COLUMNS = ("run", "mesh", "object_mass_g")
 Progress = Callable[[float, str], None]
 
@@ -145,7 +148,47 @@ def read_set(path: str | Path) -> list[SetRow]:
         out.append(SetRow(i, run, mesh, grams.get("object_mass_g"), grams.get("water_g")))
     if len(out) < 2:
         raise SimCalError(f"{path}: {len(out)} runs; a calibration needs at least 2 (4 or more recommended)")
+    _refuse_repeated_runs(path, out)
     return out
+
+
+def run_identity(run: Path) -> str:
+    """SHA-256 of what identifies a run's measurement: a run folder's manifest (``frames.csv``, which lists every
+    frame with its own SHA-256), for a folder without one all its files, for a curve file its bytes. Two copies
+    of one run have the same identity wherever they lie."""
+    if run.is_file():
+        return sha256_file(run)
+    if (run / FRAMES_CSV).is_file():
+        return sha256_file(run / FRAMES_CSV)
+    digest = hashlib.sha256()
+    for p in sorted(q for q in run.rglob("*") if q.is_file() and not q.name.startswith(".")):
+        digest.update(f"{p.relative_to(run)}\0{sha256_file(p)}\n".encode())
+    return digest.hexdigest()
+
+
+def _refuse_repeated_runs(path: Path, rows: list[SetRow]) -> None:
+    """The same measured run twice (one path, or two copies with the same manifest) makes the leave-one-out
+    meaningless: the left-out run is still in the fit."""
+    by_path: dict[Path, SetRow] = {}
+    by_content: dict[str, SetRow] = {}
+    for row in rows:
+        resolved = row.run.resolve()
+        first = by_path.get(resolved)
+        if first is not None:
+            raise SimCalError(f"{path}: rows {first.row} and {row.row} list the same run {resolved}; each run may "
+                              "be listed once (its leave-one-out would otherwise keep it in the fit)")
+        by_path[resolved] = row
+        try:
+            identity = run_identity(row.run)
+        except OSError as exc:
+            raise SimCalError(f"{path}: row {row.row}: cannot read run {row.run} ({exc.strerror or exc})") from exc
+        first = by_content.get(identity)
+        if first is not None:
+            what = "manifest (frames.csv)" if (row.run / FRAMES_CSV).is_file() else "content"
+            raise SimCalError(f"{path}: rows {first.row} and {row.row} list the same run twice: {first.run} and "
+                              f"{row.run} have an identical {what} (SHA-256 {identity[:12]}...); each run may be "
+                              "listed once (its leave-one-out would otherwise keep it in the fit)")
+        by_content[identity] = row
 
 
 def _simulate(mesh_path: Path, resolution: int):
@@ -198,7 +241,8 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
     max_offset_s : float
         Bound on each run's drop-time offset, s.
     progress : callable, optional
-        ``progress(fraction, message)``.
+        ``progress(fraction, message)`` before each run and each fit; it may raise ``KeyboardInterrupt`` to stop
+        there (nothing is written into ``out_dir``).
 
     Returns
     -------
@@ -207,13 +251,13 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
     Raises
     ------
     SimCalError
-        Bad set file, run, mesh or calibration, with the file and row named.
+        Bad set file, run, mesh or calibration, with the file and row named; the same run listed twice.
     """
     say = progress or (lambda fraction, message: None)
     if model not in ("auto",) + MODELS:
         raise SimCalError(f"model {model!r} is not one of auto, {', '.join(MODELS)}")
-    if not 8 <= resolution <= 512:
-        raise SimCalError(f"resolution {resolution} is outside 8..512 voxels")
+    if not MIN_RESOLUTION <= resolution <= MAX_RESOLUTION:
+        raise SimCalError(f"resolution {resolution} is outside {MIN_RESOLUTION}..{MAX_RESOLUTION} voxels")
     set_csv, out_dir = Path(set_csv), Path(out_dir)
     rows = read_set(set_csv)
     _check_out(out_dir, [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)])

@@ -24,8 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from analysis import BenchCalibration, analyze_run, write_cells_csv, write_curve_csv
+from design.errors import DesignError
 from design.files.pipeline import simulate_mesh
-from design.geometry.shapes import sample_shape
+from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.inverse.problem import DesignConfig
 from drivers.sim import BenchScene
 from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
@@ -33,11 +34,15 @@ from labapp.acquisition.clock import SteppedClock
 from labapp.acquisition.engine import Engine
 from labapp.acquisition.events import EngineEvent, FrameStored, Outcome
 from labapp.acquisition.procedures import RunConfig, RunProcedure
-from labapp.acquisition.settings import BathSettings
+from labapp.acquisition.settings import INTERVAL, BathSettings
 from labapp.acquisition.simbench import SCENE, WATER_G, Material, SampleRelease, SimulatedBench, sample_release
+from labapp.errors import UsageError
+from labapp.jobs.calibrate_sim import MAX_RESOLUTION as MAX_SIMCAL_RESOLUTION
+from labapp.jobs.calibrate_sim import MIN_RESOLUTION as MIN_SIMCAL_RESOLUTION
 from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
 from labapp.jobs.physical import design_from_target
 from labapp.records.curvefiles import read_physical_curve
+from labapp.records.lock import folder_lock
 from labapp.records.storage import read_run, verify_run
 
 CAL_MASSES_G = (0.25, 0.5, 0.875, 1.25, 1.75, 2.25)
@@ -48,6 +53,12 @@ CALIBRATION_WATER_G = (WATER_G, 400.0, WATER_G)
 """Water of each calibration run, g: one run in less water shows that water masses may differ."""
 TRUTH_RESOLUTION = 80
 """Voxels along the longest side of the simulated bench's own (hidden) forward simulations."""
+CALIBRATION_INTERVAL_S = 60.0
+"""Frame interval of the calibration set's short runs, s."""
+SIMCAL_RESOLUTION, DESIGN_RESOLUTION, DESIGN_ITERATIONS = 48, 40, 120
+"""The demo's simulation-calibration resolution, design grid and design evaluation budget."""
+DEMO_DESIGN_PLACEHOLDER = "zero-order"
+"""The target the design settings are checked with before the measured curve that replaces it exists."""
 
 
 @dataclass(frozen=True)
@@ -144,8 +155,9 @@ def simulated_run(clock: SteppedClock, calibration: BenchCalibration, release: S
     return proc.run.path
 
 
-def run_demo(out_dir: Path, sample: str = "pill", interval_s: float = 11.0, calibration_interval_s: float = 60.0,
-             resolution: int = 48, design_resolution: int = 40, design_iterations: int = 120,
+def run_demo(out_dir: Path, sample: str = "pill", interval_s: float = 11.0,
+             calibration_interval_s: float = CALIBRATION_INTERVAL_S, resolution: int = SIMCAL_RESOLUTION,
+             design_resolution: int = DESIGN_RESOLUTION, design_iterations: int = DESIGN_ITERATIONS,
              material: Material | None = None, progress: Callable[[str], None] = lambda text: None) -> DemoResult:
     """The whole loop; ``progress(text)`` gets one line per step.
 
@@ -163,14 +175,51 @@ def run_demo(out_dir: Path, sample: str = "pill", interval_s: float = 11.0, cali
         Inverse design grid and evaluation budget.
     material : Material, optional
         The bench's hidden material (default: :meth:`Material.draw`).
+
+    Raises
+    ------
+    UsageError
+        Before anything is written, for any input the loop would refuse later (:func:`check_demo`), or an
+        ``out_dir`` another command is writing.
     """
-    if sample in CALIBRATION_SHAPES:
-        raise ValueError(f"the further object {sample!r} must not be one of the calibration set "
-                         f"{', '.join(CALIBRATION_SHAPES)}")
+    config = check_demo(sample, interval_s, calibration_interval_s, resolution, design_resolution, design_iterations)
+    with folder_lock(out_dir):
+        return _run_demo(Path(out_dir), sample, interval_s, calibration_interval_s, resolution, config,
+                         material or Material.draw(), progress)
+
+
+def check_demo(sample: str, interval_s: float, calibration_interval_s: float = CALIBRATION_INTERVAL_S,
+               resolution: int = SIMCAL_RESOLUTION, design_resolution: int = DESIGN_RESOLUTION,
+               design_iterations: int = DESIGN_ITERATIONS) -> DesignConfig:
+    """Check every input of :func:`run_demo` before any work; returns the design's settings (its target, the
+    measured curve, is set once it exists).
+
+    Raises
+    ------
+    UsageError
+        Naming the input, the value and what is allowed.
+    """
+    further = [s for s in SAMPLE_SHAPES if s not in CALIBRATION_SHAPES]
+    if sample not in further:
+        what = "is one of the calibration set" if sample in CALIBRATION_SHAPES else "is not a sample shape"
+        raise UsageError(f"--sample {sample!r} {what}; the further object is one of {', '.join(further)} "
+                         f"({', '.join(CALIBRATION_SHAPES)} are the calibration set)")
+    INTERVAL.check(interval_s, "demo")
+    INTERVAL.check(calibration_interval_s, "demo.calibration")
+    if not MIN_SIMCAL_RESOLUTION <= resolution <= MAX_SIMCAL_RESOLUTION:
+        raise UsageError(f"demo.resolution must be in {MIN_SIMCAL_RESOLUTION}..{MAX_SIMCAL_RESOLUTION} voxels, "
+                         f"got {resolution!r}")
+    try:
+        return DesignConfig(target=DEMO_DESIGN_PLACEHOLDER, space="nfc", resolution=design_resolution,
+                            max_iter=design_iterations, allow_infeasible=True)
+    except (DesignError, ValueError) as exc:
+        raise UsageError(f"demo design settings: {exc}") from exc
+
+
+def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interval_s: float, resolution: int,
+              design: DesignConfig, material: Material, progress: Callable[[str], None]) -> DemoResult:
+    """The loop of :func:`run_demo` on checked inputs, in a locked ``out_dir``."""
     start = time.monotonic()
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    material = material or Material.draw()
     clock = SteppedClock()
     progress("1. calibration series: clear water + 6 filament additions at 70 C ...")
     calibration, cal_path = simulated_calibration(out_dir / "calibration", clock)
@@ -216,9 +265,8 @@ def run_demo(out_dir: Path, sample: str = "pill", interval_s: float = 11.0, cali
     faults = sum(1 for line in snap.events() if "\tWARNING\t" in line)
     progress(f"   {len(curve.t_s)} frames over {curve.t_s[-1] / 3600:.2f} h, {faults} warnings in the event log")
 
-    progress(f"5. design from the measured curve (nfc, {design_resolution}^3, {design_iterations} evaluations) ...")
-    config = DesignConfig(target=str(analysis_dir / "curve.csv"), space="nfc", resolution=design_resolution,
-                          max_iter=design_iterations, allow_infeasible=True)
+    progress(f"5. design from the measured curve (nfc, {design.resolution}^3, {design.max_iter} evaluations) ...")
+    config = dataclasses.replace(design, target=str(analysis_dir / "curve.csv"))
     design_dir = out_dir / "design"
     result, physical = design_from_target(config, design_dir, simcal=simcal)
 

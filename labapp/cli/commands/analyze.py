@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from labapp.cli import interrupt
 from labapp.cli.argtypes import nonnegative_int, positive_float, positive_int
 from labapp.cli.commands.sweep import progress_printer
 from labapp.errors import UsageError
@@ -21,7 +22,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr analyze`."""
     parser.add_argument("run", nargs="+", help="run folder (frames.csv [+ run.json]) or a plain folder of images; "
                         "several: a batch into --out with one summary table")
-    parser.add_argument("--calibration", required=True, help="bench calibration JSON (sfr calibrate-bench)")
+    parser.add_argument("--calibration", help="bench calibration JSON (sfr calibrate-bench; default: the run's own "
+                        "calibration.json; required for a batch)")
     parser.add_argument("--out", help="output folder (default: RUN/analysis; required for a batch)")
     parser.add_argument("--reference", metavar="CURVE",
                         help="batch: f1/f2 of every run against this curve file or run folder")
@@ -48,11 +50,14 @@ def run(args: argparse.Namespace) -> int:
     from labapp.jobs.analyse import analyse_run
 
     live = sys.stderr.isatty()  # a terminal gets one updating line, a log file one line per step
+    interrupt.set_hint("no curve written (the frames analysed so far are kept in the cell cache); rerun the "
+                       "same command to finish")
 
     def progress(done: int, total: int) -> None:
         if done == total or done % (10 if live else 100) == 0:
             print(f"{chr(13) if live else ''}analysed {done}/{total} frames",
                   end="\n" if done == total or not live else "", file=sys.stderr, flush=True)
+        interrupt.check()   # a safe point: between two frames
 
     result = analyse_run(args.run, args.calibration, args.out, interval_s=args.interval, water_g=args.water_g,
                          window_s=args.window_s, order=args.order, workers=args.workers, reduce=args.reduce,
@@ -79,20 +84,32 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_batch(args: argparse.Namespace) -> int:
     """Many runs: the analysis job on Dask workers, one row each in ``--out/batch_summary.csv``."""
+    from labapp.records.lock import folder_lock
     from labapp.scaleout.batch import TASK_MEMORY_GB, RowStatus, analyse_many
     from labapp.scaleout.cluster import dashboard_link, dask_client
 
     if not args.out:
         raise UsageError("a batch of runs (several runs, --reference or --scheduler) needs --out: the folder that "
                          "gets one analysis folder per run and batch_summary.csv")
+    if not args.calibration:
+        raise UsageError("a batch of runs (several runs, --reference or --scheduler) needs --calibration: the bench "
+                         "calibration every run is analysed with")
+    interrupt.set_hint(f"the runs analysed so far are in {args.out}/batch_summary.csv; rerun the same command to "
+                       "analyse them all")
+    show = progress_printer()
+
+    def progress(p) -> None:
+        show(p)
+        interrupt.check()   # a safe point: a run finished (runs still going are cancelled)
     options = dict(interval_s=args.interval, water_g=args.water_g, window_s=args.window_s, order=args.order,
                    reduce=args.reduce, plot=not args.no_plot, **({"workers": args.workers} if args.workers else {}))
-    with dask_client(args.scheduler, task_memory_gb=TASK_MEMORY_GB) as client:
+    with (folder_lock(args.out), interrupt.handling(on_second=interrupt.raise_now),
+          dask_client(args.scheduler, task_memory_gb=TASK_MEMORY_GB) as client):
         link = dashboard_link(client)
         print(f"analysing {len(args.run)} runs on {args.scheduler or 'a local cluster'}"
               + (f"; Dask dashboard: {link}" if link else ""), file=sys.stderr)
         result = analyse_many(args.run, args.calibration, args.out, client, reference=args.reference,
-                              on_progress=progress_printer(), **options)
+                              on_progress=progress, **options)
     failed = [r for r in result.rows if r["status"] != RowStatus.DONE]
     for row in failed:
         print(f"{row['status']}: {row['run']}: {row.get('error', '')}", file=sys.stderr)

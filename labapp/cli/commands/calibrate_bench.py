@@ -18,6 +18,7 @@ from labapp.acquisition.settings import (
     parse_masses,
 )
 from labapp.cli.argtypes import add_setting, add_settings
+from labapp.errors import EXIT_INTERRUPTED
 
 NAME = "calibrate-bench"
 HELP = ("fit the bench calibration (transmittance vs concentration per cell) from a masses.csv image series; "
@@ -97,13 +98,18 @@ def run(args: argparse.Namespace) -> int:
         return _record(args)
     if args.folder is None:
         raise UsageError("give the calibration-series FOLDER to fit, or --record DATA_DIR to capture a series")
+    import sys
+
+    from labapp.cli import interrupt
     from labapp.jobs.calibrate_bench import calibrate_series
 
     out = args.out or "calibration.json"
+    interrupt.set_hint(f"nothing written ({out} not made); rerun the same command to fit the series")
     cal = calibrate_series(args.folder, out, water_g=args.water_g, crop=args.crop, grid=args.grid,
                            mirror_col=args.mirror_col, mirror=not args.no_mirror,
                            reduce=REDUCE.default if args.reduce is None else args.reduce,
-                           camera=_camera_pairs(args.camera))
+                           camera=_camera_pairs(args.camera), progress=lambda done, total: interrupt.check(),
+                           on_warning=lambda message: print(f"warning: {message}", file=sys.stderr, flush=True))
     _summary(cal, mirror=not args.no_mirror)
     print(f"wrote {out}")
     return 0
@@ -199,7 +205,11 @@ def _record(args: argparse.Namespace) -> int:
                         "(3 levels are needed to fit); see its events.log")
     _summary(BenchCalibration.load(proc.calibration_path), mirror=True)
     write_line(f"series {outcome}: {len(proc.masses)} levels in {folder}; calibration {proc.calibration_path}")
-    return 0
+    from labapp.cli import interrupt
+
+    interrupt.set_hint(f"the series stopped cleanly with {len(proc.masses)} levels in {folder}, fitted into "
+                       f"{proc.calibration_path}")
+    return EXIT_INTERRUPTED if interrupt.requested() and outcome == Outcome.STOPPED else 0
 
 
 def _level_printer(write_line):

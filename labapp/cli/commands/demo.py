@@ -27,11 +27,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the session, printing progress; end with where the results are."""
 
-    from labapp.jobs.demo import run_demo
+    from labapp.cli import interrupt
+    from labapp.jobs.demo import check_demo, run_demo
     from labapp.records.outpaths import check_data_dir
     from labapp.records.storage import timestamp_name
 
+    check_demo(args.sample, args.interval)   # every input before the first line of work
     out = check_data_dir(args.out) / timestamp_name(args.sample)
+    interrupt.set_hint(f"{out} holds the steps finished so far; run sfr demo again for a new session")
+
+    def progress(text: str) -> None:
+        print(text, flush=True)
+        interrupt.check()   # a safe point between the demo's steps
     print(f"sfr demo: measure -> calibrate -> design on the simulated bench, in {out}", flush=True)
     if not args.verbose:   # the injected faults are the point of the run's event log, not of the terminal
         logging.getLogger().setLevel(logging.ERROR)
@@ -41,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"operator: {operator}" + (" (built-in: records only on the simulated bench)"
                                      if operator == operators.DEMO_OPERATOR else ""), flush=True)
     with operators.acting_as(operator):
-        r = run_demo(out, sample=args.sample, interval_s=args.interval, progress=lambda s: print(s, flush=True))
+        r = run_demo(out, sample=args.sample, interval_s=args.interval, progress=progress)
     print()
     print(f"done in {r.wall_s:.0f} s (wall)")
     print(f"  time scale            {r.seconds_per_mm:.1f} s/mm calibrated, {r.true_seconds_per_mm:.1f} s/mm hidden "

@@ -7,6 +7,7 @@ import logging
 import sys
 from pathlib import Path
 
+from labapp.cli import interrupt
 from labapp.cli.argtypes import finite_float, nonnegative_float, positive_float, positive_int
 from labapp.errors import EXIT_FAILED, UsageError
 from labapp.jobs.meshunits import MM_PER_UNIT
@@ -109,6 +110,7 @@ def _progress(max_iter: int):
     tty = sys.stderr.isatty()
 
     def show(k: int, x, terms: dict) -> None:
+        interrupt.check()   # a safe point after an evaluation: Ctrl-C stops the run here (checkpoint, outputs)
         if not tty and k % 10 and k < max_iter:
             return
         phase = f"{terms['phase']}: " if "phase" in terms else ""
@@ -138,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
     from labapp.jobs.calibrate_sim import load_simcal
     from labapp.jobs.design import design as design_job
     from labapp.jobs.design import failed_design
+    from labapp.records.lock import folder_lock
 
     try:
         options = _given_options(args)
@@ -154,10 +157,13 @@ def run(args: argparse.Namespace) -> int:
                              f"{args.out}); drop it to resume")
         simcal = load_simcal(args.simcal) if args.simcal else None
         bench = BenchCalibration.load(args.calibration) if args.calibration else None
-        result, physical = design_job(config, args.out, resume=args.resume, units=args.units, simcal=simcal,
-                                       bench_calibration=bench, on_iteration=_progress(max_iter),
-                                       on_warning=lambda message: print(f"\nwarning: {message}", file=sys.stderr),
-                                       options=options if args.resume else None)
+        interrupt.set_hint(f"the best design so far is saved in {args.out}; resume with: sfr design --resume "
+                           f"--out {args.out}")
+        with folder_lock(args.out):
+            result, physical = design_job(config, args.out, resume=args.resume, units=args.units, simcal=simcal,
+                                           bench_calibration=bench, on_iteration=_progress(max_iter),
+                                           on_warning=lambda message: print(f"\nwarning: {message}", file=sys.stderr),
+                                           options=options if args.resume else None)
     finally:
         print(file=sys.stderr)          # ends the progress line, also before an error's line
     s = physical or result.outputs.summary

@@ -7,7 +7,9 @@ import logging
 
 from labapp.acquisition.devices import CAMERA_SPECS
 from labapp.acquisition.settings import BATH_SETTINGS, INTERVAL, MAX_DURATION, OBJECT_MASS, SIM_SPEED
+from labapp.cli import interrupt
 from labapp.cli.argtypes import add_setting, add_settings, setting_values
+from labapp.errors import EXIT_INTERRUPTED
 
 NAME = "run"
 HELP = "acquire a release run (real bench or --simulate) with a live status line; --resume continues one"
@@ -44,7 +46,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Check everything, build the bench, walk the run procedure, print the status line until it ends."""
+    """Check everything, build the bench, walk the run procedure, print the status line until it ends; a resumed
+    run's folder is locked while it is written (a second resume is refused)."""
+    from pathlib import Path
+
+    from labapp.records.lock import folder_lock
+
+    if not (args.resume and Path(args.resume).is_dir()):
+        return _run(args)
+    with folder_lock(args.resume):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     import math
     from pathlib import Path
 
@@ -134,6 +148,9 @@ def _drive(proc, clock, status) -> int:
         where = f" ({len(proc.run.frames)} frames kept in {folder})" if folder is not None else " (no run folder written)"
         raise JobFailed(f"run failed: {engine.error}{where}")
     write_line(f"run {outcome}: {len(proc.run.frames) if proc.run else 0} frames in {folder}")
+    interrupt.set_hint(f"the run stopped cleanly with {len(proc.run.frames) if proc.run else 0} frames in {folder}")
+    if interrupt.requested() and outcome == Outcome.STOPPED:
+        return EXIT_INTERRUPTED
     return 0 if outcome in (Outcome.COMPLETE, Outcome.STOPPED) else 1
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from labapp.cli import interrupt
 from labapp.cli.argtypes import nonnegative_float, positive_float, positive_int
 from labapp.jobs.meshunits import MM_PER_UNIT
 
@@ -47,6 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _progress(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
+    interrupt.check()   # a safe point between the job's steps
 
 
 def _run_mc(args: argparse.Namespace) -> int:
@@ -79,6 +81,14 @@ def _run_mc(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Simulate with ``--out`` locked against a second writer (:mod:`labapp.records.lock`)."""
+    from labapp.records.lock import folder_lock
+
+    with folder_lock(args.out):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     import json
 
     import numpy as np

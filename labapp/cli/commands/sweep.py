@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from labapp.cli import interrupt
 from labapp.cli.argtypes import positive_int
+from labapp.errors import EXIT_INTERRUPTED
 
 NAME = "sweep"
 HELP = "run a grid of design settings (TOML spec) on a local Dask cluster or a scheduler; sweep.csv + contact sheet"
@@ -48,6 +50,7 @@ def progress_printer():
 
 def run(args: argparse.Namespace) -> int:
     """Check the spec and --out, start or join the cluster, run the sweep, print where the results are."""
+    from labapp.records.lock import folder_lock
     from labapp.scaleout.sweep import sweep_on_cluster
     from labapp.scaleout.sweepspec import load_spec
 
@@ -59,8 +62,10 @@ def run(args: argparse.Namespace) -> int:
               f"({start.workers} workers, ~{start.task_memory_gb:.2f} GB per design)", file=sys.stderr)
         if start.dashboard:
             print(f"Dask dashboard: {start.dashboard}", file=sys.stderr)
-    result = sweep_on_cluster(spec, args.out, scheduler=args.scheduler, workers=args.workers, on_start=started,
-                              on_progress=progress_printer())
+    interrupt.set_hint(f"running designs were checkpointed in {args.out}; rerun the same command to resume")
+    with folder_lock(args.out), interrupt.handling(on_second=interrupt.raise_now):
+        result = sweep_on_cluster(spec, args.out, scheduler=args.scheduler, workers=args.workers, on_start=started,
+                                  on_progress=progress_printer(), should_stop=interrupt.requested)
     out = result.table.parent
     if sys.stderr.isatty():
         print(file=sys.stderr)
@@ -68,6 +73,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"failed: {name} (see {out / 'failed' / (name + '.txt')})", file=sys.stderr)
     print(f"wrote {result.table}" + (f", {result.contact_sheet}" if result.contact_sheet else ""))
     if result.stopped:
-        print("stopped: running designs were checkpointed; rerun the same command to resume", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     return 1 if result.failed else 0

@@ -46,7 +46,7 @@ def test_sigkill_mid_run_then_resume_into_the_same_folder(tmp_path, sim_calibrat
     _wait_frames(runs, len(before.frames) + 10, second)
     second.send_signal(signal.SIGINT)                  # Ctrl-C: a clean stop
     out, _ = second.communicate(timeout=60)
-    assert second.returncode == 0, out
+    assert second.returncode == 130, out
     assert "stopping cleanly" in out and "run stopped" in out
 
     after = read_run(folder)
