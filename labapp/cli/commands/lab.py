@@ -8,6 +8,8 @@ from labapp.cli.argtypes import add_setting, positive_float
 
 NAME = "lab"
 HELP = "start the bench GUI; --simulate runs it on the simulated camera, hotplate emulator and sample object"
+SIGNALS = False
+"""The GUI handles Ctrl-C and SIGTERM itself (labapp.gui.app): closing the window as an operator would."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
