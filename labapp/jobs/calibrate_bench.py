@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from labapp.errors import UsageError
 from labapp.records import operators
 from labapp.records.audit import Action
 from labapp.records.audit import append as audit
-from labapp.records.outpaths import check_out
+from labapp.records.outpaths import OutPathError, check_out
 from labapp.records.storage import MASSES_CSV, RUN_JSON, RecordReadError, read_record
 
 log = logging.getLogger(__name__)
@@ -89,11 +90,30 @@ def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WA
         geometry = CropGeometry(base.x, base.y, base.size, grid, mirror_col, mirror)
     cal = fit_series(files, masses, geometry, water_g, camera, reduce, progress=progress)
     out.parent.mkdir(parents=True, exist_ok=True)
-    cal.save(out)
+    _save_new(cal, out)
     if (folder / RUN_JSON).is_file():
         audit(folder, Action.CALIBRATE, f"bench calibration fitted from {len(files)} images: {out.resolve()} "
               f"(SHA-256 {hashlib.sha256(out.read_bytes()).hexdigest()})", operator=operator)
     return cal
+
+
+def _save_new(cal, out: Path) -> None:
+    """Save ``cal`` to ``out``, which must still not exist: written beside it, then linked into place, so two
+    commands given the same ``--out`` never both write it (the second is refused, naming the file)."""
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.part")
+    cal.save(tmp)
+    try:
+        os.link(tmp, out)
+    except FileExistsError:
+        raise OutPathError(f"--out {out} was written by another command meanwhile; it is never overwritten: "
+                           "choose a new file name") from None
+    except OSError:             # a file system without hard links: the check, then a rename
+        if out.exists():
+            raise OutPathError(f"--out {out} was written by another command meanwhile; it is never overwritten: "
+                               "choose a new file name") from None
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def _recorded_crop(folder: Path) -> tuple[int, int, int] | None:

@@ -216,3 +216,16 @@ def test_an_ascii_stl_named_in_latin_1_is_read(tmp_path):
     assert len(load_mesh(path).faces) > 100
     deps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
     assert any(d.startswith("charset-normalizer") for d in deps)     # a fresh install has what trimesh needs
+
+
+def test_a_calibration_file_written_meanwhile_is_not_overwritten(tmp_path):
+    from analysis import BenchCalibration
+    from labapp.jobs.calibrate_bench import _save_new, calibrate_series
+    from labapp.records.outpaths import OutPathError
+
+    cal = calibrate_series(BENCH / "calibration", tmp_path / "cal.json")
+    assert isinstance(BenchCalibration.load(tmp_path / "cal.json"), BenchCalibration)
+    before = (tmp_path / "cal.json").read_bytes()
+    with pytest.raises(OutPathError, match="written by another command meanwhile"):
+        _save_new(cal, tmp_path / "cal.json")
+    assert (tmp_path / "cal.json").read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["cal.json"]
