@@ -263,8 +263,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     missed = rel_rmse(binary_curve, target.released_mm3)
     if status == DesignStatus.MAX_ITER and missed > NOT_CONVERGED_REL_RMSE:
         warnings.append(f"did not converge: the evaluation limit ({config.max_iter}) ended the run with the binary "
-                        f"solid {missed:.1%} off the target (rel. RMSE above {NOT_CONVERGED_REL_RMSE:.0%}); raise it, "
-                        f"e.g. sfr design --resume --out {out_dir} --max-iter {2 * config.max_iter}")
+                        f"solid {missed:.1%} off the target (rel. RMSE above {NOT_CONVERGED_REL_RMSE:.0%}); run the "
+                        f"design again with a higher limit, e.g. --max-iter {2 * config.max_iter}")
     facts = assess(solid, space.dx_mm, warn_channel_mm=config.warn_channel_mm)
     warnings += list(facts.warnings)
     np.savez_compressed(out_dir / "density.npz", rho_hat=best_x, rho=rho, rho_full=rho_full, solid=solid,

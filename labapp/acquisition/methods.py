@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from labapp.acquisition.procedures import RunConfig
 from labapp.acquisition.settings import (
     HEAT_TIMEOUT,
     HOLD,
@@ -28,6 +27,7 @@ from labapp.acquisition.settings import (
     STIRRING,
     TOLERANCE,
     WATER,
+    BathSettings,
     Setting,
 )
 from labapp.errors import UsageError
@@ -44,7 +44,7 @@ METHOD_SETTINGS: tuple[Setting, ...] = (WATER, SETPOINT, STIRRING, TOLERANCE, HO
                                         MAX_DURATION, MIN_DURATION)
 """The settings a method fixes (the bath and the run's timing); the object, its mass and the notes belong to
 each run."""
-_BATH = {f.name for f in dataclasses.fields(RunConfig().bath)}
+_BATH = {f.name for f in dataclasses.fields(BathSettings)}
 
 
 class MethodError(UsageError):
@@ -112,9 +112,10 @@ class Method:
         """What ``run.json`` records under ``method``: name, path and SHA-256 of the file."""
         return {"name": self.name, "path": str(self.path), "sha256": self.sha256}
 
-    def apply(self, config: RunConfig) -> RunConfig:
-        """``config`` with the method's settings. A setting ``config`` holds at a value other than its default
-        and the method's was given on purpose: refused.
+    def apply(self, config: Any) -> Any:
+        """``config`` (a :class:`labapp.acquisition.procedures.RunConfig`) with the method's settings. A
+        setting ``config`` holds at a value other than its default and the method's was given on purpose:
+        refused.
 
         Raises
         ------
@@ -207,6 +208,8 @@ def method_from_run(run: str | Path, name: str, calibration: str | Path | None =
     MethodError
         If the run records no settings.
     """
+    from labapp.acquisition.procedures import RunConfig  # here: `sfr method --help` loads no engine
+
     run = Path(run)
     record = read_record(run)
     if not record.config:

@@ -211,7 +211,7 @@ def failed_design(summary: Mapping[str, Any]) -> str | None:
     """Why a design run that finished is a failed job (no printable solid came out of it), else None."""
     if summary.get("pieces", 1) == 0:
         return ("the design produced no solid: no density reached the extraction level, so design.stl was not "
-                "written; resume with a higher --max-iter, or check the target and its feasibility.txt")
+                "written; run the design again with a higher --max-iter, or check the target and its feasibility.txt")
     return None
 
 

@@ -24,7 +24,7 @@ from analysis.profile import ReleaseProfile, similarity
 from analysis.regulatory import RULE_NAMES, get_rule
 from labapp.acquisition.methods import MethodError, load_method
 from labapp.errors import UsageError
-from labapp.jobs.compare import summarize
+from labapp.jobs.compare import DEFAULT_RULE, summarize
 from labapp.jobs.verify import verify
 from labapp.records import operators
 from labapp.records.audit import check_trail
@@ -36,8 +36,6 @@ from labapp.records.storage import EVENTS_LOG, StorageError, read_run, sha256_fi
 
 __all__ = ["DEFAULT_RULE", "ReportData", "collect", "write_report"]
 
-DEFAULT_RULE = "ema"
-"""The regulator whose f2 rule applies unless another is named (one of ``analysis.regulatory.RULE_NAMES``)."""
 RECORDED_CURVE = Path("analysis") / "curve.csv"
 _PAGE = (8.27, 11.69)       # A4 portrait, inches
 _MONO = {"family": "monospace", "size": 6.6}
@@ -70,6 +68,7 @@ class ReportData:
     signatures: list[Any] = field(default_factory=list)
     references: list[tuple[str, np.ndarray, np.ndarray]] = field(default_factory=list)
     n_frames: int = 0
+    metrics_error: str = ""
 
 
 def _read_curve(folder: Path, curve: Path | None, calibration: BenchCalibration | None):
@@ -95,8 +94,13 @@ def _read_curve(folder: Path, curve: Path | None, calibration: BenchCalibration 
             run_curve.t_s, run_curve.released_g, run_curve.released_raw_g, list(run_curve.warnings))
 
 
+def _hundred(mass_g: float | None, released_g: np.ndarray) -> float:
+    """The 100 % of a curve, g: the weighed mass, else the final release (its maximum; never 0)."""
+    return mass_g if mass_g else max(float(np.max(released_g)), 1e-12)
+
+
 def _percent_profile(t_s: np.ndarray, released_g: np.ndarray, mass_g: float | None, label: str) -> ReleaseProfile:
-    total = mass_g if mass_g else float(np.max(released_g))
+    total = _hundred(mass_g, released_g)
     return ReleaseProfile(t_s, 100.0 * released_g / total, "s", "%", 100.0, label)
 
 
@@ -123,17 +127,19 @@ def collect(folder: str | Path, *, references: tuple[str | Path, ...] = (), rule
     calibration = BenchCalibration.load(cal_file) if cal_file.is_file() else None
     source, t_s, released, raw, warnings = _read_curve(folder, Path(curve) if curve else None, calibration)
     mass = snap.record.object_mass_g
-    summary = summarize(ReleaseProfile(t_s, released, "s", "g", mass, snap.record.name or folder.name))
+    try:
+        summary, metrics_error = summarize(ReleaseProfile(t_s, released, "s", "g", mass, snap.record.name or folder.name)), ""
+    except AnalysisError as exc:        # a curve the metrics refuse (e.g. no release yet): said, not fatal
+        summary, metrics_error = None, str(exc)
     data = ReportData(folder, snap.record, str(snap.status), record_hash(folder), source, t_s, released, raw, mass,
                       summary, calibration=calibration,
                       calibration_sha=sha256_file(cal_file) if cal_file.is_file() else None)
-    data.n_frames = len(snap.frames)
+    data.n_frames, data.metrics_error = len(snap.frames), metrics_error
     data.warnings = warnings + [f"event log: {line.split(chr(9), 4)[-1]}" for line in snap.events()
                                 if "\tWARNING\t" in line or "\tERROR\t" in line]
     if mass is None:
         data.warnings.insert(0, "no weighed mass recorded: percent released is of the final release")
     _method(data)
-    test = _percent_profile(t_s, released, mass, "this run")
     cut = get_rule(rule).cut
     for ref in references:
         ref_curve = read_physical_curve(ref)
@@ -141,12 +147,12 @@ def collect(folder: str | Path, *, references: tuple[str | Path, ...] = (), rule
         entry: dict[str, Any] = {"reference": str(ref), "rule": get_rule(rule)}
         try:
             sim = similarity(_percent_profile(ref_curve.t_s, ref_curve.released_g, ref_curve.object_mass_g, str(ref)),
-                             test, rule=cut)
+                             _percent_profile(t_s, released, mass, "this run"), rule=cut)
             entry.update(f1=sim.f1, f2=sim.f2, points=sim.points_used, reason=sim.reason, notes=sim.notes)
         except AnalysisError as exc:
             entry.update(f1=None, f2=None, points=0, reason=str(exc), notes=())
         data.comparisons.append(entry)
-    _acceptance(data, test)
+    _acceptance(data, t_s, 100.0 * released / _hundred(mass, released))
     report = verify(folder)
     data.integrity = [f"sfr verify: {'OK' if report.ok else 'FAILED: ' + report.reason}"] + \
         [f"problem: {p}" for p in report.problems if p != report.reason]
@@ -174,16 +180,16 @@ def _method(data: ReportData) -> None:
         data.method = None
 
 
-def _acceptance(data: ReportData, test: ReleaseProfile) -> None:
+def _acceptance(data: ReportData, t_s: np.ndarray, percent: np.ndarray) -> None:
     if data.method is None:
         return
-    hours = test.t / 3600.0
+    hours = t_s / 3600.0
     for criterion in data.method.acceptance:
         if criterion.metric == "released_percent":
             if criterion.at_h > hours[-1]:
                 data.acceptance.append((criterion.text(), "not measured", f"the run ends at {hours[-1]:.2f} h"))
                 continue
-            value = float(np.interp(criterion.at_h, hours, test.released))
+            value = float(np.interp(criterion.at_h, hours, percent))
             data.acceptance.append((criterion.text(), "PASS" if criterion.holds(value) else "FAIL", f"{value:.1f} %"))
         else:
             f2s = [c["f2"] for c in data.comparisons if c["f2"] is not None]
@@ -289,7 +295,7 @@ def _plot(page: _Page, d: ReportData) -> None:
     height = page.y - 0.07
     ax = page.fig.add_axes([0.1, 0.07, 0.78, height - 0.02])
     hours = d.t_s / 3600.0
-    total = d.mass_g or float(np.max(d.released_g))
+    total = _hundred(d.mass_g, d.released_g)
     ax.plot(hours, d.released_g, "-", lw=1.3, color="C0", label="release (smoothed)", zorder=2)
     if d.raw_g is not None:
         ax.plot(hours, d.raw_g, "o", ms=1.6, mew=0, color="0.2", alpha=0.55, label="measured points (raw)", zorder=3)
@@ -324,6 +330,17 @@ def _page_two(page: _Page, d: ReportData, rule: str) -> None:
     s = d.summary
     page.heading("Metrics")
     basis = "the weighed mass" if d.mass_g else "the final release"
+    total = _hundred(d.mass_g, d.released_g)
+    if s is None:
+        page.line(f"final release {d.released_g[-1]:.4f} g = {100 * d.released_g[-1] / total:.1f} % of {basis} at "
+                  f"{d.t_s[-1] / 3600:.2f} h")
+        page.line(f"MDT, DE and model fits not computed: {d.metrics_error}", color="firebrick")
+    else:
+        _metrics(page, s, d, basis)
+    _rest_of_page_two(page, d, rule)
+
+
+def _metrics(page: _Page, s, d: ReportData, basis: str) -> None:
     page.pairs([("mean dissolution time", f"{s.mdt_s / 60:.1f} min ({s.mdt_s / 3600:.2f} h; to {s.until_s / 3600:.2f} h)"),
                 ("dissolution efficiency", f"{s.de_pct:.1f} % (to {s.until_s / 3600:.2f} h)"),
                 ("final release", f"{d.released_g[-1]:.4f} g = {100 * d.released_g[-1] / s.total_g:.1f} % of {basis}"
@@ -332,6 +349,9 @@ def _page_two(page: _Page, d: ReportData, rule: str) -> None:
     page.line(f"model fits of % released over time (t in s), ranked by AIC; 100 % = {basis}:", bold=True)
     for row in _fit_rows(s):
         page.line(row)
+
+
+def _rest_of_page_two(page: _Page, d: ReportData, rule: str) -> None:
     page.heading(f"Similarity to a reference (f2, {get_rule(rule).agency} rule)")
     if not d.comparisons:
         page.line("no reference given (sfr report RUN --reference REF_RUN)")

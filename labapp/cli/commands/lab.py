@@ -8,6 +8,9 @@ from labapp.cli.argtypes import add_setting, positive_float
 
 NAME = "lab"
 HELP = "start the bench GUI; --simulate runs it on the simulated camera, hotplate emulator and sample object"
+RECORDS = "optional"
+"""Acts as ``--operator`` or ``$SFR_OPERATOR`` when given; else the GUI asks for the operator and their password
+(:mod:`labapp.gui.login`)."""
 SIGNALS = False
 """The GUI handles Ctrl-C and SIGTERM itself (labapp.gui.app): closing the window as an operator would."""
 

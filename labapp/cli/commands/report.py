@@ -5,20 +5,19 @@ from __future__ import annotations
 import argparse
 
 NAME = "report"
-HELP = "write a run's report as a PDF: settings, curve in g and %, MDT/DE/model fits, f2, audit trail, signatures"
+HELP = "write a run's report as a PDF: settings, curve in g and percent, MDT/DE/model fits, f2, audit trail, signatures"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr report`."""
-    from analysis.regulatory import RULE_NAMES
-    from labapp.jobs.report import DEFAULT_RULE
+    from labapp.cli.commands.compare import RULES
 
     parser.add_argument("record", help="the run folder")
     parser.add_argument("--out", required=True, help="the PDF to write (a new file)")
     parser.add_argument("--reference", action="append", default=[], metavar="RUN",
                         help="a reference run or curve CSV for f2 (repeatable)")
-    parser.add_argument("--rule", choices=RULE_NAMES, default=DEFAULT_RULE,
-                        help=f"the regulator whose f2 time-point rule applies (default {DEFAULT_RULE})")
+    parser.add_argument("--rule", choices=RULES, default=None,
+                        help="the regulator whose f2 time-point rule applies (default: sfr compare's, ema)")
     parser.add_argument("--curve", help="the run's curve.csv from sfr analyze (default: RUN/analysis/curve.csv "
                         "if recorded, else the run is analysed in memory with its calibration.json)")
 
@@ -27,6 +26,7 @@ def run(args: argparse.Namespace) -> int:
     """Write the PDF; print its path, page count and SHA-256."""
     from labapp.jobs.report import report_digest, write_report
 
-    path = write_report(args.record, args.out, references=tuple(args.reference), rule=args.rule, curve=args.curve)
+    rule = {} if args.rule is None else {"rule": args.rule}
+    path = write_report(args.record, args.out, references=tuple(args.reference), curve=args.curve, **rule)
     print(f"report written: {path} (3 pages, SHA-256 {report_digest(path)})")
     return 0

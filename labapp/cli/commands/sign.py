@@ -5,16 +5,16 @@ import argparse
 
 NAME = "sign"
 HELP = "sign a record (reviewed or approved) after re-entering your password; bound to the record's hash"
+MEANINGS = ("reviewed", "approved")
+"""The values of ``labapp.records.signatures.Meaning`` (kept here so that ``sfr --help`` loads no records)."""
 RECORDS = True
 """Acts as a named operator (``--operator``, ``$SFR_OPERATOR``): see :mod:`labapp.cli.operator`."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr sign`."""
-    from labapp.records.signatures import Meaning
-
     parser.add_argument("record", help="run, calibration-series, calibration or design folder")
-    parser.add_argument("--meaning", required=True, choices=[m.value for m in Meaning],
+    parser.add_argument("--meaning", required=True, choices=MEANINGS,
                         help="what the signature means")
     parser.add_argument("--reason", help="why (stored with the signature and in the audit trail)")
     parser.add_argument("--password-stdin", action="store_true",

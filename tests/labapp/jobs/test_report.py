@@ -71,3 +71,12 @@ def test_only_runs_are_reported(tmp_path):
         collect(tmp_path)
     with pytest.raises(UsageError, match="--rule 'xyz'"):
         collect(tmp_path, rule="xyz")
+
+
+def test_a_curve_the_metrics_refuse_is_still_reported(run_with_method, tmp_path):
+    folder, _, _ = run_with_method
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t_s,released_g\n0,0\n300,0.5\n600,0.1\n900,0.6\n")
+    data = collect(folder, curve=bad)
+    assert data.summary is None and "must not decrease" in data.metrics_error
+    assert write_report(folder, tmp_path / "bad.pdf", curve=bad).is_file()

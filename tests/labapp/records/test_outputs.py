@@ -72,7 +72,7 @@ def test_analyze_writes_only_into_the_runs_analysis_folder(tmp_path, capsys):
     for out, says in ((run.path, "is an input of this command"), (run.path / "x", "lies inside the input folder")):
         assert main(["analyze", str(run.path), "--calibration", str(tmp_path / "c.json"), "--out", str(out)]) == 2
         assert says in capsys.readouterr().err
-    assert sorted(p.name for p in run.path.iterdir()) == ["events.log", "frames.csv", "run.json"]
+    assert sorted(p.name for p in run.path.iterdir()) == ["audit.jsonl", "events.log", "frames.csv", "run.json"]
     check_out(run.path / "analysis", FolderKind.ANALYSIS, [tmp_path / "c.json"], analysed=run.path)  # its own place
 
 
