@@ -145,9 +145,8 @@ def _resume_config(out: Path, options: dict[str, Any], units: str | None):
         if name == "target":
             same, shown = _same_target(out, str(value), stored.target)
             if not same:
-                raise UsageError(f"--target {value} differs from the run's stored target {shown} in {out / TARGET_SOURCE}"
-                                 if (out / TARGET_SOURCE).is_file() else
-                                 f"--target {value} differs from the run's stored {shown} in {where}; drop it to resume")
+                held = out / TARGET_SOURCE if (out / TARGET_SOURCE).is_file() else where
+                raise UsageError(f"--target {value} differs from the run's stored {shown} in {held}; drop it to resume")
             continue
         if name not in kept:
             raise UsageError(f"{option_flag(name)} is not a design setting that {where} records")

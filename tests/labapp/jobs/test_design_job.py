@@ -97,6 +97,23 @@ def test_options_given_with_a_resume_must_be_the_stored_ones(calibrated, capsys,
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
 
 
+def test_a_file_target_is_compared_with_the_source_the_run_recorded(tmp_path, capsys):
+    target = tmp_path / "target.csv"
+    target.write_text("tau_mm,released_mm3\n0,0\n1,40\n2,70\n3,90\n4,100\n")
+    out = tmp_path / "d"
+    assert main(["design", "--target", str(target), *TINY, "--max-iter", "2", "--out", str(out)]) in (0, 1)
+    same = tmp_path / "same.csv"  # another path with the same bytes is the same target
+    same.write_bytes(target.read_bytes())
+    capsys.readouterr()
+    assert main(["design", "--resume", "--target", str(same), "--out", str(out)]) in (0, 1)
+    assert "already finished: nothing to do" in capsys.readouterr().out
+    other = tmp_path / "other.csv"
+    other.write_text("tau_mm,released_mm3\n0,0\n1,50\n2,100\n")
+    assert main(["design", "--resume", "--target", str(other), "--out", str(out)]) == 2
+    assert (f"--target {other} differs from the run's stored {target.resolve()} in {out / 'target_source.json'}; "
+            "drop it to resume") in capsys.readouterr().err
+
+
 def test_the_same_options_resume(calibrated, capsys):
     out, _ = calibrated
     assert main(["design", "--resume", "--target", "sphere", *TINY, "--max-iter", "40", "--units", "mm",
