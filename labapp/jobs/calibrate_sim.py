@@ -191,22 +191,40 @@ def _refuse_repeated_runs(path: Path, rows: list[SetRow]) -> None:
         by_content[identity] = row
 
 
-def _simulate(mesh_path: Path, resolution: int):
+def _check_inputs(set_csv: Path, rows: list[SetRow], bench) -> dict:
+    """Every mesh read and every run's calibration found before the first simulation: a bad row further down
+    is refused at once, not after the rows above it were analysed and simulated. Returns the meshes."""
     from design.errors import DesignError
     from design.files.meshio import load_mesh
+
+    meshes = {}
+    for row in rows:
+        where = f"{set_csv.name} row {row.row}"
+        if bench is None and row.run.is_dir() and not (row.run / "calibration.json").is_file():
+            raise SimCalError(f"{where}: the run folder {row.run} has no calibration.json of its own; give the bench "
+                              "calibration with --calibration")
+        if row.mesh not in meshes:
+            try:
+                meshes[row.mesh] = load_mesh(row.mesh)
+            except DesignError as exc:
+                raise SimCalError(f"{where}: {exc}") from exc
+    return meshes
+
+
+def _simulate(mesh, mesh_path: Path, resolution: int):
+    from design.errors import DesignError
     from design.files.pipeline import mesh_grid
     from design.forward.simulator import simulate
 
     try:
-        rho, dx, mirror = mesh_grid(load_mesh(mesh_path), resolution=resolution)
+        rho, dx, mirror = mesh_grid(mesh, resolution=resolution)
         release = simulate(rho, dx, mirror=mirror)
     except DesignError as exc:
         raise SimCalError(f"{mesh_path}: {exc}") from exc
     return release.tau_mm, release.released_mm3, dx
 
 
-def _check_out(out_dir: Path, inputs: list) -> None:
-    check_out(out_dir, FolderKind.SIMCAL, inputs, replace=False)
+def _make_out(out_dir: Path) -> None:
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -260,7 +278,8 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         raise SimCalError(f"resolution {resolution} is outside {MIN_RESOLUTION}..{MAX_RESOLUTION} voxels")
     set_csv, out_dir = Path(set_csv), Path(out_dir)
     rows = read_set(set_csv)
-    _check_out(out_dir, [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)])
+    check_out(out_dir, FolderKind.SIMCAL, [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)],
+              replace=False)
     operator = operators.require(f"calibrating the simulator into {out_dir}")
     bench = None
     if bench_calibration is not None:
@@ -268,6 +287,8 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
             bench = BenchCalibration.load(bench_calibration)
         except (AnalysisError, OSError, ValueError, KeyError) as exc:
             raise SimCalError(f"{bench_calibration}: not a bench calibration ({exc})") from exc
+    meshes = _check_inputs(set_csv, rows, bench)
+    _make_out(out_dir)
     shapes, curves, dxs = [], [], []
     n = len(rows)
     for k, row in enumerate(rows):
@@ -284,7 +305,7 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         if water is None:
             raise SimCalError(f"{where}: {row.run} records no water mass; give it in a water_g column or give "
                               "the bench calibration")
-        tau, vol, dx = _simulate(row.mesh, resolution)
+        tau, vol, dx = _simulate(meshes[row.mesh], row.mesh, resolution)
         keep = curve.t_s >= 0
         try:
             shapes.append(ShapeRun(f"{where} ({row.run.name}, {row.mesh.name})", tau, vol, curve.t_s[keep],

@@ -229,3 +229,17 @@ def test_a_calibration_file_written_meanwhile_is_not_overwritten(tmp_path):
     with pytest.raises(OutPathError, match="written by another command meanwhile"):
         _save_new(cal, tmp_path / "cal.json")
     assert (tmp_path / "cal.json").read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["cal.json"]
+
+
+def test_calibrate_sim_checks_every_mesh_before_the_first_simulation(tmp_path):
+    from labapp.jobs.calibrate_sim import SimCalError, calibrate_sim
+
+    for name, top in (("a.csv", 1.0), ("b.csv", 1.2), ("c.csv", 0.9)):
+        (tmp_path / name).write_text(f"t_s,released_g\n0,0\n100,{top}\n")
+    set_csv = _set_file(tmp_path, ["a.csv", "b.csv", "c.csv"])
+    (tmp_path / "broken.stl").write_text("solid broken\nendsolid broken\n")
+    set_csv.write_text(set_csv.read_text().replace("c.csv,sphere.stl", "c.csv,broken.stl"))
+    steps = []
+    with pytest.raises(SimCalError, match=r"set\.csv row 3: .*broken\.stl"):
+        calibrate_sim(set_csv, None, tmp_path / "simcal", progress=lambda f, m: steps.append(m))
+    assert steps == [] and not (tmp_path / "simcal").exists()

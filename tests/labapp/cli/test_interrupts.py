@@ -68,14 +68,14 @@ def _sfr(args: list[str], cwd: Path) -> subprocess.Popen:
 
 
 def _timed(commands: list[list[str]], cwd: Path) -> list[float]:
-    """Run the commands side by side to the end; the seconds each took."""
+    """Run the commands side by side to the end; the seconds each took (a design may end without a solid: 1)."""
     t0 = time.monotonic()
     procs = [_sfr(args, cwd) for args in commands]
     took = []
     for proc in procs:
         _, err = proc.communicate(timeout=300)
         took.append(time.monotonic() - t0)
-        assert proc.returncode == 0, err
+        assert proc.returncode in (0, 1) and not any(sign in err for sign in BAD_SIGNS), err
     return took
 
 
