@@ -14,7 +14,7 @@ from labapp.acquisition.calseries import fit_series, image_shape, read_masses
 from labapp.acquisition.settings import WATER
 from labapp.errors import UsageError
 from labapp.records import operators
-from labapp.records.audit import Action
+from labapp.records.audit import AUDIT_FILE, Action
 from labapp.records.audit import append as audit
 from labapp.records.outpaths import OutPathError, check_out
 from labapp.records.storage import MASSES_CSV, RUN_JSON, RecordReadError, read_record
@@ -77,7 +77,8 @@ def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WA
     if not folder.is_dir():
         raise UsageError(f"{folder} is not a folder; give the calibration-series folder holding {MASSES_CSV}")
     out = check_out(out, "calibration", [folder / MASSES_CSV], file=True)
-    operator = operators.require(f"calibrating from {folder}") if (folder / RUN_JSON).is_file() else None
+    audited = (folder / AUDIT_FILE).is_file()          # a series recorded with its audit trail: the fit is an entry
+    operator = operators.require(f"calibrating from {folder}") if audited else None
     WATER.check(water_g, "calibrate_series")
     files, masses = read_masses(folder)
     for message in implausible_levels(masses, water_g, str(folder / MASSES_CSV)):
@@ -91,7 +92,7 @@ def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WA
     cal = fit_series(files, masses, geometry, water_g, camera, reduce, progress=progress)
     out.parent.mkdir(parents=True, exist_ok=True)
     _save_new(cal, out)
-    if (folder / RUN_JSON).is_file():
+    if audited:
         audit(folder, Action.CALIBRATE, f"bench calibration fitted from {len(files)} images: {out.resolve()} "
               f"(SHA-256 {hashlib.sha256(out.read_bytes()).hexdigest()})", operator=operator)
     return cal
