@@ -35,7 +35,7 @@ from labapp.records import operators
 from labapp.records.storage import atomic_write, read_record, sha256_file
 
 __all__ = ["METHOD_FORMAT", "METHOD_SETTINGS", "Criterion", "Method", "MethodError", "load_method", "make_method",
-           "method_from_run", "save_method"]
+           "method_from_config", "method_from_run", "save_method"]
 
 METHOD_FORMAT = 1
 """The layout of a method file this version writes."""
@@ -214,10 +214,16 @@ def method_from_run(run: str | Path, name: str, calibration: str | Path | None =
     record = read_record(run)
     if not record.config:
         raise MethodError(f"{run}/run.json records no settings (config); it cannot make a method")
-    config = RunConfig.from_dict(dict(record.config))
-    settings = {s.name: getattr(config.bath if s.name in _BATH else config, s.name) for s in METHOD_SETTINGS}
     if calibration is None and (run / "calibration.json").is_file():
         calibration = run / "calibration.json"
+    return method_from_config(name, RunConfig.from_dict(dict(record.config)), calibration, acceptance)
+
+
+def method_from_config(name: str, config: Any, calibration: str | Path | None = None,
+                       acceptance: tuple[Criterion, ...] = ()) -> Method:
+    """A method with the settings of a :class:`labapp.acquisition.procedures.RunConfig` (the GUI's run
+    settings, a run's recorded ones), made by the current operator; see :func:`make_method`."""
+    settings = {s.name: getattr(config.bath if s.name in _BATH else config, s.name) for s in METHOD_SETTINGS}
     return make_method(name, settings, config.stop_on_steady, calibration, acceptance)
 
 
