@@ -4,12 +4,12 @@
 (`CURVE_COLUMNS`), ``history.csv``, ``report.png``,
 ``design.ini`` (PrusaSlicer profile) and ``summary.json``.
 
-The binary solid is the printed mesh re-voxelised on the design grid, as the paper plots it (Fig. 6).
-On that grid a rate measured over a short window (`design.inverse.rate.rate_deviation`) is off by a few
-points (docs/design.md#from-density-to-print-designfabricationextractpy-designfilesoutputspy), so the
-printed mesh is also re-simulated on a grid `FINE_FACTOR` times finer: the ``fine`` curve and
-figures, the closer estimate of what the print releases. A mesh target (the source's release on the
-design grid) is re-simulated there too, so that the fine figures compare like with like.
+Every headline figure is the print's: ``design.stl`` released by the reference evaluator
+(`design.forward.reference`, exact surface distances, independent of the design grid) against the
+target's physical release (a source shape's by the same evaluator), and its volume and mass are the
+mesh's own. The design grid's figures stay as diagnostics: the density's release and the binary solid's
+(the printed mesh re-voxelised on the design grid, as the paper plots it, Fig. 6), both first-order fast
+marching with a shape-dependent O(dx) error.
 """
 from __future__ import annotations
 
@@ -25,11 +25,11 @@ import numpy as np
 
 from design.errors import DesignError
 from design.fabrication.extract import centred_iou, count_pieces, density_mesh, mass_preserving_level, revoxelize
-from design.fabrication.printability import assess, prusa_profile
+from design.fabrication.printability import assess, print_mass_g, prusa_profile
 from design.files.records import SUMMARY, SUMMARY_FORMAT, DesignSummary
 from design.files.report import save_report
+from design.forward.reference import design_lattice, reference_release
 from design.forward.simulator import simulate
-from design.geometry.voxelize import grid_for, voxelize
 from design.inverse.objective import DesignObjective, rel_rmse
 from design.inverse.optimize import HISTORY_COLUMNS
 from design.inverse.rate import rate_deviation, rate_deviation_vs_target
@@ -37,15 +37,9 @@ from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)
 
-CURVE_COLUMNS = ("tau_mm", "target_mm3", "density_mm3", "binary_mm3", "fine_mm3", "fine_target_mm3")
-"""``fine_target_mm3``: the target on the finer grid: a mesh target's source re-simulated there, else the
-target itself."""
-FINE_FACTOR = 2
-"""The ``fine`` curve re-simulates the printed mesh on voxels this many times smaller than the design's."""
-FINE_MAX_VOXELS = 2 ** 25
-"""Largest simulated grid of the ``fine`` check, voxels: its solve holds about 165 bytes a voxel, so a
-larger one (beyond an nfc design at 256 or an extruded one at 256) is skipped with a warning rather
-than risk the end of a long run."""
+CURVE_COLUMNS = ("tau_mm", "target_mm3", "print_mm3", "density_mm3", "binary_mm3")
+"""``target_mm3`` the physical target, ``print_mm3`` the printed solid's release by the reference evaluator;
+``density_mm3`` and ``binary_mm3`` the density's and the re-voxelised solid's on the design grid."""
 
 
 @dataclass(frozen=True)
@@ -134,6 +128,15 @@ RESULT_FILES = ("design.stl", "density.npz", "curves.csv", "curves_physical.csv"
 """The files a finished design run's result lines name, where they exist (`summary_lines`)."""
 
 
+def print_fit_text(summary: DesignSummary) -> str:
+    """The headline fit of a summary as text: "0.412% (+/- 0.050%)", "-" when not computed."""
+    fit = summary.get("rel_rmse_print")
+    if fit is None:
+        return "-"
+    error = summary.get("rel_rmse_print_error")
+    return f"{fit:.3%}" + ("" if error is None else f" (+/- {error:.3%})")
+
+
 def summary_lines(summary: DesignSummary, out_dir: Path) -> list[str]:
     """The result of a design run in a few lines of text, from its summary: what `sfr design` prints and the
     design launcher shows.
@@ -148,11 +151,13 @@ def summary_lines(summary: DesignSummary, out_dir: Path) -> list[str]:
     s = summary
     lines = [f"{s['status']} after {s['iterations']} evaluations ({s['seconds']:.1f} s, "
              f"{s['seconds_per_iteration'] or 0:.3f} s each)",
-             f"rel. RMSE: density {s['rel_rmse_density']:.3%}, binary solid {s['rel_rmse_binary']:.3%}, "
-             f"binary solid on a {s['fine_factor']}x finer grid {percent_text(s['rel_rmse_fine'], 3)}"]
+             f"fit of the print: rel. RMSE {print_fit_text(s)} (design.stl by exact surface distances, "
+             "against the target's physical release)",
+             f"design grid (diagnostics): rel. RMSE density {s['rel_rmse_density']:.3%}, binary solid "
+             f"{percent_text(s['rel_rmse_design_grid_binary'], 3)}"]
     dev = {k: percent_text(v) for k, v in s["rate_dev_mid80"].items()}
-    lines.append(f"rate deviation, middle 80% of the release: density {dev['density']}, binary solid "
-                 f"{dev['binary']}, on the finer grid {dev['fine']}")
+    lines.append(f"rate deviation, middle 80% of the release: print {dev['print']}; design grid: density "
+                 f"{dev['density']}, binary solid {dev['design_grid_binary']}")
     lines.append(f"pieces {s['pieces']}, print mass {s['print_mass_g']:.3f} g, narrowest channel "
                  f"{'none' if s['min_channel_mm'] is None else format(s['min_channel_mm'], '.2f') + ' mm'}, "
                  f"{enclosed_voids_text(s)}")
@@ -179,8 +184,7 @@ def solid_release(solid: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], tot
 
 
 def fine_release(mesh, dx_mm: float, origin_mm: np.ndarray, full_shape: tuple[int, int, int],
-                 mirror: tuple[bool, ...], total_time_mm: float, dtau_mm: float,
-                 factor: int = FINE_FACTOR) -> np.ndarray:
+                 mirror: tuple[bool, ...], total_time_mm: float, dtau_mm: float, factor: int) -> np.ndarray:
     """Released volume of a printed mesh re-voxelised on voxels `factor` times smaller than the design
     grid's (same domain: `dx_mm`, `origin_mm`, `full_shape`, `mirror`), mm^3 per tau sample; zeros
     for ``mesh`` None (no solid extracted)."""
@@ -190,18 +194,9 @@ def fine_release(mesh, dx_mm: float, origin_mm: np.ndarray, full_shape: tuple[in
     return solid_release(solid, fine_dx, mirror, total_time_mm, dtau_mm)
 
 
-def fine_source_release(mesh, dx_mm: float, total_time_mm: float, dtau_mm: float,
-                        factor: int = FINE_FACTOR) -> np.ndarray:
-    """Released volume of a source mesh on voxels `factor` times smaller than `dx_mm`, over its own
-    bounding box and without mirror planes (a source need not be symmetric), mm^3 per tau sample."""
-    fine_dx = dx_mm / factor
-    solid = voxelize(mesh, fine_dx).astype(float)
-    return simulate(solid, fine_dx, total_time_mm=total_time_mm, dtau_mm=dtau_mm).released_mm3
-
-
 NOT_CONVERGED_REL_RMSE = 0.05
-"""A run ended by its evaluation limit whose binary solid misses the target by more than this rel. RMSE gets
-the warning that it did not converge, with the limit to raise."""
+"""A run ended by its evaluation limit whose print misses the target by more than this rel. RMSE gets the
+warning that it did not converge, with the limit to raise."""
 
 
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
@@ -243,41 +238,33 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         warnings.append(f"no density reaches the extraction level {level:.3f} yet: no solid extracted "
                         "(design.stl not written)")
     binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm)
-    fine_voxels = FINE_FACTOR ** 3 * int(np.prod(space.grid_shape))  # the simulated part: half, quarter, octant
-    if problem.source_mesh is not None:
-        source_shape = grid_for(problem.source_mesh.bounds, space.dx_mm / FINE_FACTOR)[1]
-        fine_voxels = max(fine_voxels, int(np.prod(source_shape)))
-    fine_grid = (space.dx_mm, problem.origin_mm, problem.full_shape, space.mirror, target.total_time_mm, dtau_mm)
-    fine_target = target.released_mm3
-    if fine_voxels <= FINE_MAX_VOXELS:
-        fine_curve = fine_release(mesh, *fine_grid)
-        if problem.source_mesh is not None:  # a mesh target is the source's release on the design grid
-            fine_target = fine_source_release(problem.source_mesh, space.dx_mm, target.total_time_mm, dtau_mm)
-    else:
-        fine_curve = np.full_like(binary_curve, np.nan)
-        warnings.append(f"the printed solid was not re-simulated on a {FINE_FACTOR}x finer grid: {fine_voxels} "
-                        f"voxels, more than {FINE_MAX_VOXELS}")
+    # the print: design.stl released by exact surface distances, its volume the mesh's own
+    printed = (reference_release(mesh, target.tau_mm, cells=design_lattice(config.resolution))
+               if mesh is not None else None)
+    print_curve = printed.released_mm3 if printed is not None else np.zeros_like(binary_curve)
+    volume = printed.volume_mm3 if printed is not None else 0.0
+    fit_print = rel_rmse(print_curve, target.released_mm3)
+    # |rmse(a) - rmse(b)| <= max |a - b|: the two curves' stated errors bound the fit's
+    fit_error = ((printed.error_mm3 if printed is not None else 0.0) + (problem.target_error_mm3 or 0.0)) \
+        / target.final_mm3
     pieces = count_pieces(solid)
     if pieces > 1:
         warnings.append(f"the solid has {pieces} separate pieces")
-    missed = rel_rmse(binary_curve, target.released_mm3)
-    if status == DesignStatus.MAX_ITER and missed > NOT_CONVERGED_REL_RMSE:
-        warnings.append(f"did not converge: the evaluation limit ({config.max_iter}) ended the run with the binary "
-                        f"solid {missed:.1%} off the target (rel. RMSE above {NOT_CONVERGED_REL_RMSE:.0%}); run the "
-                        f"design again with a higher limit, e.g. --max-iter {2 * config.max_iter}")
+    if status == DesignStatus.MAX_ITER and fit_print > NOT_CONVERGED_REL_RMSE:
+        warnings.append(f"did not converge: the evaluation limit ({config.max_iter}) ended the run with the print "
+                        f"{fit_print:.1%} off the target (rel. RMSE above {NOT_CONVERGED_REL_RMSE:.0%}); run the design again "
+                        f"with a higher limit, e.g. --max-iter {2 * config.max_iter}")
     facts = assess(solid, space.dx_mm, warn_channel_mm=config.warn_channel_mm)
     warnings += list(facts.warnings)
     np.savez_compressed(out_dir / "density.npz", rho_hat=best_x, rho=rho, rho_full=rho_full, solid=solid,
                         dx_mm=space.dx_mm, origin_mm=problem.origin_mm, mirror=np.array(space.mirror))
-    curves = np.column_stack([target.tau_mm, target.released_mm3, density_curve, binary_curve, fine_curve,
-                              fine_target])
+    curves = np.column_stack([target.tau_mm, target.released_mm3, print_curve, density_curve, binary_curve])
     _write_text(out_dir / "curves.csv", _csv(CURVE_COLUMNS, curves))
     rows = np.array(history, dtype=float).reshape(-1, len(HISTORY_COLUMNS))
     _write_text(out_dir / "history.csv", _csv(HISTORY_COLUMNS, rows))
     # NFC designs may overhang; ICO and extruded ones print without supports (section 3.6)
     _write_text(out_dir / "design.ini", prusa_profile(out_dir.name, supports=space.name == "nfc"))
-    achieved = (("density", density_curve, target.released_mm3), ("binary", binary_curve, target.released_mm3),
-                ("fine", fine_curve, fine_target))
+    achieved = (("print", print_curve), ("density", density_curve), ("design_grid_binary", binary_curve))
     iterations = len(history)
     seconds = float(history[-1][-1]) if history else 0.0
     summary: DesignSummary = {
@@ -285,21 +272,25 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         "status": status,
         "target": target.source,
         "space": space.name,
+        "rel_rmse_print": fit_print if printed is not None else None,
+        "rel_rmse_print_error": fit_error if printed is not None else None,
         "rel_rmse_density": rel_rmse(density_curve, target.released_mm3),
-        "rel_rmse_binary": rel_rmse(binary_curve, target.released_mm3),
-        "rel_rmse_fine": rel_rmse(fine_curve, fine_target) if np.all(np.isfinite(fine_curve)) else None,
-        "fine_factor": FINE_FACTOR,
-        "rate_dev_mid80": {name: _rate_dev(target.tau_mm, curve, goal, False) for name, curve, goal in achieved},
-        "rate_dev_mid80_vs_target": {name: _rate_dev(target.tau_mm, curve, goal, True)
-                                     for name, curve, goal in achieved},
+        "rel_rmse_design_grid_binary": rel_rmse(binary_curve, target.released_mm3),
+        "reference": None if printed is None else {
+            "method": printed.method, "cell_mm": printed.cell_mm, "seconds": printed.seconds,
+            "print_error_mm3": printed.error_mm3, "target_error_mm3": problem.target_error_mm3},
+        "rate_dev_mid80": {name: _rate_dev(target.tau_mm, curve, target.released_mm3, False)
+                           for name, curve in achieved},
+        "rate_dev_mid80_vs_target": {name: _rate_dev(target.tau_mm, curve, target.released_mm3, True)
+                                     for name, curve in achieved},
         "iterations": iterations,
         "seconds": seconds,
         "seconds_per_iteration": seconds / iterations if iterations else None,
         "session_seconds": session_seconds,
         "pieces": pieces,
         "extraction_level": level,
-        "volume_mm3": facts.volume_mm3,
-        "print_mass_g": facts.mass_g,
+        "volume_mm3": volume,
+        "print_mass_g": print_mass_g(volume),
         "min_channel_mm": facts.min_channel_mm,
         "enclosed_voids": facts.enclosed_voids,
         "enclosed_void_mm3": facts.enclosed_void_mm3,
@@ -321,10 +312,10 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     }
     for w in warnings:
         log.warning("%s", w)
-    save_report(out_dir / "report.png", target.tau_mm, target.released_mm3, density_curve,
-                binary_curve, fine_curve, rho_full, solid,
-                f"{target.source} | {space.name} | rel. RMSE density {summary['rel_rmse_density']:.2%}, "
-                f"binary {summary['rel_rmse_binary']:.2%} (finer grid {percent_text(summary['rel_rmse_fine'])}) | "
+    save_report(out_dir / "report.png", target.tau_mm, target.released_mm3, print_curve, density_curve,
+                binary_curve, rho_full, solid,
+                f"{target.source} | {space.name} | print rel. RMSE {print_fit_text(summary)} | design grid: "
+                f"density {summary['rel_rmse_density']:.2%}, binary {summary['rel_rmse_design_grid_binary']:.2%} | "
                 f"overhang {facts.overhang_fraction:.1%} | {iterations} it."
                 + (f" | preset {config.preset}" if config.preset else ""))
     path = out_dir / SUMMARY

@@ -29,7 +29,7 @@ CHECKPOINT = "checkpoint.npz"
 
 CONFIG_FORMAT = 2
 """The layout of ``config.json`` this version writes: the `DesignConfig` fields and ``format``."""
-SUMMARY_FORMAT = 1
+SUMMARY_FORMAT = 2
 """The layout of ``summary.json`` this version writes (`DesignSummary`)."""
 CHECKPOINT_FORMAT = 2
 """The layout of ``checkpoint.npz`` this version writes: the `Checkpoint` arrays (the "lbfgs" optimiser's
@@ -139,18 +139,22 @@ class DesignSummary(TypedDict, total=False):
     """``summary.json`` of a finished (or stopped) design run (`design.files.outputs.write_outputs`).
 
     Fractions are of the target's final release (``rel_rmse_*``) or of its mean rate (``rate_dev_*``);
-    None where a figure was not computed. ``labapp.jobs.physical`` adds the physical prediction
-    (``rel_rmse_physical``, ``print_mass_basis``, ``simcal``, ``release_metrics``) to the same file.
+    None where a figure was not computed. The headline ``rel_rmse_print`` is the printed solid's
+    (``design.stl``) release by the reference evaluator against the target's physical release;
+    ``rel_rmse_density`` and ``rel_rmse_design_grid_binary`` are the design grid's diagnostics.
+    ``labapp.jobs.physical`` adds the physical prediction (``rel_rmse_physical``, ``print_mass_basis``,
+    ``simcal``, ``release_metrics``) to the same file.
     """
 
     format: int
     status: DesignStatus | str
     target: str
     space: str
+    rel_rmse_print: float | None
+    rel_rmse_print_error: float | None
     rel_rmse_density: float
-    rel_rmse_binary: float
-    rel_rmse_fine: float | None
-    fine_factor: int | None
+    rel_rmse_design_grid_binary: float
+    reference: dict[str, Any] | None
     rate_dev_mid80: dict[str, float | None] | None
     rate_dev_mid80_vs_target: dict[str, float | None] | None
     iterations: int
@@ -202,7 +206,27 @@ def _summary_0_to_1(stored: dict[str, Any]) -> dict[str, Any]:
     return record
 
 
-_SUMMARY_UPGRADES = {0: _summary_0_to_1}
+def _summary_1_to_2(stored: dict[str, Any]) -> dict[str, Any]:
+    """Layout 1 judged the design on voxel grids only: its ``rel_rmse_binary`` is the design grid's
+    (``rel_rmse_design_grid_binary``), and the print's figures (``rel_rmse_print``, its error, the
+    ``reference`` evaluation) read as None; its re-simulation on a finer grid (``rel_rmse_fine``,
+    ``fine_factor``, the ``fine`` rate deviation) is no longer a summary figure. Its ``volume_mm3`` and
+    ``print_mass_g`` stay as recorded (from the voxel count)."""
+    record = dict(stored, format=2)
+    record["rel_rmse_design_grid_binary"] = record.pop("rel_rmse_binary", None)
+    record.pop("rel_rmse_fine", None)
+    record.pop("fine_factor", None)
+    for key in ("rel_rmse_print", "rel_rmse_print_error", "reference"):
+        record.setdefault(key, None)
+    for key in ("rate_dev_mid80", "rate_dev_mid80_vs_target"):
+        rates = record.get(key)
+        if rates is not None:
+            record[key] = {"print": None, "density": rates.get("density"),
+                           "design_grid_binary": rates.get("binary")}
+    return record
+
+
+_SUMMARY_UPGRADES = {0: _summary_0_to_1, 1: _summary_1_to_2}
 """``layout -> function`` making the next layout of ``summary.json``; one entry per format change."""
 
 

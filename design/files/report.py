@@ -1,4 +1,5 @@
-"""The report picture of a design run: target vs achieved curves, density and solid slices.
+"""The report picture of a design run: the target against the print's release (and the design grid's
+diagnostic curves), density and solid slices.
 
 Uses matplotlib's object API with the Agg canvas (no pyplot state), so it is safe in worker
 threads and headless runs.
@@ -20,16 +21,17 @@ def _rate(tau: np.ndarray, c: np.ndarray, points: int = 100) -> tuple[np.ndarray
     return 0.5 * (t[1:] + t[:-1]), np.diff(v) / np.diff(t)
 
 
-def report_figure(tau_mm: np.ndarray, target_mm3: np.ndarray, density_mm3: np.ndarray, binary_mm3: np.ndarray,
-                  fine_mm3: np.ndarray, rho_full: np.ndarray, solid_full: np.ndarray, title: str) -> Figure:
+def report_figure(tau_mm: np.ndarray, target_mm3: np.ndarray, print_mm3: np.ndarray, density_mm3: np.ndarray,
+                  binary_mm3: np.ndarray, rho_full: np.ndarray, solid_full: np.ndarray, title: str) -> Figure:
     """Build the report figure.
 
     Parameters
     ----------
     tau_mm : (K,) ndarray of float, mm
-    target_mm3, density_mm3, binary_mm3, fine_mm3 : (K,) ndarrays of float, mm^3
-        Target, optimised density, re-voxelised binary solid and the binary solid on a finer grid
-        (`design.files.outputs.fine_release`) cumulative release.
+    target_mm3, print_mm3, density_mm3, binary_mm3 : (K,) ndarrays of float, mm^3
+        Cumulative release of the (physical) target, of the printed solid by the reference evaluator
+        (`design.forward.reference`), and on the design grid of the optimised density and of the
+        re-voxelised binary solid.
     rho_full : (D, H, W) ndarray of float
         Full optimised density.
     solid_full : (D, H, W) ndarray of bool
@@ -41,8 +43,9 @@ def report_figure(tau_mm: np.ndarray, target_mm3: np.ndarray, density_mm3: np.nd
     grid = fig.add_gridspec(2, 4)
     ax_c = fig.add_subplot(grid[0, 0:2])
     ax_r = fig.add_subplot(grid[0, 2:4])
-    styles = (("target", target_mm3, "-", "tab:green"), ("density", density_mm3, "--", "tab:blue"),
-              ("binary solid", binary_mm3, ":", "tab:red"), ("binary solid, finer grid", fine_mm3, "-.", "tab:gray"))
+    styles = (("target", target_mm3, "-", "tab:green"), ("print (exact distances)", print_mm3, "-", "tab:red"),
+              ("density, design grid", density_mm3, "--", "tab:blue"),
+              ("binary solid, design grid", binary_mm3, ":", "tab:gray"))
     # a release that ends early (zero-order targets) is shown zoomed, with rates over 1/100 of the view
     t_end = float(tau_mm[np.argmax(target_mm3 >= 0.999 * target_mm3[-1])])
     view = min(float(tau_mm[-1]), 1.5 * t_end) if t_end < 0.5 * tau_mm[-1] else float(tau_mm[-1])

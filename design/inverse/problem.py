@@ -4,6 +4,10 @@ A target spec is one of: a sample shape name (`design.geometry.shapes.SAMPLE_SHA
 (.stl/.obj/.ply/.off/.3mf), a ``tau_mm,released_mm3`` CSV, or an analytic family
 ``zero-order[:final=F,duration=D]`` / ``accel:q=Q[,final=F,duration=D]`` with F the total release
 as a fraction of the domain volume and D the release's end as a fraction of T (Fig. 7).
+
+A source shape's target is its physical release, by exact surface distances
+(`design.forward.reference`), not its release on the design grid: the design grid's first-order error
+depends on the shape, and a print is judged against what the source itself releases.
 """
 from __future__ import annotations
 
@@ -19,6 +23,7 @@ from design.errors import DesignError
 from design.fabrication.connectivity import TAIL_SLOPE
 from design.fabrication.extract import count_pieces
 from design.fabrication.ico import DEFAULT_COARSEN, DEFAULT_LAYERS, IcoConfig
+from design.forward.reference import design_lattice, reference_release
 from design.forward.simulator import total_time
 from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.geometry.voxelize import voxelize
@@ -33,7 +38,7 @@ from design.inverse.targets import (
     constant_acceleration,
     curve_end_mm,
     target_from_curve,
-    target_from_mesh,
+    tau_grid,
 )
 
 log = logging.getLogger(__name__)
@@ -369,7 +374,10 @@ class Problem:
         What is known about the source and the target before the run (`source_warnings`,
         `rate_resolution_warnings`); logged when the problem is prepared and kept in the run's summary.
     source_mesh : trimesh.Trimesh or None
-        The source mesh of a mesh target, mm (re-simulated on a finer grid for the outputs' check).
+        The source mesh of a mesh target, mm.
+    target_error_mm3 : float or None
+        The stated error of a mesh target's release by the reference evaluator
+        (`design.forward.reference.ReferenceRelease.error_mm3`), mm^3; None for other targets.
     """
 
     space: DesignSpace
@@ -383,6 +391,7 @@ class Problem:
     start_region: np.ndarray | None = None
     warnings: tuple[str, ...] = ()
     source_mesh: trimesh.Trimesh | None = None
+    target_error_mm3: float | None = None
 
 
 def source_warnings(source_solid: np.ndarray | None, allow_pieces: bool) -> tuple[str, ...]:
@@ -620,9 +629,13 @@ def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
     t_total = total_time(space.grid_shape, dx, space.mirror)
     domain_volume = float(np.prod(sim_full)) * dx ** 3
     source_solid = None
+    target_error = None
     if mesh is not None:
-        target = target_from_mesh(mesh, dx, t_total, f"mesh:{config.target}", config.samples, origin_mm=origin,
-                                  shape=sim_full)
+        # the source's physical release (exact surface distances), not its release on the design grid
+        grid_tau = tau_grid(t_total, config.samples)
+        reference = reference_release(mesh, grid_tau, cells=design_lattice(config.resolution))
+        target = Target(grid_tau, reference.released_mm3, f"mesh:{config.target}")
+        target_error = reference.error_mm3
         source_solid = voxelize(mesh, dx, origin_mm=origin, shape=sim_full) > 0.5
     else:
         target = _curve_target(config, analytic, curve, t_total, box_volume, box_time)
@@ -638,4 +651,4 @@ def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
     for warning in warnings:
         log.warning("%s", warning)
     return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, radius_vox,
-                   start_region(space, target, half_mm, radius_vox * dx), warnings, mesh)
+                   start_region(space, target, half_mm, radius_vox * dx), warnings, mesh, target_error)

@@ -32,7 +32,7 @@ def _history(folder):
 def test_every_record_of_a_run_carries_its_format(tmp_path):
     run_design(DesignConfig(max_iter=4, **SMALL), tmp_path)
     assert json.loads((tmp_path / "config.json").read_text())["format"] == CONFIG_FORMAT == 2
-    assert json.loads((tmp_path / "summary.json").read_text())["format"] == SUMMARY_FORMAT == 1
+    assert json.loads((tmp_path / "summary.json").read_text())["format"] == SUMMARY_FORMAT == 2
     with np.load(tmp_path / "checkpoint.npz") as saved:
         assert int(saved["format"]) == CHECKPOINT_FORMAT == 2
     assert load_config(tmp_path) == DesignConfig(max_iter=4, **SMALL)
@@ -55,10 +55,21 @@ def test_a_format_less_config_reads_its_missing_options_as_the_run_had_them():
 def test_a_format_less_summary_reads_the_facts_recorded_since_as_not_recorded():
     old = {"status": "max_iter", "rel_rmse_binary": 0.02, "rate_dev_mid80": {"density": 0.01, "binary": 0.03}}
     summary = migrate_summary(old)
-    assert summary["format"] == 1 and summary["status"] is DesignStatus.MAX_ITER
-    assert summary["enclosed_voids"] is None and summary["rel_rmse_fine"] is None and summary["ico"] is None
-    assert summary["rate_dev_mid80"] == {"fine": None, "density": 0.01, "binary": 0.03}
+    assert summary["format"] == 2 and summary["status"] is DesignStatus.MAX_ITER
+    assert summary["enclosed_voids"] is None and summary["ico"] is None
+    assert summary["rate_dev_mid80"] == {"print": None, "density": 0.01, "design_grid_binary": 0.03}
     assert migrate_summary({"format": 1, "status": "someday"})["status"] == "someday"  # kept as stored
+
+
+def test_a_layout_1_summary_reads_its_binary_fit_as_the_design_grid_s_and_has_no_print_fit():
+    old = {"format": 1, "status": "converged", "rel_rmse_binary": 0.02, "rel_rmse_fine": 0.03, "fine_factor": 2,
+           "rate_dev_mid80": {"density": 0.01, "binary": 0.03, "fine": 0.04}, "volume_mm3": 100.0}
+    summary = migrate_summary(old)
+    assert summary["format"] == 2 and summary["rel_rmse_design_grid_binary"] == 0.02
+    assert summary["rel_rmse_print"] is None and summary["rel_rmse_print_error"] is None and summary["reference"] is None
+    assert "rel_rmse_binary" not in summary and "rel_rmse_fine" not in summary and "fine_factor" not in summary
+    assert summary["rate_dev_mid80"] == {"print": None, "density": 0.01, "design_grid_binary": 0.03}
+    assert summary["volume_mm3"] == 100.0 and old["rel_rmse_binary"] == 0.02  # the stored record is not changed
 
 
 @pytest.mark.parametrize("migrate", [migrate_config, migrate_summary])

@@ -5,14 +5,16 @@ import numpy as np
 import pytest
 import trimesh
 
-import design.files.outputs
 from design.errors import DesignError
 from design.fabrication.connectivity import Connectivity
 from design.files.outputs import _rate_dev
 from design.files.rundir import run_design
+from design.forward.reference import reference_release
 from design.geometry.shapes import sample_shape
+from design.inverse.objective import rel_rmse
 from design.inverse.problem import DesignConfig, prepare
 from design.inverse.status import FINISHED, DesignStatus
+from design.material import PRINT_DENSITY_G_PER_CM3
 
 SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)
 
@@ -24,25 +26,36 @@ def test_sphere_run_writes_every_output_and_fits(tmp_path):
                  "summary.json", "design.ini", "config.json", "checkpoint.npz"):
         assert (out / name).exists(), name
     summary = json.loads((out / "summary.json").read_text())
-    for key in ("rel_rmse_density", "rel_rmse_binary", "iterations", "seconds", "seconds_per_iteration",
-                "pieces", "print_mass_g", "min_channel_mm", "enclosed_voids", "enclosed_void_mm3"):
+    for key in ("rel_rmse_print", "rel_rmse_print_error", "rel_rmse_density", "rel_rmse_design_grid_binary",
+                "iterations", "seconds", "seconds_per_iteration", "pieces", "print_mass_g", "min_channel_mm",
+                "enclosed_voids", "enclosed_void_mm3"):
         assert key in summary
     assert summary["enclosed_voids"] == 0 and summary["enclosed_void_mm3"] == 0.0  # a sphere's design is solid
     assert summary["software"]["numpy"] == np.__version__ and summary["software"]["shape-from-release"]
-    assert (out / "curves.csv").read_text().splitlines()[0] == ("tau_mm,target_mm3,density_mm3,binary_mm3,fine_mm3,"
-                                                                "fine_target_mm3")
-    assert summary["rel_rmse_fine"] < 0.05 and summary["fine_factor"] == 2
-    # the mesh target on the finer grid: the sphere's volume to 0.03 mm^3 where the design grid misses by 12.6
+    assert (out / "curves.csv").read_text().splitlines()[0] == "tau_mm,target_mm3,print_mm3,density_mm3,binary_mm3"
+    # the mesh target is the sphere's physical release: it ends at the mesh's volume and starts at 0
     curves = np.genfromtxt(out / "curves.csv", delimiter=",", names=True)
-    volume = sample_shape("sphere").volume
-    assert abs(curves["fine_target_mm3"][-1] - volume) < 0.25 * abs(curves["target_mm3"][-1] - volume)
+    assert curves["target_mm3"][-1] == pytest.approx(sample_shape("sphere").volume, rel=1e-9)
+    assert curves["target_mm3"][0] == 0.0 and curves["print_mm3"][0] == 0.0
     history = np.loadtxt(out / "history.csv", delimiter=",", skiprows=1)
     assert result.iterations == len(history) <= 80
     assert history[-1, 1] < history[0, 1] / 5  # J falls well below the uniform start
     # an 8^3 octant recovers the sphere's curve to a few percent within 80 evaluations (20 per beta stage)
-    assert summary["rel_rmse_binary"] < 0.05 and summary["pieces"] == 1
-    assert summary["print_mass_g"] == pytest.approx(summary["volume_mm3"] * 1.32e-3)
+    assert summary["rel_rmse_print"] < 0.05 and summary["pieces"] == 1
     assert summary["config"]["w_binary"] == 20.0  # defaults are resolved and stored
+    # volume_mm3, print_mass_g and the headline fit recomputed from design.stl: its volume (to the float32
+    # coordinates of an STL), and its release by the reference evaluator on another lattice (an
+    # independent quadrature), within the stated errors of both
+    mesh = trimesh.load(out / "design.stl")
+    assert summary["volume_mm3"] == pytest.approx(mesh.volume, rel=1e-6)
+    assert summary["print_mass_g"] == pytest.approx(summary["volume_mm3"] * PRINT_DENSITY_G_PER_CM3 / 1000, rel=1e-12)
+    again = reference_release(mesh, curves["tau_mm"], cells=80)
+    stated = summary["reference"]["print_error_mm3"] + again.error_mm3
+    assert np.abs(again.released_mm3 - curves["print_mm3"]).max() <= stated
+    fit = rel_rmse(again.released_mm3, curves["target_mm3"])
+    assert abs(fit - summary["rel_rmse_print"]) <= stated / curves["target_mm3"][-1]
+    assert summary["rel_rmse_print_error"] >= summary["reference"]["print_error_mm3"] / curves["target_mm3"][-1]
+    assert summary["rel_rmse_print"] == pytest.approx(rel_rmse(curves["print_mm3"], curves["target_mm3"]), rel=1e-6)
 
 
 def test_stop_then_resume_continues_the_history(tmp_path):
@@ -110,7 +123,7 @@ def test_an_extruded_ring_opens_its_hole_with_default_flags(tmp_path):
     run_design(DesignConfig(target=str(tmp_path / "ring.stl"), space="extruded", resolution=48, max_iter=150),
                tmp_path / "run")
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    assert summary["rel_rmse_binary"] < 0.01 and summary["pieces"] == 1
+    assert summary["rel_rmse_print"] < 0.01 and summary["pieces"] == 1
     with np.load(tmp_path / "run" / "density.npz") as saved:
         solid = saved["solid"]
     centre = tuple(n // 2 for n in solid.shape)
@@ -144,33 +157,21 @@ def test_a_release_over_within_one_sample_has_no_rate_deviation_instead_of_faili
     assert _rate_dev(tau, curve, 10.0 * tau, vs_target=True) is not None  # the target's window is well defined
 
 
-def test_a_fine_check_over_its_voxel_budget_is_skipped_with_a_warning(tmp_path, monkeypatch):
-    monkeypatch.setattr(design.files.outputs, "FINE_MAX_VOXELS", 8 ** 3 * 8 - 1)  # the 16^3 nfc run's check is 8^3 * 8
-    result = run_design(DesignConfig(max_iter=6, **SMALL), tmp_path / "run")
-    summary = result.outputs.summary
-    assert summary["rel_rmse_fine"] is None and summary["rate_dev_mid80"]["fine"] is None
-    assert summary["rel_rmse_binary"] is not None
-    assert any("not re-simulated on a 2x finer grid" in w and "voxels, more than 4095" in w for w in summary["warnings"])
-    fine = np.genfromtxt(tmp_path / "run" / "curves.csv", delimiter=",", names=True)["fine_mm3"]
-    assert np.all(np.isnan(fine)) and (tmp_path / "run" / "report.png").is_file()
-
-
-def test_a_curve_target_is_its_own_target_on_the_finer_grid(tmp_path):
+def test_a_curve_target_is_taken_as_given(tmp_path):
     run_design(DesignConfig(target="zero-order:final=0.1,duration=0.3", space="nfc", resolution=16, max_iter=4),
                tmp_path / "run")
-    curves = np.genfromtxt(tmp_path / "run" / "curves.csv", delimiter=",", names=True)
-    assert np.array_equal(curves["fine_target_mm3"], curves["target_mm3"])
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["reference"] is None or summary["reference"]["target_error_mm3"] is None
 
 
-def test_a_source_without_the_design_s_symmetry_is_re_simulated_whole_on_the_finer_grid(tmp_path):
-    """The spinner top is not symmetric about its mid-height plane while an nfc design is: simulated as
-    an octant on the finer grid it would release 911 of its 1326 mm^3. Whole, on voxels half the design
-    grid's (64 across the domain), it releases its volume to 0.2%."""
-    run_design(DesignConfig(target="spinner_top", space="nfc", resolution=32, radius_vox=2.0, max_iter=2),
-               tmp_path / "run")
-    curves = np.genfromtxt(tmp_path / "run" / "curves.csv", delimiter=",", names=True)
+def test_a_source_target_is_the_whole_source_s_physical_release(tmp_path):
+    """The spinner top is not symmetric about its mid-height plane while an nfc design is: the target is
+    the whole source's release by exact distances, which ends at its volume, whatever the design grid."""
+    problem = prepare(DesignConfig(target="spinner_top", space="nfc", resolution=16, radius_vox=2.0))
     volume = sample_shape("spinner_top").volume
-    assert abs(curves["fine_target_mm3"][-1] - volume) < 0.01 * volume
+    assert problem.target.released_mm3[-1] == pytest.approx(volume, rel=1e-9)
+    assert problem.target.released_mm3[0] == 0.0
+    assert problem.target_error_mm3 <= 0.002 * volume
 
 
 def test_a_design_status_is_its_stored_string():
