@@ -111,7 +111,7 @@ def analyse_run(run: str | Path, calibration: str | Path | None = None, out: str
             files.append(out / "curve.png")
             _plot_curve(curve, files[-1])
     if into_record:
-        audit(run, Action.REANALYSE, f"analysed {len(curve.files)} frames into {out.relative_to(run)} with "
+        audit(run, Action.REANALYSE, f"analysed {len(curve.files)} frames into {out.relative_to(run.resolve())} with "
               f"calibration {Path(calibration).name}", operator=operator)
     return AnalysisOutputs(curve, out, tuple(files))
 

@@ -178,7 +178,7 @@ def test_calibrate_bench_warns_on_masses_typed_in_mg(tmp_path, capsys):
     assert "warning: " in err and "look like milligrams" in err
 
 
-def test_analyze_uses_the_runs_own_calibration(tmp_path, capsys):
+def test_analyze_uses_the_runs_own_calibration(tmp_path, capsys, monkeypatch):
     from labapp.jobs.calibrate_bench import calibrate_series
 
     run = tmp_path / "run"
@@ -190,6 +190,8 @@ def test_analyze_uses_the_runs_own_calibration(tmp_path, capsys):
     shutil.copyfile(tmp_path / "cal.json", run / "calibration.json")      # as a recorded run holds it
     assert main(["analyze", str(run), "--no-plot"]) == 0
     assert (run / "analysis" / "curve.csv").is_file() and not (run / "analysis" / LOCK_NAME).exists()
+    monkeypatch.chdir(tmp_path)                 # the README's way: a relative run folder
+    assert main(["analyze", "run", "--no-plot"]) == 0
 
 
 def test_analyze_out_analysis_from_the_repository_root_says_why(monkeypatch, capsys, tmp_path):
