@@ -3,7 +3,9 @@
 Ranking (`rank`, documented in docs/scale.md): finished designs before unfinished ones, failures last;
 among finished designs the printable ones first (one piece, no channel narrower than the run's
 ``warn_channel_mm``), as fabricability is the criterion hyperparameters are tuned for (section 5.2);
-then by the binary design's fit error (relative RMSE of its simulated release), smallest first.
+then by the print's fit (``rel_rmse_print``: relative RMSE of design.stl's release by exact surface
+distances against the target's physical release; a run recorded before that figure, by its design grid's
+binary fit), smallest first.
 """
 from __future__ import annotations
 
@@ -38,16 +40,28 @@ def summary_row(folder: Path) -> dict:
         s = load_summary(Path(folder))
     except (OSError, ValueError, DesignError):
         return {}
-    row = {key: s.get(key) for key in ("status", "rel_rmse_density", "rel_rmse_binary", "rel_rmse_fine", "pieces",
-                                       "min_channel_mm", "enclosed_void_mm3", "print_mass_g", "iterations", "seconds",
-                                       "overhang_fraction", "rel_rmse_physical")}
+    row = {key: s.get(key) for key in ("status", "rel_rmse_print", "rel_rmse_print_error", "rel_rmse_density",
+                                       "rel_rmse_design_grid_binary", "pieces", "min_channel_mm", "enclosed_void_mm3",
+                                       "print_mass_g", "iterations", "seconds", "overhang_fraction",
+                                       "rel_rmse_physical")}
     row["warn_channel_mm"] = s.get("config", {}).get("warn_channel_mm")
-    for curve in ("binary", "fine"):
+    for curve in ("print", "design_grid_binary"):
         row[f"rate_dev_{curve}"] = (s.get("rate_dev_mid80") or {}).get(curve)
     curves = _curves(Path(folder))
     if curves is not None:
-        row["rmse_mm3"] = float(np.sqrt(np.mean((curves["binary_mm3"] - curves["target_mm3"]) ** 2)))
+        row["rmse_mm3"] = float(np.sqrt(np.mean((_achieved(curves) - curves["target_mm3"]) ** 2)))
     return {k: ("" if v is None else v) for k, v in row.items()}
+
+
+def _achieved(curves: dict[str, np.ndarray]) -> np.ndarray:
+    """The print's release of a run's curves.csv (the design grid's binary solid in a run recorded before it)."""
+    return curves["print_mm3"] if "print_mm3" in curves else curves["binary_mm3"]
+
+
+def fit_of(row: dict) -> float | None:
+    """The fit a row is ranked and labelled by: the print's, else (a run recorded before it) the design grid's."""
+    fit = _number(row.get("rel_rmse_print"))
+    return fit if fit is not None else _number(row.get("rel_rmse_design_grid_binary"))
 
 
 def _number(value) -> float | None:
@@ -67,7 +81,7 @@ def rank(rows: list[dict]) -> list[dict]:
     def key(row):
         status = row.get("status")
         group = 0 if status in FINISHED else 2 if status == "failed" else 1
-        error = _number(row.get("rel_rmse_binary"))
+        error = fit_of(row)
         return group, not printable(row), math.inf if error is None else error
     return sorted(rows, key=key)
 
@@ -119,8 +133,8 @@ def _picture(folder: Path) -> np.ndarray | None:
 
 
 def _label(rank_no: int, row: dict) -> str:
-    err = row.get("rel_rmse_binary")
-    fit = f"fit {float(err):.1%}" if err not in ("", None) else row.get("error", "")[:40] or "no result"
+    err = fit_of(row)
+    fit = f"fit {err:.1%}" if err is not None else row.get("error", "")[:40] or "no result"
     channel = row.get("min_channel_mm")
     facts = f"{row.get('pieces', '-')} pc, ch {float(channel):.2f} mm" if channel not in ("", None) else \
         f"{row.get('pieces', '-')} pc"
@@ -152,12 +166,12 @@ def draw_contact_sheet(rows: list[dict], path: str | Path, sweep_dir: str | Path
         curves = _curves(folder)
         if curves is not None:
             curve_ax.plot(curves["tau_mm"], curves["target_mm3"], "-", color="g", lw=1.5)
-            curve_ax.plot(curves["tau_mm"], curves["binary_mm3"], "--", color="m", lw=1.2)
+            curve_ax.plot(curves["tau_mm"], _achieved(curves), "--", color="m", lw=1.2)
         picture = _picture(folder)
         if picture is not None:
             pic_ax.imshow(np.ma.masked_equal(picture, 0), cmap="viridis", origin="lower",
                           interpolation="nearest")
-    fig.suptitle("sweep: target (green) vs binary design (magenta dashed), tau (mm) vs released (mm^3); "
+    fig.suptitle("sweep: target (green) vs the print (magenta dashed), tau (mm) vs released (mm^3); "
                  "top view | side view, coloured by height", fontsize=8)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.3 / height_in))
     tmp = path.with_suffix(".tmp.png")

@@ -231,7 +231,7 @@ class DesignLauncher(QWidget):
         self.plot.addLegend()
         self.target_curve = self.plot.plot([], [], pen=pg.mkPen("g", width=2), name="target")
         self.achieved_curve = self.plot.plot([], [], pen=pg.mkPen("m", width=2, style=Qt.PenStyle.DashLine),
-                                             name="achieved (binary design)")
+                                             name="achieved (the print)")
         self.solid = SolidView()
         self.slice_image = self.solid.images[0]
         self.physical_plot = time_plot("predicted release over the measured target")
@@ -452,7 +452,8 @@ class DesignLauncher(QWidget):
         self.progress.setValue(self.progress.maximum() if not stopped else self.progress.value())
         curves = read_curves(result.out_dir / "curves.csv")
         self.target_curve.setData(curves["tau_mm"], curves["target_mm3"])
-        self.achieved_curve.setData(curves["tau_mm"], curves["binary_mm3"])
+        # the print's release (a design recorded before it was computed: the design grid's binary solid)
+        self.achieved_curve.setData(curves["tau_mm"], curves["print_mm3" if "print_mm3" in curves else "binary_mm3"])
         self.save_button.setEnabled((result.out_dir / "design.stl").is_file())
         density = result.out_dir / "density.npz"
         if density.is_file():

@@ -131,8 +131,9 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
     """The physical prediction of a finished design: ``curves_physical.csv``, summary fields, ``report.png``.
 
     ``curves_physical.csv`` has ``t_s,target_released_g,design_released_g``: the measured target at its own
-    times (or the simulated target mapped through the calibration), and the printable binary solid's
-    predicted release (mass from ``g_per_mm3``). ``summary.json`` gains ``rel_rmse_physical`` (RMS of the
+    times (or the simulated target mapped through the calibration), and the print's predicted release
+    (``print_mm3``: design.stl by exact surface distances; a design recorded before it, its binary solid on
+    the design grid; mass from ``g_per_mm3``). ``summary.json`` gains ``rel_rmse_physical`` (RMS of the
     difference over the target's final grams), ``print_mass_g`` at the calibrated density, ``simcal`` and
     ``release_metrics`` (MDT, DE and model fits of design and target, f2 of the design against the target);
     the simulation-units report is kept as ``report_simulation.png`` and ``report.png`` shows grams over
@@ -154,7 +155,8 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
         summary = load_summary(design_dir)
     except (OSError, ValueError) as exc:
         raise SimCalError(f"{design_dir}: no finished design to predict ({exc})") from exc
-    tau, binary = np.asarray(data["tau_mm"], float), np.asarray(data["binary_mm3"], float)
+    achieved = "print_mm3" if "print_mm3" in data.dtype.names else "binary_mm3"
+    tau, binary = np.asarray(data["tau_mm"], float), np.asarray(data[achieved], float)
     water = (target.water_g if target is not None else None) or simcal.water_g
     cal = simcal.cal
     if target is not None:

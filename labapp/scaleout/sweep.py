@@ -50,11 +50,13 @@ log = logging.getLogger(__name__)
 RUNS, FAILED, LOCKS = "runs", "failed", ".locks"
 STOP_POLL_S = 1.0
 """How often a running design asks the scheduler whether the sweep was stopped, s."""
-TABLE_COLUMNS = ("name", "status", "error", "rel_rmse_density", "rel_rmse_binary", "rel_rmse_fine", "rmse_mm3",
-                 "rel_rmse_physical", "rate_dev_binary", "rate_dev_fine", "pieces", "overhang_fraction",
-                 "min_channel_mm", "enclosed_void_mm3", "warn_channel_mm", "print_mass_g", "iterations", "seconds",
-                 "folder")
-"""Columns of sweep.csv; the swept settings go between ``name`` and ``status``."""
+TABLE_COLUMNS = ("name", "status", "error", "rel_rmse_print", "rel_rmse_print_error", "rel_rmse_density",
+                 "rel_rmse_design_grid_binary", "rmse_mm3", "rel_rmse_physical", "rate_dev_print",
+                 "rate_dev_design_grid_binary", "pieces", "overhang_fraction", "min_channel_mm", "enclosed_void_mm3",
+                 "warn_channel_mm", "print_mass_g", "iterations", "seconds", "folder")
+"""Columns of sweep.csv; the swept settings go between ``name`` and ``status``. ``rel_rmse_print`` (the
+print's fit, design.stl by exact surface distances) is the headline; ``rmse_mm3`` is the print's too;
+``rel_rmse_density`` and ``rel_rmse_design_grid_binary`` are the design grid's diagnostics."""
 
 
 class SweepError(UsageError):

@@ -117,9 +117,10 @@ def test_serial_sweep_records_failures_and_reruns_skip_done(tmp_path):
     assert table[0]["iterations"] == "6" and float(table[0]["rmse_mm3"]) > 0 and table[1]["status"] == "failed"
     assert float(table[0]["enclosed_void_mm3"]) >= 0 and table[1]["enclosed_void_mm3"] == ""
     summary = json.loads((out / "runs" / "radius_vox=2" / "summary.json").read_text())
-    assert float(table[0]["rel_rmse_fine"]) == pytest.approx(summary["rel_rmse_fine"])
-    assert float(table[0]["rate_dev_fine"]) == pytest.approx(summary["rate_dev_mid80"]["fine"])
-    assert table[1]["rel_rmse_fine"] == table[1]["rate_dev_binary"] == ""
+    # six evaluations leave the design grey: no solid, so no print to judge (a blank), the design grid's figure
+    assert summary["rel_rmse_print"] is None and table[0]["rel_rmse_print"] == ""
+    assert float(table[0]["rel_rmse_design_grid_binary"]) == pytest.approx(summary["rel_rmse_design_grid_binary"])
+    assert table[1]["rel_rmse_print"] == table[1]["rate_dev_print"] == ""
     done = out / "runs" / "radius_vox=2"
     assert folder_state(done) == "done"
     stamp = (done / "summary.json").stat().st_mtime_ns
@@ -178,14 +179,15 @@ def test_out_checks_before_any_work(tmp_path):
 
 
 def test_ranking_puts_printable_good_fits_first():
-    rows = [{"name": "a", "status": "failed", "rel_rmse_binary": ""},
-            {"name": "b", "status": "max_iter", "rel_rmse_binary": 0.01, "pieces": 2},
-            {"name": "c", "status": "max_iter", "rel_rmse_binary": 0.05, "pieces": 1, "min_channel_mm": 2.0,
+    # ranked by the print's fit; a run recorded before it (d) by its design grid's binary fit
+    rows = [{"name": "a", "status": "failed", "rel_rmse_print": ""},
+            {"name": "b", "status": "max_iter", "rel_rmse_print": 0.01, "pieces": 2},
+            {"name": "c", "status": "max_iter", "rel_rmse_print": 0.05, "rel_rmse_design_grid_binary": 0.001,
+             "pieces": 1, "min_channel_mm": 2.0, "warn_channel_mm": 1.0},
+            {"name": "d", "status": "converged", "rel_rmse_design_grid_binary": 0.03, "pieces": 1, "min_channel_mm": "",
              "warn_channel_mm": 1.0},
-            {"name": "d", "status": "converged", "rel_rmse_binary": 0.03, "pieces": 1, "min_channel_mm": "",
-             "warn_channel_mm": 1.0},
-            {"name": "e", "status": "stopped", "rel_rmse_binary": 0.001, "pieces": 1},
-            {"name": "f", "status": "max_iter", "rel_rmse_binary": 0.02, "pieces": 1, "min_channel_mm": 0.5,
+            {"name": "e", "status": "stopped", "rel_rmse_print": 0.001, "pieces": 1},
+            {"name": "f", "status": "max_iter", "rel_rmse_print": 0.02, "pieces": 1, "min_channel_mm": 0.5,
              "warn_channel_mm": 1.0}]
     assert [r["name"] for r in rank(rows)] == ["d", "c", "b", "f", "e", "a"]
     assert not printable(rows[5]) and printable(rows[3])
