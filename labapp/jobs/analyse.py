@@ -63,7 +63,8 @@ def _check_out(out: Path, inputs: list, run: Path) -> Path:
 def analyse_run(run: str | Path, calibration: str | Path | None = None, out: str | Path | None = None, *,
                 interval_s: float | None = None, water_g: float | None = None, window_s: float | None = None,
                 order: int | None = None, workers: int | None = None, reduce: int | None = None,
-                plot: bool = True, progress: Callable[[int, int], None] | None = None) -> AnalysisOutputs:
+                plot: bool = True, progress: Callable[[int, int], None] | None = None,
+                reason: str | None = None) -> AnalysisOutputs:
     """Analyse a run folder or a plain image folder into ``curve.csv``, ``cells.csv``, ``summary.json`` (with
     MDT, DE and the ranked model fits of the release) and ``curve.png``.
 
@@ -77,6 +78,8 @@ def analyse_run(run: str | Path, calibration: str | Path | None = None, out: str
         Output folder (default ``RUN/analysis``); it also holds the cell cache.
     window_s, order : optional
         Savitzky-Golay window (s) and order (defaults: ``analysis.curve.DEFAULT_WINDOW_S``/``DEFAULT_ORDER``).
+    reason : str, optional
+        Why a recorded run is analysed again (its audit trail's ``reanalyse`` entry says it).
     progress : callable, optional
         ``progress(done, total)`` frames; it may raise ``KeyboardInterrupt`` to stop after a frame (the frames
         analysed so far stay in the cell cache of ``out``, no other output is written).
@@ -112,7 +115,7 @@ def analyse_run(run: str | Path, calibration: str | Path | None = None, out: str
             _plot_curve(curve, files[-1])
     if into_record:
         audit(run, Action.REANALYSE, f"analysed {len(curve.files)} frames into {out.relative_to(run.resolve())} with "
-              f"calibration {Path(calibration).name}", operator=operator)
+              f"calibration {Path(calibration).name}", operator=operator, reason=reason)
     return AnalysisOutputs(curve, out, tuple(files))
 
 

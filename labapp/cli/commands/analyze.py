@@ -25,6 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--calibration", help="bench calibration JSON (sfr calibrate-bench; default: the run's own "
                         "calibration.json; required for a batch)")
     parser.add_argument("--out", help="output folder (default: RUN/analysis; required for a batch)")
+    parser.add_argument("--reason", help="why a recorded run is analysed again (in its audit trail)")
     parser.add_argument("--reference", metavar="CURVE",
                         help="batch: f1/f2 of every run against this curve file or run folder")
     parser.add_argument("--scheduler", metavar="ADDRESS",
@@ -61,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
     result = analyse_run(args.run, args.calibration, args.out, interval_s=args.interval, water_g=args.water_g,
                          window_s=args.window_s, order=args.order, workers=args.workers, reduce=args.reduce,
-                         plot=not args.no_plot, progress=progress)
+                         plot=not args.no_plot, progress=progress, reason=args.reason)
     curve, out = result.curve, result.out
     for message in curve.warnings:
         print(f"warning: {message}", file=sys.stderr)

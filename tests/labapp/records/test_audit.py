@@ -240,3 +240,21 @@ def test_a_setting_changes_during_a_run_only_audited_with_a_reason(users, tmp_pa
     assert (last["action"], last["detail"], last["reason"]) == (
         "change-setting", "max_duration_s: 1 -> 2 h", "the sample dissolves slower than expected")
     proc.run.close()
+
+
+def test_a_reanalysis_into_the_record_is_audited_with_its_reason(users, tmp_path):
+    import shutil
+    from pathlib import Path
+
+    from labapp.jobs.analyse import analyse_run
+    from labapp.jobs.calibrate_bench import calibrate_series
+
+    bench = Path(__file__).resolve().parents[3] / "fixtures" / "bench"
+    run = tmp_path / "run"
+    shutil.copytree(bench / "run", run)
+    calibrate_series(bench / "calibration", tmp_path / "cal.json", reduce=4)
+    assert not (bench / "calibration" / AUDIT_FILE).exists()       # a series without a trail is not written
+    analyse_run(run, tmp_path / "cal.json", reduce=4, plot=False, reason="smoothing window corrected")
+    [entry] = check_trail(run).entries
+    assert (entry["action"], entry["operator"], entry["reason"]) == ("reanalyse", "A. Jones",
+                                                                      "smoothing window corrected")
