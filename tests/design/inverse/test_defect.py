@@ -1,6 +1,7 @@
 """Defect correction (design.inverse.defect): a known bias is corrected, a resume inside a round repeats the run,
 the rounds fit in the evaluation limit, bad settings are refused."""
 import copy
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from design.forward.simulator import simulate
 from design.inverse.defect import RoundState, check_print, correction_plan, optimise_physical
 from design.inverse.optimize import build_objective
 from design.inverse.problem import DesignConfig, prepare
+from design.inverse.targets import target_from_mesh
 
 SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)
 
@@ -76,6 +78,10 @@ def short_print(monkeypatch):
 def test_a_known_shortfall_of_the_print_is_corrected(short_print):
     config = DesignConfig(max_iter=140, correction_rounds=3, correction_evals=20, **SMALL)
     problem = prepare(config)
+    # a target the design grid can meet: the sphere's own release on it
+    reachable = target_from_mesh(problem.source_mesh, problem.dx_mm, problem.target.total_time_mm, "sphere on the grid",
+                                 config.samples, origin_mm=problem.origin_mm, shape=problem.full_shape)
+    problem = replace(problem, target=reachable)
     short_print(problem)
     rounds = MemoryRounds()
     outcome, objective = optimise_physical(build_objective(problem, config), problem, config, MemoryStore(), rounds)
