@@ -124,6 +124,11 @@ def _run(args: argparse.Namespace) -> int:
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         print(f"predicted: {grams[-1, 1]:.3f} g released over {grams[-1, 0] / 3600:.2f} h "
               f"({simcal.describe()}) -> {physical}")
+    error = summary["error"]
+    estimate = ("not estimated" if error["error_mm3"] is None else
+                f"within {error['error_mm3']:.3g} mm^3 ({error['error_fraction']:.2%} of the volume) of the physical "
+                f"release ({error['method']})")
     print(f"volume {release.volume_mm3:.1f} mm^3, T = {release.total_time_mm:.3f} mm, {summary['voxels']:,} voxels, "
           f"{seconds:.2f} s -> {out}")
+    print(f"error: the simulated curve is {estimate}")
     return 0
