@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import getpass
-import os
 import sys
 from collections.abc import Callable
 
@@ -29,7 +28,6 @@ def add_operator_option(parser: argparse.ArgumentParser, run: Callable[[argparse
 
         if args.operator:
             with operators.acting_as(args.operator):
-                os.environ[OPERATOR_ENV] = args.operator     # the processes this command starts (Dask workers)
                 return run(args)
         if records is True:
             operators.require(f"'sfr {args.command}'")

@@ -7,9 +7,10 @@ design, a signature) names the operator who did it. Operators are the users of a
 password (``hashlib.scrypt``, compared in constant time with ``hmac.compare_digest``). A user is never
 deleted, only disabled, so that the names in old audit trails keep meaning one person.
 
-The process acts as one operator at a time (:func:`log_in`, :func:`acting_as`; the ``SFR_OPERATOR``
-environment variable when nothing is set). The simulated demo acts as the built-in :data:`DEMO_OPERATOR`,
-which is not in any users file and records only on the simulated bench.
+The process acts as one operator at a time (:func:`log_in`, :func:`acting_as`, which also set
+``SFR_OPERATOR`` for the processes it starts; that variable alone when nobody logged in). The simulated
+demo acts as the built-in :data:`DEMO_OPERATOR`, which is not in any users file and records only on the
+simulated bench.
 """
 from __future__ import annotations
 
@@ -185,28 +186,35 @@ _session: str | None = None
 
 
 def log_in(name: str) -> str:
-    """Act as ``name`` from now on in this process (checked against the users file)."""
+    """Act as ``name`` from now on in this process and the processes it starts (Dask workers, `sfr`
+    subprocesses: ``SFR_OPERATOR`` is set); checked against the users file."""
     global _session
     _session = _known(name)
+    os.environ[OPERATOR_ENV] = _session
     return _session
 
 
 def log_out() -> None:
-    """Act as nobody (``SFR_OPERATOR`` applies again)."""
+    """Act as nobody: the session and ``SFR_OPERATOR`` are cleared."""
     global _session
     _session = None
+    os.environ.pop(OPERATOR_ENV, None)
 
 
 @contextlib.contextmanager
 def acting_as(name: str) -> Iterator[str]:
-    """Act as ``name`` inside the ``with`` block, then as before."""
+    """Act as ``name`` inside the ``with`` block, then as before (``SFR_OPERATOR`` too)."""
     global _session
-    before = _session
+    before, before_env = _session, os.environ.get(OPERATOR_ENV)
     log_in(name)
     try:
         yield name
     finally:
         _session = before
+        if before_env is None:
+            os.environ.pop(OPERATOR_ENV, None)
+        else:
+            os.environ[OPERATOR_ENV] = before_env
 
 
 def current() -> str | None:

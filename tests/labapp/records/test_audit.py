@@ -258,3 +258,16 @@ def test_a_reanalysis_into_the_record_is_audited_with_its_reason(users, tmp_path
     [entry] = check_trail(run).entries
     assert (entry["action"], entry["operator"], entry["reason"]) == ("reanalyse", "A. Jones",
                                                                       "smoothing window corrected")
+
+
+def test_the_operator_reaches_the_processes_a_session_starts(users):
+    import os
+    import subprocess
+    import sys
+
+    with operators.acting_as("B. Smith"):
+        assert os.environ[operators.OPERATOR_ENV] == "B. Smith"
+        out = subprocess.run([sys.executable, "-c", "from labapp.records import operators; print(operators.current())"],
+                             capture_output=True, text=True, check=True).stdout
+        assert out.strip() == "B. Smith"
+    assert os.environ[operators.OPERATOR_ENV] == "A. Jones" == operators.current()
