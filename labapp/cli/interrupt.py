@@ -35,7 +35,6 @@ DEFAULT_HINT = "stopped before its outputs were written; rerun the same command 
 
 _requests: list[int] = []
 _hint: list[str] = []
-_raised: list[bool] = []
 _actions: list[tuple[str, Callable[[], None] | None, Callable[[], None] | None]] = []
 
 
@@ -51,11 +50,11 @@ def requested() -> bool:
 def check() -> None:
     """At a safe point: raise :class:`Interrupted` if a stop was requested, else return at once.
 
-    It raises once per request: the callbacks a job makes while it stops cleanly (a last progress report,
-    the outputs of a stopped design) return normally.
+    It raises at every safe point after the request, so a job that goes on after one stop (a further stage or
+    round) stops at its next; a callback that the job also makes while it stops cleanly (a last progress report)
+    checks :func:`requested` itself.
     """
-    if _requests and not _raised:
-        _raised.append(True)
+    if _requests:
         raise Interrupted
 
 
@@ -80,7 +79,6 @@ def reset() -> None:
     """Forget requests and the hint (a new command in the same process, e.g. tests calling ``main``)."""
     _requests.clear()
     _hint.clear()
-    _raised.clear()
 
 
 def _say(text: str) -> None:

@@ -97,11 +97,13 @@ def _run_batch(args: argparse.Namespace) -> int:
                          "calibration every run is analysed with")
     interrupt.set_hint(f"the runs analysed so far are in {args.out}/batch_summary.csv; rerun the same command to "
                        "analyse them all")
-    show = progress_printer()
+    show, stopping = progress_printer(), []
 
     def progress(p) -> None:
         show(p)
-        interrupt.check()   # a safe point: a run finished (runs still going are cancelled)
+        if interrupt.requested() and not stopping:  # a safe point: a run finished (runs still going are cancelled);
+            stopping.append(True)                   # the batch's last report, after the stop, returns
+            raise interrupt.Interrupted
     options = dict(interval_s=args.interval, water_g=args.water_g, window_s=args.window_s, order=args.order,
                    reduce=args.reduce, plot=not args.no_plot, **({"workers": args.workers} if args.workers else {}))
     with (folder_lock(args.out), interrupt.handling(on_second=interrupt.raise_now),

@@ -24,15 +24,15 @@ DESIGN = ["design", "--target", "sphere", "--resolution", "16", "--max-iter", "4
 BAD_SIGNS = ("Traceback", "internal error", "SystemError", "Fatal Python error", "GIL")
 
 
-def test_the_handler_records_and_check_raises_once_at_a_safe_point():
+def test_the_handler_records_and_check_raises_at_the_safe_points():
     interrupt.reset()
     with interrupt.handling():
         os.kill(os.getpid(), signal.SIGINT)        # no KeyboardInterrupt here, whatever runs
         total = sum(range(10_000))
         assert total and interrupt.requested()
-        with pytest.raises(KeyboardInterrupt):
-            interrupt.check()
-        interrupt.check()                           # the clean stop's own callbacks return normally
+        for _ in range(2):                          # at every safe point after the request
+            with pytest.raises(KeyboardInterrupt):
+                interrupt.check()
     interrupt.reset()
     assert not interrupt.requested()
 
@@ -120,14 +120,18 @@ def test_ctrl_c_at_twenty_random_moments_of_a_design_an_analysis_and_a_calibrati
     kinds = ("design", "analysis", "calibration")
     durations = dict(zip(kinds, _timed([command(k, tmp_path / f"timed_{k}") for k in kinds], tmp_path)))
     rng = random.Random(32)
-    moments = [(kinds[i % 3], tmp_path / f"{kinds[i % 3]}_{i}", rng.uniform(0.1, 0.95) * durations[kinds[i % 3]])
-               for i in range(20)]
+    # (kind, output, delay s, tries left): a moment that falls after the command's end (it ran faster than
+    # when timed) is tried again earlier
+    queue = [(kinds[i % 3], tmp_path / f"{kinds[i % 3]}_{i}", rng.uniform(0.05, 0.8) * durations[kinds[i % 3]], 2)
+             for i in range(20)]
     caught = 0
-    for batch in range(0, 20, 3):
-        group = moments[batch:batch + 3]
-        for (kind, out, delay), (code, err) in zip(group, _interrupt_at([(command(k, o), d) for k, o, d in group],
-                                                                           tmp_path)):
-            if code is None or (code == 0 and "Ctrl-C" not in err):   # the moment fell after the command's end
+    while queue:
+        group, queue = queue[:3], queue[3:]
+        for (kind, out, delay, tries), (code, err) in zip(group, _interrupt_at([(command(k, o), d) for k, o, d, _
+                                                                                in group], tmp_path)):
+            if code is None or (code in (0, 1) and "Ctrl-C" not in err):   # the moment fell after the command
+                if tries:                                                   # had ended (a design may find no solid)
+                    queue.append((kind, out.with_name(out.name + "_again"), delay / 2, tries - 1))
                 continue
             caught += 1
             where = f"{kind} interrupted after {delay:.2f} s"
@@ -151,4 +155,4 @@ def test_ctrl_c_at_twenty_random_moments_of_a_design_an_analysis_and_a_calibrati
                 if not path.exists():
                     calibrate_series(BENCH / "calibration", path)
                 assert np.allclose(json.loads(path.read_text())["cells"]["k"], reference_k), where
-    assert caught >= 15, f"only {caught} of 20 moments fell inside a command"
+    assert caught >= 18, f"only {caught} of 20 moments fell inside a command"
