@@ -6,7 +6,8 @@ evaluator (`design.forward.reference`); the methods:
 
 - ``none``: a run without correction (``physical_correction="none"``, ``max_iter`` evaluations);
 - ``defect``: the default run: the first optimisation, then the defect-correction rounds of
-  `design.inverse.defect` within the same ``max_iter`` evaluations;
+  `design.inverse.defect` within the same ``max_iter`` evaluations (``defect_final_beta`` in a CSV: rows of the
+  rounds run at the final beta rather than at `design.inverse.defect.ROUND_BETA_FACTOR` times it);
 - ``fine``: the defect run's first optimisation, then a last stage on a grid twice as fine started from the
   upsampled design variables at the final beta, of half the rounds' evaluations (each costs about eight).
 
@@ -16,6 +17,7 @@ design grid against the same target), pieces, and seconds (the optimisation, and
 Rows are appended to the CSV as they finish; a row already in it is not run again.
 
     python benchmarks/physical_study.py CSV [--resolution 64] [--spaces nfc,extruded] [--shapes a,b] [--methods ...]
+    python benchmarks/physical_study.py CSV --table      # the CSV as the Markdown table of docs/design.md
 
 Last line: ``rows: <count>``.
 """
@@ -182,6 +184,28 @@ def _warm_up() -> None:
     reference_release(untuned_shapes.source("rock"), problem.target.tau_mm, cells=16)
 
 
+def table(path: Path) -> str:
+    """The rows of a study CSV as a Markdown table: one line per shape and space, the methods side by side."""
+    with path.open() as handle:
+        rows = list(csv.DictReader(handle))
+    methods = [m for m in ("none", "defect_final_beta", "defect", "fine") if any(r["method"] == m for r in rows)]
+    cases: dict[tuple[str, str, str], dict[str, dict]] = {}
+    for r in rows:
+        cases.setdefault((r["shape"], r["space"], r["resolution"]), {})[r["method"]] = r
+    head = "| shape | space | " + " | ".join(f"true fit, {m}" for m in methods) + " | design grid, " + \
+        " / ".join(methods) + " | pieces | seconds, " + " / ".join(methods) + " |"
+    lines = [head, "|---|---|" + "---|" * (len(methods) + 3)]
+    extrusions = set(untuned_shapes.EXTRUSIONS)
+    for (shape, space, _), by in cases.items():
+        cell = {m: (f"{float(by[m]['true_fit']):.2f}%" if m in by else "-") for m in methods}
+        label = f"{shape}{' (extrusion)' if shape in extrusions else ''}"
+        lines.append(f"| {label} | {space} | " + " | ".join(cell[m] for m in methods) + " | "
+                     + " / ".join(f"{float(by[m]['grid_fit']):.2f}%" if m in by else "-" for m in methods) + " | "
+                     + " / ".join(by[m]["pieces"] if m in by else "-" for m in methods) + " | "
+                     + " / ".join(f"{float(by[m]['seconds']):.0f}" if m in by else "-" for m in methods) + " |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("csv", type=Path)
@@ -190,7 +214,11 @@ def main() -> None:
     parser.add_argument("--shapes", default=",".join(untuned_shapes.BUILDERS))
     parser.add_argument("--methods", default="none,defect,fine")
     parser.add_argument("--max-iter", type=int, default=500)
+    parser.add_argument("--table", action="store_true", help="print the CSV as a Markdown table and stop")
     args = parser.parse_args()
+    if args.table:
+        print(table(args.csv))
+        return
     args.csv.parent.mkdir(parents=True, exist_ok=True)
     _warm_up()
     methods = tuple(args.methods.split(","))

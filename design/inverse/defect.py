@@ -11,12 +11,15 @@ optimisation of eq. (4), each of `DesignConfig.correction_rounds` rounds
 2. takes the bias b(x) = G(x) - P(x), where G(x) is the design grid's release of the density that J_fit
    sees (eqs. 5-7);
 3. re-targets J_fit (eq. 4) at C* + b(x) and continues the optimiser from x for
-   `DesignConfig.correction_evals` evaluations at the final beta.
+   `DesignConfig.correction_evals` evaluations at `ROUND_BETA_FACTOR` times the final beta.
 
 At a fixed point G(x) = C* + b(x), so P(x) = C*: the print meets the target as the reference evaluator judges
-it. The bias changes slowly with x (it is the grid's and the cut's error, not the design), so a few rounds
-suffice. Every design a round starts from, and the last round's, is judged by its print; the result is
-the one-piece design whose print fits best (docs/design.md#physical-correction).
+it. The iteration converges when the bias changes little from one design to the next. The grid's error does
+not change much, but the cut's does at the final beta, where the grey layer the filter leaves is a large part of
+the bias and the optimiser can move it without moving the solid; the rounds therefore steepen the projection
+(the density they judge and continue is nearly binary), and a few rounds suffice. Every design a round starts
+from, and the last round's, is judged by its print; the result is the one-piece design whose print fits best
+(docs/design.md#physical-correction).
 
 `optimise_physical` runs the optimisation and the rounds; what a resume needs between rounds (the round in
 progress, its bias and start design, the best print so far) goes to a `RoundStore`, which
@@ -54,6 +57,12 @@ from design.inverse.status import DesignStatus
 from design.inverse.targets import Target
 
 log = logging.getLogger(__name__)
+
+ROUND_BETA_FACTOR = 2.0
+"""The rounds' projection steepness as a multiple of the run's final beta (at most `MAX_BETA`)
+(docs/design.md#physical-correction)."""
+MAX_BETA = 64.0
+"""The steepest projection a `DesignConfig` allows."""
 
 REFERENCE_PER_VOXEL = 3.0
 """Lattice cells of the rounds' reference releases (`design.forward.reference.reference_release`) per design
@@ -116,17 +125,23 @@ def check_print(objective: DesignObjective, problem: Problem, x: np.ndarray) -> 
 
 
 def retargeted(problem: Problem, config: DesignConfig, bias_mm3: np.ndarray) -> DesignObjective:
-    """The objective of eq. (4) with J_fit aimed at C* + ``bias_mm3``, at the run's final beta."""
+    """The objective of eq. (4) with J_fit aimed at C* + ``bias_mm3``, at the rounds' beta (`round_beta`)."""
     target = problem.target
     aimed = Target(target.tau_mm, target.released_mm3 + bias_mm3, target.source)
     objective = build_objective(replace(problem, target=aimed), config)
-    objective.beta = final_beta(config)
+    objective.beta = round_beta(config)
     return objective
 
 
 def final_beta(config: DesignConfig) -> float:
     """The projection steepness of the run's last beta stage (`design.inverse.optimize.beta_stages`)."""
     return beta_stages(config)[-1][0]
+
+
+def round_beta(config: DesignConfig) -> float:
+    """The projection steepness of the correction rounds, of their prints and of the run's outputs:
+    `ROUND_BETA_FACTOR` times the final beta, at most `MAX_BETA`."""
+    return min(MAX_BETA, ROUND_BETA_FACTOR * final_beta(config))
 
 
 @dataclass(frozen=True)
@@ -255,7 +270,7 @@ def optimise_physical(objective: DesignObjective, problem: Problem, config: Desi
         over (the last optimisation's best while they are not); ``best_value`` is the last optimisation's
         lowest J (NaN for a run resumed after its last round was judged).
     DesignObjective
-        The objective the outputs evaluate the density with (its beta the run's last).
+        The objective the outputs evaluate the density with (at the rounds' beta once they have begun).
     """
     n_rounds, first = correction_plan(config)
     if n_rounds == 0:
@@ -263,14 +278,14 @@ def optimise_physical(objective: DesignObjective, problem: Problem, config: Desi
                         should_stop=should_stop), objective
     t0 = time.perf_counter()
     running = _Running(store)
-    beta = final_beta(config)
+    beta = round_beta(config)
     state = rounds.load() if saved is not None else None
     if state is None:
         outcome = optimise(objective, problem, replace(config, max_iter=first), running, saved=saved, start=start,
                            on_iteration=on_iteration, should_stop=should_stop)
         if not outcome.status.finished:
             return replace(outcome, session_seconds=time.perf_counter() - t0), objective
-        objective.beta = beta  # the prints are judged at the final beta, as the outputs cut them
+        objective.beta = beta  # the prints are judged at the rounds' beta, as the outputs cut them
         state = _judged(None, check_print(objective, problem, outcome.best_x), config, outcome)
         rounds.save(state)
         history, saved, best_value = outcome.history, None, outcome.best_value

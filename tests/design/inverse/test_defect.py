@@ -122,7 +122,7 @@ def test_a_run_resumed_inside_a_round_repeats_the_uninterrupted_one(short_print,
     assert second.status == whole.status == "max_iter" and len(second.history) == 64
     np.testing.assert_array_equal(_history(second), _history(whole))
     np.testing.assert_array_equal(second.best_x, whole.best_x)
-    assert objective.beta == 12.0
+    assert objective.beta == 24.0  # the rounds' beta: twice the final one
     assert store.last.status == "max_iter" and np.array_equal(store.last.best_x, second.best_x.ravel())
 
 
