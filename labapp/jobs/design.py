@@ -17,6 +17,7 @@ from labapp.errors import UsageError
 from labapp.jobs.calibrate_sim import load_simcal
 from labapp.jobs.meshunits import design_memory_bytes, load_mesh_mm, require_memory, size_warnings
 from labapp.jobs.physical import design_from_target, is_physical
+from labapp.records.lock import folder_lock
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import timestamp_name
 
@@ -263,7 +264,8 @@ def design(config, out: str | Path, *, resume: bool = False, units: str | None =
         run["simcal"] = _stored_simcal(out, simcal)
         for w in _check_target_unchanged(out):
             warn(w)
-        return design_from_target(resumed, out, resume=True, **run)
+        with folder_lock(out):      # one writer: a second resume (sfr design, the GUI's launcher) is refused
+            return design_from_target(resumed, out, resume=True, **run)
     units = units or "mm"
     out = check_out(out, FolderKind.DESIGN, [config.target], replace=False)
     existed = out.exists()

@@ -245,3 +245,19 @@ def test_calibrate_sim_checks_every_mesh_before_the_first_simulation(tmp_path):
     with pytest.raises(SimCalError, match=r"set\.csv row 3: .*broken\.stl"):
         calibrate_sim(set_csv, None, tmp_path / "simcal", progress=lambda f, m: steps.append(m))
     assert steps == [] and not (tmp_path / "simcal").exists()
+
+
+def test_the_design_job_refuses_a_second_resume_of_one_folder(tmp_path):
+    """The job takes the lock itself, so the GUI's launcher and sfr design never resume one run together."""
+    from design.inverse.problem import DesignConfig
+    from labapp.jobs.design import design
+
+    out = tmp_path / "design"
+    design(DesignConfig(target="sphere", resolution=16, max_iter=3, physical_correction="none"), out)
+    proc = _holding(out)
+    try:
+        with pytest.raises(FolderLocked, match=f"is being written by process {proc.pid}"):
+            design(None, out, resume=True)
+    finally:
+        proc.kill()
+        proc.wait()
