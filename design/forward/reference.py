@@ -556,6 +556,8 @@ def _wetting(mesh: trimesh.Trimesh) -> tuple[np.ndarray, int]:
     # shell inside one faces the void of its innermost enclosing (odd-depth) shell
     region = np.zeros(n_shells, dtype=np.int64)
     voids = [s for s in range(n_shells) if depth[s] % 2 == 1]
+    if not voids:  # separate bodies, every one facing the bath
+        return np.zeros(len(mesh.faces)), 0
     for k, s in enumerate(voids):
         region[s] = k + 1
     for s in range(n_shells):

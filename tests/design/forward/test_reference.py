@@ -155,3 +155,14 @@ def test_rejects_bad_arguments():
         reference_release(mesh, [[0.0, np.nan]])
     with pytest.raises(DesignError, match="trimesh.Trimesh"):
         reference_release(np.zeros((3, 3)), [0.0])
+
+
+def test_separate_bodies_all_face_the_bath():
+    # two boxes apart: each releases as a box from tau = 0, no sealed void between them
+    a, b = (trimesh.creation.box((2.0, 3.0, 4.0)) for _ in range(2))
+    b.apply_translation([5.0, 0.1, 0.2])
+    tau = np.linspace(0.0, 1.2, 25)
+    ref = reference_release(trimesh.util.concatenate([a, b]), tau, cells=48)
+    one = 24.0 - np.prod(np.clip(np.array([2.0, 3.0, 4.0]) - 2 * tau[:, None], 0, None), axis=1)
+    assert ref.method == "exact-distance"
+    assert np.abs(ref.released_mm3 - 2 * one).max() <= TOLERANCE * ref.volume_mm3
