@@ -6,8 +6,9 @@ evaluator (`design.forward.reference`); the methods:
 
 - ``none``: a run without correction (``physical_correction="none"``, ``max_iter`` evaluations);
 - ``defect``: the default run: the first optimisation, then the defect-correction rounds of
-  `design.inverse.defect` within the same ``max_iter`` evaluations (``defect_final_beta`` in a CSV: rows of the
-  rounds run at the final beta rather than at `design.inverse.defect.ROUND_BETA_FACTOR` times it);
+  `design.inverse.defect` within the same ``max_iter`` evaluations (in a CSV, ``defect_final_beta`` and
+  ``defect_double_beta`` are rows of the rounds at the final beta and at twice it, where the default
+  `design.inverse.defect.ROUND_BETA_FACTOR` is the other);
 - ``fine``: the defect run's first optimisation, then a last stage on a grid twice as fine started from the
   upsampled design variables at the final beta, of half the rounds' evaluations (each costs about eight).
 
@@ -188,7 +189,8 @@ def table(path: Path) -> str:
     """The rows of a study CSV as a Markdown table: one line per shape and space, the methods side by side."""
     with path.open() as handle:
         rows = list(csv.DictReader(handle))
-    methods = [m for m in ("none", "defect_final_beta", "defect", "fine") if any(r["method"] == m for r in rows)]
+    methods = [m for m in ("none", "defect", "defect_final_beta", "defect_double_beta", "fine")
+               if any(r["method"] == m for r in rows)]
     cases: dict[tuple[str, str, str], dict[str, dict]] = {}
     for r in rows:
         cases.setdefault((r["shape"], r["space"], r["resolution"]), {})[r["method"]] = r

@@ -11,13 +11,14 @@ optimisation of eq. (4), each of `DesignConfig.correction_rounds` rounds
 2. takes the bias b(x) = G(x) - P(x), where G(x) is the design grid's release of the density that J_fit
    sees (eqs. 5-7);
 3. re-targets J_fit (eq. 4) at C* + b(x) and continues the optimiser from x for
-   `DesignConfig.correction_evals` evaluations at `ROUND_BETA_FACTOR` times the final beta.
+   `DesignConfig.correction_evals` evaluations at the final beta (twice it for nfc designs, `ROUND_BETA_FACTOR`).
 
 At a fixed point G(x) = C* + b(x), so P(x) = C*: the print meets the target as the reference evaluator judges
 it. The iteration converges when the bias changes little from one design to the next. The grid's error does
-not change much, but the cut's does at the final beta, where the grey layer the filter leaves is a large part of
-the bias and the optimiser can move it without moving the solid; the rounds therefore steepen the projection
-(the density they judge and continue is nearly binary), and a few rounds suffice. Every design a round starts
+not change much, but the cut's can: in a free 3D design at the final beta the grey layer the filter leaves is
+a large part of the bias and the optimiser moves it without moving the solid, so nfc rounds steepen the
+projection (the density they judge and continue is nearly binary). Extruded designs lost fit that way and keep
+the final beta. Every design a round starts
 from, and the last round's, is judged by its print; the result is the one-piece design whose print fits best
 (docs/design.md#physical-correction).
 
@@ -58,9 +59,9 @@ from design.inverse.targets import Target
 
 log = logging.getLogger(__name__)
 
-ROUND_BETA_FACTOR = 2.0
-"""The rounds' projection steepness as a multiple of the run's final beta (at most `MAX_BETA`)
-(docs/design.md#physical-correction)."""
+ROUND_BETA_FACTOR = {"nfc": 2.0}
+"""The rounds' projection steepness as a multiple of the run's final beta, per design space (1 for the others),
+at most `MAX_BETA` (docs/design.md#physical-correction)."""
 MAX_BETA = 64.0
 """The steepest projection a `DesignConfig` allows."""
 
@@ -140,8 +141,8 @@ def final_beta(config: DesignConfig) -> float:
 
 def round_beta(config: DesignConfig) -> float:
     """The projection steepness of the correction rounds, of their prints and of the run's outputs:
-    `ROUND_BETA_FACTOR` times the final beta, at most `MAX_BETA`."""
-    return min(MAX_BETA, ROUND_BETA_FACTOR * final_beta(config))
+    the space's `ROUND_BETA_FACTOR` times the final beta, at most `MAX_BETA`."""
+    return min(MAX_BETA, ROUND_BETA_FACTOR.get(config.space, 1.0) * final_beta(config))
 
 
 @dataclass(frozen=True)
