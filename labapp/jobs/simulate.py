@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from design import simulate as forward
+from design.errors import DesignError
 from design.files.meshio import DENSITY_SUFFIXES
 from design.files.pipeline import DEFAULT_RESOLUTION, SAMPLE_PREFIX, input_grid, mesh_grid
 from design.forward.reference import reference_release
@@ -83,7 +84,10 @@ def error_estimate(source: str, units: str, release, rho, dx_mm: float,
     import numpy as np
 
     if not _is_density(source):
-        ref = reference_release(_source_mesh(source, units), release.tau_mm)
+        try:
+            ref = reference_release(_source_mesh(source, units), release.tau_mm)
+        except DesignError as exc:  # a mesh the voxeliser takes but the evaluator does not (not closed)
+            return {"error_mm3": None, "error_fraction": None, "method": f"not estimated: {exc}"}
         diff = float(np.abs(release.released_mm3 - ref.released_mm3).max())
         return {"error_mm3": diff, "error_fraction": diff / ref.volume_mm3, "method": "reference evaluator",
                 "reference_volume_mm3": ref.volume_mm3, "reference_error_mm3": ref.error_mm3,

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from design.errors import DesignError
 from design.forward.reference import reference_release
 from design.geometry.shapes import sample_shape
 from labapp.cli.main import main
@@ -59,3 +60,14 @@ def test_errors_name_the_problem(tmp_path, capsys):
     assert "nothing.stl: no such file" in capsys.readouterr().err
     assert main(["simulate", "sample:nope", "--out", str(tmp_path / "o")]) == 2
     assert "unknown sample shape" in capsys.readouterr().err
+
+
+def test_a_mesh_the_reference_evaluator_refuses_is_simulated_without_an_estimate(tmp_path, monkeypatch):
+    import labapp.jobs.simulate
+
+    def refuse(mesh, tau_mm):
+        raise DesignError("reference release: the mesh has inconsistent face winding")
+    monkeypatch.setattr(labapp.jobs.simulate, "reference_release", refuse)
+    assert main(["simulate", "sample:sphere", "--resolution", "12", "--out", str(tmp_path / "o")]) == 0
+    error = json.loads((tmp_path / "o" / "summary.json").read_text())["error"]
+    assert error["error_mm3"] is None and error["method"].startswith("not estimated: reference release")
