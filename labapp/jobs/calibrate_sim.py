@@ -28,6 +28,7 @@ from labapp.records.audit import Action
 from labapp.records.audit import append as audit
 from labapp.records.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
 from labapp.records.jsonfile import read_format
+from labapp.records.lock import folder_lock
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import FRAMES_CSV, atomic_write, sha256_file
 
@@ -288,7 +289,15 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         except (AnalysisError, OSError, ValueError, KeyError) as exc:
             raise SimCalError(f"{bench_calibration}: not a bench calibration ({exc})") from exc
     meshes = _check_inputs(set_csv, rows, bench)
-    _make_out(out_dir)
+    with folder_lock(out_dir):      # one writer (sfr calibrate-sim, the GUI's wizard); made here, after the checks
+        _make_out(out_dir)
+        return _fit_and_write(set_csv, rows, bench, bench_calibration, meshes, out_dir, model, resolution,
+                              max_offset_s, say, operator)
+
+
+def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, meshes: dict, out_dir: Path,
+                   model: str, resolution: int, max_offset_s: float, say: Progress, operator) -> SimCalRun:
+    """The work of :func:`calibrate_sim` on checked inputs, into the locked ``out_dir``."""
     shapes, curves, dxs = [], [], []
     n = len(rows)
     for k, row in enumerate(rows):

@@ -36,16 +36,14 @@ def run(args: argparse.Namespace) -> int:
     """Calibrate, print the leave-one-out table and where the files are."""
     from labapp.cli import interrupt
     from labapp.jobs.calibrate_sim import calibrate_sim
-    from labapp.records.lock import folder_lock
 
     def progress(fraction: float, message: str) -> None:
         print(f"[{100 * fraction:3.0f}%] {message}", file=sys.stderr, flush=True)
         interrupt.check()   # a safe point: before a run is read and simulated, before a fit
 
     interrupt.set_hint(f"nothing written into {args.out}; rerun the same command to calibrate")
-    with folder_lock(args.out):
-        done = calibrate_sim(args.set_csv, args.calibration, args.out, model=args.model, resolution=args.resolution,
-                             max_offset_s=args.max_offset_s, progress=progress)
+    done = calibrate_sim(args.set_csv, args.calibration, args.out, model=args.model, resolution=args.resolution,
+                         max_offset_s=args.max_offset_s, progress=progress)
     print_summary(done.doc)
     out = Path(args.out)
     print(f"wrote {out / 'simcal.json'}, {out / 'loo.csv'}, {out / 'simcal.png'}")

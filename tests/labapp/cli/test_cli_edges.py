@@ -261,3 +261,18 @@ def test_the_design_job_refuses_a_second_resume_of_one_folder(tmp_path):
     finally:
         proc.kill()
         proc.wait()
+
+
+def test_the_calibrate_sim_job_takes_the_lock_after_its_checks(tmp_path):
+    from labapp.jobs.calibrate_sim import calibrate_sim
+
+    for name, top in (("a.csv", 1.0), ("b.csv", 1.2)):
+        (tmp_path / name).write_text(f"t_s,released_g\n0,0\n100,{top}\n")
+    out = tmp_path / "simcal"
+    proc = _holding(out)
+    try:
+        with pytest.raises(FolderLocked, match=f"is being written by process {proc.pid}"):
+            calibrate_sim(_set_file(tmp_path, ["a.csv", "b.csv"]), None, out)
+    finally:
+        proc.kill()
+        proc.wait()
