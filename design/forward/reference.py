@@ -623,18 +623,18 @@ def _lattice_curve(surface: _Surface, offset: np.ndarray, bounds: np.ndarray, h:
     deep = f > 0.5 * h
     meet = np.zeros(f.shape, dtype=bool)
     if np.any(offset > 0.0):
-        # with sealed voids: T by the shortest path from every wetted region, and the cells near a
-        # surface where another region's front arrives first, or the surface is a void's (a front from
-        # outside may erode its solid side before the void is wetted): those are split like ridges
-        wet = f > -h
+        # with sealed voids: where the closest surface faces the bath, T = f (every region's term is at
+        # least its distance, and the bath's is f); elsewhere T by the shortest path from every wetted
+        # region. The cells near a void's wall are split like ridges: a front from outside may erode
+        # their solid side before the void is wetted
+        wet = (f > -h) & (floor > 0.0)
         t_any, tri_any = surface.nearest_stored(centres[wet], offset)
         tri_t[wet] = tri_any
-        t_all = np.full(f.shape, np.inf)
-        t_all[wet] = t_any
-        arrive[deep] = t_all[deep]
-        grad[deep] = _sign_and_direction(centres[deep], tri_t[deep], surface.vx, surface.face_n, surface.edge_n,
-                                         surface.vert_n, surface.faces)[1]
-        meet = wet & ~deep & ((floor > 0.0) | (t_all < floor + np.abs(f) - 1e-9 * h))
+        far = wet & deep
+        arrive[far] = t_any[deep[wet]]
+        grad[far] = _sign_and_direction(centres[far], tri_t[far], surface.vx, surface.face_n, surface.edge_n,
+                                        surface.vert_n, surface.faces)[1]
+        meet = wet & ~deep
     floor[deep] = -np.inf
     # a cell whose arrival-time gradient turns by more than RIDGE_ANGLE_DEG against a face neighbour
     # straddles a ridge of T (the medial axis, or where fronts meet): T is not linear there, so the
