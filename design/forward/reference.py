@@ -56,14 +56,6 @@ MIN_CELLS = 16
 """Fewest cells along the longest side: the coarse estimate's lattice must still resolve the solid."""
 CELLS_PER_DESIGN_VOXEL = 4
 """`design_lattice`: lattice cells per voxel of a design grid whose target or print is evaluated."""
-
-
-def design_lattice(resolution: int) -> int:
-    """Lattice cells for the target and the print of a design at `resolution` voxels across its domain:
-    `CELLS_PER_DESIGN_VOXEL` per voxel, at most `DEFAULT_CELLS` (reached from resolution 40 on) and at
-    least `MIN_CELLS`, so that the small grids of quick runs and tests are not evaluated at the cost of
-    a production one; the stated error says what that costs in accuracy."""
-    return int(min(DEFAULT_CELLS, max(MIN_CELLS, CELLS_PER_DESIGN_VOXEL * int(resolution))))
 LEAF_SIZE = 4
 """Triangles per leaf of the bounding-volume hierarchy."""
 RIDGE_ANGLE_DEG = 20.0
@@ -74,6 +66,14 @@ SPLIT = 4
 BAND = 2.0
 """Lattice spacings from the surface within which points outside are given exact distances; farther
 out, they release nothing and are only classified."""
+
+
+def design_lattice(resolution: int) -> int:
+    """Lattice cells for the target and the print of a design at `resolution` voxels across its domain:
+    `CELLS_PER_DESIGN_VOXEL` per voxel, at most `DEFAULT_CELLS` (reached from resolution 40 on) and at
+    least `MIN_CELLS`, so that the small grids of quick runs and tests are not evaluated at the cost of
+    a production one; the stated error says what that costs in accuracy."""
+    return int(min(DEFAULT_CELLS, max(MIN_CELLS, CELLS_PER_DESIGN_VOXEL * int(resolution))))
 
 
 @dataclass(frozen=True)
