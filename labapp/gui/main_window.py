@@ -7,7 +7,9 @@ while something runs stops it and closes once it has finished.
 """
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import cv2
@@ -46,7 +48,7 @@ from labapp.acquisition.events import (
     StateChanged,
 )
 from labapp.acquisition.procedures import PreviewProcedure, RunConfig
-from labapp.acquisition.simbench import SimulatedBench, resume_clock
+from labapp.acquisition.simbench import SampleRelease, SimulatedBench, resume_clock, sample_release
 from labapp.acquisition.status import RunStatus
 from labapp.errors import UsageError
 from labapp.gui import dialogs, persist
@@ -70,6 +72,13 @@ TITLE_BAR_PX = 32
 LOG_HEIGHT_PX = 110
 GAP_FACTOR = 2.5
 """A frame arriving more than this many intervals after the previous one marks a gap on the plots."""
+
+
+def release_in_subprocess(sample: str) -> SampleRelease:
+    """The simulated sample's release, computed in a child process: its fast marching (scikit-fmm) holds the
+    GIL for seconds, which in a thread of this process would freeze the window all the same."""
+    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return pool.submit(sample_release, sample).result()
 
 
 def decode_preview(data: bytes | None = None, path: str | None = None) -> np.ndarray | None:
@@ -109,6 +118,7 @@ class MainWindow(QMainWindow):
         self.engine.subscribe(self.status.update)       # before the bridge: the status is current when a signal lands
         self.bridge = EngineBridge(self.engine, self)
         self.sim: SimulatedBench | None = None
+        self._release: SampleRelease | None = None
         self.procedure = None
         self.run_config: RunConfig | None = None
         self.latest_frame: str | None = None
@@ -157,7 +167,7 @@ class MainWindow(QMainWindow):
         self.log_dock.setWidget(self.messages)
         self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.log_dock)
         self.resizeDocks([self.log_dock], [LOG_HEIGHT_PX], Qt.Orientation.Vertical)
-        self.resizeDocks([self.bench_dock], [390], Qt.Orientation.Horizontal)
+        self.resizeDocks([self.bench_dock], [410], Qt.Orientation.Horizontal)
         self._menus()
         self.statusBar().addPermanentWidget(self.progress)
 
@@ -226,9 +236,23 @@ class MainWindow(QMainWindow):
             if shortcut is not None:
                 action.setShortcut(shortcut)
             file_menu.addAction(action)
+        bench_menu = self.menuBar().addMenu("&Bench")       # the panel's buttons, from the keyboard too
+        for text, button, shortcut in (("Connect / preview", self.devices.connect_button, "F5"),
+                                       ("Start run", self.controls.start_button, "F6"),
+                                       ("Object dropped", self.controls.drop_button, "F7")):
+            action = QAction(text, self)
+            action.setShortcut(QKeySequence(shortcut))
+            action.triggered.connect(button.click)
+            bench_menu.addAction(action)
         self.view_menu = self.menuBar().addMenu("&View")
         for dock in (self.bench_dock, self.log_dock):
             self.view_menu.addAction(dock.toggleViewAction())
+        self.view_menu.addSeparator()
+        for index, name in enumerate(("Live", "Runs", "Design")):
+            action = QAction(f"{name} tab", self)
+            action.setShortcut(QKeySequence(f"Ctrl+{index + 1}"))
+            action.triggered.connect(lambda checked=False, i=index: self.tabs.setCurrentIndex(i))
+            self.view_menu.addAction(action)
 
     def fit_to_screen(self, available: QRect | None = None) -> None:
         """Size the window to :data:`PREFERRED_SIZE`, or to the screen's available area (less a title bar) where
@@ -333,8 +357,11 @@ class MainWindow(QMainWindow):
     def _sim_current(self, water_g: float) -> bool:
         return self.sim is not None and self.sim.scene.water_g == water_g
 
-    def _new_sim(self, water_g: float, with_hotplate: bool, clock) -> SimulatedBench:
-        return SimulatedBench(clock, sample=self.sample, with_hotplate=with_hotplate, water_g=water_g)
+    def _new_sim(self, water_g: float, with_hotplate: bool, clock, release: SampleRelease | None = None
+                 ) -> SimulatedBench:
+        release = release or self._release
+        return SimulatedBench(clock, release=release, sample=self.sample, with_hotplate=with_hotplate,
+                              water_g=water_g)
 
     def _set_sim(self, sim: SimulatedBench | None) -> None:
         if self.sim is not None and self.sim is not sim:
@@ -365,7 +392,8 @@ class MainWindow(QMainWindow):
 
         def build(progress):
             if camera == SIMULATED:
-                return self._new_sim(bath.water_g, hotplate == SIMULATED, clock)
+                release = self._release or release_in_subprocess(self.sample)
+                return self._new_sim(bath.water_g, hotplate == SIMULATED, clock, release)
             return make_bench(camera, hotplate, cam_settings)
         self._then = then
         self.build_task = BackgroundTask(build, self)
@@ -382,6 +410,7 @@ class MainWindow(QMainWindow):
                 built.close()
             return
         if isinstance(built, SimulatedBench):
+            self._release = built.release             # the sample's release: computed once a session
             self._set_sim(built)
             built = built.bench()
         if then is not None:

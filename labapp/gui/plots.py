@@ -119,6 +119,7 @@ class PlotsPanel(QWidget):
         self.percent = QCheckBox("released as % of the weighed mass")
         self.percent.setToolTip("right axis in % of the object's weighed mass (needs the mass)")
         self.percent.setEnabled(False)
+        self.percent.setVisible(False)                # shown once a weighed mass is known
         self.percent.toggled.connect(self._scale_right_axis)
         self.set_water(water_g)
         self.splitter = QSplitter(orientation)
@@ -149,6 +150,7 @@ class PlotsPanel(QWidget):
         """The object's weighed mass (None: not weighed), for the % axis."""
         self.object_mass_g = mass_g if mass_g else None
         self.percent.setEnabled(self.object_mass_g is not None)
+        self.percent.setVisible(self.object_mass_g is not None)
         if self.object_mass_g is None:
             self.percent.setChecked(False)
         self._scale_right_axis()

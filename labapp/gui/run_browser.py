@@ -165,8 +165,8 @@ class RunBrowser(QWidget):
         self.splitter = QSplitter(Qt.Orientation.Vertical)
         self.splitter.addWidget(top)
         self.splitter.addWidget(self.views)
-        self.splitter.setStretchFactor(0, 2)
-        self.splitter.setStretchFactor(1, 3)
+        self.splitter.setStretchFactor(0, 1)
+        self.splitter.setStretchFactor(1, 1)
         self.splitter.setChildrenCollapsible(False)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(2, 2, 2, 2)
@@ -244,7 +244,7 @@ class RunBrowser(QWidget):
         for b in (self.analyse_button, self.verify_button):
             b.setEnabled(has)
         self.verify_button.setEnabled(snap is not None)
-        interrupted = has and snap.status == RecordStatus.INTERRUPTED
+        interrupted = snap is not None and snap.status == RecordStatus.INTERRUPTED
         self.resume_button.setEnabled(interrupted and snap.record.kind == RecordKind.RUN)
         self.finalise_button.setEnabled(interrupted)
         if snap is None:

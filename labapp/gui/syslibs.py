@@ -30,14 +30,15 @@ def _ldconfig_names() -> str:
         return ""
 
 
-def missing_xcb_libraries(find=ctypes.util.find_library) -> list[tuple[str, str]]:
-    """The (library, package) pairs of :data:`XCB_LIBRARIES` the dynamic loader cannot find."""
+def missing_xcb_libraries(find=ctypes.util.find_library, ldconfig=_ldconfig_names) -> list[tuple[str, str]]:
+    """The (library, package) pairs of :data:`XCB_LIBRARIES` that neither ``find`` (``ctypes.util.find_library``)
+    nor the loader's cache (``ldconfig -p``) knows."""
     listed = None
     missing = []
     for name, package in XCB_LIBRARIES:
         if find(name):
             continue
-        listed = _ldconfig_names() if listed is None else listed
+        listed = ldconfig() if listed is None else listed
         if f"lib{name}.so" not in listed:
             missing.append((name, package))
     return missing
@@ -54,11 +55,12 @@ def uses_xcb(environ=os.environ, platform: str = sys.platform) -> bool:
     return bool(environ.get("DISPLAY")) or not environ.get("WAYLAND_DISPLAY")
 
 
-def xcb_problem(environ=os.environ, platform: str = sys.platform, find=ctypes.util.find_library) -> str | None:
+def xcb_problem(environ=os.environ, platform: str = sys.platform, find=ctypes.util.find_library,
+                ldconfig=_ldconfig_names) -> str | None:
     """One line naming the missing libraries and the packages to install, or None when nothing is missing."""
     if not uses_xcb(environ, platform):
         return None
-    missing = missing_xcb_libraries(find)
+    missing = missing_xcb_libraries(find, ldconfig)
     if not missing:
         return None
     names = ", ".join(f"lib{name}" for name, _ in missing)
