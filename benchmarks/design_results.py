@@ -11,12 +11,12 @@ Last line: ``runs: <count>``.
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 from pathlib import Path
 
 import numpy as np
 
+from design.files.records import load_summary
 from design.inverse.rate import rate_deviation, rate_deviation_vs_target
 
 
@@ -44,11 +44,11 @@ def main() -> None:
           "| mass (g) | narrowest channel (mm) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for run in args.runs:
-        s = json.loads((run / "summary.json").read_text())
+        s = load_summary(run)
         iou = "-" if s["iou_with_source"] is None else f"{s['iou_with_source']:.3f}"
         chan = "none" if s["min_channel_mm"] is None else f"{s['min_channel_mm']:.2f}"
         print(f"| {run.name} | {s['space']} | {'x'.join(map(str, s['reduced_shape']))} | {s['iterations']} "
-              f"| {s['seconds_per_iteration']:.3f} | {s['rel_rmse_density']:.3%} | {s['rel_rmse_binary']:.3%} "
+              f"| {s['seconds_per_iteration']:.3f} | {s['rel_rmse_density']:.3%} | {s['rel_rmse_design_grid_binary']:.3%} "
               f"| {iou} | {s['pieces']} | {s['print_mass_g']:.3f} | {chan} |")
         if s["target"].startswith("analytic:zero-order"):
             curves = np.loadtxt(run / "curves.csv", delimiter=",", skiprows=1)

@@ -10,7 +10,6 @@ overhanging voxels (`design.fabrication.printability.overhangs`) in red. Last li
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
@@ -18,15 +17,16 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from design.fabrication.printability import overhangs
+from design.files.records import load_summary
 
 
 def row(run: Path) -> str:
-    s = json.loads((run / "summary.json").read_text())
+    s = load_summary(run)
     ico = s.get("ico") or {}
     share = ico.get("fab_time_share")
     return (f"| {s['target'].split(':', 1)[-1]} | {s['space']} | {s['full_shape']} | {s['iterations']} | "
             f"{s['seconds_per_iteration']:.2f} | {'-' if share is None else format(share, '.0%')} | "
-            f"{s['rel_rmse_density']:.2%} | {s['rel_rmse_binary']:.2%} | {s['overhang_fraction']:.2%} | "
+            f"{s['rel_rmse_density']:.2%} | {s['rel_rmse_design_grid_binary']:.2%} | {s['overhang_fraction']:.2%} | "
             f"{s['max_overhang_run_mm']:.2f} | {'-' if not ico else format(ico['J_fab'], '.3f')} | {s['pieces']} |")
 
 
@@ -58,7 +58,7 @@ def main() -> None:
     FigureCanvasAgg(fig)
     for col, (ico, nfc) in enumerate(pairs):
         for r, run in enumerate((nfc, ico)):
-            s = json.loads((run / "summary.json").read_text())
+            s = load_summary(run)
             with np.load(run / "density.npz") as data:
                 solid = data["solid"]
             ax = fig.add_subplot(2, len(pairs), r * len(pairs) + col + 1)

@@ -25,7 +25,6 @@ gives the median over the starts and the range, and the verdict compares medians
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
 from pathlib import Path
@@ -33,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from design.errors import DesignError
+from design.files.records import load_summary
 from design.files.rundir import run_design
 from design.geometry.shapes import SAMPLE_SHAPES
 from design.inverse.problem import DesignConfig
@@ -62,13 +62,13 @@ def run_one(target: str, space: str, optimizer: str, seed: int, args: argparse.N
                           **paper)  # one run per optimiser and seed
     folder = args.out / f"{target.split(':')[0]}_{space}_{optimizer}" / f"seed{seed}"
     result = run_design(config, folder, start=perturbed_start(seed) if seed else None)
-    s = json.loads((folder / "summary.json").read_text())
+    s = load_summary(folder)
     dev = (s.get("rate_dev_mid80") or {}).get("binary")
     curves = np.loadtxt(folder / "curves.csv", delimiter=",", skiprows=1)
     target_mm3, binary_mm3 = curves[-1, 1], curves[-1, 3]
     history = np.loadtxt(folder / "history.csv", delimiter=",", skiprows=1, ndmin=2)[:, 1]
     return {"evals": result.iterations, "J": result.best_value, "J_history": history, "density": s["rel_rmse_density"],
-            "binary": s["rel_rmse_binary"], "mass": binary_mm3 / target_mm3 - 1.0,
+            "binary": s["rel_rmse_design_grid_binary"], "mass": binary_mm3 / target_mm3 - 1.0,
             "rate_dev": dev if dev is not None else float("nan"), "per_eval": s.get("seconds_per_iteration") or 0.0}
 
 

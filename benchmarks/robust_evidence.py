@@ -14,7 +14,6 @@ Last line: ``rows: <count>``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -24,6 +23,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.robust_sources import BUILDERS, EXTRUSIONS, source  # noqa: E402
+from design.files.records import load_summary  # noqa: E402
 from design.geometry.shapes import SAMPLE_SHAPES  # noqa: E402
 
 
@@ -36,11 +36,11 @@ def _run(code_root: Path, target: str, space: str, resolution: int, max_iter: in
         if proc.returncode != 0 or not (out / "summary.json").exists():
             print(f"failed: {' '.join(cmd)}\n{proc.stderr[-2000:]}", file=sys.stderr)
             return None
-    return json.loads((out / "summary.json").read_text())
+    return load_summary(out)
 
 
 def _cell(s: dict | None) -> str:
-    return "-" if s is None else f"{s['rel_rmse_binary']:.2%} / {s['pieces']}"
+    return "-" if s is None else f"{s['rel_rmse_design_grid_binary']:.2%} / {s['pieces']}"
 
 
 def main() -> None:
