@@ -2,12 +2,11 @@
 
 Reads each run folder's ``design.stl``, ``density.npz`` and ``curves.csv`` (nothing is written into
 the folders), re-voxelises the mesh over the run's design domain on voxels 1, 2, ... times smaller
-than the design grid's (`design.files.outputs.fine_release`, the same function as the ``fine`` curve of
-`sfr design`) and prints one markdown row per run: the rate deviation over the solid's own middle
-80% (`design.inverse.rate.rate_deviation`) and the rel. RMSE against the run's target at each factor.
-Factor 1 reproduces the run's own binary solid. The rel. RMSE is against the run's ``target_mm3``,
-which for a mesh target is the source on the design grid; `sfr design`'s own ``rel_rmse_fine``
-compares with the source re-simulated on the finer grid too (``fine_target_mm3``).
+than the design grid's (`design.files.outputs.fine_release`) and prints one markdown row per run: the
+rate deviation over the solid's own middle 80% (`design.inverse.rate.rate_deviation`) and the rel. RMSE
+against the run's target at each factor. Factor 1 reproduces the run's own binary solid. The rel. RMSE
+is against the run's ``target_mm3``: a source's physical release (runs of summary format 2), or its
+release on the design grid (format 1).
 
     python benchmarks/printed_grid.py RUN_FOLDER [RUN_FOLDER ...] [--factors 1 2 3] [--figure PNG]
 
