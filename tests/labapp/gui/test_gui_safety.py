@@ -288,3 +288,21 @@ def test_setting_boxes_keep_what_is_typed(qtbot):
     assert box.value() == 1400 and "got 1400 rpm" in box.problem()
     engine = Engine()
     assert engine.stop_reason == ""
+
+
+def test_the_wizard_redoes_the_last_level_and_refuses_a_negative_mass(qtbot, tmp_path):
+    from labapp.acquisition.calseries import RedoLevel
+    from labapp.acquisition.events import PromptKind
+
+    win = MainWindow(tmp_path / "runs", simulate=True, speed=200.0)
+    qtbot.addWidget(win)
+    try:
+        win.wizard.set_asking(True, "enter the cumulative mass")
+        assert win.wizard.redo_button.isEnabled() and win.wizard.capture_button.isEnabled()
+        _type(qtbot, win.wizard.mass, "-0.5")
+        assert not win.wizard.capture_button.isEnabled() and "must be >= 0 g" in win.wizard.mass.problem()
+        win.wizard.redo_button.click()
+        assert isinstance(win.engine._answers[PromptKind.ADDED_MASS], RedoLevel)
+        assert not win.wizard.redo_button.isEnabled()              # until the series asks again
+    finally:
+        win.shutdown()
