@@ -1,4 +1,9 @@
-"""`sfr lab`: the bench GUI (PySide6 + pyqtgraph)."""
+"""`sfr lab`: the bench GUI (PySide6 + pyqtgraph).
+
+Ctrl-C in its terminal (SIGINT) and SIGTERM close the window as closing it mid-run does, without asking: a
+run is interrupted (heating and stirring off, the folder left resumable); the exit status is then 130
+(SIGINT) or 143 (SIGTERM); see :class:`labapp.gui.app.SignalStop`.
+"""
 from __future__ import annotations
 
 import argparse
@@ -7,7 +12,8 @@ from labapp.acquisition.settings import SIM_SPEED
 from labapp.cli.argtypes import add_setting, positive_float
 
 NAME = "lab"
-HELP = "start the bench GUI; --simulate runs it on the simulated camera, hotplate emulator and sample object"
+HELP = ("start the bench GUI; --simulate runs it on the simulated camera, hotplate emulator and sample object; "
+        "Ctrl-C or SIGTERM interrupt a run resumably (heating off) and exit with 130 or 143")
 RECORDS = "optional"
 """Acts as ``--operator`` or ``$SFR_OPERATOR`` when given; else the GUI asks for the operator and their password
 (:mod:`labapp.gui.login`)."""
