@@ -27,14 +27,14 @@ done
 DOCK_RUN_TAB="96 68"
 DOCK_CAL_TAB="164 68"
 DOCK_DEV_TAB="37 68"
-RUNS_FIRST_ROW="560 112"
-DESIGN_TARGET="760 80"
-DESIGN_RESOLUTION="800 136"
-DESIGN_MAX_ITER="950 136"
-DESIGN_CHECK="500 189"
-DESIGN_START="590 189"
-DESIGN_SWEEP_TAB="530 248"
-DESIGN_DESIGN_TAB="470 248"
+RUNS_FIRST_ROW="600 95"
+DESIGN_TARGET="740 79"
+DESIGN_RESOLUTION="740 136"
+DESIGN_MAX_ITER="890 136"
+DESIGN_CHECK="468 189"
+DESIGN_START="560 189"
+DESIGN_SWEEP_TAB="518 248"
+DESIGN_DESIGN_TAB="454 248"
 
 cleanup() {
     [[ -n ${LAB:-} ]] && kill "$LAB" 2>/dev/null || true
@@ -65,35 +65,37 @@ shot() {   # shot NAME: the whole screen
     echo "  $OUT/$1.png"
 }
 click() { xdotool mousemove $1 $2 click 1; sleep 0.5; }
-key() { xdotool key --window "$WIN" "$@"; sleep 0.5; }
+key() { xdotool key "$@"; sleep 0.5; }      # to the focused window, as typed
 
 "$SFR" lab --simulate --speed "$SPEED" --data "$WORK/data" --calibration "$CAL" >"$WORK/lab.log" 2>&1 &
 LAB=$!
 WIN=$(xdotool search --sync --name "Shape from Release" | head -1)
-xdotool windowactivate --sync "$WIN" || true
+xdotool windowactivate --sync "$WIN" 2>/dev/null || true
 sleep 3
+click 640 9                        # the title bar: the window has the keyboard focus
 
 echo "connect"
-key F5
-shot 01_devices_connected 12
+key F5                            # the first Connect computes the sample's dissolution: tens of seconds
+shot 01_devices_connecting 2
+shot 02_devices_connected 45
 
 echo "start a run"
 click $DOCK_RUN_TAB
 key F6
-shot 02_run_heating 15
+shot 03_run_heating 15
 for _ in $(seq 1 40); do          # the bath is stable when "Object dropped" is enabled: press it until it is
     key F7
     sleep 2
 done
-shot 03_live_run 20
+shot 04_live_run 20
 
 click $DOCK_CAL_TAB
-shot 04_calibration_tab
+shot 05_calibration_tab
 click $DOCK_DEV_TAB
 
 key ctrl+2
 click $RUNS_FIRST_ROW
-shot 05_runs 3
+shot 06_runs 3
 
 key ctrl+3
 click $DESIGN_TARGET
@@ -105,20 +107,21 @@ click $DESIGN_MAX_ITER
 key ctrl+a
 xdotool type "200"
 click $DESIGN_CHECK
-shot 06_design_target_checked 8
+shot 07_design_target_checked 8
 click $DESIGN_START
-shot 07_design_running 40
+shot 08_design_running 40
 click $DESIGN_SWEEP_TAB
-shot 08_design_sweep
+shot 09_design_sweep
 click $DESIGN_DESIGN_TAB
 
 key ctrl+1
-shot 09_live_later 5
+shot 10_live_later 5
 
-echo "quit while the run and the design go on"
+echo "quit while the run goes on: the window asks, Escape keeps it running; SIGTERM stops it as closing does"
 key ctrl+q
-shot 10_quit_asks 2
-key alt+y
-shot 11_stopping 1
+shot 11_quit_asks 2
+key Escape
+kill -TERM "$LAB"
+shot 12_stopping 1
 for _ in $(seq 1 60); do kill -0 "$LAB" 2>/dev/null || break; sleep 1; done
 echo "done: $(ls "$OUT" | wc -l) screenshots in $OUT"

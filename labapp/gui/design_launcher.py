@@ -39,6 +39,7 @@ from design.files.records import load_config
 from design.files.targets_io import load_problem
 from design.geometry.shapes import SAMPLE_SHAPES
 from design.inverse.problem import DesignConfig
+from design.inverse.status import DesignStatus
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.plots import hmm, time_plot
 from labapp.gui.sweep_panel import SweepPanel
@@ -105,7 +106,7 @@ def preview_target(target: str, space: str, resolution: int, simcal: SimCalFile 
                          problem.feasibility.text(), problem.feasibility.feasible, measured, tuple(problem.warnings))
 
 
-class SolidView(pg.GraphicsLayoutWidget):
+class SolidView(QWidget):
     """Three orthogonal mid-slices of a voxel solid (top, front, side) with a scale bar in mm; during a design
     the first view shows the mid-slice of the design variables."""
 
@@ -113,15 +114,22 @@ class SolidView(pg.GraphicsLayoutWidget):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
+        self.graphics = pg.GraphicsLayoutWidget()
         self.views, self.images, self.bars = [], [], []
         for i, title in enumerate(self.TITLES):
-            self.addLabel(title, row=0, col=i)
-            view = self.addViewBox(row=1, col=i, lockAspect=True, invertY=True)
+            row, col = divmod(i, 2)
+            self.graphics.addLabel(title, row=2 * row, col=col)
+            view = self.graphics.addViewBox(row=2 * row + 1, col=col, lockAspect=True, invertY=True)
             image = pg.ImageItem(axisOrder="row-major")
             view.addItem(image)
             self.views.append(view)
             self.images.append(image)
-        self.caption = self.addLabel("", row=2, col=0, colspan=3)
+        self.caption = QLabel("the printed solid appears here when a design ends")
+        self.caption.setWordWrap(True)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(self.graphics, 1)
+        layout.addWidget(self.caption)
 
     def show_variables(self, image: np.ndarray) -> None:
         """The mid-slice of the design variables (0..1), during a design."""
@@ -150,7 +158,7 @@ class SolidView(pg.GraphicsLayoutWidget):
             bar.anchor((1, 1), (1, 1), offset=(-12, -12))
             self.bars.append(bar)
         self.caption.setText(f"printed solid: {nx} x {ny} x {nz} voxels of {dx_mm:.3g} mm "
-                             f"({nx * dx_mm:.1f} x {ny * dx_mm:.1f} x {nz * dx_mm:.1f} mm)")
+                             f"({nx * dx_mm:.1f} x {ny * dx_mm:.1f} x {nz * dx_mm:.1f} mm), mid-slices")
 
 
 def _nice_length(mm: float) -> float:
@@ -447,7 +455,7 @@ class DesignLauncher(QWidget):
         self.start_button.setEnabled(True)
         self.resume_button.setEnabled(True)
         self.stop_button.setEnabled(False)
-        stopped = str(result.status) == "interrupted"
+        stopped = not DesignStatus(result.status).finished
         self.progress.setFormat("stopped: Resume... continues it" if stopped else "done")
         self.progress.setValue(self.progress.maximum() if not stopped else self.progress.value())
         curves = read_curves(result.out_dir / "curves.csv")

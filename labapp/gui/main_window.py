@@ -47,6 +47,7 @@ from labapp.acquisition.events import (
     PromptKind,
     StateChanged,
 )
+from labapp.acquisition.methods import load_method, method_from_config, save_method
 from labapp.acquisition.procedures import PreviewProcedure, RunConfig
 from labapp.acquisition.simbench import SampleRelease, SimulatedBench, resume_clock, sample_release
 from labapp.acquisition.status import RunStatus
@@ -279,10 +280,12 @@ class MainWindow(QMainWindow):
             except Exception as exc:      # a file changed since: say so, start without it
                 self.on_message("warning", f"the last simulation calibration {simcal} does not load: {exc}")
 
-    def apply_run_settings(self, config: RunConfig, calibration: str) -> None:
-        """Show ``config``'s run and bath settings (not the object's) and ``calibration`` in the forms."""
+    def apply_run_settings(self, config: RunConfig, calibration: str, name: bool = True) -> None:
+        """Show ``config``'s run and bath settings (not the object's; its name if ``name``) and ``calibration``
+        in the forms."""
         c = self.controls
-        c.name.setText(config.name)
+        if name:
+            c.name.setText(config.name)
         c.interval.set_stored(config.interval_s)
         c.max_hours.set_stored(config.max_duration_s)
         c.stop_on_steady.setChecked(config.stop_on_steady)
@@ -296,7 +299,8 @@ class MainWindow(QMainWindow):
         return self.controls.config(self.devices.bath())
 
     def save_method(self, path: str | None = None) -> Path | None:
-        """Save the run and bath settings and the calibration as a method template."""
+        """Save the run and bath settings and the calibration as a method file
+        (``labapp.acquisition.methods``: what ``sfr method save`` writes and ``sfr run --method`` runs)."""
         try:
             config = self.current_run_settings()
         except Exception as exc:
@@ -305,30 +309,37 @@ class MainWindow(QMainWindow):
         if not path:
             folder = self.data_dir / "methods"
             folder.mkdir(parents=True, exist_ok=True)
-            path, _ = QFileDialog.getSaveFileName(self, "save method", str(folder / f"{config.name}{persist.METHOD_SUFFIX}"),
-                                                  f"method (*{persist.METHOD_SUFFIX})")
+            path, _ = QFileDialog.getSaveFileName(self, "save method", str(folder / f"{config.name}.json"),
+                                                  "method (*.json)")
             if not path:
                 return None
-        saved = persist.write_method(Path(path), config, self.controls.calibration.text().strip())
+        path = Path(path).with_suffix(".json")
+        calibration = self.controls.calibration.text().strip() or None
+        try:
+            saved = save_method(method_from_config(path.stem, config, calibration), path)
+        except UsageError as exc:                    # MethodError, OperatorError: one line naming the problem
+            self.on_message("error", f"cannot save the method: {exc}")
+            return None
         self.on_message("info", f"method saved: {saved}")
         return saved
 
     def load_method(self, path: str | None = None) -> bool:
-        """Fill the forms from a method template."""
+        """Fill the forms from a method file (its settings over the defaults, its calibration)."""
         if not path:
             path, _ = QFileDialog.getOpenFileName(self, "load method", str(self.data_dir / "methods"),
-                                                  f"method (*{persist.METHOD_SUFFIX});;JSON (*.json)")
+                                                  "method (*.json)")
             if not path:
                 return False
         try:
-            config, calibration = persist.read_method(Path(path))
+            method = load_method(Path(path))
+            config = method.apply(RunConfig())
         except UsageError as exc:
             self.on_message("error", str(exc))
             return False
-        self.apply_run_settings(config, calibration)
-        if calibration and not Path(calibration).is_file():
-            self.on_message("warning", f"{path}: its calibration {calibration} does not exist; choose one")
-        self.on_message("info", f"method loaded: {path}")
+        self.apply_run_settings(config, method.calibration_file or "", name=False)   # a method names no run
+        if method.calibration_file and not Path(method.calibration_file).is_file():
+            self.on_message("warning", f"{path}: its calibration {method.calibration_file} does not exist; choose one")
+        self.on_message("info", f"method {method.name!r} loaded: {path}")
         return True
 
     def lock_settings(self, locked: bool) -> None:

@@ -1,14 +1,12 @@
-"""What the bench application remembers: the last run's settings and the last simulation calibration
-(``QSettings``), and method templates (JSON files of a run's settings and its calibration).
-
-A method stores the run settings in ``run.json``'s flat layout (``labapp.acquisition.settings.to_record``) and
-reads them back through ``from_record``, so a template and a run folder describe a run the same way.
+"""What the bench application remembers between sessions (``QSettings``): the last run's settings, in
+``run.json``'s flat layout (``labapp.acquisition.settings.to_record`` / ``from_record``), and the last
+simulation calibration. Method templates are ``labapp.acquisition.methods`` files, the ones ``sfr method``
+and ``sfr run --method`` use.
 """
 from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
 from typing import Any
 
 from PySide6.QtCore import QSettings
@@ -16,13 +14,10 @@ from PySide6.QtCore import QSettings
 from labapp.acquisition.procedures import RunConfig
 from labapp.acquisition.settings import from_record, to_record
 from labapp.errors import UsageError
-from labapp.records.jsonfile import read_format
 
 ORGANISATION, APPLICATION = "shape-from-release", "sfr-lab"
 SETTINGS_ENV = "SFR_LAB_SETTINGS"
 """An INI file to keep the GUI's settings in instead of the user's (tests, several benches on one account)."""
-METHOD_FORMAT = "sfr-method/1"
-METHOD_SUFFIX = ".method.json"
 LAST_RUN, LAST_CALIBRATION, LAST_SIMCAL = "run/last", "run/calibration", "design/simcal"
 NOT_REMEMBERED = ("object_mass_g", "object_name", "notes")
 """Run settings that belong to one object: never carried over to the next run or into a template."""
@@ -57,22 +52,3 @@ def last_run(settings: QSettings) -> tuple[RunConfig, str] | None:
         return from_record(RunConfig, json.loads(str(text))), str(settings.value(LAST_CALIBRATION, "") or "")
     except (ValueError, TypeError, UsageError):
         return None
-
-
-def write_method(path: Path, config: RunConfig, calibration: str | None) -> Path:
-    """Save a method template: the run and bath settings and the bench calibration."""
-    path = Path(path)
-    if not path.name.endswith(METHOD_SUFFIX):
-        path = path.with_name(path.name.removesuffix(".json") + METHOD_SUFFIX)
-    doc = {"format": METHOD_FORMAT, "run": run_record(config), "calibration": calibration or None}
-    path.write_text(json.dumps(doc, indent=2) + "\n")
-    return path
-
-
-def read_method(path: Path) -> tuple[RunConfig, str]:
-    """A method template's run settings and calibration path (UsageError naming the file when unusable)."""
-    doc = read_format(Path(path), METHOD_FORMAT, "a method template", "save one with File > Save method...")
-    try:
-        return from_record(RunConfig, dict(doc.get("run") or {})), str(doc.get("calibration") or "")
-    except (TypeError, ValueError) as exc:
-        raise UsageError(f"{path}: run settings: {exc}") from exc

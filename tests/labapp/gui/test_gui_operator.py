@@ -144,7 +144,9 @@ def test_run_progress_and_marks_from_engine_events(qtbot, tmp_path, monkeypatch)
         win.shutdown()
 
 
-def test_settings_persist_methods_load_and_lock(qtbot, tmp_path):
+def test_settings_persist_methods_load_and_lock(qtbot, tmp_path, monkeypatch):
+    from labapp.records.operators import DEMO_OPERATOR, OPERATOR_ENV
+    monkeypatch.setenv(OPERATOR_ENV, DEMO_OPERATOR)               # a method names who made it
     win = _window(qtbot, tmp_path / "runs")
     win.controls.name.setText("pill-A")
     win.controls.interval.set_stored(30.0)
@@ -152,8 +154,8 @@ def test_settings_persist_methods_load_and_lock(qtbot, tmp_path):
     config = win.current_run_settings()
     persist.remember_run(win.settings, config, "")
     method = win.save_method(str(tmp_path / "dissolution"))
-    assert method.name == "dissolution.method.json"
-    assert json.loads(method.read_text())["format"] == persist.METHOD_FORMAT
+    assert method.name == "dissolution.json"
+    assert json.loads(method.read_text())["settings"]["setpoint_c"] == 37.0
     win.shutdown()
 
     again = _window(qtbot, tmp_path / "runs")                 # the next session starts where this one left off
@@ -162,8 +164,8 @@ def test_settings_persist_methods_load_and_lock(qtbot, tmp_path):
     again.controls.name.setText("other")
     again.devices.bath_fields["setpoint_c"].set_stored(50.0)
     assert again.load_method(str(method))
-    assert again.controls.name.text() == "pill-A" and again.devices.bath_fields["setpoint_c"].stored() == 37.0
-    bad = tmp_path / "bad.method.json"
+    assert again.controls.name.text() == "other" and again.devices.bath_fields["setpoint_c"].stored() == 37.0
+    bad = tmp_path / "bad.json"
     bad.write_text('{"format": "something else"}')
     assert not again.load_method(str(bad)) and str(bad) in again.messages.toPlainText()
     again.lock_settings(True)
