@@ -98,9 +98,10 @@ class DevicePanel(QWidget):
         buttons = QHBoxLayout()
         buttons.addWidget(self.connect_button)
         layout = QVBoxLayout(self)
-        for w in (devices, settings, bath, readout):
+        layout.addWidget(devices)
+        layout.addLayout(buttons)                 # Connect under the device choice: in view on a small screen
+        for w in (readout, settings, bath):
             layout.addWidget(w)
-        layout.addLayout(buttons)
         layout.addStretch(1)
         self.stale_timer = QTimer(self)
         self.stale_timer.timeout.connect(self.check_stale)
