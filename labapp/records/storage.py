@@ -6,7 +6,9 @@ A run folder (format in ``docs/formats.md``) holds
 - ``frames.csv``: one row per frame, appended and fsync'ed row by row, with the SHA-256 of the file;
 - ``events.log``: the event log, appended and flushed line by line (tab-separated);
 - ``run.json``: the run's settings and state, rewritten atomically (temp file + rename); read through
-  :func:`read_record` as a :class:`labapp.records.runrecord.RunRecord`.
+  :func:`read_record` as a :class:`labapp.records.runrecord.RunRecord`. It holds a seal
+  (:mod:`labapp.records.seal`) of its own fields, of each ``frames.csv`` row and of ``masses.csv``,
+  rewritten with it, so that verification names any of them edited afterwards.
 
 After a crash or power cut the folder is still a valid run: every row of ``frames.csv`` names a complete
 file, a half-written last row (a torn write) is dropped when the folder is reopened, and stray ``.part``
@@ -37,12 +39,15 @@ from labapp.records import operators
 from labapp.records.audit import AUDIT_FILE, FINISH_ACTIONS, SIGNATURES_FILE, Action
 from labapp.records.audit import append as audit
 from labapp.records.runrecord import FORMAT, Gap, RecordFormatError, RecordKind, RecordStatus, RunRecord
+from labapp.records.seal import SEAL_KEY, make_seal, seal_findings
 
 log = logging.getLogger(__name__)
 
 FRAMES_CSV = "frames.csv"
 EVENTS_LOG = "events.log"
 RUN_JSON = "run.json"
+MASSES_CSV = "masses.csv"
+ANALYSIS_DIR = "analysis"
 FRAME_COLUMNS = ("file", "t_s", "t_unix_s", "plate_c", "probe_c", "speed_rpm", "sha256", "bytes")
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
@@ -327,9 +332,10 @@ class RunFolder:
         return self.record.status
 
     def update(self, **fields: Any) -> None:
-        """Merge ``fields`` into ``run.json`` and rewrite it atomically."""
+        """Merge ``fields`` into ``run.json`` and rewrite it atomically, sealed with the folder's manifests as
+        they are now (call it with no fields after writing ``masses.csv``)."""
         self.meta.update(fields)
-        atomic_write(self.path / RUN_JSON, json.dumps(self.meta, indent=2, sort_keys=True).encode())
+        _write_sealed(self.path, self.meta)
 
     def event(self, level: str, kind: str, message: str, t_s: float | None = None) -> None:
         """Append ``time<TAB>t_s<TAB>LEVEL<TAB>kind<TAB>message`` to ``events.log``, flushed and fsync'ed."""
@@ -373,6 +379,7 @@ class RunFolder:
         self._csv.flush()
         os.fsync(self._csv.fileno())
         self.frames.append(record)
+        self.update()
         return record
 
     def add_gap(self, after_t_s: float, before_t_s: float, reason: str) -> None:
@@ -403,6 +410,16 @@ class RunFolder:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _write_sealed(path: Path, meta: dict[str, Any]) -> None:
+    """Write ``meta`` as the ``run.json`` of the folder ``path``, with the seal of it and of the folder's
+    ``frames.csv`` and ``masses.csv`` as they are on disk."""
+    frames = path / FRAMES_CSV
+    masses = path / MASSES_CSV
+    meta[SEAL_KEY] = make_seal(meta, frames.read_bytes() if frames.exists() else b"",
+                               masses.read_bytes() if masses.exists() else None)
+    atomic_write(path / RUN_JSON, json.dumps(meta, indent=2, sort_keys=True).encode())
 
 
 def _writer() -> dict[str, Any]:
@@ -440,7 +457,7 @@ def create_run(data_dir: Path, name: str, meta: dict[str, Any]) -> RunFolder:
         raise StorageError(f"could not find a free run folder name for {base!r} in {data_dir}")
     full = dict(meta, name=name, status=RecordStatus.RUNNING, created_unix_s=time.time(), gaps=[], format=FORMAT,
                 operator=operator, **_writer())
-    atomic_write(path / RUN_JSON, json.dumps(full, indent=2, sort_keys=True).encode())
+    _write_sealed(path, full)
     run = RunFolder(read_run(path))
     run.event("info", "created", f"run folder {path.name} created")
     audit(path, Action.START, f"{meta.get('kind', 'run')} {path.name} created", operator=operator)
@@ -536,8 +553,6 @@ class VerifyReport:
         return out
 
 
-ANALYSIS_DIR = "analysis"
-MASSES_CSV = "masses.csv"
 
 
 def _entries(path: Path) -> list[Path]:
@@ -593,6 +608,13 @@ def _verify_record(path: Path) -> VerifyReport:
     pending = unrecorded_frames(snap)
     notes = [f"{name} was written just before the process stopped and never recorded; resuming or finalising "
              f"the run keeps it aside in {UNRECORDED_DIR}/" for name in pending]
+    masses = path / MASSES_CSV
+    frames = path / FRAMES_CSV
+    altered, seal_notes = seal_findings(snap.record.stored, frames.read_bytes() if frames.is_file() else b"",
+                                        masses.read_bytes() if masses.is_file() else None,
+                                        unfinished=snap.status in (RecordStatus.RUNNING, RecordStatus.INTERRUPTED))
+    problems += altered
+    notes += seal_notes
     label = "calibration-series record" if kind == RecordKind.CALIBRATION_SERIES else "acquisition run record"
     return VerifyReport(snap.path, label, snap.status, len(snap.frames), missing, mismatched, duplicates, unlisted,
                         list(snap.record.gaps), snap.torn_bytes, problems, notes)
@@ -710,7 +732,8 @@ def verify_run(path: Path) -> VerifyReport:
 
     A record written by this module (``run.json`` with ``writer_pid``/``created_unix_s`` and a checksummed
     ``frames.csv``): every listed frame and file against its SHA-256, a manifest (``run.json``,
-    ``frames.csv``, ``events.log``, ``masses.csv``) missing or damaged anywhere, files present but
+    ``frames.csv``, ``events.log``, ``masses.csv``) missing or damaged anywhere, a ``run.json`` field, a
+    ``frames.csv`` row or ``masses.csv`` changed since the writer sealed them, files present but
     unlisted (only the ``analysis`` subfolder may be added), a kind other than ``run`` or
     ``calibration-series``. Any other folder is verified as a frames folder without checksums, a
     calibration series, or a plain image folder (see :func:`_verify_unrecorded`).

@@ -114,3 +114,55 @@ def test_disk_space_check_refuses_a_run_that_cannot_fit(tmp_path):
 def test_reading_a_non_run_folder_is_a_clear_error(tmp_path):
     with pytest.raises(StorageError, match="not a readable run folder"):
         read_run(tmp_path)
+
+
+@pytest.mark.parametrize("field, value", [("water_g", 450.0), ("object_mass_g", 2.0), ("crop", {"x": 1, "y": 2, "size": 9})])
+def test_verify_names_a_metadata_field_edited_after_the_run(tmp_path, field, value):
+    run = _run_with_frames(tmp_path)
+    run.update(object_mass_g=1.75, crop={"x": 0, "y": 0, "size": 10})
+    run.finish(RecordStatus.COMPLETE)
+    run.close()
+    assert verify_run(run.path).ok
+    meta = json.loads((run.path / "run.json").read_text())
+    meta[field] = value
+    (run.path / "run.json").write_text(json.dumps(meta, indent=2))
+    report = verify_run(run.path)
+    assert not report.ok and f"run.json field '{field}' was changed after it was recorded" in report.reason
+
+
+@pytest.mark.parametrize("column, new", [(1, "12.000"), (3, "65.00")])
+def test_verify_names_a_frame_row_edited_after_the_run(tmp_path, column, new):
+    run = _run_with_frames(tmp_path)
+    run.finish(RecordStatus.COMPLETE)
+    run.close()
+    path = run.path / "frames.csv"
+    lines = path.read_text().splitlines()
+    cells = lines[2].split(",")
+    cells[column] = new                          # frame_000001's time or plate temperature
+    lines[2] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    report = verify_run(run.path)
+    assert not report.ok and "frames.csv line 3, row 3 (frame_000001.jpg), was changed" in report.reason
+
+
+def test_verify_names_added_fields_lost_rows_and_changed_masses(tmp_path):
+    run = create_run(tmp_path, "series", {"kind": "calibration-series", "water_g": 500.0})
+    for k in range(3):
+        run.add_frame(f"frame_{k:06d}.jpg", bytes([k]) * 100, t_s=11.0 * k, t_unix_s=1e9 + 11 * k)
+    (run.path / "masses.csv").write_text("file,added_mass_g\nframe_000000.jpg,0.000000\n")
+    run.update()
+    run.finish(RecordStatus.COMPLETE)
+    run.close()
+    assert verify_run(run.path).ok
+    (run.path / "masses.csv").write_text("file,added_mass_g\nframe_000000.jpg,0.001000\n")
+    assert "masses.csv was changed" in verify_run(run.path).reason
+    meta = json.loads((run.path / "run.json").read_text())
+    meta["note"] = "added by hand"
+    (run.path / "run.json").write_text(json.dumps(meta))
+    assert "run.json field 'note' was added after the run was recorded" in verify_run(run.path).reason
+    del meta["note"]
+    (run.path / "run.json").write_text(json.dumps(meta))
+    (run.path / "masses.csv").write_text("file,added_mass_g\nframe_000000.jpg,0.000000\n")
+    path = run.path / "frames.csv"
+    path.write_text("".join(path.read_text().splitlines(keepends=True)[:-1]))
+    assert "frames.csv lost 1 recorded row(s)" in " ".join(verify_run(run.path).problems)

@@ -52,7 +52,7 @@ def test_a_resumed_record_keeps_its_layout(tmp_path):
     run.close()
     stored = json.loads((folder / "run.json").read_text())
     assert "format" not in stored and stored["status"] == "stopped" and stored["resumed"] == 1
-    assert set(stored) == set(LAYOUT_0) | {"resumed", "finished_unix_s"}
+    assert set(stored) == set(LAYOUT_0) | {"resumed", "finished_unix_s", "seal"}  # sealed from now on
     assert verify_run(folder).ok
 
 
