@@ -20,7 +20,7 @@ from labapp.cli.main import main
 ROOT = Path(__file__).resolve().parents[3]
 BENCH = ROOT / "fixtures" / "bench"
 SFR = [sys.executable, "-m", "labapp.cli.main"]
-DESIGN = ["design", "--target", "sphere", "--resolution", "16", "--max-iter", "40", "--physical-correction", "none"]
+DESIGN = ["design", "--target", "sphere", "--resolution", "16", "--max-iter", "24", "--physical-correction", "none"]
 BAD_SIGNS = ("Traceback", "internal error", "SystemError", "Fatal Python error", "GIL")
 
 
