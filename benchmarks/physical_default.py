@@ -47,8 +47,11 @@ def design_row(name: str, space: str, resolution: int, runs: Path) -> dict:
     if (folder / "rounds.npz").exists():
         with np.load(folder / "rounds.npz") as rounds:
             fits = ";".join(f"{100 * f:.3f}" for f in rounds["fits"])
-    return {"shape": name, "space": space, "resolution": resolution, "true_fit": f"{100 * s['rel_rmse_print']:.4f}",
-            "recomputed": f"{100 * again:.4f}", "grid_fit": f"{100 * s['rel_rmse_design_grid_binary']:.4f}",
+    summary_fit = s.get("rel_rmse_print")  # None in a summary written before it was recorded
+    grid_fit = s.get("rel_rmse_design_grid_binary", s.get("rel_rmse_binary"))
+    return {"shape": name, "space": space, "resolution": resolution,
+            "true_fit": "-" if summary_fit is None else f"{100 * summary_fit:.4f}",
+            "recomputed": f"{100 * again:.4f}", "grid_fit": "-" if grid_fit is None else f"{100 * grid_fit:.4f}",
             "pieces": s["pieces"], "seconds": f"{s['seconds']:.0f}", "wall": f"{wall:.0f}",
             "iterations": s["iterations"], "round_fits": fits}
 

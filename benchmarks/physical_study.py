@@ -189,22 +189,26 @@ def table(path: Path) -> str:
     """The rows of a study CSV as a Markdown table: one line per shape and space, the methods side by side."""
     with path.open() as handle:
         rows = list(csv.DictReader(handle))
-    methods = [m for m in ("none", "defect", "defect_final_beta", "defect_double_beta", "fine")
-               if any(r["method"] == m for r in rows)]
     cases: dict[tuple[str, str, str], dict[str, dict]] = {}
     for r in rows:
         cases.setdefault((r["shape"], r["space"], r["resolution"]), {})[r["method"]] = r
-    head = "| shape | space | " + " | ".join(f"true fit, {m}" for m in methods) + " | design grid, " + \
-        " / ".join(methods) + " | pieces | seconds, " + " / ".join(methods) + " |"
-    lines = [head, "|---|---|" + "---|" * (len(methods) + 3)]
+    others = ("defect_final_beta", "defect_double_beta", "fine")
+    lines = ["| shape | space | true fit, none | **true fit, defect (default)** | true fit, "
+             + " / ".join(o.replace("_", " ") for o in others) + " | design grid, none / defect | pieces, none / "
+             "defect | seconds, none / defect |", "|---|---|---|---|---|---|---|---|"]
     extrusions = set(untuned_shapes.EXTRUSIONS)
+
+    def fit(by, m, key="true_fit"):
+        return f"{float(by[m][key]):.2f}%" if m in by else "-"
+
     for (shape, space, _), by in cases.items():
-        cell = {m: (f"{float(by[m]['true_fit']):.2f}%" if m in by else "-") for m in methods}
         label = f"{shape}{' (extrusion)' if shape in extrusions else ''}"
-        lines.append(f"| {label} | {space} | " + " | ".join(cell[m] for m in methods) + " | "
-                     + " / ".join(f"{float(by[m]['grid_fit']):.2f}%" if m in by else "-" for m in methods) + " | "
-                     + " / ".join(by[m]["pieces"] if m in by else "-" for m in methods) + " | "
-                     + " / ".join(f"{float(by[m]['seconds']):.0f}" if m in by else "-" for m in methods) + " |")
+        lines.append(f"| {label} | {space} | {fit(by, 'none')} | **{fit(by, 'defect')}** | "
+                     + " / ".join(fit(by, o) for o in others) + f" | {fit(by, 'none', 'grid_fit')} / "
+                     f"{fit(by, 'defect', 'grid_fit')} | " + " / ".join(by[m]["pieces"] if m in by else "-"
+                                                                         for m in ("none", "defect"))
+                     + " | " + " / ".join(f"{float(by[m]['seconds']):.0f}" if m in by else "-"
+                                          for m in ("none", "defect")) + " |")
     return "\n".join(lines)
 
 
