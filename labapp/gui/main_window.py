@@ -71,8 +71,9 @@ PREFERRED_SIZE = (1500, 950)
 TITLE_BAR_PX = 32
 """Room left for the window manager's title bar when fitting the window to the screen."""
 LOG_HEIGHT_PX = 110
-GAP_FACTOR = 2.5
-"""A frame arriving more than this many intervals after the previous one marks a gap on the plots."""
+GAP_FACTOR, GAP_MIN_S = 5.0, 120.0
+"""A frame arriving more than this many intervals, and at least this long, after the previous one marks a gap
+on the plots (an accelerated simulation may lag its interval a little: that is no gap)."""
 
 
 def release_in_subprocess(sample: str) -> SampleRelease:
@@ -637,26 +638,24 @@ class MainWindow(QMainWindow):
         """A run frame was stored: plot it, remember it for the live view."""
         self.latest_frame = frame.path
         interval = self.run_config.interval_s if self.run_config is not None else None
-        if self._last_frame_t is not None and interval and frame.t_s - self._last_frame_t > GAP_FACTOR * interval:
-            self.plots.mark("gap", self._last_frame_t, "gap", end_s=frame.t_s)
+        if self._last_frame_t is not None and interval and \
+                frame.t_s - self._last_frame_t > max(GAP_FACTOR * interval, GAP_MIN_S):
+            self.plots.mark("gap", self._last_frame_t, "", end_s=frame.t_s)
         self._last_frame_t = frame.t_s
         self.plots.add_frame(frame.t_s, frame.conc_g_per_kg)
         # the bath plot shows the reading logged with each frame: one time base with the release curve
         self.plots.add_reading(frame.t_s, frame.plate_c, frame.probe_c, frame.speed_rpm)
 
     def on_event(self, event) -> None:
-        """Marks on the plots: the drop, a resume, steady state and faults."""
+        """Marks on the plots: the drop, a resume and steady state (faults and excursions: the alarm banner's)."""
         t = self.status.t_s
         if isinstance(event, StateChanged) and event.phase == Phase.ACQUIRING:
             if event.resumed:
                 self.plots.mark("resume", t if t is not None else 0.0, "resumed")
             else:
                 self.plots.mark("drop", 0.0, "drop")
-        elif isinstance(event, Message) and t is not None and self.status.phase == Phase.ACQUIRING:
-            if event.topic == "steady":
-                self.plots.mark("steady", t, "steady state")
-            elif event.level == "error":
-                self.plots.mark("fault", t, event.topic or "fault")
+        elif isinstance(event, Message) and t is not None and event.topic == "steady":
+            self.plots.mark("steady", t, "steady state")
 
     def on_level(self, level: CalibrationLevel) -> None:
         """A calibration-series frame was stored: show it in the live view."""

@@ -112,7 +112,6 @@ class PlotsPanel(QWidget):
         self.speed_curve = pg.PlotCurveItem(pen=pg.mkPen((150, 150, 150), width=1, style=Qt.PenStyle.DashLine))
         self.speed_view.addItem(self.speed_curve)
         self.temps.vb.sigResized.connect(self._sync_views)
-        self.temps.setXLink(self.release)
         for plot in (self.release, self.temps):
             for side in ("left", "right"):
                 plot.getAxis(side).enableAutoSIPrefix(False)  # no "(x0.001)" rescaling of g/kg, g or s

@@ -132,8 +132,11 @@ def test_run_progress_and_marks_from_engine_events(qtbot, tmp_path, monkeypatch)
         win.status.phase, win.status.t_s = Phase.ACQUIRING, 3600.0
         win.on_event(StateChanged(Phase.ACQUIRING))
         win.on_event(Message("info", "steady state reached at t=3600 s", topic="steady"))
-        win.on_event(Message("error", "camera lost", topic="camera"))
-        assert [m[0] for m in win.plots.marks] == ["drop", "steady", "fault"]
+        from labapp.acquisition.events import FrameStored
+        for t in (0.0, 10.0, 20.0, 30.0, 500.0, 510.0):             # one gap of 470 s in 10 s frames
+            win.on_frame(FrameStored(0, "f.jpg", str(tmp_path / "f.jpg"), t, 1, conc_g_per_kg=0.1))
+        assert [m[0] for m in win.plots.marks] == ["drop", "steady", "gap"]
+        assert win.plots.marks[-1][1] == 30.0
         assert win.plots.band.isVisible()
         monkeypatch.setattr(type(win.engine), "running", property(lambda self: True))
         win._show_progress()
