@@ -92,8 +92,8 @@ class DevicePanel(QWidget):
         rform = QFormLayout(readout)
         rform.addRow(self.heater)
         rform.addRow(self.stale_label)
-        for key, label in (("plate_c", "plate (C)"), ("probe_c", "probe (C)"), ("speed_rpm", "stirring (rpm)"),
-                           ("setpoint_c", "setpoint (C)"), ("state", "heating / stirring")):
+        for key, label in (("plate_c", "plate (\u00b0C)"), ("probe_c", "probe (\u00b0C)"), ("speed_rpm", "stirring (rpm)"),
+                           ("setpoint_c", "setpoint (\u00b0C)"), ("state", "heating / stirring")):
             rform.addRow(label, self.readouts[key])
         buttons = QHBoxLayout()
         buttons.addWidget(self.connect_button)

@@ -41,7 +41,7 @@ class SettingBox(QDoubleSpinBox):
         if none_text is not None:
             self.setSpecialValueText(none_text)
         if setting.display_unit:
-            self.setSuffix(f" {setting.display_unit}")
+            self.setSuffix(" \u00b0C" if setting.display_unit == "C" else f" {setting.display_unit}")   # degrees shown
         self.setKeyboardTracking(True)
         self._problem: str | None = None
         self.error_label = QLabel("")
