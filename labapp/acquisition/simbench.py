@@ -1,9 +1,12 @@
 """The simulated bench: SimulatedCamera + Heidolph emulator + a dissolving sample object, on one clock.
 
-The object's release comes from the forward simulator (``design.forward.simulator``) and is mapped to physical units
-by a hidden material (:class:`Material`, drawn from a seed): its dissolution rate (s per mm of tau) and
-print density differ from any constant of the code, and every printed object deviates from the material by
-a few percent (its own seeded draw), as real prints do. Nothing in the calibration reads them: the
+The object dissolves by the bench's own physics (:mod:`labapp.acquisition.printworld`: anisotropic
+erosion, a print a little larger or smaller than its mesh, channels shut by swelling, a wetting lag),
+computed with no code of the forward model (a material without print physics, for tests of the
+calibration's arithmetic, dissolves exactly as the forward model computes), and is mapped to physical units by a hidden material
+(:class:`Material`, drawn from a seed): its dissolution rate (s per mm of in-plane erosion depth), print
+density and print physics differ from any constant of the code, and every printed object deviates from
+the material by a few percent (its own seeded draw), as real prints do. Nothing in the calibration reads them: the
 simulation-to-bench calibration (``sfr calibrate-sim``) has to recover them from the images. A sample
 object keeps its truth in :attr:`SampleRelease.truth` for tests and the demo's ``truth.json``.
 
@@ -31,6 +34,7 @@ from drivers.sim import BenchScene
 from drivers.sim.heidolph_emulator import HeidolphEmulator
 from labapp.acquisition.bench import Bench
 from labapp.acquisition.clock import Clock, ScaledClock, SteppedClock, WallClock
+from labapp.acquisition.printworld import WORLD_RESOLUTION, PrintPhysics, world_release
 from labapp.acquisition.settings import WATER
 from labapp.records.storage import FRAMES_CSV, read_run
 
@@ -57,19 +61,25 @@ class Material:
         Print density.
     rate_spread, density_spread : float
         Relative standard deviation of each printed object's rate and density around the material's.
+    physics : PrintPhysics or None
+        How its prints dissolve (:mod:`labapp.acquisition.printworld`). None: exactly as the isotropic
+        forward model computes at the sample's resolution, for tests of the calibration's arithmetic,
+        where the model must be right.
     """
 
     seconds_per_mm: float
     density_g_per_cm3: float
     rate_spread: float = 0.015
     density_spread: float = 0.02
+    physics: PrintPhysics | None = None
 
     @classmethod
     def draw(cls, seed: int = MATERIAL_SEED) -> Material:
-        """A material with a rate of 1000-2400 s/mm (a ~1.7 g object dissolves in 1.5-3.5 h) and a print
-        density of 1.15-1.45 g/cm^3."""
+        """A material with a rate of 1000-2400 s/mm (a ~1.7 g object dissolves in 1.5-3.5 h), a print
+        density of 1.15-1.45 g/cm^3 and print physics drawn by :meth:`PrintPhysics.draw`."""
         rng = np.random.default_rng(seed)
-        return cls(float(rng.uniform(1000.0, 2400.0)), float(rng.uniform(1.15, 1.45)))
+        return cls(float(rng.uniform(1000.0, 2400.0)), float(rng.uniform(1.15, 1.45)),
+                   physics=PrintPhysics.draw(seed))
 
     def printed(self, index: int, seed: int = MATERIAL_SEED) -> tuple[float, float]:
         """The ``index``-th printed object's own (seconds_per_mm, g_per_mm3)."""
@@ -116,35 +126,45 @@ class SampleRelease:
 
     @classmethod
     def from_simulation(cls, name: str, tau_mm: np.ndarray, released_mm3: np.ndarray, seconds_per_mm: float,
-                        g_per_mm3: float) -> SampleRelease:
-        """Map a simulated curve (tau in mm, released mm^3) to s and g with an object's own scales."""
+                        g_per_mm3: float, lag_s: float = 0.0) -> SampleRelease:
+        """Map a release curve (erosion depth in mm, released mm^3) to s and g with an object's own scales,
+        starting ``lag_s`` after the drop."""
         vol = np.asarray(released_mm3, float)
         truth = {"seconds_per_mm": seconds_per_mm, "g_per_mm3": g_per_mm3, "volume_mm3": float(vol[-1]),
                  "mass_g": float(vol[-1] * g_per_mm3)}
-        return cls(name, np.asarray(tau_mm, float) * seconds_per_mm, vol * g_per_mm3, truth)
+        return cls(name, lag_s + np.asarray(tau_mm, float) * seconds_per_mm, vol * g_per_mm3, truth)
 
 
-def sample_release(shape: str = "pill", index: int = 0, resolution: int = 48,
+def sample_release(shape: str = "pill", index: int = 0, resolution: int = WORLD_RESOLUTION,
                    material: Material | None = None) -> SampleRelease:
-    """Simulate the ``index``-th print of a shipped sample object in the bench's hidden material.
+    """The ``index``-th print of a shipped sample object dissolving on the bench, in its hidden material.
 
     Parameters
     ----------
     shape : str
-        A name of ``design.geometry.shapes.SAMPLE_SHAPES`` (each 1326 mm^3).
+        A name of ``design.geometry.shapes.SAMPLE_SHAPES`` (each 1326 mm^3 as designed).
     index : int
         Which print: each has its own few-percent deviation of rate and density.
     resolution : int
-        Voxels along the longest side for the forward simulation.
+        Voxels along the longest side of the bench's own release computation
+        (:func:`labapp.acquisition.printworld.world_release`, or the forward model's grid for a material
+        without print physics).
     material : Material, optional
         Default :meth:`Material.draw`.
     """
     material = material or Material.draw()
     seconds_per_mm, g_per_mm3 = material.printed(index)
-    release = simulate_mesh(sample_shape(shape), resolution=resolution)
-    log.info("sample %s #%d: %.3f g, dissolves in %.0f s", shape, index, release.released_mm3[-1] * g_per_mm3,
-             release.tau_mm[-1] * seconds_per_mm)
-    return SampleRelease.from_simulation(shape, release.tau_mm, release.released_mm3, seconds_per_mm, g_per_mm3)
+    physics = material.physics
+    if physics is None:
+        model = simulate_mesh(sample_shape(shape), resolution=resolution)
+        release = SampleRelease.from_simulation(shape, model.tau_mm, model.released_mm3, seconds_per_mm, g_per_mm3)
+    else:
+        world = world_release(sample_shape(shape), physics, resolution=resolution)
+        release = SampleRelease.from_simulation(shape, world.tau_mm, world.released_mm3, seconds_per_mm, g_per_mm3,
+                                                lag_s=physics.wetting_lag_s)
+        release.truth["physics"] = dataclasses.asdict(physics)
+    log.info("sample %s #%d: %.3f g, dissolves in %.0f s", shape, index, release.mass_g, release.duration_s)
+    return release
 
 
 class _ClockedCamera:
