@@ -19,6 +19,12 @@ order, which the adjoint sweep streams backwards instead of revisiting the recor
 read in place of scattered ones, for a little more work while marching. Timings:
 docs/benchmarks.md#forward-simulator.
 
+Anisotropic erosion (a build-direction speed ``anisotropy`` times the in-plane one) is the same
+equation on a rectilinear grid of spacings (dx, dx, dx / anisotropy) in the travel-time metric: eq. (5)
+becomes sum_d w_d max(u_i - u_N(i,d), u_i - u_N(i,-d), 0)^2 = (n_i dx)^2 with w_d = (dx / h_d)^2, so
+w_z = anisotropy^2 on axis 2 (z) of a 3D grid, and its linearisation and adjoint sweep carry w_d along.
+With anisotropy 1 the marcher runs the unweighted solve, so the isotropic results are unchanged.
+
 Repeated solves on one grid (inverse design) pass a `MarchBuffers`: allocating the records (140 MB
 for a 128^3 grid) afresh would cost page faults on every solve, a sizeable part of the solve.
 """
@@ -51,6 +57,8 @@ class Marching:
         Flat-index stride of each axis of the padded grid.
     padded_shape : tuple of int
     dx_mm : float
+    weights : (D,) ndarray of float
+        Per axis w_d = (dx / h_d)^2 of the anisotropic eq. (5): all 1 for isotropic erosion.
     """
 
     rec: np.ndarray
@@ -61,6 +69,7 @@ class Marching:
     dx_mm: float
     buffers: MarchBuffers | None = None
     generation: int = 0
+    weights: np.ndarray | None = None
 
     @property
     def u_pad(self) -> np.ndarray:
@@ -225,13 +234,48 @@ def _local_solve(rec, i, ndim, dx):
 
 
 @njit(cache=True, nogil=True)
-def _march_kernel(rec, strides, dx, keys, ids, order, coef):
+def _local_solve_weighted(rec, i, ndim, dx, weights):
+    """Solve sum_d w_d (u - a_d)^2 = (n_i dx)^2 (eq. 5 on per-axis spacings) with consistent terms only."""
+    a0 = rec[i, 2]
+    w0 = weights[0]
+    a1 = rec[i, 3]
+    w1 = weights[1]
+    a2 = np.inf
+    w2 = 1.0
+    if ndim == 3:
+        a2 = rec[i, 4]
+        w2 = weights[2]
+    if a1 < a0:
+        a0, a1, w0, w1 = a1, a0, w1, w0
+    if a2 < a1:
+        a1, a2, w1, w2 = a2, a1, w2, w1
+        if a1 < a0:
+            a0, a1, w0, w1 = a1, a0, w1, w0
+    h = rec[i, 1] * dx
+    v = h / np.sqrt(w0)
+    if a0 + v <= a1:
+        return a0 + v
+    # in v = u - a0 (see _local_solve): (w0 + w1) v^2 - 2 w1 b1 v + w1 b1^2 - h^2 = 0
+    b1 = a1 - a0
+    total = w0 + w1
+    v = (w1 * b1 + np.sqrt(max(total * h * h - w0 * w1 * b1 * b1, 0.0))) / total
+    if a0 + v <= a2:
+        return a0 + v
+    b2 = a2 - a0
+    total += w2
+    s = w1 * b1 + w2 * b2
+    v = (s + np.sqrt(max(s * s - total * (w1 * b1 * b1 + w2 * b2 * b2 - h * h), 0.0))) / total
+    return a0 + v
+
+
+@njit(cache=True, nogil=True)
+def _march_kernel(rec, strides, dx, keys, ids, order, coef, weights, isotropic):
     ndim = strides.shape[0]
     size = 0
     # the initial front: unknown voxels with a finite upwind value (next to ordinary padding)
     for i in range(rec.shape[0]):
         if rec[i, 1] > 0.0:
-            val = _local_solve(rec, i, ndim, dx)
+            val = _local_solve(rec, i, ndim, dx) if isotropic else _local_solve_weighted(rec, i, ndim, dx, weights)
             if val < np.inf:
                 rec[i, 0] = val
                 size = _push(keys, ids, rec, size, val, i)
@@ -247,14 +291,17 @@ def _march_kernel(rec, strides, dx, keys, ids, order, coef):
         rec[i, 1] = -n_i  # accepted
         ui = rec[i, 0]
         order[count] = i
-        _adjoint_coefficients(rec, i, ndim, strides, n_i * dx * dx, coef[count])
+        _adjoint_coefficients(rec, i, ndim, strides, n_i * dx * dx, coef[count], weights)
         count += 1
         for d in range(ndim):
             for nb in (i - strides[d], i + strides[d]):
                 if rec[nb, 1] < 0.0 or ui >= rec[nb, 2 + d]:
                     continue  # known or padding, or the new neighbour is not its best on this axis
                 rec[nb, 2 + d] = ui
-                val = _local_solve(rec, nb, ndim, dx)
+                if isotropic:
+                    val = _local_solve(rec, nb, ndim, dx)
+                else:
+                    val = _local_solve_weighted(rec, nb, ndim, dx, weights)
                 if rec[nb, 0] == np.inf:  # far -> trial
                     rec[nb, 0] = val
                     size = _push(keys, ids, rec, size, val, nb)
@@ -267,13 +314,14 @@ def _march_kernel(rec, strides, dx, keys, ids, order, coef):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _adjoint_coefficients(rec, i, ndim, strides, n_dx2, out):
+def _adjoint_coefficients(rec, i, ndim, strides, n_dx2, out, weights):
     """Linearisation of eq. (5) at a voxel being accepted, for the adjoint sweep (eq. 10).
 
-    Differentiating sum_d (u_i - a_d)^2 = (n_i dx)^2 gives du_i = (sum_d w_d da_d + n_i dx^2 dn_i) / W
-    with w_d = u_i - a_d for strictly upwind axes (a_d < u_i; else 0) and W = sum_d w_d; a_d is the
-    smaller neighbour on axis d (a trial neighbour is never below u_i). ``out`` gets w_d / W, negated
-    when that neighbour is on the lower side, and n_i dx^2 / W.
+    Differentiating sum_d c_d (u_i - a_d)^2 = (n_i dx)^2 (c_d the axis weights, 1 when isotropic)
+    gives du_i = (sum_d w_d da_d + n_i dx^2 dn_i) / W with w_d = c_d (u_i - a_d) for strictly upwind
+    axes (a_d < u_i; else 0) and W = sum_d w_d; a_d is the smaller neighbour on axis d (a trial
+    neighbour is never below u_i). ``out`` gets w_d / W, negated when that neighbour is on the lower
+    side, and n_i dx^2 / W.
     """
     ui = rec[i, 0]
     total = 0.0
@@ -281,7 +329,7 @@ def _adjoint_coefficients(rec, i, ndim, strides, n_dx2, out):
         lower = rec[i - strides[d], 0]
         upper = rec[i + strides[d], 0]
         a = min(lower, upper)
-        w = ui - a if a < ui else 0.0
+        w = (ui - a) * weights[d] if a < ui else 0.0  # exact for c_d = 1
         out[d] = w if upper < lower else -w
         total += w
     inv = 1.0 / total
@@ -355,7 +403,27 @@ def _fill(rec: np.ndarray, n: np.ndarray, mirror: tuple[bool, ...]) -> np.ndarra
     return np.array(rec.strides[:-1], dtype=np.int64) // rec.strides[-2]
 
 
-def march(n: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], buffers: MarchBuffers | None = None) -> Marching:
+def axis_weights(ndim: int, anisotropy: float) -> np.ndarray:
+    """Per-axis weights w_d = (dx / h_d)^2 of eq. (5) for z speed ``anisotropy`` x the in-plane speed.
+
+    Raises
+    ------
+    DesignError
+        For a non-positive or non-finite anisotropy, or anisotropy != 1 on a 2D grid (which has no z).
+    """
+    a = float(anisotropy)
+    if not np.isfinite(a) or a <= 0:
+        raise DesignError(f"anisotropy must be a positive number, got {anisotropy}")
+    weights = np.ones(ndim)
+    if a != 1.0:
+        if ndim != 3:
+            raise DesignError(f"anisotropy {a:g} needs a 3D grid (axis 2 is the build direction z); this grid is {ndim}D")
+        weights[2] = a * a
+    return weights
+
+
+def march(n: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], buffers: MarchBuffers | None = None,
+          anisotropy: float = 1.0) -> Marching:
     """Solve the discrete Eikonal equation (5) by first-order fast marching.
 
     Parameters
@@ -368,12 +436,16 @@ def march(n: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], buffers: MarchB
         Per axis, True for a mirror plane at the index-0 face instead of u = 0 padding.
     buffers : MarchBuffers, optional
         Work arrays for this grid shape to reuse; the previous solve made with them becomes stale.
+    anisotropy : float
+        Erosion speed along axis 2 (z) over the in-plane speed: the grid spacing on z is
+        dx / anisotropy in the travel-time metric. 1 is the paper's isotropic model.
 
     Returns
     -------
     Marching
     """
     n = np.asarray(n, dtype=np.float64)
+    weights = axis_weights(n.ndim, anisotropy)
     if buffers is None:
         buffers = MarchBuffers(n.shape)
         shared = None
@@ -385,9 +457,9 @@ def march(n: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], buffers: MarchB
     padded_shape = tuple(s + 2 for s in n.shape)
     strides = _fill(buffers.rec.reshape(padded_shape + (RECORD_WIDTH,)), n, mirror)
     order = _march_kernel(buffers.rec, strides, float(dx_mm), buffers.keys, buffers.ids, buffers.order,
-                          buffers.coef)
+                          buffers.coef, weights, bool(np.all(weights == 1.0)))
     return Marching(buffers.rec, order, buffers.coef[:order.size], strides, padded_shape, float(dx_mm), shared,
-                    buffers.generation)
+                    buffers.generation, weights)
 
 
 def march_adjoint(marching: Marching, u_bar: np.ndarray) -> np.ndarray:
@@ -421,13 +493,32 @@ def march_adjoint(marching: Marching, u_bar: np.ndarray) -> np.ndarray:
     return np.array(marching.interior(nbar))
 
 
+def upwind_spacing(marching: Marching) -> np.ndarray:
+    """Per interior voxel, the metric spacing dx / sqrt(w_d) of its main upwind axis (smallest a_d), mm.
+
+    The axis comes from the linearisation recorded while marching: |coef_d| / w_d is proportional to
+    u_i - a_d. It is constant under small changes of the slowness (it changes only at ties of the
+    upwind values), so it carries no gradient. dx everywhere for isotropic erosion.
+    """
+    marching.check_current()
+    weights = np.ones(len(marching.padded_shape)) if marching.weights is None else marching.weights
+    shape = tuple(s - 2 for s in marching.padded_shape)
+    if np.all(weights == 1.0):
+        return np.full(shape, marching.dx_mm)
+    ndim = len(shape)
+    axis = np.argmax(np.abs(marching.coef[:, :ndim]) / weights, axis=1)
+    flat = np.empty(int(np.prod(marching.padded_shape)))
+    flat[marching.order] = marching.dx_mm / np.sqrt(weights[axis])
+    return np.array(marching.interior(flat))
+
+
 def eikonal_residual(marching: Marching) -> np.ndarray:
     """Residual of eq. (5) at every interior voxel, as a length.
 
     Returns
     -------
     ndarray of float, grid shape, mm
-        sqrt(sum_d max(u_i - u_N(i,d), u_i - u_N(i,-d), 0)^2) - n_i dx. Round-off makes it of the
+        sqrt(sum_d w_d max(u_i - u_N(i,d), u_i - u_N(i,-d), 0)^2) - n_i dx. Round-off makes it of the
         order of the float spacing of u (~1e-16 u), however small n_i dx is.
     """
     shape = marching.padded_shape
@@ -435,10 +526,11 @@ def eikonal_residual(marching: Marching) -> np.ndarray:
     inner = (slice(1, -1),) * len(shape)
     ui = u[inner]
     total = np.zeros(ui.shape)
+    weights = np.ones(len(shape)) if marching.weights is None else marching.weights
     for axis in range(len(shape)):
         lo = list(inner)
         hi = list(inner)
         lo[axis] = slice(0, -2)
         hi[axis] = slice(2, None)
-        total += np.maximum(ui - np.minimum(u[tuple(lo)], u[tuple(hi)]), 0.0) ** 2
+        total += weights[axis] * np.maximum(ui - np.minimum(u[tuple(lo)], u[tuple(hi)]), 0.0) ** 2
     return np.sqrt(total) + marching.interior(marching.rec[:, 1]) * marching.dx_mm  # n is stored negated

@@ -8,6 +8,14 @@ adjoint sweep (eq. 10).
 Mirror symmetry: with ``mirror[a]`` set, the grid is the half of the object on the positive side of a
 mirror plane at the index-0 face of axis a; the full object is
 ``np.concatenate([np.flip(half, a), half], a)``. Released volumes are always the full object's.
+
+Anisotropy: with ``anisotropy`` a != 1 the erosion speed along axis 2 (z, the build direction) is a
+times the in-plane speed; eq. (5) is solved on spacings (dx, dx, dx / a) in the travel-time metric (see
+`design.forward.fmm`), and a voxel's ramp of eq. (6) spans its metric edge along its main upwind
+axis (the one of its smallest upwind value), L_i = n_i h_d: dx in plane, dx / a along z. A plane
+front parallel to any face then dissolves one layer of voxels per layer crossing time, the ramps of
+successive layers tiling time exactly as in the isotropic model (L_i = n_i dx). The axis is fixed
+under small changes of the density, so L_i's choice carries no gradient. u and tau stay in in-plane mm.
 """
 from __future__ import annotations
 
@@ -19,7 +27,7 @@ import numpy as np
 
 from design._validate import check_density, check_mirror, check_positive
 from design.errors import DesignError  # re-exported: the base exception of design/
-from design.forward.fmm import MarchBuffers, Marching, eikonal_residual, march, march_adjoint
+from design.forward.fmm import MarchBuffers, Marching, axis_weights, eikonal_residual, march, march_adjoint, upwind_spacing
 from design.forward.release import ramp_release, ramp_release_vjp
 
 log = logging.getLogger(__name__)
@@ -50,6 +58,8 @@ class Release:
         Voxel edge length, mm.
     mirror : tuple of bool
         Per axis, True for a mirror plane at the index-0 face.
+    anisotropy : float
+        Erosion speed along z over the in-plane speed (1: the paper's isotropic model).
     """
 
     tau_mm: np.ndarray
@@ -60,6 +70,13 @@ class Release:
     mirror: tuple[bool, ...]
     _rho: np.ndarray = field(repr=False)
     _marching: Marching = field(repr=False)
+    anisotropy: float = 1.0
+    _ramp: float | np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def ramp_mm(self) -> float | np.ndarray:
+        """Ramp length per unit slowness of eq. (6), mm: dx, or per voxel its main upwind axis's metric spacing."""
+        return self.dx_mm if self._ramp is None else self._ramp
 
     @property
     def dtau_mm(self) -> float:
@@ -83,12 +100,13 @@ def slowness(rho: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=32)
-def _unit_total_time(shape: tuple[int, ...], mirror: tuple[bool, ...]) -> float:
-    marching = march(np.ones(shape), 1.0, mirror)
+def _unit_total_time(shape: tuple[int, ...], mirror: tuple[bool, ...], anisotropy: float = 1.0) -> float:
+    marching = march(np.ones(shape), 1.0, mirror, anisotropy=anisotropy)
     return float(marching.interior(marching.u_pad).max())
 
 
-def total_time(shape: tuple[int, ...], dx_mm: float, mirror: tuple[bool, ...] | None = None) -> float:
+def total_time(shape: tuple[int, ...], dx_mm: float, mirror: tuple[bool, ...] | None = None,
+               anisotropy: float = 1.0) -> float:
     """T, the largest dissolution time of the all-solid grid (cached per shape and mirror), mm.
 
     Parameters
@@ -99,18 +117,23 @@ def total_time(shape: tuple[int, ...], dx_mm: float, mirror: tuple[bool, ...] | 
         Voxel edge length, mm.
     mirror : tuple of bool, optional
         Mirror flags per axis.
+    anisotropy : float
+        Erosion speed along z over the in-plane speed.
     """
     shape = tuple(int(s) for s in shape)
     if len(shape) not in (2, 3) or min(shape) < 1:
         raise DesignError(f"grid shape must be 2D or 3D with positive sizes, got {shape}")
     dx = check_positive("dx_mm", dx_mm)
     # u scales linearly with dx, so one solve at dx = 1 serves every voxel size
-    return _unit_total_time(shape, check_mirror(mirror, len(shape))) * dx
+    mirror = check_mirror(mirror, len(shape))
+    if anisotropy == 1.0:
+        return _unit_total_time(shape, mirror) * dx
+    return _unit_total_time(shape, mirror, float(anisotropy)) * dx
 
 
 def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None = None,
              dtau_mm: float | None = None, total_time_mm: float | None = None,
-             check: bool = False, buffers: MarchBuffers | None = None) -> Release:
+             check: bool = False, buffers: MarchBuffers | None = None, anisotropy: float = 1.0) -> Release:
     """Simulate the release curve of a density field.
 
     Parameters
@@ -130,6 +153,9 @@ def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None =
     buffers : MarchBuffers, optional
         Fast-marching work arrays to reuse (repeated solves on one grid); the gradient of the
         previous `Release` simulated with them is then no longer available.
+    anisotropy : float
+        Erosion speed along axis 2 (z) over the in-plane speed, > 0; 1 (default) is the paper's
+        isotropic model. Needs a 3D grid unless 1.
 
     Returns
     -------
@@ -143,11 +169,13 @@ def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None =
     rho = np.array(check_density(rho))  # a private copy: the Release keeps it read-only
     dx = check_positive("dx_mm", dx_mm)
     mirror = check_mirror(mirror, rho.ndim)
-    big_t = total_time(rho.shape, dx, mirror) if total_time_mm is None else check_positive(
+    anisotropy = float(anisotropy)
+    axis_weights(rho.ndim, anisotropy)  # validates before any solve
+    big_t = total_time(rho.shape, dx, mirror, anisotropy) if total_time_mm is None else check_positive(
         "total_time_mm", total_time_mm)
     steps = DEFAULT_STEPS if dtau_mm is None else max(1, int(round(big_t / check_positive("dtau_mm", dtau_mm))))
     n = slowness(rho)
-    marching = march(n, dx, mirror, buffers)
+    marching = march(n, dx, mirror, buffers, anisotropy)
     # one compact copy of u: the curve, its gradient and callers then read 8 bytes per voxel, not a record
     u = np.ascontiguousarray(marching.interior(marching.u_pad))
     if check:
@@ -156,12 +184,14 @@ def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None =
             raise DesignError(f"eq. (5) residual {worst:.3g} mm exceeds {RESIDUAL_TOL:g} T = {RESIDUAL_TOL * big_t:.3g} mm")
         log.debug("eq. (5) residual %.3g mm", worst)
     multiplicity = 2 ** sum(mirror)
-    curve = ramp_release(u.ravel(), (n * dx).ravel(), (rho * (dx ** 3 * multiplicity)).ravel(),
-                         big_t / steps, steps + 1)
+    ramp = None if anisotropy == 1.0 else upwind_spacing(marching)
+    curve = ramp_release(u.ravel(), (n * (dx if ramp is None else ramp)).ravel(),
+                         (rho * (dx ** 3 * multiplicity)).ravel(), big_t / steps, steps + 1)
     u.flags.writeable = False
     rho.flags.writeable = False
     return Release(tau_mm=np.linspace(0.0, big_t, steps + 1), released_mm3=curve, total_time_mm=big_t,
-                   u_mm=u, dx_mm=dx, mirror=mirror, _rho=rho, _marching=marching)
+                   u_mm=u, dx_mm=dx, mirror=mirror, _rho=rho, _marching=marching, anisotropy=anisotropy,
+                   _ramp=ramp)
 
 
 def release_gradient(release: Release, dJ_dC: np.ndarray, dJ_du: np.ndarray | None = None) -> np.ndarray:
@@ -188,7 +218,8 @@ def release_gradient(release: Release, dJ_dC: np.ndarray, dJ_du: np.ndarray | No
     dx = release.dx_mm
     n = slowness(rho)
     scale = dx ** 3 * release.multiplicity
-    u_bar, length_bar, weight_bar = ramp_release_vjp(release.u_mm.ravel(), (n * dx).ravel(),
+    ramp = release.ramp_mm
+    u_bar, length_bar, weight_bar = ramp_release_vjp(release.u_mm.ravel(), (n * ramp).ravel(),
                                                      (rho * scale).ravel(), release.dtau_mm, g)
     u_bar = u_bar.reshape(rho.shape)
     if dJ_du is not None:
@@ -196,6 +227,6 @@ def release_gradient(release: Release, dJ_dC: np.ndarray, dJ_du: np.ndarray | No
         if extra.shape != rho.shape:
             raise DesignError(f"dJ_du must have the grid shape {rho.shape}, got {extra.shape}")
         u_bar = u_bar + extra
-    n_bar = march_adjoint(release._marching, u_bar) + length_bar.reshape(rho.shape) * dx
+    n_bar = march_adjoint(release._marching, u_bar) + length_bar.reshape(rho.shape) * ramp
     # chain rule through w = rho dx^3 m and eq. (2): dn/drho = 1 - n_min
     return weight_bar.reshape(rho.shape) * scale + n_bar * (1.0 - N_MIN)
