@@ -6,8 +6,8 @@ Runs every case of `CASES` through `labapp.jobs.design.design`, the job `sfr des
 `design.inverse.problem.DesignConfig`'s defaults for everything but the target, the design space and
 the resolution, and once more without the physical correction (``physical_correction="none"``), and writes a
 Markdown page: the software versions, the defaults used (read from `DesignConfig` and from each case's resolved
-configuration, never restated here), one table row per case, the print's true fit (`true_fit`, by the reference
-evaluator) beside the design grid's before and after the correction, and a figure of the release curves.
+configuration, never restated here), one table row per case, the print's true fit (``rel_rmse_print``, by the
+reference evaluator) beside the design grid's before and after the correction, and a figure of the release curves.
 ``--quick`` runs the same cases at `QUICK_RESOLUTION` (a smoke test of several minutes) and prints the page
 instead of writing it unless ``--out`` is given.
 
@@ -129,27 +129,6 @@ BEFORE, AFTER = "none", None
 `DesignConfig`'s default (after)."""
 
 
-def true_fit(case: Case, folder: Path) -> float | None:
-    """The printed solid's true fit: rel. RMSE of ``design.stl``'s release against the target's physical
-    release, both by the reference evaluator (`design.forward.reference`; an analytic target's curve is
-    physical as it is). None without a printed solid."""
-    import numpy as np
-    import trimesh
-
-    from design.forward.reference import reference_release
-    from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
-    from design.inverse.objective import rel_rmse
-
-    stl = folder / "design.stl"
-    if not stl.exists():
-        return None
-    data = np.genfromtxt(folder / "curves.csv", delimiter=",", names=True)
-    tau = data["tau_mm"]
-    goal = (reference_release(sample_shape(case.target), tau).released_mm3 if case.target in SAMPLE_SHAPES
-            else data["target_mm3"])
-    return rel_rmse(reference_release(trimesh.load_mesh(stl), tau).released_mm3, goal)
-
-
 def run_case(case: Case, resolution: int, folder: Path, stop: _Stop, prefix: str,
              correction: str | None = AFTER) -> dict:
     """Design one case into ``folder`` (``correction``: `DesignConfig.physical_correction`, None = its default);
@@ -171,11 +150,10 @@ def run_case(case: Case, resolution: int, folder: Path, stop: _Stop, prefix: str
         print(file=sys.stderr)
     s = result.outputs.summary
     return dict(case=case, config=config, status=result.status, iterations=result.iterations,
-                density=s["rel_rmse_density"], binary=s["rel_rmse_binary"], fine=s["rel_rmse_fine"],
-                fine_factor=s["fine_factor"], pieces=s["pieces"], mass_g=s["print_mass_g"],
-                voids=s["enclosed_voids"], rate_dev=s["rate_dev_mid80_vs_target"]["fine"], seconds=s["seconds"],
-                wall=wall, software=s["software"], folder=result.out_dir, warnings=s["warnings"],
-                true=true_fit(case, result.out_dir))
+                density=s["rel_rmse_density"], binary=s["rel_rmse_design_grid_binary"], true=s["rel_rmse_print"],
+                true_error=s["rel_rmse_print_error"], pieces=s["pieces"], mass_g=s["print_mass_g"],
+                voids=s["enclosed_voids"], rate_dev=s["rate_dev_mid80_vs_target"]["print"], seconds=s["seconds"],
+                wall=wall, software=s["software"], folder=result.out_dir, warnings=s["warnings"])
 
 
 def _warm_up(folder: Path, stop: _Stop) -> None:
@@ -204,7 +182,7 @@ def _machine() -> str:
 
 
 def figure(rows: list[dict], path: Path) -> None:
-    """One panel per case: the target and the printed solid's release on the design grid and on the finer grid."""
+    """One panel per case: the target and the printed solid's release on the design grid and by the reference evaluator."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -217,13 +195,11 @@ def figure(rows: list[dict], path: Path) -> None:
     rows = [r for r in rows if "folder" in r]
     for ax, row in zip(axes.flat, rows):
         data = np.genfromtxt(row["folder"] / "curves.csv", delimiter=",", names=True)
-        ax.plot(data["tau_mm"], data["target_mm3"], color="k", lw=2, label="target, design grid")
+        ax.plot(data["tau_mm"], data["target_mm3"], color="k", lw=2, label="target (physical)")
         ax.plot(data["tau_mm"], data["binary_mm3"], "--", color="C1", label="printed solid, design grid")
-        if np.all(np.isfinite(data["fine_mm3"])):
-            ax.plot(data["tau_mm"], data["fine_target_mm3"], color="0.6", lw=1, label="target, finer grid")
-            ax.plot(data["tau_mm"], data["fine_mm3"], color="C3", lw=1.2,
-                    label=f"printed solid, {row['fine_factor']}x finer grid")
-        ax.set_title(f"{row['case'].target}, {row['case'].space}: {percent_text(row['fine'])}", fontsize=9)
+        if np.all(np.isfinite(data["print_mm3"])):
+            ax.plot(data["tau_mm"], data["print_mm3"], color="C3", lw=1.2, label="printed solid (reference)")
+        ax.set_title(f"{row['case'].target}, {row['case'].space}: {percent_text(row['true'])}", fontsize=9)
         final = data["target_mm3"][-1]
         ax.set_xlim(0, 1.3 * data["tau_mm"][np.argmax(data["target_mm3"] >= 0.999 * final)])
         ax.set_xlabel("tau (mm dissolved)")
@@ -265,7 +241,7 @@ def _before_after(rows: list[dict], before: dict) -> list[str]:
 def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | None, quick: bool,
          before: dict | None = None) -> str:
     """The Markdown of docs/results.md (``before``: the runs without the physical correction, by (target, space))."""
-    from design.files.outputs import FINE_FACTOR, software_versions
+    from design.files.outputs import software_versions
 
     done = [r for r in rows if "folder" in r]
     software = done[0]["software"] if done else software_versions()
@@ -295,21 +271,21 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
         "",
         f"The full page took {minutes:.1f} min of wall time on this machine, one case after another.",
         "",
-        "## Results",
+        "## Results (with the defaults)",
         "",
         "| case | space | evaluations | status | rel. RMSE, density (design grid) | rel. RMSE, printed solid "
-        "(design grid) | rel. RMSE, printed solid (finer grid) | **rel. RMSE, printed solid (true)** | rate deviation "
-        "(finer grid) | pieces | print mass (g) | enclosed voids | seconds |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "(design grid) | **rel. RMSE, printed solid (true)** | rate deviation (true) | pieces | print mass (g) "
+        "| enclosed voids | seconds |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         if "folder" not in r:
             lines.append(f"| {r['case'].label} | {r['case'].space} | - | {r['status']}: "
-                         f"{r['error']} | - | - | - | - | - | - | - | - | {r['wall']:.0f} |")
+                         f"{r['error']} | - | - | - | - | - | - | - | {r['wall']:.0f} |")
             continue
         lines.append(f"| {r['case'].label} | {r['case'].space} | {r['iterations']} | "
                      f"{r['status']} | {percent_text(r['density'])} | {percent_text(r['binary'])} | "
-                     f"{percent_text(r['fine'])} | **{percent_text(r['true'])}** | "
+                     f"**{percent_text(r['true'])}** (± {percent_text(r['true_error'])}) | "
                      f"{percent_text(r['rate_dev']) if _zero_order(r['case']) else '-'} | "
                      f"{r['pieces']} | {r['mass_g']:.3f} | {r['voids']} | {r['wall']:.0f} |")
 
@@ -326,15 +302,13 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
         "  density's mass) re-voxelised on the design grid and simulated (`rel_rmse_binary`, the figure the",
         "  paper plots). A diagnostic too: on the design grid the voxelisation error of the grid itself, which",
         "  the optimiser has learnt to use, is part of both curves.",
-        f"- **printed solid (finer grid)**: the same mesh simulated on voxels {FINE_FACTOR} times smaller, against",
-        "  the target on that grid (for a mesh target, its source re-simulated there; `rel_rmse_fine`).",
         "- **printed solid (true)**: `design.stl`'s release by the reference evaluator (exact surface distances,",
         "  `design.forward.reference`) against the target's physical release (a sample shape's by the same",
-        "  evaluator, an analytic target's curve as it is): what the print does, and the figure to judge a",
-        "  design by.",
+        "  evaluator, an analytic target's curve as it is; `rel_rmse_print`, with its stated error): what the",
+        "  print does, and the figure to judge a design by.",
         "- **rate deviation** (zero-order targets): the largest deviation of the printed solid's release rate",
         "  from the target's constant rate over the target's middle 80% (10% to 90% released), in 20 equal",
-        "  windows, on the finer grid (`rate_dev_mid80_vs_target`, `design.inverse.rate`).",
+        "  windows, of the printed solid's reference release (`rate_dev_mid80_vs_target`, `design.inverse.rate`).",
         "- **pieces**: separate solid parts of the printed solid (1 = one printable piece). **enclosed voids**:",
         "  voids the bath cannot reach until a wall dissolves. **seconds**: wall time of the whole job,",
         "  output writing included (the kernels are compiled before the first case).",
