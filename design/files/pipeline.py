@@ -13,7 +13,7 @@ from design.files.meshio import DENSITY_SUFFIXES, checked_mesh, load_density, lo
 from design.forward.simulator import Release, simulate
 from design.geometry.bodies import mirror_mismatch
 from design.geometry.shapes import sample_shape
-from design.geometry.voxelize import voxelize
+from design.geometry.voxelize import grid_for, voxelize
 
 log = logging.getLogger(__name__)
 
@@ -36,9 +36,47 @@ def parse_symmetry(symmetry: str, ndim: int = 3) -> tuple[bool, ...]:
     return tuple(axis in letters for axis in _AXES[:ndim])
 
 
+OFFSET_BAND_VOXELS = 3
+"""Voxels within this many voxels of the offset surface (by the voxelisation's own distance transform) are
+classified by the mesh's exact signed distance; the distance transform's error is below one voxel."""
+
+
+def offset_solid(mesh: trimesh.Trimesh, dx_mm: float, offset_mm: float, mirror: tuple[bool, ...]
+                 ) -> np.ndarray:
+    """Voxel centres inside the mesh grown by ``offset_mm`` (shrunk if negative): {signed distance > -offset}.
+
+    The grid is the one :func:`voxelize` would use on the mesh's bounds widened by ``max(offset, 0)`` on
+    every side (same centre, so mirror planes stay put). Near the offset surface the mesh's exact signed
+    distance (:func:`design.forward.reference.signed_distance`) decides; elsewhere the voxelisation's
+    distance transform, whose sign there is certain.
+    """
+    from scipy import ndimage
+
+    from design.forward.reference import signed_distance
+
+    grow = max(float(offset_mm), 0.0)
+    lo, hi = mesh.bounds
+    origin, shape = grid_for(np.array([lo - grow, hi + grow]), dx_mm, mirror)
+    inside = voxelize(mesh, dx_mm, origin_mm=origin, shape=shape)
+    if offset_mm == 0.0:
+        return inside
+    rough = np.where(inside, ndimage.distance_transform_edt(inside, sampling=dx_mm),
+                     -ndimage.distance_transform_edt(~inside, sampling=dx_mm))
+    # a half grid's transform is exact: for a point on the kept side of a mirror plane the nearest voxel of
+    # the other kind is never only across the plane, since its mirror image on this side is no farther
+    band = np.abs(rough + offset_mm) <= OFFSET_BAND_VOXELS * dx_mm
+    solid = rough > -offset_mm
+    centres = origin + (np.argwhere(band) + 0.5) * dx_mm
+    solid[band] = signed_distance(mesh, centres) > -offset_mm
+    return solid
+
+
 def mesh_grid(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel_size_mm: float | None = None,
-              symmetry: str = "") -> tuple[np.ndarray, float, tuple[bool, ...]]:
+              symmetry: str = "", offset_mm: float = 0.0) -> tuple[np.ndarray, float, tuple[bool, ...]]:
     """Voxelise a closed mesh at its voxel centres (parameters as for :func:`simulate_mesh`).
+
+    With ``offset_mm`` the solid voxelised is the mesh's surface moved outward by that distance (inward if
+    negative): a print larger or smaller than its mesh. The voxel size still follows the mesh's own extent.
 
     Returns
     -------
@@ -59,8 +97,11 @@ def mesh_grid(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel_siz
     mirror = parse_symmetry(symmetry)
     if any(mirror):
         check_symmetric(mesh, dx, mirror)
-    rho = voxelize(mesh, dx, mirror=mirror).astype(np.float64)
-    log.info("voxelised to %s voxels of %.4g mm (mirror %s)", rho.shape, dx, mirror)
+    offset = float(offset_mm)
+    if not np.isfinite(offset) or offset <= -0.5 * float(mesh.extents.min()):
+        raise DesignError(f"offset_mm {offset_mm} must be finite and above -half the mesh's thinnest extent")
+    rho = (voxelize(mesh, dx, mirror=mirror) if offset == 0.0 else offset_solid(mesh, dx, offset, mirror)).astype(np.float64)
+    log.info("voxelised to %s voxels of %.4g mm (mirror %s, offset %g mm)", rho.shape, dx, mirror, offset)
     return rho, dx, mirror
 
 
@@ -88,7 +129,7 @@ def check_symmetric(mesh: trimesh.Trimesh, dx_mm: float, mirror: tuple[bool, ...
 
 
 def simulate_mesh(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel_size_mm: float | None = None,
-                  symmetry: str = "") -> Release:
+                  symmetry: str = "", anisotropy: float = 1.0, offset_mm: float = 0.0) -> Release:
     """Voxelise a closed mesh at its voxel centres and simulate its release.
 
     Parameters
@@ -103,14 +144,19 @@ def simulate_mesh(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel
         Axis letters (``"x"``, ``"xy"``, ``"xyz"``) with a mirror plane through the bounding-box centre;
         only the half/quadrant/octant above the planes is simulated. Use it only for shapes that are
         symmetric about those planes.
+    anisotropy : float
+        Erosion speed along z over the in-plane speed (``design.forward.simulator.simulate``).
+    offset_mm : float
+        The printed surface lies this far outside the mesh's (inside if negative), mm.
 
     Returns
     -------
     Release
         Its `released_mm3` is always the full object's (mirror copies included).
     """
-    rho, dx, mirror = mesh_grid(mesh, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)
-    return simulate(rho, dx, mirror=mirror)
+    rho, dx, mirror = mesh_grid(mesh, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry,
+                                offset_mm=offset_mm)
+    return simulate(rho, dx, mirror=mirror, anisotropy=anisotropy)
 
 
 def input_grid(spec: str, *, resolution: int | None = None, voxel_size_mm: float | None = None,
