@@ -256,6 +256,10 @@ class MainWindow(QMainWindow):
             action.triggered.connect(lambda checked=False, i=index: self.tabs.setCurrentIndex(i))
             self.view_menu.addAction(action)
 
+    def _tab_shown(self, index: int) -> None:
+        if self.tabs.widget(index) is self.browser:
+            self.browser.refresh()                    # frame counts and statuses as they are now
+
     def fit_to_screen(self, available: QRect | None = None) -> None:
         """Size the window to :data:`PREFERRED_SIZE`, or to the screen's available area (less a title bar) where
         that is smaller, and place it inside that area."""
@@ -672,6 +676,7 @@ class MainWindow(QMainWindow):
         self.controls.set_running(True, waiting_drop=state.phase == Phase.WAITING_DROP)  # Done ends it (on_done)
         if state.phase == Phase.OPENED:
             self.on_message("info", f"run folder {state.folder}")
+            self.browser.refresh()                    # the new run is listed while it records
 
     def on_prompt(self, prompt: Prompt) -> None:
         """The engine asks the operator something."""

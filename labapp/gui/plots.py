@@ -185,7 +185,7 @@ class PlotsPanel(QWidget):
                                        pen=pg.mkPen(colour, width=1.5, style=Qt.PenStyle.DashLine))
             if plot is self.release and text:          # labelled on the release plot only
                 label = pg.InfLineLabel(item if isinstance(item, pg.InfiniteLine) else item.lines[0], text=text,
-                                        position=0.92, rotateAxis=(1, 0), anchor=(1, 1), color=colour)
+                                        position=0.06, rotateAxis=(1, 0), anchor=(0, 1), color=colour)
                 label.setZValue(20)
             plot.addItem(item, ignoreBounds=True)
             self._mark_items.append((plot, item))

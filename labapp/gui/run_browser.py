@@ -176,7 +176,9 @@ class RunBrowser(QWidget):
         self.refresh()
 
     def refresh(self) -> None:
-        """Re-read the data directory."""
+        """Re-read the data directory (the selection is kept)."""
+        selected = self.selected_paths()
+        self.tree.blockSignals(True)
         self.tree.clear()
         for snap in list_runs(self.data_dir):
             created = time.strftime("%Y-%m-%d %H:%M", time.localtime(snap.record.created_unix_s or 0))
@@ -189,6 +191,10 @@ class RunBrowser(QWidget):
             except StorageError:
                 row = [path.name, str(folder_kind(path) or "-"), "not a run record", str(len(frame_files(path))), ""]
             self._add_item(path, row)
+        for i in range(self.tree.topLevelItemCount()):
+            item = self.tree.topLevelItem(i)
+            item.setSelected(Path(item.data(0, 256)) in selected)
+        self.tree.blockSignals(False)
         self._selected()
 
     def _add_item(self, path: Path, row: list[str]) -> None:

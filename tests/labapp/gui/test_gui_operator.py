@@ -59,7 +59,7 @@ def test_connect_never_blocks_the_gui_thread(qtbot, tmp_path):
         qtbot.waitUntil(lambda: not win.building, timeout=60_000)
         latency.timer.stop()
         # the event loop kept turning while the bench was built (slack for a loaded test machine)
-        assert latency.worst_ms < 2 * MAX_BLOCK_MS, latency.worst_ms
+        assert latency.worst_ms < 3 * MAX_BLOCK_MS, latency.worst_ms
         qtbot.waitUntil(lambda: win.live.image.image is not None and not win.engine.running, timeout=60_000)
         assert win.devices.connect_button.isEnabled() and "connecting" not in win.devices.connect_button.text()
     finally:
