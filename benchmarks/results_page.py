@@ -222,7 +222,7 @@ def _before_after(rows: list[dict], before: dict) -> list[str]:
         "evaluations); [design.md](design.md#physical-correction) says how they work. The **true** fit is the",
         "printed solid's (`design.stl`) release against the target's physical release, both by the reference",
         "evaluator (`design.forward.reference`: exact surface distances); the design-grid fit is the printed",
-        "solid re-voxelised on the design grid against the target there (`rel_rmse_binary`).",
+        "solid re-voxelised on the design grid against the target there (`rel_rmse_design_grid_binary`).",
         "",
         "| case | space | design grid, before | **true, before** | design grid, after | **true, after** "
         "| pieces, before / after | seconds, before / after |",
@@ -299,7 +299,7 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
         "  the grid the optimiser worked on (`rel_rmse_density`). A diagnostic of the optimisation only: the",
         "  density is not what is printed.",
         "- **printed solid (design grid)**: the printed mesh (`design.stl`, the contour that keeps the",
-        "  density's mass) re-voxelised on the design grid and simulated (`rel_rmse_binary`, the figure the",
+        "  density's mass) re-voxelised on the design grid and simulated (`rel_rmse_design_grid_binary`, the figure the",
         "  paper plots). A diagnostic too: on the design grid the voxelisation error of the grid itself, which",
         "  the optimiser has learnt to use, is part of both curves.",
         "- **printed solid (true)**: `design.stl`'s release by the reference evaluator (exact surface distances,",
