@@ -65,7 +65,7 @@ at most `MAX_BETA` (docs/design.md#physical-correction)."""
 MAX_BETA = 64.0
 """The steepest projection a `DesignConfig` allows."""
 
-REFERENCE_PER_VOXEL = 3.0
+REFERENCE_PER_VOXEL = 2.0
 """Lattice cells of the rounds' reference releases (`design.forward.reference.reference_release`) per design
 voxel along the print's longest side, between the evaluator's `MIN_CELLS` and `DEFAULT_CELLS`: the lattice
 resolves what the design grid can make, and its cost follows the design's."""
