@@ -29,6 +29,7 @@ measured samples, with no offset (a drop-time error counts as prediction error).
 """
 from __future__ import annotations
 
+import copy
 import logging
 import math
 from collections.abc import Callable, Sequence
@@ -298,6 +299,15 @@ class _Prepared:
         self.weight = np.concatenate([[0.5 * dt[0]], 0.5 * (dt[1:] + dt[:-1]), [0.5 * dt[-1]]])   # trapezoid, h
         self.load_fraction = shape.mass_g / shape.water_g   # g of release per g of water when complete
 
+    def with_simulation(self, shape: ShapeRun) -> _Prepared:
+        """This run's prepared measured curves with another simulation of its shape (same measured run)."""
+        other = copy.copy(self)
+        other.shape = shape
+        other.tau = np.asarray(shape.tau_mm, float)
+        other.sim = np.asarray(shape.released_mm3, float) / shape.volume_mm3
+        other.sim_slope = np.gradient(other.sim, other.tau)
+        return other
+
     def loss(self, seconds_per_mm: float, inv_csat: float, offset_s: float) -> float:
         """Section 4.3's L for this run (hours), the simulated curve on the clock of the model."""
         free = 1.0 - inv_csat * 1000.0 * self.load_fraction * self.sim
@@ -339,11 +349,14 @@ def _fit_time(prepared: Sequence[_Prepared], inv_csat: float, max_offset_s: floa
         return sum(p.loss(s, inv_csat, o) for p, o in zip(prepared, offsets))
 
     lo, hi = (math.log(b) for b in SECONDS_PER_MM_BOUNDS)
+    full_grid = np.linspace(lo, hi, int(round((hi - lo) / math.log(10) * _SCAN_PER_DECADE)) + 1)
     if around is None:
-        grid = np.linspace(lo, hi, int(round((hi - lo) / math.log(10) * _SCAN_PER_DECADE)) + 1)
+        log_s, _ = _scan_then_refine(total, full_grid, 1e-5)
     else:
         grid = np.linspace(math.log(around) - 0.3, math.log(around) + 0.3, 13)
-    log_s, _ = _scan_then_refine(total, grid, 1e-5)
+        log_s, _ = _scan_then_refine(total, grid, 1e-5)
+        if min(log_s - grid[0], grid[-1] - log_s) < 0.5 * (grid[1] - grid[0]):   # at the window's edge: scan all
+            log_s, _ = _scan_then_refine(total, full_grid, 1e-5)
     for _ in range(_ROUNDS if max_offset_s > 0 else 0):
         s = math.exp(log_s)
         offset_grid = np.linspace(-max_offset_s, max_offset_s, 17)
@@ -362,14 +375,15 @@ def _prepare(shapes: Sequence[ShapeRun], window_s: float, order: int) -> list[_P
     return [_Prepared(s, window_s, order) for s in shapes]
 
 
-def _fit_prepared(prepared: Sequence[_Prepared], model: str, max_offset_s: float) -> SimCalFit:
+def _fit_prepared(prepared: Sequence[_Prepared], model: str, max_offset_s: float,
+                  around: float | None = None) -> SimCalFit:
     if model not in MODELS:
         raise AnalysisError(f"model {model!r} is not one of {', '.join(MODELS)}")
     if not 0 <= max_offset_s < math.inf:
         raise AnalysisError(f"max_offset_s = {max_offset_s!r} must be >= 0 and finite")
     shapes = [p.shape for p in prepared]
     g_per_mm3 = float(sum(s.mass_g for s in shapes) / sum(s.volume_mm3 for s in shapes))
-    s, offsets, losses = _fit_time(prepared, 0.0, max_offset_s)
+    s, offsets, losses = _fit_time(prepared, 0.0, max_offset_s, around=around)
     inv_csat = 0.0
     if model == "saturation":
         # 1/c_sat from 0 (constant rate) to where the most loaded bath would reach 90% of saturation
@@ -451,3 +465,220 @@ def leave_one_out(shapes: Sequence[ShapeRun], model: str = "constant", *,
         if progress is not None:
             progress(i + 1, len(prepared))
     return tuple(out)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Print physics: parameters of the forward model itself (design.forward: anisotropy, surface offset), fitted
+# with the scales. The analysis never simulates: the caller gives ``shapes_at(values)``, the calibration
+# shapes simulated with those parameter values (the job caches them per mesh and values).
+
+PHYSICS_PARAMETERS = ("anisotropy", "offset_mm")
+"""Print physics the calibration can fit: z / in-plane erosion rate, printed surface outside the mesh's (mm)."""
+PHYSICS_IDENTITY = {"anisotropy": 1.0, "offset_mm": 0.0}
+"""Values that switch each effect off (the paper's isotropic model of the mesh as designed)."""
+PHYSICS_GRIDS = {"anisotropy": tuple(float(x) for x in np.exp(np.linspace(math.log(0.5), math.log(2.0), 13))),
+                 "offset_mm": tuple(float(x) for x in np.round(np.linspace(-0.2, 0.3, 11), 6))}
+"""Search grid of each parameter (anisotropy log-spaced by a factor 1.12, offset in 0.05 mm steps); the
+minimum is refined by a parabola through the best grid point and its neighbours."""
+PHYSICS_CHOICES = ("none", "anisotropy", "offset", "all", "auto")
+"""``--physics`` values: which parameters to fit; ``auto`` fits every subset and keeps the one leave-one-out prefers."""
+PHYSICS_SETS = {"none": (), "anisotropy": ("anisotropy",), "offset": ("offset_mm",), "all": PHYSICS_PARAMETERS}
+EARN_MARGIN = 0.05
+"""A parameter set is kept over a smaller one only if its mean leave-one-out error is lower by more than this
+fraction: a parameter must earn its place, not win by the noise of the fit."""
+EARN_SIGMAS = 2.0
+"""... and only if each of its parameters lies more than this many standard errors from its identity value."""
+_PHYSICS_ROUNDS = 2
+_LOO_WINDOW = 3
+
+
+@dataclass(frozen=True)
+class PhysicsFit:
+    """Print physics fitted with the scales.
+
+    Attributes
+    ----------
+    fitted : tuple of str
+        The parameters fitted (names of `PHYSICS_PARAMETERS`); the others stay at `PHYSICS_IDENTITY`.
+    values : dict
+        Every parameter's value (fitted or identity).
+    uncertainty : dict
+        Per fitted parameter, its standard error: the larger of the jackknife over the leave-one-out
+        fits and a tenth of its grid step (for the offset also the floor the caller gives).
+    loss : float
+        Section 4.3 loss of the scales fitted at `values`.
+    loo : tuple of LooShape
+        Each shape predicted with physics and scales fitted without it.
+    loo_values : tuple of dict
+        The parameter values fitted without each shape.
+    """
+
+    fitted: tuple[str, ...]
+    values: dict
+    uncertainty: dict
+    loss: float
+    loo: tuple[LooShape, ...]
+    loo_values: tuple[dict, ...]
+
+    @property
+    def loo_rel_rmse_mean(self) -> float:
+        """Mean leave-one-out relative RMSE."""
+        return float(np.mean([s.rel_rmse for s in self.loo]))
+
+
+def _grid_coord(name: str, x: float) -> float:
+    return math.log(x) if name == "anisotropy" else x
+
+
+def _from_coord(name: str, c: float) -> float:
+    return math.exp(c) if name == "anisotropy" else c
+
+
+def _refine(name: str, grid: Sequence[float], i: int, losses: Sequence[float]) -> float:
+    """Vertex of the parabola through grid point i and its neighbours (in log for anisotropy), kept between them."""
+    if i == 0 or i == len(grid) - 1:
+        return float(grid[i])
+    c = [_grid_coord(name, grid[j]) for j in (i - 1, i, i + 1)]
+    f = [losses[j] for j in (i - 1, i, i + 1)]
+    den = (c[0] - c[1]) * (c[0] - c[2]) * (c[1] - c[2])
+    a = (c[2] * (f[1] - f[0]) + c[1] * (f[0] - f[2]) + c[0] * (f[2] - f[1])) / den
+    b = (c[2] ** 2 * (f[0] - f[1]) + c[1] ** 2 * (f[2] - f[0]) + c[0] ** 2 * (f[1] - f[2])) / den
+    if not a > 0:
+        return float(grid[i])
+    return float(_from_coord(name, min(max(-b / (2 * a), c[0]), c[2])))
+
+
+def _nearest(p: str, value: float) -> int:
+    return int(np.argmin([abs(_grid_coord(p, g) - _grid_coord(p, value)) for g in PHYSICS_GRIDS[p]]))
+
+
+def _physics_search(loss_at: Callable[[dict], float], fitted: Sequence[str], near: dict | None = None) -> dict:
+    """Coordinate search over the grids of the ``fitted`` parameters (values on grid points), then a parabola
+    refinement of each from its grid neighbours. Returns every parameter's value. With ``near`` (values), the
+    search starts there and covers `_LOO_WINDOW` grid points either side of it (leave-one-out refits)."""
+    start = near or PHYSICS_IDENTITY
+    index = {p: _nearest(p, start[p]) for p in fitted}
+    span = {p: (0, len(PHYSICS_GRIDS[p])) if near is None else
+            (max(index[p] - _LOO_WINDOW, 0), min(index[p] + _LOO_WINDOW + 1, len(PHYSICS_GRIDS[p]))) for p in fitted}
+
+    def point(overrides: dict) -> dict:
+        values = dict(PHYSICS_IDENTITY)
+        values.update({p: PHYSICS_GRIDS[p][k] for p, k in index.items()})
+        values.update(overrides)
+        return values
+
+    profiles: dict[str, list[float]] = {}
+    for _ in range(_PHYSICS_ROUNDS if len(fitted) > 1 else 1):
+        for p in fitted:
+            lo, hi = span[p]
+            grid = PHYSICS_GRIDS[p][lo:hi]
+            profiles[p] = [loss_at(point({p: g})) for g in grid]
+            index[p] = lo + int(np.argmin(profiles[p]))
+    values = point({})
+    for p in fitted:
+        lo, hi = span[p]
+        values[p] = _refine(p, PHYSICS_GRIDS[p][lo:hi], index[p] - lo, profiles[p])
+    return values
+
+
+def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequence[str], *,
+                max_offset_s: float = DEFAULT_MAX_OFFSET_S, window_s: float = DEFAULT_WINDOW_S,
+                order: int = DEFAULT_ORDER, progress: Callable[[int, int], None] | None = None,
+                offset_floor_mm: float = 0.0) -> PhysicsFit:
+    """Fit print physics and the constant-rate scales together, with leave-one-out and uncertainties.
+
+    Each candidate parameter value is scored by the section 4.3 loss of the scales fitted at it (the
+    time scale and the drop offsets refitted for every value, the mass scale pooled), summed over shapes;
+    the parameters minimise it (:func:`_physics_search`). Leave-one-out refits the physics and the scales
+    without each shape and predicts it from its weighed mass; the spread of those refits gives each
+    parameter's jackknife standard error.
+
+    Parameters
+    ----------
+    shapes_at : callable
+        ``shapes_at(values)``: the calibration shapes (same order and names every call) simulated with the
+        parameter values ``values`` (a dict over `PHYSICS_PARAMETERS`).
+    fitted : sequence of str
+        Parameters to fit (a subset of `PHYSICS_PARAMETERS`; empty: the identity physics).
+    max_offset_s, window_s, order
+        As in :func:`fit_simcal`.
+    progress : callable, optional
+        ``progress(done, total)`` after the full fit and each left-out shape.
+    offset_floor_mm : float
+        Least standard error of the offset, mm: a voxelised surface is placed only to within its voxels
+        (the caller passes half the simulations' voxel edge).
+
+    Returns
+    -------
+    PhysicsFit
+    """
+    unknown = [p for p in fitted if p not in PHYSICS_PARAMETERS]
+    if unknown:
+        raise AnalysisError(f"unknown print physics {unknown}; known: {', '.join(PHYSICS_PARAMETERS)}")
+    prepared: dict[tuple, list[_Prepared]] = {}
+    base = _prepare(shapes_at(dict(PHYSICS_IDENTITY)), window_s, order)   # the measured curves, smoothed once
+    around = _fit_prepared(base, "constant", max_offset_s).cal.seconds_per_mm
+
+    def prep(values: dict) -> list[_Prepared]:
+        key = tuple(round(values[p], 9) for p in PHYSICS_PARAMETERS)
+        if key not in prepared:
+            prepared[key] = [b.with_simulation(sh) for b, sh in zip(base, shapes_at(values))]
+        return prepared[key]
+
+    def loss_without(skip: int | None) -> Callable[[dict], float]:
+        def loss_at(values: dict) -> float:
+            sub = [p for j, p in enumerate(prep(values)) if j != skip]
+            return _fit_prepared(sub, "constant", max_offset_s, around).loss
+        return loss_at
+
+    n = len(base)
+    if n < 2:
+        raise AnalysisError("fitting print physics needs at least two shapes (leave-one-out)")
+    values = _physics_search(loss_without(None), fitted) if fitted else dict(PHYSICS_IDENTITY)
+    full = _fit_prepared(prep(values), "constant", max_offset_s)
+    if progress is not None:
+        progress(1, n + 1)
+    loo, loo_values = [], []
+    for i in range(n):
+        v = _physics_search(loss_without(i), fitted, near=values) if fitted else dict(PHYSICS_IDENTITY)
+        shapes = prep(v)
+        cal = _fit_prepared(shapes[:i] + shapes[i + 1:], "constant", max_offset_s).cal
+        sh = shapes[i].shape
+        predicted = cal.to_physical(sh.tau_mm, sh.released_mm3, sh.t_s, sh.water_g, mass_g=sh.mass_g)
+        measured = np.asarray(sh.released_g, float)
+        rel = float(np.sqrt(np.mean((predicted - measured) ** 2)) / sh.mass_g)
+        loo.append(LooShape(sh.name, cal, np.asarray(sh.t_s, float), measured, predicted, rel))
+        loo_values.append(v)
+        log.info("leave-one-out %s (physics %s): %s, rel_rmse %.2f%%", sh.name, "+".join(fitted) or "none", v, 100 * rel)
+        if progress is not None:
+            progress(i + 2, n + 1)
+    uncertainty = {}
+    for p in fitted:
+        coords = np.array([_grid_coord(p, v[p]) for v in loo_values])
+        jack = math.sqrt((n - 1) / n * float(np.sum((coords - coords.mean()) ** 2)))
+        step = abs(_grid_coord(p, PHYSICS_GRIDS[p][1]) - _grid_coord(p, PHYSICS_GRIDS[p][0]))
+        se = max(jack, 0.1 * step)
+        # anisotropy is searched in log: its standard error is relative, reported in its own unit
+        uncertainty[p] = float(values[p] * se) if p == "anisotropy" else float(max(se, offset_floor_mm))
+    return PhysicsFit(tuple(fitted), values, uncertainty, full.loss, tuple(loo), tuple(loo_values))
+
+
+def choose_physics(fits: dict[str, PhysicsFit]) -> str:
+    """The physics set leave-one-out prefers: the smallest mean error, a larger set kept only if it beats
+    every smaller one it contains by `EARN_MARGIN` and each of its parameters is `EARN_SIGMAS` standard errors
+    from its identity value (``none`` is the isotropic model of the mesh as designed)."""
+    def size(name: str) -> int:
+        return len(PHYSICS_SETS[name])
+
+    chosen = "none" if "none" in fits else min(fits, key=size)
+    for name in sorted(fits, key=size):
+        if name == chosen:
+            continue
+        smaller = [m for m in fits if size(m) < size(name) and set(PHYSICS_SETS[m]) <= set(PHYSICS_SETS[name])]
+        earns = all(fits[name].loo_rel_rmse_mean < (1 - EARN_MARGIN) * fits[m].loo_rel_rmse_mean for m in smaller)
+        # and every parameter it fits is resolved away from its identity value
+        earns = earns and all(abs(fits[name].values[p] - PHYSICS_IDENTITY[p]) > EARN_SIGMAS * fits[name].uncertainty[p]
+                              for p in fits[name].fitted)
+        if earns and fits[name].loo_rel_rmse_mean < fits[chosen].loo_rel_rmse_mean:
+            chosen = name
+    return chosen

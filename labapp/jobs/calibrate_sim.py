@@ -10,6 +10,7 @@ leave-one-out predictions (:mod:`analysis.simcal`) and writes ``simcal.json``, `
 from __future__ import annotations
 
 import csv
+import dataclasses
 import datetime as _dt
 import hashlib
 import json
@@ -21,7 +22,17 @@ from pathlib import Path
 import numpy as np
 
 from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, SimCal, fit_simcal, leave_one_out
-from analysis.simcal import DEFAULT_MAX_OFFSET_S, MODELS
+from analysis.simcal import (
+    DEFAULT_MAX_OFFSET_S,
+    MODELS,
+    PHYSICS_CHOICES,
+    PHYSICS_IDENTITY,
+    PHYSICS_PARAMETERS,
+    PHYSICS_SETS,
+    PhysicsFit,
+    choose_physics,
+    fit_physics,
+)
 from labapp.errors import UsageError
 from labapp.records import operators
 from labapp.records.audit import Action
@@ -32,8 +43,10 @@ from labapp.records.lock import folder_lock
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import FRAMES_CSV, atomic_write, sha256_file
 
-FORMAT = "sfr-simcal/1"
+FORMAT = "sfr-simcal/2"
 """``format`` of ``simcal.json``."""
+OLD_FORMATS = ("sfr-simcal/1",)
+"""Earlier formats :func:`load_simcal` reads by :func:`migrate` (version 1 had no print physics: the identity)."""
 FORWARD_MODEL = "design.forward.simulator: fast marching, eqs. 2-10"
 """The simulator a calibration holds for; a file naming another is refused."""
 DEFAULT_RESOLUTION = 64
@@ -74,6 +87,8 @@ class SimCalFile:
     water_g : float
         Water mass of the calibration runs (median), g: the default bath for predictions.
     path : Path
+    physics : dict
+        The forward model's print physics (``anisotropy``, ``offset_mm``) predictions simulate with.
     """
 
     cal: SimCal
@@ -81,12 +96,18 @@ class SimCalFile:
     voxel_size_mm: float
     water_g: float
     path: Path
+    physics: dict = dataclasses.field(default_factory=lambda: dict(PHYSICS_IDENTITY))
 
     def describe(self) -> str:
         """One line for reports and GUI labels."""
         sat = "" if self.cal.saturation_g_per_kg is None else f", c_sat {self.cal.saturation_g_per_kg:.3g} g/kg"
+        phys = "".join(f", {k} {v:.3g}" for k, v in self.physics.items() if v != PHYSICS_IDENTITY[k])
         return (f"{self.path.name}: {self.cal.model} model, {self.cal.seconds_per_mm:.1f} s/mm, "
-                f"{self.cal.g_per_mm3 * 1000:.4g} g/cm^3{sat}, resolution {self.resolution}")
+                f"{self.cal.g_per_mm3 * 1000:.4g} g/cm^3{sat}{phys}, resolution {self.resolution}")
+
+    def simulate_options(self) -> dict:
+        """Keyword arguments of ``design.files.pipeline.simulate_mesh`` for this calibration's physics."""
+        return {"anisotropy": self.physics["anisotropy"], "offset_mm": self.physics["offset_mm"]}
 
 
 @dataclass(frozen=True)
@@ -212,14 +233,20 @@ def _check_inputs(set_csv: Path, rows: list[SetRow], bench) -> dict:
     return meshes
 
 
-def _simulate(mesh, mesh_path: Path, resolution: int):
+def _simulate(mesh, mesh_path: Path, resolution: int, physics: dict | None = None, grids: dict | None = None):
+    """A mesh's simulated release with print physics; ``grids`` caches voxelisations per (mesh, offset)."""
     from design.errors import DesignError
     from design.files.pipeline import mesh_grid
     from design.forward.simulator import simulate
 
+    physics = physics or PHYSICS_IDENTITY
+    grids = {} if grids is None else grids
     try:
-        rho, dx, mirror = mesh_grid(mesh, resolution=resolution)
-        release = simulate(rho, dx, mirror=mirror)
+        key = (mesh_path, physics["offset_mm"])
+        if key not in grids:
+            grids[key] = mesh_grid(mesh, resolution=resolution, offset_mm=physics["offset_mm"])
+        rho, dx, mirror = grids[key]
+        release = simulate(rho, dx, mirror=mirror, anisotropy=physics["anisotropy"])
     except DesignError as exc:
         raise SimCalError(f"{mesh_path}: {exc}") from exc
     return release.tau_mm, release.released_mm3, dx
@@ -240,7 +267,8 @@ def _loo_summary(loo: tuple[LooShape, ...], rows: list[SetRow]) -> list[dict]:
 
 def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out_dir: str | Path, *,
                   model: str = "auto", resolution: int = DEFAULT_RESOLUTION,
-                  max_offset_s: float = DEFAULT_MAX_OFFSET_S, progress: Progress | None = None) -> SimCalRun:
+                  max_offset_s: float = DEFAULT_MAX_OFFSET_S, physics: str = "none",
+                  progress: Progress | None = None) -> SimCalRun:
     """Calibrate the simulator against measured runs and write ``simcal.json``, ``loo.csv``, ``simcal.png``.
 
     Parameters
@@ -259,6 +287,11 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         Voxels along each mesh's longest side.
     max_offset_s : float
         Bound on each run's drop-time offset, s.
+    physics : {'none', 'anisotropy', 'offset', 'all', 'auto'}
+        Print physics of the forward model to fit with the scales (:func:`analysis.simcal.fit_physics`):
+        ``none`` keeps the isotropic model of the mesh as designed; ``auto`` fits every set and keeps the
+        one leave-one-out prefers (a parameter must earn its place). The models of ``model`` are then
+        fitted on the meshes simulated with the chosen physics.
     progress : callable, optional
         ``progress(fraction, message)`` before each run and each fit; it may raise ``KeyboardInterrupt`` to stop
         there (nothing is written into ``out_dir``).
@@ -275,6 +308,8 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
     say = progress or (lambda fraction, message: None)
     if model not in ("auto",) + MODELS:
         raise SimCalError(f"model {model!r} is not one of auto, {', '.join(MODELS)}")
+    if physics not in PHYSICS_CHOICES:
+        raise SimCalError(f"physics {physics!r} is not one of {', '.join(PHYSICS_CHOICES)}")
     if not MIN_RESOLUTION <= resolution <= MAX_RESOLUTION:
         raise SimCalError(f"resolution {resolution} is outside {MIN_RESOLUTION}..{MAX_RESOLUTION} voxels")
     set_csv, out_dir = Path(set_csv), Path(out_dir)
@@ -292,17 +327,50 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
     with folder_lock(out_dir):      # one writer (sfr calibrate-sim, the GUI's wizard); made here, after the checks
         _make_out(out_dir)
         return _fit_and_write(set_csv, rows, bench, bench_calibration, meshes, out_dir, model, resolution,
-                              max_offset_s, say, operator)
+                              max_offset_s, say, operator, physics)
+
+
+def _physics_doc(fits: dict[str, PhysicsFit], chosen: str, rows: list[SetRow]) -> dict:
+    fit = fits[chosen]
+    return {"fitted": list(fit.fitted), "choice": chosen, **{p: fit.values[p] for p in PHYSICS_PARAMETERS},
+            "uncertainty": dict(fit.uncertainty),
+            "candidates": {name: {"fitted": list(f.fitted), "values": f.values, "uncertainty": f.uncertainty,
+                                  "loss": f.loss, "loo_rel_rmse_mean": f.loo_rel_rmse_mean,
+                                  "loo": [{"run": str(r.run), "rel_rmse": s.rel_rmse, "values": v}
+                                          for s, r, v in zip(f.loo, rows, f.loo_values)]}
+                           for name, f in fits.items()}}
 
 
 def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, meshes: dict, out_dir: Path,
-                   model: str, resolution: int, max_offset_s: float, say: Progress, operator) -> SimCalRun:
+                   model: str, resolution: int, max_offset_s: float, say: Progress, operator,
+                   physics: str = "none") -> SimCalRun:
     """The work of :func:`calibrate_sim` on checked inputs, into the locked ``out_dir``."""
-    shapes, curves, dxs = [], [], []
+    measured = []
     n = len(rows)
+    simulated: dict[tuple, tuple] = {}   # (mesh, anisotropy, offset) -> (tau, volume, dx)
+    grids: dict[tuple, tuple] = {}       # (mesh, offset) -> voxel grid
+
+    def simulation(row: SetRow, values: dict) -> tuple:
+        key = (row.mesh, round(values["anisotropy"], 9), round(values["offset_mm"], 9))
+        if key not in simulated:
+            simulated[key] = _simulate(meshes[row.mesh], row.mesh, resolution, values, grids)
+        return simulated[key]
+
+    def shapes_at(values: dict) -> list[ShapeRun]:
+        out = []
+        for row, (where, t, g, mass, water) in zip(rows, measured):
+            tau, vol, _ = simulation(row, values)
+            try:
+                out.append(ShapeRun(f"{where} ({row.run.name}, {row.mesh.name})", tau, vol, t, g, mass, water))
+            except AnalysisError as exc:
+                raise SimCalError(str(exc)) from exc
+        return out
+
+    curves = []
     for k, row in enumerate(rows):
         where = f"{set_csv.name} row {row.row}"
-        say(0.6 * k / n, f"{where}: reading {row.run.name} and simulating {row.mesh.name} ...")
+        say(0.6 * k / n if physics == "none" else 0.1 * k / n,
+            f"{where}: reading {row.run.name} and simulating {row.mesh.name} ...")
         try:
             curve = read_physical_curve(row.run, calibration=bench)
         except CurveFileError as exc:
@@ -314,15 +382,29 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
         if water is None:
             raise SimCalError(f"{where}: {row.run} records no water mass; give it in a water_g column or give "
                               "the bench calibration")
-        tau, vol, dx = _simulate(meshes[row.mesh], row.mesh, resolution)
         keep = curve.t_s >= 0
-        try:
-            shapes.append(ShapeRun(f"{where} ({row.run.name}, {row.mesh.name})", tau, vol, curve.t_s[keep],
-                                   curve.released_g[keep], float(mass), float(water)))
-        except AnalysisError as exc:
-            raise SimCalError(str(exc)) from exc
+        measured.append((where, curve.t_s[keep], curve.released_g[keep], float(mass), float(water)))
         curves.append(curve)
-        dxs.append(dx)
+        simulation(row, PHYSICS_IDENTITY)
+    physics_fits: dict[str, PhysicsFit] = {}
+    chosen_physics = "none"
+    if physics != "none":
+        names = [m for m in PHYSICS_SETS if physics == "auto" or m in ("none", physics)]
+        for j, name in enumerate(names):
+            base, span = 0.1 + 0.5 * j / len(names), 0.5 / len(names)
+            say(base, f"fitting print physics '{name}' and its leave-one-out ...")
+            try:
+                physics_fits[name] = fit_physics(
+                    shapes_at, PHYSICS_SETS[name], max_offset_s=max_offset_s, offset_floor_mm=0.5 * float(
+                        np.median([simulation(row, PHYSICS_IDENTITY)[2] for row in rows])),
+                    progress=lambda done, total, name=name, base=base, span=span: say(
+                        base + span * done / total, f"print physics '{name}': {done} of {total} fits"))
+            except AnalysisError as exc:
+                raise SimCalError(f"{set_csv}: {exc}") from exc
+        chosen_physics = choose_physics(physics_fits) if physics == "auto" else physics
+    values = physics_fits[chosen_physics].values if physics_fits else dict(PHYSICS_IDENTITY)
+    shapes = shapes_at(values)
+    dxs = [simulation(row, values)[2] for row in rows]
     fits, loos = {}, {}
     models = MODELS if model == "auto" else (model,)
     for j, name in enumerate(models):
@@ -346,6 +428,8 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
         "water_g": float(np.median([s.water_g for s in shapes])),
         "resolution": resolution,
         "voxel_size_mm": float(np.median(dxs)),
+        "physics": (_physics_doc(physics_fits, chosen_physics, rows) if physics_fits else
+                    {"fitted": [], "choice": "none", **PHYSICS_IDENTITY, "uncertainty": {}, "candidates": {}}),
         "loss": fit.loss,
         "loo": _loo_summary(loos[chosen], rows),
         "loo_rel_rmse_mean": mean_loo[chosen],
@@ -418,6 +502,14 @@ def plot_loo(loo: tuple[LooShape, ...], labels: list[str], path: Path, title: st
     plt.close(fig)
 
 
+def migrate(doc: dict) -> dict:
+    """A ``simcal.json`` of an earlier format as the current one: version 1 had no print physics (the identity)."""
+    if doc.get("format") == "sfr-simcal/1":
+        doc = dict(doc, format=FORMAT, physics={"fitted": [], "choice": "none", **PHYSICS_IDENTITY,
+                                                "uncertainty": {}, "candidates": {}})
+    return doc
+
+
 def load_simcal(path: str | Path) -> SimCalFile:
     """Read ``simcal.json``, refusing a file of another format, forward model or calibration model.
 
@@ -427,7 +519,12 @@ def load_simcal(path: str | Path) -> SimCalFile:
         Naming the file and the field.
     """
     path = Path(path)
-    doc = read_format(path, FORMAT, "a simulation calibration", "make one with sfr calibrate-sim", SimCalError)
+    try:
+        found = json.loads(path.read_text()).get("format")
+    except (OSError, ValueError, AttributeError):
+        found = None
+    fmt = found if found in OLD_FORMATS else FORMAT
+    doc = migrate(read_format(path, fmt, "a simulation calibration", "make one with sfr calibrate-sim", SimCalError))
     if doc.get("forward_model") != FORWARD_MODEL:
         raise SimCalError(f"{path}: calibrated for the simulator {doc.get('forward_model')!r}, this one is "
                           f"{FORWARD_MODEL!r}; recalibrate with sfr calibrate-sim")
@@ -437,11 +534,15 @@ def load_simcal(path: str | Path) -> SimCalFile:
         cal = SimCal(doc["model"], float(doc["seconds_per_mm"]), float(doc["g_per_mm3"]),
                      None if doc.get("saturation_g_per_kg") is None else float(doc["saturation_g_per_kg"]))
         resolution, dx, water = int(doc["resolution"]), float(doc["voxel_size_mm"]), float(doc["water_g"])
+        physics = {p: float(doc["physics"][p]) for p in PHYSICS_PARAMETERS}
     except (KeyError, TypeError, ValueError, AnalysisError) as exc:
         raise SimCalError(f"{path}: bad or missing field ({exc})") from exc
     if not (resolution > 0 and dx > 0 and water > 0):
         raise SimCalError(f"{path}: resolution, voxel_size_mm and water_g must be positive")
-    return SimCalFile(cal, resolution, dx, water, path)
+    if not (math.isfinite(physics["anisotropy"]) and physics["anisotropy"] > 0 and math.isfinite(physics["offset_mm"])):
+        raise SimCalError(f"{path}: physics.anisotropy must be a positive number and physics.offset_mm a finite one, "
+                          f"got {physics}")
+    return SimCalFile(cal, resolution, dx, water, path, physics)
 
 
 def check_resolution(simcal: SimCalFile, resolution: int | None) -> int:

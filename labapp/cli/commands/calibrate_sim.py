@@ -15,7 +15,7 @@ RECORDS = True
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr calibrate-sim`."""
-    from analysis.simcal import DEFAULT_MAX_OFFSET_S
+    from analysis.simcal import DEFAULT_MAX_OFFSET_S, PHYSICS_CHOICES
     from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION
 
     parser.add_argument("set_csv", metavar="SET.csv",
@@ -26,6 +26,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default="auto", choices=("auto", "constant", "saturation"),
                         help="model used for prediction: constant rate, Appendix B's saturating bath, or auto "
                              "(the lower leave-one-out error; both are always reported)")
+    parser.add_argument("--physics", default="none", choices=PHYSICS_CHOICES,
+                        help="print physics of the forward model to fit with the scales: the build-direction "
+                             "anisotropy (z / in-plane erosion rate), the surface offset (print larger or smaller "
+                             "than its mesh, mm), both, or auto (every set; a parameter is kept only where "
+                             "leave-one-out shows it earns it). Default none: the isotropic model of the mesh")
     parser.add_argument("--resolution", type=positive_int, default=DEFAULT_RESOLUTION,
                         help=f"voxels along each mesh's longest side (default {DEFAULT_RESOLUTION})")
     parser.add_argument("--max-offset-s", type=nonnegative_float, default=DEFAULT_MAX_OFFSET_S,
@@ -43,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     interrupt.set_hint(f"nothing written into {args.out}; rerun the same command to calibrate")
     done = calibrate_sim(args.set_csv, args.calibration, args.out, model=args.model, resolution=args.resolution,
-                         max_offset_s=args.max_offset_s, progress=progress)
+                         max_offset_s=args.max_offset_s, physics=args.physics, progress=progress)
     print_summary(done.doc)
     out = Path(args.out)
     print(f"wrote {out / 'simcal.json'}, {out / 'loo.csv'}, {out / 'simcal.png'}")
@@ -55,6 +60,13 @@ def print_summary(doc: dict) -> None:
     sat = doc["saturation_g_per_kg"]
     print(f"model {doc['model']}: {doc['seconds_per_mm']:.1f} s per mm of tau, {doc['g_per_mm3'] * 1000:.4f} g/cm^3"
           + ("" if sat is None else f", c_sat {sat:.3g} g/kg") + f", resolution {doc['resolution']}")
+    physics = doc.get("physics") or {}
+    if physics.get("candidates"):
+        print(f"print physics '{physics['choice']}': " + ", ".join(
+            f"{p} {physics[p]:.3g} +/- {physics['uncertainty'][p]:.2g}" for p in physics["fitted"]) or "none")
+        for name, c in physics["candidates"].items():
+            values = ", ".join(f"{p} {c['values'][p]:.3g}" for p in c["fitted"]) or "isotropic, mesh as designed"
+            print(f"  {name:10s} leave-one-out {100 * c['loo_rel_rmse_mean']:.2f}%  ({values})")
     models = list(doc["models"])
     print("leave-one-out rel. RMSE (% of weighed mass):")
     print(f"  {'run':40s} " + " ".join(f"{m:>11s}" for m in models))
