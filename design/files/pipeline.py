@@ -160,8 +160,11 @@ def simulate_mesh(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel
 
 
 def input_grid(spec: str, *, resolution: int | None = None, voxel_size_mm: float | None = None,
-               symmetry: str = "") -> tuple[np.ndarray, float, tuple[bool, ...]]:
+               symmetry: str = "", offset_mm: float = 0.0) -> tuple[np.ndarray, float, tuple[bool, ...]]:
     """The density grid of ``sample:NAME``, a mesh file or a density array file.
+
+    ``offset_mm`` moves a mesh's surface outward (:func:`mesh_grid`); a density array is its own solid and
+    takes no offset.
 
     For a density array (``.npy`` needs `voxel_size_mm`; ``.npz`` stores ``dx_mm``), the array is the
     simulated grid itself and `symmetry` puts mirror planes at the index-0 faces of the named axes.
@@ -174,10 +177,11 @@ def input_grid(spec: str, *, resolution: int | None = None, voxel_size_mm: float
     """
     if spec.startswith(SAMPLE_PREFIX):
         return mesh_grid(sample_shape(spec[len(SAMPLE_PREFIX):]), resolution=resolution,
-                         voxel_size_mm=voxel_size_mm, symmetry=symmetry)
+                         voxel_size_mm=voxel_size_mm, symmetry=symmetry, offset_mm=offset_mm)
     if Path(spec).suffix.lower() in DENSITY_SUFFIXES:
         if resolution is not None:
             raise DesignError(f"{spec}: --resolution applies to meshes; a density array has its own grid")
         rho, dx = load_density(spec, voxel_size_mm)
         return rho, dx, parse_symmetry(symmetry, rho.ndim)
-    return mesh_grid(load_mesh(spec), resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)
+    return mesh_grid(load_mesh(spec), resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry,
+                     offset_mm=offset_mm)

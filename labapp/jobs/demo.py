@@ -271,7 +271,7 @@ def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interva
     result, physical = design_from_target(config, design_dir, simcal=simcal)
 
     measured = read_physical_curve(analysis_dir / "curve.csv")
-    sim = simulate_mesh(sample_shape(sample), resolution=simcal.resolution)
+    sim = simulate_mesh(sample_shape(sample), resolution=simcal.resolution, **simcal.simulate_options())
     predicted = simcal.cal.to_physical(sim.tau_mm, sim.released_mm3, measured.t_s, measured.water_g or WATER_G)
     rel_pred = float(np.sqrt(np.mean((predicted - measured.released_g) ** 2)) / measured.released_g.max())
     figure = out_dir / "demo.png"

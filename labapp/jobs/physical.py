@@ -280,7 +280,8 @@ def _read_measured(path: Path) -> PhysicalCurve:
 
 
 def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """A mesh's predicted release in physical units: simulated at the calibration's resolution, mapped.
+    """A mesh's predicted release in physical units: simulated at the calibration's resolution with its print
+    physics (anisotropy, surface offset), mapped.
 
     Parameters
     ----------
@@ -295,8 +296,8 @@ def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = N
     t_s, released_g : (Q,) ndarray of float
     """
     try:
-        rho, dx, mirror = input_grid(str(mesh), resolution=simcal.resolution)
-        release = simulate(rho, dx, mirror=mirror)
+        rho, dx, mirror = input_grid(str(mesh), resolution=simcal.resolution, offset_mm=simcal.physics["offset_mm"])
+        release = simulate(rho, dx, mirror=mirror, anisotropy=simcal.physics["anisotropy"])
     except DesignError as exc:
         raise SimCalError(f"{mesh}: {exc}") from exc
     water = water_g or simcal.water_g

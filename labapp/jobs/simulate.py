@@ -33,7 +33,8 @@ class SimulationOutputs:
 
 
 def simulation_grid(source: str, *, resolution: int | None = None, voxel_size_mm: float | None = None,
-                    symmetry: str = "", units: str = "mm") -> tuple[Any, float, tuple[bool, ...], list[str]]:
+                    symmetry: str = "", units: str = "mm", offset_mm: float = 0.0
+                    ) -> tuple[Any, float, tuple[bool, ...], list[str]]:
     """The density grid a simulation of ``source`` (mesh, ``sample:NAME`` or density array) runs on.
 
     A mesh is scaled from ``units`` to mm, checked for an implausible size (warnings naming the likely
@@ -50,14 +51,16 @@ def simulation_grid(source: str, *, resolution: int | None = None, voxel_size_mm
         if units != "mm":
             raise UsageError("--units applies to meshes; a density array's voxel size is in mm")
         rho, dx, mirror = input_grid(source, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)
-        return rho, dx, mirror, []
+        return rho, dx, mirror, ([f"{source}: a density array is simulated as given; the calibration's surface "
+                                  f"offset {offset_mm:g} mm applies to meshes only"] if offset_mm else [])
     mesh = _source_mesh(source, units)
     dx = voxel_size_mm or float(mesh.extents.max()) / (resolution or DEFAULT_RESOLUTION)
     warnings = size_warnings(mesh.extents, float(mesh.volume), dx, source)
     for w in warnings:
         log.warning("%s", w)
     check_memory(grid_shape(mesh.extents, dx), SIMULATE_BYTES_PER_VOXEL, f"simulating {source}")
-    rho, dx, mirror = mesh_grid(mesh, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)
+    rho, dx, mirror = mesh_grid(mesh, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry,
+                                offset_mm=offset_mm)
     return rho, dx, mirror, warnings
 
 
@@ -105,11 +108,12 @@ def error_estimate(source: str, units: str, release, rho, dx_mm: float,
 
 
 def simulate(source: str, out: str | Path, *, resolution: int | None = None, voxel_size_mm: float | None = None,
-             symmetry: str = "", units: str = "mm",
+             symmetry: str = "", units: str = "mm", physics: dict | None = None,
              progress: Callable[[str], None] | None = None) -> SimulationOutputs:
     """Simulate the release of a mesh, ``sample:NAME`` or density array into ``out`` (release.csv,
     summary.json, release.png); the grid comes from :func:`simulation_grid`. The summary's ``error``
-    states how far the curve is from the solid's physical release (:func:`error_estimate`).
+    states how far the curve is from the solid's physical release (:func:`error_estimate`). ``physics``
+    (``anisotropy``, ``offset_mm``, a calibration's print physics) simulates the print instead of the mesh.
 
     Raises
     ------
@@ -126,12 +130,17 @@ def simulate(source: str, out: str | Path, *, resolution: int | None = None, vox
     out = check_out(out, FolderKind.SIMULATION, [source])
     start = time.perf_counter()
     say(f"[1/3] loading and voxelising {source} ...")
+    physics = physics or {"anisotropy": 1.0, "offset_mm": 0.0}
     rho, dx, mirror, warnings = simulation_grid(source, resolution=resolution, voxel_size_mm=voxel_size_mm,
-                                                symmetry=symmetry, units=units)
+                                                symmetry=symmetry, units=units, offset_mm=physics["offset_mm"])
     say(f"[2/3] fast marching {rho.size:,} voxels of {dx:.4g} mm ({time.perf_counter() - start:.1f} s) ...")
-    release = forward(rho, dx, mirror=mirror)
+    release = forward(rho, dx, mirror=mirror, anisotropy=physics["anisotropy"])
     say(f"      estimating its error ({time.perf_counter() - start:.1f} s) ...")
-    error = error_estimate(source, units, release, rho, dx, mirror)
+    if physics["anisotropy"] != 1.0 or physics["offset_mm"] != 0.0:
+        error = {"error_mm3": None, "error_fraction": None,
+                 "method": "not estimated: the reference evaluator has no print physics"}
+    else:
+        error = error_estimate(source, units, release, rho, dx, mirror)
     seconds = time.perf_counter() - start
     say(f"[3/3] writing {out}/ ({seconds:.1f} s)")
     out.mkdir(parents=True, exist_ok=True)
@@ -140,7 +149,7 @@ def simulate(source: str, out: str | Path, *, resolution: int | None = None, vox
     summary = {"input": source, "units": units, "volume_mm3": release.volume_mm3,
                "total_time_mm": release.total_time_mm, "voxels": int(rho.size), "grid_shape": list(rho.shape),
                "voxel_size_mm": dx, "mirror": list(mirror), "dtau_mm": release.dtau_mm, "error": error,
-               "seconds": seconds, "warnings": warnings}
+               "seconds": seconds, "warnings": warnings, "physics": physics}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     _plot_release(release.tau_mm, release.released_mm3, out / "release.png", source)
     return SimulationOutputs(release, summary, out, tuple(warnings))

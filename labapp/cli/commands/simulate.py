@@ -110,7 +110,8 @@ def _run(args: argparse.Namespace) -> int:
             return 2
         args.resolution = check_resolution(simcal, args.resolution)
     result = simulate_job(args.input, args.out, resolution=args.resolution, voxel_size_mm=args.voxel_size,
-                          symmetry=args.symmetry, units=args.units, progress=_progress)
+                          symmetry=args.symmetry, units=args.units, progress=_progress,
+                          physics=None if simcal is None else simcal.physics)
     release, summary, out = result.release, result.summary, result.out
     seconds = summary["seconds"]
     if simcal is not None:

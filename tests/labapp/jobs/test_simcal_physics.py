@@ -91,3 +91,27 @@ def test_version_1_file_loads_as_isotropic(tmp_path):
     (tmp_path / "simcal.json").write_text(json.dumps(doc))
     with pytest.raises(Exception, match="physics.anisotropy"):
         load_simcal(tmp_path / "simcal.json")
+
+
+def test_predictions_simulate_with_the_calibrated_physics(tmp_path):
+    from design.files.pipeline import simulate_mesh
+    from design.geometry.shapes import sample_shape
+    from labapp.jobs.physical import predict_mesh
+
+    doc = {"format": "sfr-simcal/2", "forward_model": "design.forward.simulator: fast marching, eqs. 2-10",
+           "model": "constant", "seconds_per_mm": 1500.0, "g_per_mm3": 0.00125, "saturation_g_per_kg": None,
+           "water_g": 500.0, "resolution": 24, "voxel_size_mm": 0.5,
+           "physics": {"anisotropy": 1.5, "offset_mm": 0.1, "fitted": ["anisotropy", "offset_mm"]}}
+    (tmp_path / "simcal.json").write_text(json.dumps(doc))
+    simcal = load_simcal(tmp_path / "simcal.json")
+    t, grams = predict_mesh("sample:pill", simcal)
+    truth = simulate_mesh(sample_shape("pill"), resolution=24, anisotropy=1.5, offset_mm=0.1)
+    assert t[-1] == pytest.approx(truth.tau_mm[-1] * 1500.0, rel=1e-9)
+    assert grams[-1] == pytest.approx(truth.released_mm3[-1] * 0.00125, rel=1e-9)
+    iso = simulate_mesh(sample_shape("pill"), resolution=24)
+    assert truth.released_mm3[-1] > 1.02 * iso.released_mm3[-1]   # the offset grows the print
+    assert main(["simulate", "sample:pill", "--simcal", str(tmp_path / "simcal.json"), "--out", str(tmp_path / "sim")]) == 0
+    summary = json.loads((tmp_path / "sim" / "summary.json").read_text())
+    assert summary["physics"] == {"anisotropy": 1.5, "offset_mm": 0.1}
+    assert summary["volume_mm3"] == pytest.approx(truth.volume_mm3, rel=1e-12)
+    assert summary["total_time_mm"] == pytest.approx(truth.total_time_mm, rel=1e-12)
