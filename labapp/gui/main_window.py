@@ -76,11 +76,17 @@ GAP_FACTOR, GAP_MIN_S = 5.0, 120.0
 on the plots (an accelerated simulation may lag its interval a little: that is no gap)."""
 
 
+_RELEASES: dict[str, SampleRelease] = {}
+"""Simulated samples' releases computed in this process's lifetime (the same object dissolves the same way)."""
+
+
 def release_in_subprocess(sample: str) -> SampleRelease:
-    """The simulated sample's release, computed in a child process: its fast marching (scikit-fmm) holds the
-    GIL for seconds, which in a thread of this process would freeze the window all the same."""
-    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return pool.submit(sample_release, sample).result()
+    """The simulated sample's release, computed once in a child process: its fast marching (scikit-fmm) holds
+    the GIL for seconds, which in a thread of this process would freeze the window all the same."""
+    if sample not in _RELEASES:
+        with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
+            _RELEASES[sample] = pool.submit(sample_release, sample).result()
+    return _RELEASES[sample]
 
 
 def decode_preview(data: bytes | None = None, path: str | None = None) -> np.ndarray | None:

@@ -54,7 +54,7 @@ def test_connect_never_blocks_the_gui_thread(qtbot, tmp_path):
         win.connect_devices()                        # builds the simulated bench (seconds cold) in a worker thread
         called_ms = (time.perf_counter() - start) * 1000
         assert called_ms < MAX_BLOCK_MS, called_ms
-        assert win.building and "connecting" in win.devices.connect_button.text()
+        assert "connecting" in win.devices.connect_button.text()          # until the built bench arrives
         assert not win.devices.connect_button.isEnabled()
         qtbot.waitUntil(lambda: not win.building, timeout=60_000)
         latency.timer.stop()
