@@ -115,3 +115,25 @@ def test_predictions_simulate_with_the_calibrated_physics(tmp_path):
     assert summary["physics"] == {"anisotropy": 1.5, "offset_mm": 0.1}
     assert summary["volume_mm3"] == pytest.approx(truth.volume_mm3, rel=1e-12)
     assert summary["total_time_mm"] == pytest.approx(truth.total_time_mm, rel=1e-12)
+
+
+def test_a_parameter_is_kept_only_where_it_earns_it():
+    from analysis.simcal import LooShape, PhysicsFit, choose_physics
+
+    def fit(fitted, values, sigma, loo):
+        shapes = tuple(LooShape("s", None, np.zeros(1), np.zeros(1), np.zeros(1), loo) for _ in range(3))
+        full = {"anisotropy": 1.0, "offset_mm": 0.0, **values}
+        return PhysicsFit(tuple(fitted), full, {p: sigma for p in fitted}, 0.0, shapes, ())
+
+    none = fit((), {}, 0.0, 0.040)
+    resolved = fit(("anisotropy",), {"anisotropy": 1.5}, 0.2, 0.030)
+    assert choose_physics({"none": none, "anisotropy": resolved}) == "anisotropy"
+    # better leave-one-out, but 1.3 is within 2 standard errors of 1: not kept
+    assert choose_physics({"none": none, "anisotropy": fit(("anisotropy",), {"anisotropy": 1.3}, 0.2, 0.030)}) == "none"
+    # resolved, but less than 5 % better: not kept
+    assert choose_physics({"none": none, "anisotropy": fit(("anisotropy",), {"anisotropy": 1.5}, 0.2, 0.039)}) == "none"
+    # both parameters must beat the one-parameter set they contain
+    both = fit(("anisotropy", "offset_mm"), {"anisotropy": 1.5, "offset_mm": 0.3}, 0.1, 0.0295)
+    assert choose_physics({"none": none, "anisotropy": resolved, "all": both}) == "anisotropy"
+    both = fit(("anisotropy", "offset_mm"), {"anisotropy": 1.5, "offset_mm": 0.3}, 0.1, 0.020)
+    assert choose_physics({"none": none, "anisotropy": resolved, "all": both}) == "all"
