@@ -13,6 +13,7 @@ import pytest
 from design.errors import DesignError
 from design.files.records import CHECKPOINT, load_checkpoint, save_checkpoint
 from design.files.rundir import run_design
+from design.inverse.defect import ROUND_BETA_FACTOR
 from design.inverse.problem import DesignConfig
 
 SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)
@@ -51,11 +52,12 @@ def test_outputs_cut_short_are_written_from_the_finished_state_at_its_final_beta
     shutil.copytree(finished, copy)
     for name in lost:  # Ctrl-C while the outputs were written: summary.json, written last, is missing
         (copy / name).unlink()
-    assert load_checkpoint(copy / CHECKPOINT).beta == pytest.approx(12.0)
+    # the physical-correction rounds ran at twice the final beta 12 (design.inverse.defect.ROUND_BETA_FACTOR)
+    assert load_checkpoint(copy / CHECKPOINT).beta == pytest.approx(ROUND_BETA_FACTOR["nfc"] * 12.0)
     result = run_design(None, copy, resume=True)
     assert not result.unchanged and result.status == "max_iter" and result.iterations == 40
     with np.load(finished / "density.npz") as a, np.load(copy / "density.npz") as b:
-        np.testing.assert_array_equal(a["rho"], b["rho"])  # projected at beta 12, not at the start's 3
+        np.testing.assert_array_equal(a["rho"], b["rho"])  # projected at the final state's beta, not the start's 3
         np.testing.assert_array_equal(a["solid"], b["solid"])
     original = json.loads((finished / "summary.json").read_text())
     rewritten = json.loads((copy / "summary.json").read_text())
