@@ -16,7 +16,8 @@ G_PER_MM3 = 2.0e-3
 
 
 def _simcal(path: Path, g_per_mm3: float = G_PER_MM3) -> Path:
-    path.write_text(json.dumps({"format": FORMAT, "forward_model": FORWARD_MODEL, "model": "constant",
+    path.write_text(json.dumps({"format": FORMAT, "forward_model": FORWARD_MODEL,
+        "physics": {"anisotropy": 1.0, "offset_mm": 0.0}, "model": "constant",
                                 "seconds_per_mm": 1500.0, "g_per_mm3": g_per_mm3, "resolution": 16,
                                 "voxel_size_mm": 1.0, "water_g": 500.0}))
     return path

@@ -93,7 +93,8 @@ def test_sfr_simulate_simcal_summary_carries_the_release_metrics(tmp_path):
     from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL
 
     simcal = tmp_path / "simcal.json"
-    simcal.write_text(json.dumps({"format": FORMAT, "forward_model": FORWARD_MODEL, "model": "constant",
+    simcal.write_text(json.dumps({"format": FORMAT, "forward_model": FORWARD_MODEL,
+        "physics": {"anisotropy": 1.0, "offset_mm": 0.0}, "model": "constant",
                                   "seconds_per_mm": SECONDS_PER_MM, "g_per_mm3": G_PER_MM3, "resolution": 12,
                                   "voxel_size_mm": 1.0, "water_g": 500.0}))
     out = tmp_path / "sim"

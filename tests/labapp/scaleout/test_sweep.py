@@ -80,7 +80,8 @@ def test_a_measured_target_goes_through_the_simulation_calibration(tmp_path):
     from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL
 
     (tmp_path / "simcal.json").write_text(json.dumps({
-        "format": FORMAT, "forward_model": FORWARD_MODEL, "model": "constant", "seconds_per_mm": 1500.0,
+        "format": FORMAT, "forward_model": FORWARD_MODEL,
+        "physics": {"anisotropy": 1.0, "offset_mm": 0.0}, "model": "constant", "seconds_per_mm": 1500.0,
         "g_per_mm3": 1.3e-3, "resolution": 16, "voxel_size_mm": 1.0, "water_g": 500.0}))
     t_s = np.linspace(0.0, 6000.0, 60)                  # a 5 mm sphere dissolving at 1500 s/mm, in grams
     depth = np.minimum(t_s / 1500.0, 5.0)
