@@ -41,15 +41,16 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration, mo
             raise AssertionError(_diagnosis(win)) from None
         assert win.status.phase.startswith("waiting")
         win.controls.drop_button.click()
-        qtbot.waitUntil(lambda: len(win.plots.t_s) >= 25 or not win.engine.running, timeout=300_000)
-        assert len(win.plots.t_s) >= 25, _diagnosis(win)
+        # 45 frames: the simulated print wets for up to 10 min before it dissolves (its hidden wetting lag)
+        qtbot.waitUntil(lambda: len(win.plots.t_s) >= 45 or not win.engine.running, timeout=300_000)
+        assert len(win.plots.t_s) >= 45, _diagnosis(win)
         win.controls.stop_button.click()
         qtbot.waitUntil(lambda: not win.engine.running, timeout=60_000)
         assert win.engine.outcome == "stopped"
 
         folder = win.procedure.run.path
         snap = read_run(folder)
-        assert snap.status == "stopped" and len(snap.frames) >= 25 and verify_run(folder).ok
+        assert snap.status == "stopped" and len(snap.frames) >= 45 and verify_run(folder).ok
         assert (folder / "reference.jpg").is_file() and snap.meta["object_name"] == ""
         qtbot.waitUntil(lambda: len(win.plots.t_s) == len(snap.frames), timeout=10_000)   # queued events
         win.plots.redraw()
