@@ -31,6 +31,7 @@ Last line: ``sources: <count>``.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -129,26 +130,37 @@ FRESH = {"tube": _tube, "torus": _torus, "l_bracket": _l_bracket, "asterisk": _a
 BUILDERS = {**TUNING, **FURTHER, **FRESH}
 
 
-def source(name: str) -> trimesh.Trimesh:
-    """A closed mesh centred at the origin with volume `VOLUME_MM3`, mm."""
-    mesh = BUILDERS[name]()
-    if not mesh.is_watertight:
-        raise RuntimeError(f"source {name} is not watertight")
+def centred(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """``mesh`` moved to centre its bounding box at the origin and scaled to volume `VOLUME_MM3`, mm."""
     mesh.apply_translation(-mesh.bounds.mean(axis=0))
     mesh.apply_scale((VOLUME_MM3 / mesh.volume) ** (1.0 / 3.0))
     return mesh
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def source(name: str) -> trimesh.Trimesh:
+    """A closed mesh centred at the origin with volume `VOLUME_MM3`, mm."""
+    mesh = BUILDERS[name]()
+    if not mesh.is_watertight:
+        raise RuntimeError(f"source {name} is not watertight")
+    return centred(mesh)
+
+
+def write_sources(names: Iterable[str], make: Callable[[str], trimesh.Trimesh], description: str) -> None:
+    """The command line of a source script: write ``make(name)`` as ``OUT_DIR/<name>.stl`` for every name."""
+    parser = argparse.ArgumentParser(description=description.splitlines()[0])
     parser.add_argument("out_dir", type=Path)
     args = parser.parse_args()
     args.out_dir.mkdir(parents=True, exist_ok=True)
-    for name in BUILDERS:
-        mesh = source(name)
+    names = list(names)
+    for name in names:
+        mesh = make(name)
         mesh.export(args.out_dir / f"{name}.stl")
         print(f"{name}: {mesh.volume:.1f} mm^3, extents {np.round(mesh.extents, 2).tolist()} mm")
-    print(f"sources: {len(BUILDERS)}")
+    print(f"sources: {len(names)}")
+
+
+def main() -> None:
+    write_sources(BUILDERS, source, __doc__)
 
 
 if __name__ == "__main__":

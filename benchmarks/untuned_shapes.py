@@ -24,14 +24,15 @@ Last line: ``sources: <count>``.
 """
 from __future__ import annotations
 
-import argparse
+import sys
 from pathlib import Path
 
 import manifold3d
 import numpy as np
 import trimesh
 
-from design.geometry.shapes import VOLUME_MM3
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import robust_sources  # noqa: E402
 
 SEED = 20261203
 """Seed of the shapes drawn at random (``rock``)."""
@@ -139,21 +140,11 @@ def source(name: str) -> trimesh.Trimesh:
     mesh.process(validate=True)
     if not mesh.is_watertight or not mesh.is_volume:
         raise RuntimeError(f"source {name} is not a closed volume")
-    mesh.apply_translation(-mesh.bounds.mean(axis=0))
-    mesh.apply_scale((VOLUME_MM3 / mesh.volume) ** (1.0 / 3.0))
-    return mesh
+    return robust_sources.centred(mesh)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("out_dir", type=Path)
-    args = parser.parse_args()
-    args.out_dir.mkdir(parents=True, exist_ok=True)
-    for name in BUILDERS:
-        mesh = source(name)
-        mesh.export(args.out_dir / f"{name}.stl")
-        print(f"{name}: {mesh.volume:.1f} mm^3, extents {np.round(mesh.extents, 2).tolist()} mm")
-    print(f"sources: {len(BUILDERS)}")
+    robust_sources.write_sources(BUILDERS, source, __doc__)
 
 
 if __name__ == "__main__":
