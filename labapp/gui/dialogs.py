@@ -2,14 +2,16 @@
 
 Every final action asks through :func:`confirm`: a warning box that names the run and what cannot be undone,
 with the safe choice ("Keep running", "Cancel") as its default and Escape button, so Enter or Escape never
-ends a run. Tests answer it by monkeypatching :func:`confirm` (callers look it up through this module) or by
-clicking the box.
+ends a run. An action that changes a record after the fact (finalising an interrupted run, reanalysing a
+recorded one) asks through :func:`ask_reason` instead: the same question with a field for the reason its
+audit entry carries, required where the job function requires one. Tests answer them by monkeypatching
+:func:`confirm` and :func:`ask_reason` (callers look them up through this module) or by driving the dialogs.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from PySide6.QtWidgets import QMessageBox, QWidget
+from PySide6.QtWidgets import QDialog, QDialogButtonBox, QLabel, QLineEdit, QMessageBox, QVBoxLayout, QWidget
 
 KEEP_RUNNING = "Keep running"
 CANCEL = "Cancel"
@@ -38,6 +40,60 @@ def confirm(parent: QWidget | None, q: Question) -> bool:
     box.setEscapeButton(keep)
     box.exec()
     return box.clickedButton() is act
+
+
+class ReasonDialog(QDialog):
+    """A final action's question with a reason field: :meth:`reason` is what the operator typed (stripped).
+
+    The safe button is the default and the Escape button; with ``required``, the action button refuses an
+    empty reason and says so in the dialog, which stays open.
+    """
+
+    def __init__(self, parent: QWidget | None, q: Question, required: bool) -> None:
+        super().__init__(parent)
+        self.setWindowTitle(q.title)
+        self.required = required
+        self.question = QLabel(q.question)
+        self.question.setStyleSheet("font-weight: bold;")
+        self.consequences = QLabel(q.consequences + "\n\nThe audit trail records who did it, when, and the reason "
+                                   "given here.")
+        for label in (self.question, self.consequences):
+            label.setWordWrap(True)
+        self.reason_edit = QLineEdit()
+        self.reason_edit.setPlaceholderText("reason (required)" if required else
+                                            "reason (optional, as `sfr analyze --reason`)")
+        self.problem = QLabel("")
+        self.problem.setStyleSheet("color: #b00000;")
+        self.problem.hide()
+        buttons = QDialogButtonBox()
+        self.action_button = buttons.addButton(q.action, QDialogButtonBox.ButtonRole.AcceptRole)
+        self.safe_button = buttons.addButton(q.safe, QDialogButtonBox.ButtonRole.RejectRole)
+        self.action_button.setAutoDefault(False)
+        self.safe_button.setDefault(True)
+        buttons.accepted.connect(self._act)
+        buttons.rejected.connect(self.reject)
+        layout = QVBoxLayout(self)
+        for widget in (self.question, self.consequences, QLabel("reason:"), self.reason_edit, self.problem, buttons):
+            layout.addWidget(widget)
+
+    def reason(self) -> str:
+        """The reason as typed, without surrounding white space."""
+        return self.reason_edit.text().strip()
+
+    def _act(self) -> None:
+        if self.required and not self.reason():
+            self.problem.setText("a reason is required: it is recorded in the audit trail")
+            self.problem.show()
+            self.reason_edit.setFocus()
+            return
+        self.accept()
+
+
+def ask_reason(parent: QWidget | None, q: Question, required: bool) -> str | None:
+    """Ask ``q`` with a reason field (modal); the reason given (``""`` when none was typed and none is
+    ``required``), or None when the operator chose the safe button or Escape."""
+    dialog = ReasonDialog(parent, q, required)
+    return dialog.reason() if dialog.exec() == QDialog.DialogCode.Accepted else None
 
 
 def _what(procedure: str, name: str) -> str:
@@ -93,3 +149,10 @@ def finalise_question(name: str, frames: int) -> Question:
     return Question("finalise", f"Finalise run {name} without resuming it?",
                     f"Its status becomes 'stopped' with its {frames} frames, and it can no longer be resumed.",
                     "Finalise", CANCEL)
+
+
+def reanalyse_question(name: str, out: str, calibration: str) -> Question:
+    """Reanalyse a recorded run: its analysis folder is written again (``labapp.jobs.analyse.analyse_run``)."""
+    return Question("reanalyse", f"Reanalyse run {name}?",
+                    f"{out} (curve.csv, cells.csv, summary.json, curve.png) is written again from the frames with "
+                    f"the calibration {calibration}; the frames themselves are not changed.", "Reanalyse", CANCEL)

@@ -159,6 +159,7 @@ class MainWindow(QMainWindow):
         self.tabs.addTab(self._live_page(), "Live")
         self.tabs.addTab(self.browser, "Runs")
         self.tabs.addTab(self.design, "Design")
+        self.tabs.currentChanged.connect(self._tab_shown)
         self.alarms = AlarmBanner(self.plots)
         central = QWidget()
         column = QVBoxLayout(central)
@@ -653,6 +654,7 @@ class MainWindow(QMainWindow):
             self.plots.mark("gap", self._last_frame_t, "", end_s=frame.t_s)
         self._last_frame_t = frame.t_s
         self.plots.add_frame(frame.t_s, frame.conc_g_per_kg)
+        self.browser.show_frames(Path(frame.path).parent, frame.n_frames)     # the Runs list counts live
         # the bath plot shows the reading logged with each frame: one time base with the release curve
         self.plots.add_reading(frame.t_s, frame.plate_c, frame.probe_c, frame.speed_rpm)
 

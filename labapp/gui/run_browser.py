@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import logging
 import math
+import re
 import time
 from pathlib import Path
 
@@ -33,15 +34,16 @@ from labapp.gui.bridge import BackgroundTask
 from labapp.gui.overlay import PhysicalOverlay, prediction_curve, run_curve
 from labapp.gui.plots import PlotsPanel
 from labapp.gui.signing import save_report, sign_record
-from labapp.jobs.analyse import analyse_run
+from labapp.jobs.analyse import analyse_run, writes_into_record
 from labapp.jobs.compare import Comparison, compare_curves
-from labapp.jobs.run import resumable
+from labapp.jobs.run import finalise, resumable
 from labapp.jobs.verify import verify as verify_folder
 from labapp.records.outpaths import ANALYSIS_SUBFOLDER, folder_kind
 from labapp.records.runrecord import RecordKind, RecordStatus
-from labapp.records.storage import RunSnapshot, StorageError, finalise_run, read_run
+from labapp.records.storage import RunSnapshot, StorageError, read_run
 
 log = logging.getLogger(__name__)
+FRAMES_COLUMN = 3
 
 
 def list_runs(data_dir: Path) -> list[RunSnapshot]:
@@ -92,7 +94,7 @@ class RunBrowser(QWidget):
         header = self.tree.header()
         header.setStretchLastSection(False)
         header.setSectionResizeMode(0, QHeaderView.ResizeMode.Stretch)
-        for column in range(1, 5):
+        for column in range(1, FRAMES_COLUMN + 2):
             header.setSectionResizeMode(column, QHeaderView.ResizeMode.ResizeToContents)
         self.opened: list[Path] = []
         """Folders opened from elsewhere (File > Open run...), listed after the data directory's runs."""
@@ -196,6 +198,17 @@ class RunBrowser(QWidget):
             item.setSelected(Path(item.data(0, 256)) in selected)
         self.tree.blockSignals(False)
         self._selected()
+
+    def show_frames(self, folder: str | Path, n_frames: int) -> None:
+        """The live frame count of a run still recording (a slot fed by each stored frame), in its row and, when
+        it is selected, in the info line."""
+        folder = Path(folder)
+        for i in range(self.tree.topLevelItemCount()):
+            item = self.tree.topLevelItem(i)
+            if Path(item.data(0, 256)) == folder:
+                item.setText(FRAMES_COLUMN, str(n_frames))
+                if item.isSelected() and len(self.tree.selectedItems()) == 1:
+                    self.info.setText(re.sub(r", \d+ frames,", f", {n_frames} frames,", self.info.text(), count=1))
 
     def _add_item(self, path: Path, row: list[str]) -> None:
         item = QTreeWidgetItem([str(v) for v in row])
@@ -305,10 +318,16 @@ class RunBrowser(QWidget):
             return
         window, order = self.window.value(), self.order.value()
         out = self.analysis_dir(path)
+        reason = None
+        if writes_into_record(path, out):      # audited as `sfr analyze --reason` is: ask why, optional as there
+            question = dialogs.reanalyse_question(path.name, f"{path.name}/{out.relative_to(path)}", cal_path.name)
+            reason = dialogs.ask_reason(self, question, required=False)
+            if reason is None:
+                return
 
         def work(progress):
-            return analyse_run(path, cal_path, out, window_s=window, order=order,
-                                    progress=lambda done, total: progress((done, total))).curve
+            return analyse_run(path, cal_path, out, window_s=window, order=order, reason=reason or None,
+                               progress=lambda done, total: progress((done, total))).curve
         self.task = BackgroundTask(work, self)
         self.task.progress.connect(self._progress)
         self.task.finished.connect(self.show_curve)
@@ -411,13 +430,26 @@ class RunBrowser(QWidget):
         self.resume_requested.emit(str(path))
 
     def _finalise(self) -> None:
+        """Finalise the selected interrupted run (``labapp.jobs.run.finalise``): asks first, with the reason its
+        audit entry carries (required)."""
         path = self.selected_path()
-        if path is not None:
-            if not dialogs.confirm(self, dialogs.finalise_question(path.name, len(read_run(path).frames))):
-                return
-            finalise_run(path)
-            self.refresh()
-            self.select(path)
+        if path is None:
+            return
+        try:
+            question = dialogs.finalise_question(path.name, len(read_run(path).frames))
+        except StorageError as exc:
+            self.info.setText(f"cannot finalise: {exc}")
+            return
+        reason = dialogs.ask_reason(self, question, required=True)
+        if reason is None:
+            return
+        try:
+            finalise(path, reason)
+        except UsageError as exc:                  # no reason, no longer interrupted, nobody logged in
+            self.info.setText(f"not finalised: {exc}")
+            return
+        self.refresh()
+        self.select(path)
 
     def _verify(self) -> None:
         path = self.selected_path()

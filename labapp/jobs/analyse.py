@@ -60,6 +60,14 @@ def _check_out(out: Path, inputs: list, run: Path) -> Path:
         raise
 
 
+def writes_into_record(run: str | Path, out: str | Path | None = None) -> bool:
+    """Whether analysing ``run`` into ``out`` (default ``RUN/analysis``) writes into a recorded run's folder: the
+    analysis is then audited (``reanalyse``, with the reason given) and needs an operator."""
+    run = Path(run)
+    out = Path(out) if out is not None else run / ANALYSIS_SUBFOLDER
+    return (run / "run.json").is_file() and run.resolve() in out.resolve().parents
+
+
 def analyse_run(run: str | Path, calibration: str | Path | None = None, out: str | Path | None = None, *,
                 interval_s: float | None = None, water_g: float | None = None, window_s: float | None = None,
                 order: int | None = None, workers: int | None = None, reduce: int | None = None,
@@ -95,7 +103,7 @@ def analyse_run(run: str | Path, calibration: str | Path | None = None, out: str
     run = Path(run)
     default_out = run / ANALYSIS_SUBFOLDER
     out = Path(out) if out is not None else default_out
-    into_record = (run / "run.json").is_file() and run.resolve() in out.resolve().parents
+    into_record = writes_into_record(run, out)
     operator = operators.require(f"analysing {run} into its record") if into_record else None
     calibration = run_calibration(run, calibration)
     inputs = [calibration] if out.resolve() == default_out.resolve() else [calibration, run]

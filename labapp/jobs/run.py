@@ -14,7 +14,7 @@ from labapp.records.audit import Action
 from labapp.records.audit import append as audit
 from labapp.records.outpaths import FolderKind, check_data_dir, folder_kind
 from labapp.records.runrecord import RecordKind, RecordStatus
-from labapp.records.storage import RunSnapshot, StorageError, read_run
+from labapp.records.storage import RunSnapshot, StorageError, finalise_run, read_run
 
 
 def new_run(config: RunConfig, bench: Bench, data_dir: str | Path,
@@ -82,6 +82,30 @@ def resume_run(folder: str | Path, bench: Bench, calibration: BenchCalibration |
         raise UsageError(f"{folder} was recorded on a {'simulated' if snap.record.simulated else 'real'} "
                          f"bench; it cannot be resumed on a {'simulated' if bench.simulated else 'real'} one")
     return RunProcedure.resume(Path(folder), bench, calibration)
+
+
+def finalise(folder: str | Path, reason: str) -> None:
+    """Close an interrupted run or calibration series without resuming it, as the current operator, with
+    ``reason``: its status becomes ``stopped`` and the audit trail's ``finalise`` entry says who, when and why.
+
+    Raises
+    ------
+    UsageError
+        For no reason, or a folder that is not an interrupted record (finished, still being written, not a run).
+    labapp.records.operators.OperatorError
+        When the process acts as nobody.
+    """
+    folder = Path(folder)
+    if not reason or not reason.strip():
+        raise UsageError(f"finalising {folder.name} needs a reason (it is recorded in the audit trail)")
+    try:
+        snap = read_run(folder)
+    except StorageError as exc:
+        raise UsageError(f"{folder} is not a run folder ({exc}); nothing to finalise") from None
+    if snap.live or snap.status != RecordStatus.INTERRUPTED:
+        raise UsageError(f"{folder} is {'being written' if snap.live else snap.status}; only an interrupted run "
+                         "can be finalised")
+    finalise_run(folder, reason.strip())
 
 
 CHANGEABLE = (MAX_DURATION, MIN_DURATION)

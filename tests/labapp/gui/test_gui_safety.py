@@ -142,13 +142,13 @@ def test_finalise_asks_first(qtbot, tmp_path, monkeypatch):
     try:
         win.browser.refresh()
         win.browser.select(run.path)
-        no = Asked(False)
-        monkeypatch.setattr(dialogs, "confirm", no)
+        no = Asked(None)
+        monkeypatch.setattr(dialogs, "ask_reason", lambda parent, q, required: no(parent, q))
         win.browser.finalise_button.click()
         assert read_run(run.path).status == "interrupted"
         assert no.questions[0].question == f"Finalise run {run.path.name} without resuming it?"
         assert "can no longer be resumed" in no.questions[0].consequences and no.questions[0].safe == "Cancel"
-        monkeypatch.setattr(dialogs, "confirm", Asked(True))
+        monkeypatch.setattr(dialogs, "ask_reason", lambda parent, q, required: "sample lost")
         win.browser.finalise_button.click()
         assert read_run(run.path).status == "stopped"
     finally:

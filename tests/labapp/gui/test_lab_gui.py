@@ -94,7 +94,7 @@ def test_crop_overlay_geometry():
     assert mirrored_x(100, 50, 300) == 450                       # the square mirrored across column 300
 
 
-def test_calibration_wizard_reanalysis_and_design_launcher(qtbot, tmp_path):
+def test_calibration_wizard_reanalysis_and_design_launcher(qtbot, tmp_path, monkeypatch):
     win = MainWindow(tmp_path / "data", simulate=True, speed=float("inf"), sample="sphere")
     qtbot.addWidget(win)
     try:
@@ -119,6 +119,7 @@ def test_calibration_wizard_reanalysis_and_design_launcher(qtbot, tmp_path):
         win.browser.select(series)
         win.browser.calibration.setText(str(cal_path))
         win.browser.window.setValue(60.0)
+        monkeypatch.setattr(dialogs, "ask_reason", lambda parent, question, required: "")   # no reason, as the CLI allows
         win.browser.reanalyse()
         qtbot.waitUntil(lambda: "frames analysed" in win.browser.info.text(), timeout=60_000)
         assert len(win.browser.plots.conc) == 4 and abs(win.browser.plots.conc[-1] - 3.0) < 0.1
