@@ -129,7 +129,8 @@ def check_symmetric(mesh: trimesh.Trimesh, dx_mm: float, mirror: tuple[bool, ...
 
 
 def simulate_mesh(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel_size_mm: float | None = None,
-                  symmetry: str = "", anisotropy: float = 1.0, offset_mm: float = 0.0) -> Release:
+                  symmetry: str = "", anisotropy: float = 1.0, offset_mm: float = 0.0,
+                  swelling_mm: float = 0.0) -> Release:
     """Voxelise a closed mesh at its voxel centres and simulate its release.
 
     Parameters
@@ -148,6 +149,9 @@ def simulate_mesh(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel
         Erosion speed along z over the in-plane speed (``design.forward.simulator.simulate``).
     offset_mm : float
         The printed surface lies this far outside the mesh's (inside if negative), mm.
+    swelling_mm : float
+        Channels of the print narrower than this are shut until their walls dissolve, mm
+        (``design.forward.simulator.simulate``).
 
     Returns
     -------
@@ -156,7 +160,7 @@ def simulate_mesh(mesh: trimesh.Trimesh, *, resolution: int | None = None, voxel
     """
     rho, dx, mirror = mesh_grid(mesh, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry,
                                 offset_mm=offset_mm)
-    return simulate(rho, dx, mirror=mirror, anisotropy=anisotropy)
+    return simulate(rho, dx, mirror=mirror, anisotropy=anisotropy, swelling_mm=swelling_mm)
 
 
 def input_grid(spec: str, *, resolution: int | None = None, voxel_size_mm: float | None = None,

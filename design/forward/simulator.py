@@ -16,6 +16,11 @@ axis (the one of its smallest upwind value), L_i = n_i h_d: dx in plane, dx / a 
 front parallel to any face then dissolves one layer of voxels per layer crossing time, the ramps of
 successive layers tiling time exactly as in the isotropic model (L_i = n_i dx). The axis is fixed
 under small changes of the density, so L_i's choice carries no gradient. u and tau stay in in-plane mm.
+
+Swelling: with ``swelling_mm`` w > 0, channels narrower than w are shut (`design.forward.swelling`): their void
+voxels take the slowness of solid in eq. (2) but keep their own weight in eq. (7), so the front crosses them
+at the material's rate and they release nothing. The plug depends on the thresholded density only and is held
+fixed by the gradient (exact wherever no voxel crosses the threshold).
 """
 from __future__ import annotations
 
@@ -29,6 +34,7 @@ from design._validate import check_density, check_mirror, check_positive
 from design.errors import DesignError  # re-exported: the base exception of design/
 from design.forward.fmm import MarchBuffers, Marching, axis_weights, eikonal_residual, march, march_adjoint, upwind_spacing
 from design.forward.release import ramp_release, ramp_release_vjp
+from design.forward.swelling import shut_channels
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +66,10 @@ class Release:
         Per axis, True for a mirror plane at the index-0 face.
     anisotropy : float
         Erosion speed along z over the in-plane speed (1: the paper's isotropic model).
+    swelling_mm : float
+        Channels narrower than this were shut (0: none).
+    plug : ndarray of bool, grid shape, or None
+        The void voxels shut by swelling (read-only; None without swelling).
     """
 
     tau_mm: np.ndarray
@@ -72,6 +82,8 @@ class Release:
     _marching: Marching = field(repr=False)
     anisotropy: float = 1.0
     _ramp: float | np.ndarray | None = field(default=None, repr=False)
+    swelling_mm: float = 0.0
+    plug: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def ramp_mm(self) -> float | np.ndarray:
@@ -133,7 +145,8 @@ def total_time(shape: tuple[int, ...], dx_mm: float, mirror: tuple[bool, ...] | 
 
 def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None = None,
              dtau_mm: float | None = None, total_time_mm: float | None = None,
-             check: bool = False, buffers: MarchBuffers | None = None, anisotropy: float = 1.0) -> Release:
+             check: bool = False, buffers: MarchBuffers | None = None, anisotropy: float = 1.0,
+             swelling_mm: float = 0.0) -> Release:
     """Simulate the release curve of a density field.
 
     Parameters
@@ -156,6 +169,9 @@ def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None =
     anisotropy : float
         Erosion speed along axis 2 (z) over the in-plane speed, > 0; 1 (default) is the paper's
         isotropic model. Needs a 3D grid unless 1.
+    swelling_mm : float
+        Swelling width, mm: channels narrower than this are shut until the front dissolving their walls
+        reaches them (module docstring); 0 (default) shuts none.
 
     Returns
     -------
@@ -174,7 +190,11 @@ def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None =
     big_t = total_time(rho.shape, dx, mirror, anisotropy) if total_time_mm is None else check_positive(
         "total_time_mm", total_time_mm)
     steps = DEFAULT_STEPS if dtau_mm is None else max(1, int(round(big_t / check_positive("dtau_mm", dtau_mm))))
-    n = slowness(rho)
+    swelling = float(swelling_mm)
+    plug = shut_channels(rho, dx, swelling, mirror) if swelling != 0.0 else None
+    if plug is not None and not plug.any():
+        plug = None
+    n = slowness(rho if plug is None else np.where(plug, 1.0, rho))
     marching = march(n, dx, mirror, buffers, anisotropy)
     # one compact copy of u: the curve, its gradient and callers then read 8 bytes per voxel, not a record
     u = np.ascontiguousarray(marching.interior(marching.u_pad))
@@ -189,9 +209,11 @@ def simulate(rho: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None =
                          (rho * (dx ** 3 * multiplicity)).ravel(), big_t / steps, steps + 1)
     u.flags.writeable = False
     rho.flags.writeable = False
+    if plug is not None:
+        plug.flags.writeable = False
     return Release(tau_mm=np.linspace(0.0, big_t, steps + 1), released_mm3=curve, total_time_mm=big_t,
                    u_mm=u, dx_mm=dx, mirror=mirror, _rho=rho, _marching=marching, anisotropy=anisotropy,
-                   _ramp=ramp)
+                   _ramp=ramp, swelling_mm=swelling, plug=plug)
 
 
 def release_gradient(release: Release, dJ_dC: np.ndarray, dJ_du: np.ndarray | None = None) -> np.ndarray:
@@ -216,7 +238,7 @@ def release_gradient(release: Release, dJ_dC: np.ndarray, dJ_du: np.ndarray | No
         raise DesignError(f"dJ_dC must have shape {release.tau_mm.shape}, got {g.shape}")
     rho = release._rho
     dx = release.dx_mm
-    n = slowness(rho)
+    n = slowness(rho if release.plug is None else np.where(release.plug, 1.0, rho))
     scale = dx ** 3 * release.multiplicity
     ramp = release.ramp_mm
     u_bar, length_bar, weight_bar = ramp_release_vjp(release.u_mm.ravel(), (n * ramp).ravel(),
@@ -228,5 +250,6 @@ def release_gradient(release: Release, dJ_dC: np.ndarray, dJ_du: np.ndarray | No
             raise DesignError(f"dJ_du must have the grid shape {rho.shape}, got {extra.shape}")
         u_bar = u_bar + extra
     n_bar = march_adjoint(release._marching, u_bar) + length_bar.reshape(rho.shape) * ramp
-    # chain rule through w = rho dx^3 m and eq. (2): dn/drho = 1 - n_min
-    return weight_bar.reshape(rho.shape) * scale + n_bar * (1.0 - N_MIN)
+    # chain rule through w = rho dx^3 m and eq. (2): dn/drho = 1 - n_min, 0 in a plug (its n is solid's)
+    dn_drho = 1.0 - N_MIN if release.plug is None else np.where(release.plug, 0.0, 1.0 - N_MIN)
+    return weight_bar.reshape(rho.shape) * scale + n_bar * dn_drho
