@@ -9,11 +9,13 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from design.inverse.status import FINISHED
 from labapp.cli import interrupt
 from labapp.cli.main import main
 
@@ -21,6 +23,8 @@ ROOT = Path(__file__).resolve().parents[3]
 BENCH = ROOT / "fixtures" / "bench"
 SFR = [sys.executable, "-m", "labapp.cli.main"]
 DESIGN = ["design", "--target", "sphere", "--resolution", "16", "--max-iter", "24", "--physical-correction", "none"]
+#: Commands running at once: the moments' commands and the resumes and reruns that follow them.
+PARALLEL = 4
 BAD_SIGNS = ("Traceback", "internal error", "SystemError", "Fatal Python error", "GIL")
 
 
@@ -63,96 +67,149 @@ def test_exit_code_130_even_when_the_command_had_finished(monkeypatch, capsys):
         "interrupted: the command had finished its work when the signal came; its outputs are complete"
 
 
-def _sfr(args: list[str], cwd: Path) -> subprocess.Popen:
-    return subprocess.Popen(SFR + args, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+class WarmSfr:
+    """`sfr` commands forked from one warmed process (`warm_cli.py`): each is a real process with its own signal
+    handling, started without paying the imports."""
+
+    def __init__(self, folder: Path):
+        self.folder = folder
+        self.errors = folder / "warm_cli.err"
+        with open(self.errors, "w") as err:
+            self.server = subprocess.Popen([sys.executable, str(Path(__file__).with_name("warm_cli.py"))], cwd=ROOT,
+                                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err, text=True)
+        self.started = 0
+
+    def ask(self, request: dict) -> dict:
+        self.server.stdin.write(json.dumps(request) + "\n")
+        self.server.stdin.flush()
+        line = self.server.stdout.readline()
+        assert line, f"the warmed sfr ended: {self.errors.read_text()[-3000:]}"
+        return json.loads(line)
+
+    def warm(self, commands: list[list[str]]) -> list[float]:
+        """Run the commands once in the server; the seconds each took."""
+        return self.ask({"warm": commands, "cwd": str(self.folder)})["seconds"]
+
+    def start(self, args: list[str]) -> tuple[int, Path]:
+        """The child's pid and its standard error's file."""
+        self.started += 1
+        log = self.folder / f"command_{self.started}"
+        return self.ask({"run": args, "cwd": str(self.folder), "log": str(log)})["pid"], log.with_suffix(".err")
+
+    def poll(self, pid: int) -> int | None:
+        """The child's exit code, None while it runs."""
+        return self.ask({"poll": pid})["code"]
+
+    def close(self) -> None:
+        self.server.stdin.close()
+        self.server.wait(timeout=60)
 
 
-def _timed(commands: list[list[str]], cwd: Path) -> list[float]:
-    """Run the commands side by side to the end; the seconds each took (a design may end without a solid: 1)."""
-    t0 = time.monotonic()
-    procs = [_sfr(args, cwd) for args in commands]
-    took = []
-    for proc in procs:
-        _, err = proc.communicate(timeout=300)
-        took.append(time.monotonic() - t0)
-        assert proc.returncode in (0, 1) and not any(sign in err for sign in BAD_SIGNS), err
-    return took
+@dataclass
+class Moment:
+    """A command stopped at one moment, then resumed or run again; ``pid`` is the running one's."""
 
+    kind: str
+    out: Path
+    delay: float
+    tries: int
+    pid: int = 0
+    err: Path = Path()
+    started: float = 0.0
+    signalled: bool = False
+    following_up: bool = False
 
-def _interrupt_at(commands: list[tuple[list[str], float]], cwd: Path) -> list[tuple[int | None, str]]:
-    """Start the commands side by side, send each SIGINT after its delay; (exit code, stderr) of each, exit code
-    None for one that had ended before its moment."""
-    t0 = time.monotonic()
-    procs = [(_sfr(args, cwd), delay) for args, delay in commands]
-    missed = set()
-    for i, (proc, delay) in sorted(enumerate(procs), key=lambda item: item[1][1]):
-        time.sleep(max(0.0, t0 + delay - time.monotonic()))
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-        else:
-            missed.add(i)
-    results = []
-    for i, (proc, _) in enumerate(procs):
-        _, err = proc.communicate(timeout=300)
-        results.append((None, err) if i in missed else (proc.returncode, err))
-    return results
+    @property
+    def where(self) -> str:
+        return f"{self.kind} interrupted after {self.delay:.2f} s ({self.out.name})"
 
 
 @pytest.mark.timeout(600)
 def test_ctrl_c_at_twenty_random_moments_of_a_design_an_analysis_and_a_calibration(tmp_path):
     """Each moment: exit code 130, a clean last line, nothing internal; then the design resumes to a finished
-    run, the analysis reruns to the same curve and the calibration to the same fit. A design, an analysis and a
-    calibration run side by side, each stopped at its own moment."""
-    from labapp.jobs.analyse import analyse_run
-    from labapp.jobs.calibrate_bench import calibrate_series
-    from labapp.jobs.design import design
-
+    run, the analysis reruns to the same curve and the calibration to the same fit. Designs, analyses and
+    calibrations run side by side, PARALLEL at a time, each stopped at its own moment."""
     cal = tmp_path / "cal.json"
-    calibrate_series(BENCH / "calibration", cal)
-    analyse_run(BENCH / "run", cal, tmp_path / "ref_analysis", plot=False)
-    reference_curve = (tmp_path / "ref_analysis" / "curve.csv").read_text()
-    reference_k = json.loads(cal.read_text())["cells"]["k"]
 
     def command(kind: str, out: Path) -> list[str]:
         return {"design": DESIGN + ["--out", str(out)],
                 "analysis": ["analyze", str(BENCH / "run"), "--calibration", str(cal), "--out", str(out)],
                 "calibration": ["calibrate-bench", str(BENCH / "calibration"), "--out", str(out) + ".json"]}[kind]
-    kinds = ("design", "analysis", "calibration")
-    durations = dict(zip(kinds, _timed([command(k, tmp_path / f"timed_{k}") for k in kinds], tmp_path)))
+    kinds = ("calibration", "analysis", "design")
+    sfr = WarmSfr(tmp_path)
+    durations = dict(zip(kinds, sfr.warm([command("calibration", cal.with_suffix("")),
+                                          command("analysis", tmp_path / "reference"),
+                                          command("design", tmp_path / "reference_design")])))
+    reference_curve = (tmp_path / "reference" / "curve.csv").read_text()
+    reference_k = json.loads(cal.read_text())["cells"]["k"]
     rng = random.Random(32)
-    # (kind, output, delay s, tries left): a moment that falls after the command's end (it ran faster than
-    # when timed) is tried again earlier
-    queue = [(kinds[i % 3], tmp_path / f"{kinds[i % 3]}_{i}", rng.uniform(0.05, 0.8) * durations[kinds[i % 3]], 2)
-             for i in range(20)]
+    pending = [Moment(kinds[i % 3], tmp_path / f"{kinds[i % 3]}_{i}", rng.uniform(0.05, 0.8) * durations[kinds[i % 3]], 2)
+               for i in range(20)]
+    running: list[Moment] = []
     caught = 0
-    while queue:
-        group, queue = queue[:3], queue[3:]
-        for (kind, out, delay, tries), (code, err) in zip(group, _interrupt_at([(command(k, o), d) for k, o, d, _
-                                                                                in group], tmp_path)):
-            if code is None or (code in (0, 1) and "Ctrl-C" not in err):   # the moment fell after the command
-                if tries:                                                   # had ended (a design may find no solid)
-                    queue.append((kind, out.with_name(out.name + "_again"), delay / 2, tries - 1))
+    while pending or running:
+        while pending and len(running) < PARALLEL:
+            moment = pending.pop(0)
+            moment.pid, moment.err = sfr.start(command(moment.kind, moment.out))
+            moment.started = time.monotonic()
+            running.append(moment)
+        for moment in list(running):
+            code = sfr.poll(moment.pid)
+            if code is None:
+                if not moment.signalled and time.monotonic() >= moment.started + moment.delay:
+                    os.kill(moment.pid, signal.SIGINT)
+                    moment.signalled = True
                 continue
-            caught += 1
-            where = f"{kind} interrupted after {delay:.2f} s"
-            assert code == 130, f"{where}: exit {code}\n{err}"
-            assert err.strip().splitlines()[-1].startswith("interrupted: "), f"{where}\n{err}"
-            assert not any(sign in err for sign in BAD_SIGNS), f"{where}\n{err}"
-            finished = "finished its work" in err
-            if kind == "design":
-                if (out / "config.json").exists():      # started: it resumes to a finished run
-                    result, _ = design(None, out, resume=True)
-                    assert result.status.finished and (out / "summary.json").is_file(), where
-                else:                                   # stopped before it began: nothing left behind
-                    assert not out.exists() or not any(out.iterdir()), where
-            elif kind == "analysis":
-                assert finished or not (out / "curve.csv").exists(), where
-                analyse_run(BENCH / "run", cal, out, plot=False)
-                assert (out / "curve.csv").read_text() == reference_curve, where
+            err = moment.err.read_text()
+            if moment.following_up:
+                assert code in (0, 1) and not any(sign in err for sign in BAD_SIGNS), f"{moment.where}, then:\n{err}"
+                _assert_completed(moment, reference_curve, reference_k)
+                running.remove(moment)
+            elif not moment.signalled or (code in (0, 1) and "Ctrl-C" not in err):   # the moment fell after the
+                running.remove(moment)                                               # end (a design may find no
+                if moment.tries:                                                     # solid: exit 1)
+                    pending.append(Moment(moment.kind, moment.out.with_name(moment.out.name + "_again"),
+                                          moment.delay / 2, moment.tries - 1))
             else:
-                path = Path(str(out) + ".json")
-                assert finished or not path.exists(), where
-                if not path.exists():
-                    calibrate_series(BENCH / "calibration", path)
-                assert np.allclose(json.loads(path.read_text())["cells"]["k"], reference_k), where
+                caught += 1
+                follow_up = _assert_interrupted(moment, code, err)
+                if follow_up is None:
+                    running.remove(moment)
+                else:
+                    moment.pid, moment.err = sfr.start(follow_up(command))
+                    moment.following_up = True
+        time.sleep(0.02)
+    sfr.close()
     assert caught >= 18, f"only {caught} of 20 moments fell inside a command"
+
+
+def _assert_interrupted(moment: Moment, code: int, err: str):
+    """The checks of an interrupted command; the command that completes its work (a function of the command
+    builder), or None when nothing is left to complete."""
+    assert code == 130, f"{moment.where}: exit {code}\n{err}"
+    assert err.strip().splitlines()[-1].startswith("interrupted: "), f"{moment.where}\n{err}"
+    assert not any(sign in err for sign in BAD_SIGNS), f"{moment.where}\n{err}"
+    finished = "finished its work" in err
+    out = moment.out
+    if moment.kind == "design":
+        if not (out / "config.json").exists():     # stopped before it began: nothing left behind
+            assert not out.exists() or not any(out.iterdir()), f"{moment.where}: left {list(out.iterdir())}"
+            return None
+        return lambda command: DESIGN + ["--resume", "--out", str(out)]
+    if moment.kind == "analysis":
+        assert finished or not (out / "curve.csv").exists(), moment.where
+    else:
+        assert finished or not Path(str(out) + ".json").exists(), moment.where
+    return lambda command: command(moment.kind, out)
+
+
+def _assert_completed(moment: Moment, reference_curve: str, reference_k: list) -> None:
+    """The design resumed to a finished run, the analysis to the uninterrupted curve, the calibration to its fit."""
+    if moment.kind == "design":
+        status = json.loads((moment.out / "summary.json").read_text())["status"]
+        assert status in FINISHED, f"{moment.where}: resumed to {status}"
+    elif moment.kind == "analysis":
+        assert (moment.out / "curve.csv").read_text() == reference_curve, moment.where
+    else:
+        assert np.allclose(json.loads(Path(str(moment.out) + ".json").read_text())["cells"]["k"], reference_k), \
+            moment.where
