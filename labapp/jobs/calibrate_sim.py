@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, SimCal, fit_simcal, leave_one_out
+from analysis.bands import band_block
 from analysis.simcal import (
     DEFAULT_MAX_OFFSET_S,
     MODELS,
@@ -447,6 +448,10 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "operator": operator,
     }
+    say(0.95, "error bands: each run's leave-one-out prediction against the band from the other runs ...")
+    honest = physics_fits.get(chosen_physics)   # with print physics, the leave-one-out that refits it
+    doc["band"] = band_block(honest.loo if honest else loos[chosen], shapes, honest.loo_values if honest else None,
+                             doc["physics"]["uncertainty"], lambda i, values: simulation(rows[i], values)[:2])
     say(0.96, f"writing {out_dir} ...")
     atomic_write(out_dir / "simcal.json", (json.dumps(doc, indent=2) + "\n").encode())
     lines = ["run,mesh,model,rel_rmse,seconds_per_mm_without_it"]

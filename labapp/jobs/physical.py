@@ -24,6 +24,7 @@ from design.files.pipeline import input_grid
 from design.files.records import load_summary
 from design.files.rundir import finished_run, run_design
 from design.forward.simulator import simulate
+from labapp.jobs import bands
 from labapp.jobs.calibrate_sim import SimCalError, SimCalFile, curve_of
 from labapp.jobs.compare import prediction_metrics
 from labapp.records import operators
@@ -78,8 +79,9 @@ def physical_times(simcal: SimCalFile, tau_mm: np.ndarray, released_mm3: np.ndar
 
 
 def write_release_physical(tau_mm: np.ndarray, released_mm3: np.ndarray, simcal: SimCalFile, out_dir: Path,
-                           water_g: float | None = None, title: str = "") -> Path:
-    """``release_physical.csv`` (``t_s,released_g,conc_g_per_kg``) and ``release_physical.png``.
+                           water_g: float | None = None, title: str = "", simulate_at=None) -> Path:
+    """``release_physical.csv`` (``t_s,released_g,conc_g_per_kg``, and the band's ``released_g_q05,released_g_q95``
+    when the calibration stores one: :mod:`labapp.jobs.bands`) and ``release_physical.png``.
 
     Parameters
     ----------
@@ -89,16 +91,22 @@ def write_release_physical(tau_mm: np.ndarray, released_mm3: np.ndarray, simcal:
     out_dir : Path
     water_g : float, optional
         Bath water, g (default: the calibration's).
+    simulate_at : callable, optional
+        ``simulate_at(physics) -> (tau_mm, released_mm3)``: the band's print physics spread
+        (:func:`labapp.jobs.bands.source_simulator`).
     """
     water = water_g or simcal.water_g
     t = physical_times(simcal, tau_mm, released_mm3, water)
     grams = simcal.cal.to_physical(tau_mm, released_mm3, t, water)
-    rows = "t_s,released_g,conc_g_per_kg\n" + "".join(f"{a:.2f},{b:.6f},{b / water * 1000.0:.6f}\n"
-                                                     for a, b in zip(t, grams))
+    band = bands.prediction_band(simcal, tau_mm, released_mm3, t, water, simulate_at)
+    lo, hi = bands.quantile_columns()
+    rows = ("t_s,released_g,conc_g_per_kg" + ("" if band is None else f",released_g_{lo},released_g_{hi}") + "\n"
+            + "".join(f"{a:.2f},{b:.6f},{b / water * 1000.0:.6f}" + ("" if band is None else
+                      f",{band[0][i]:.6f},{band[1][i]:.6f}") + "\n" for i, (a, b) in enumerate(zip(t, grams))))
     path = Path(out_dir) / "release_physical.csv"
     atomic_write(path, rows.encode())
     plot_physical(path.with_suffix(".png"), [(t, grams, "predicted release", "-")],
-                   f"predicted release {title}\n{simcal.describe()}")
+                   f"predicted release {title}\n{simcal.describe()}", band=bands.band_series(t, band))
     return path
 
 
@@ -166,8 +174,14 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
         t = physical_times(simcal, tau, target_mm3, water)
         target_g = cal.to_physical(tau, target_mm3, t, water)
     design_g = cal.to_physical(tau, binary, t, water) if binary[-1] > 0 else np.zeros_like(t)
-    rows = "t_s,target_released_g,design_released_g\n" + "".join(
-        f"{a:.2f},{b:.6f},{c:.6f}\n" for a, b, c in zip(t, target_g, design_g))
+    band = bands.design_band(design_dir, simcal, tau, binary, t, water) if binary[-1] > 0 else None
+    if band is not None:
+        summary["band"] = bands.band_summary(band, target_g)
+    lo, hi = bands.quantile_columns()
+    rows = ("t_s,target_released_g,design_released_g" + ("" if band is None else
+            f",design_released_g_{lo},design_released_g_{hi}") + "\n" + "".join(
+        f"{a:.2f},{b:.6f},{c:.6f}" + ("" if band is None else f",{band[0][i]:.6f},{band[1][i]:.6f}") + "\n"
+        for i, (a, b, c) in enumerate(zip(t, target_g, design_g))))
     atomic_write(design_dir / "curves_physical.csv", rows.encode())
     final = float(np.max(target_g)) if np.max(target_g) > 0 else 1.0
     summary["rel_rmse_physical"] = float(np.sqrt(np.mean((design_g - target_g) ** 2)) / final)
@@ -186,7 +200,8 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
     plot_physical(report, [(t, target_g, label, "-"), (t, design_g, "design (printed solid, predicted)", "--")],
                    f"rel. RMSE {100 * summary['rel_rmse_physical']:.2f}% of final, print mass "
                    f"{summary['print_mass_g']:.3f} g, narrowest channel "
-                   f"{'none' if channel is None else format(channel, '.2f') + ' mm'}\n{simcal.describe()}")
+                   f"{'none' if channel is None else format(channel, '.2f') + ' mm'}\n{simcal.describe()}",
+                   band=bands.band_series(t, band))
     return summary
 
 
@@ -303,3 +318,14 @@ def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = N
     water = water_g or simcal.water_g
     t = physical_times(simcal, release.tau_mm, release.released_mm3, water)
     return t, simcal.cal.to_physical(release.tau_mm, release.released_mm3, t, water)
+
+
+def predict_mesh_band(mesh: str | Path, simcal: SimCalFile, water_g: float | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+    """:func:`predict_mesh` with the prediction's band (:func:`labapp.jobs.bands.prediction_band`; None for a
+    calibration file without one): the GUI's overlays and the demo's picture."""
+    simulate_at = bands.source_simulator(str(mesh), simcal.resolution)
+    tau, vol = simulate_at(simcal.physics)
+    water = water_g or simcal.water_g
+    t = physical_times(simcal, tau, vol, water)
+    return t, simcal.cal.to_physical(tau, vol, t, water), bands.prediction_band(simcal, tau, vol, t, water, simulate_at)

@@ -29,7 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--physics", default="none", choices=PHYSICS_CHOICES,
                         help="print physics of the forward model to fit with the scales: the build-direction "
                              "anisotropy (z / in-plane erosion rate), the surface offset (print larger or smaller "
-                             "than its mesh, mm), both, or auto (every set; a parameter is kept only where "
+                             "than its mesh, mm), the swelling width (channels narrower are shut until their walls "
+                             "dissolve, mm), all three, or auto (every subset; a parameter is kept only where "
                              "leave-one-out shows it earns it). Default none: the isotropic model of the mesh")
     parser.add_argument("--resolution", type=positive_int, default=DEFAULT_RESOLUTION,
                         help=f"voxels along each mesh's longest side (default {DEFAULT_RESOLUTION})")
@@ -74,4 +75,10 @@ def print_summary(doc: dict) -> None:
         name = Path(row["run"]).name
         print(f"  {name:40.40s} " + " ".join(f"{100 * doc['models'][m]['loo'][i]['rel_rmse']:10.2f}%" for m in models))
     print(f"  {'mean':40s} " + " ".join(f"{100 * doc['models'][m]['loo_rel_rmse_mean']:10.2f}%" for m in models))
+    band = doc.get("band")
+    if band:
+        cov = band["loo_coverage"]
+        print(f"error bands ({100 * band['level']:.0f}%): {cov['points_inside']} of {cov['points']} held-out points "
+              f"({100 * cov['fraction']:.1f}%) inside the band from the other runs; per run "
+              + ", ".join(f"{100 * c:.0f}%" for c in cov["per_run"]))
 

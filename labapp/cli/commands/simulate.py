@@ -115,8 +115,12 @@ def _run(args: argparse.Namespace) -> int:
     release, summary, out = result.release, result.summary, result.out
     seconds = summary["seconds"]
     if simcal is not None:
+        from analysis.bands import BAND_LEVEL
+        from labapp.jobs.bands import source_simulator
+
         physical = write_release_physical(release.tau_mm, release.released_mm3, simcal, out, args.water_g,
-                                          title=args.input)
+                                          title=args.input, simulate_at=source_simulator(
+                                              args.input, simcal.resolution, symmetry=args.symmetry, units=args.units))
         grams = np.loadtxt(physical, delimiter=",", skiprows=1)
         summary["physical"] = {"simcal": str(simcal.path), "model": simcal.cal.model,
                                "mass_g": float(grams[-1, 1]), "duration_s": float(grams[-1, 0]),
@@ -125,6 +129,11 @@ def _run(args: argparse.Namespace) -> int:
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         print(f"predicted: {grams[-1, 1]:.3f} g released over {grams[-1, 0] / 3600:.2f} h "
               f"({simcal.describe()}) -> {physical}")
+        if grams.shape[1] > 3:
+            print(f"  {100 * BAND_LEVEL:.0f}% band (calibration uncertainty and leave-one-out residuals): final mass "
+                  f"{grams[-1, 3]:.3f}-{grams[-1, 4]:.3f} g, widest {np.max(grams[:, 4] - grams[:, 3]):.3f} g")
+        else:
+            print(f"  no error band: {simcal.path} was made without one; recalibrate with sfr calibrate-sim")
     error = summary["error"]
     estimate = ("not estimated" if error["error_mm3"] is None else
                 f"within {error['error_mm3']:.3g} mm^3 ({error['error_fraction']:.2%} of the volume) of the physical "
