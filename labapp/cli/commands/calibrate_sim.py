@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from labapp.cli.argtypes import nonnegative_float, positive_int
+from labapp.cli.argtypes import nonnegative_float, positive_float, positive_int
 
 NAME = "calibrate-sim"
 HELP = "fit seconds per mm and grams per mm^3 from measured runs and their meshes (simcal.json, loo.csv, simcal.png)"
@@ -18,9 +18,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from analysis.simcal import DEFAULT_MAX_OFFSET_S, PHYSICS_CHOICES
     from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION
 
-    parser.add_argument("set_csv", metavar="SET.csv",
+    parser.add_argument("set_csv", metavar="SET.csv", nargs="?",
                         help="columns run,mesh,object_mass_g; run = run folder or curve CSV, paths relative to "
-                             "the file; an empty mass is read from the run's run.json")
+                             "the file; an empty mass is read from the run's run.json (not with --plan)")
+    _add_plan_arguments(parser)
     parser.add_argument("--calibration", help="bench calibration JSON for the run folders (default: each run's own)")
     parser.add_argument("--out", required=True, help="output folder (must not hold a calibration yet)")
     parser.add_argument("--model", default="auto", choices=("auto", "constant", "saturation"),
@@ -38,10 +39,53 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"bound on each run's drop-time offset, s (default {DEFAULT_MAX_OFFSET_S:g}; 0 = none)")
 
 
+def _add_plan_arguments(parser: argparse.ArgumentParser) -> None:
+    from labapp.jobs.plan import PLAN_NOISE, PLAN_POINTS, PLAN_PRINTS
+
+    parser.add_argument("--plan", action="store_true",
+                        help="no calibration: propose which shapes to print (shipped samples, generated flat, tall and "
+                             "channelled shapes) to separate the --physics parameters, with each parameter's expected "
+                             "standard error (plan.csv, plan.json and the generated shapes' STL files in --out)")
+    parser.add_argument("--plan-prints", type=positive_int, default=PLAN_PRINTS,
+                        help=f"with --plan: how many prints to propose (default {PLAN_PRINTS})")
+    parser.add_argument("--plan-noise", type=positive_float, default=PLAN_NOISE,
+                        help=f"with --plan: calibration error per independent point, fraction of the weighed mass "
+                             f"(default {PLAN_NOISE:g})")
+    parser.add_argument("--plan-points", type=positive_int, default=PLAN_POINTS,
+                        help=f"with --plan: independent points per run (default {PLAN_POINTS})")
+
+
+def _run_plan(args: argparse.Namespace) -> int:
+    from labapp.errors import UsageError
+    from labapp.jobs.plan import plan_prints
+
+    if args.set_csv is not None:
+        raise UsageError("--plan proposes prints before any run: give no SET.csv with it")
+    plan = plan_prints(args.physics, args.out, prints=args.plan_prints, noise=args.plan_noise,
+                       points=args.plan_points, resolution=args.resolution,
+                       progress=lambda text: print(text, file=sys.stderr, flush=True))
+    print(f"calibration prints for {', '.join(plan.parameters)} (error {100 * plan.noise:g}% of the mass at "
+          f"{plan.points} independent points per run):")
+    print(f"  {'#':>2s} {'shape':16s} " + " ".join(f"{'std ' + p:>18s}" for p in plan.parameters) + "  why")
+    for k, step in enumerate(plan.steps, start=1):
+        print(f"  {k:2d} {step.name:16s} " + " ".join(f"{step.std[p]:18.3g}" for p in plan.parameters)
+              + f"  {step.why}")
+    print("expected standard errors (log_seconds and anisotropy relative): "
+          + ", ".join(f"{p} {v:.3g}" for p, v in plan.std.items()))
+    print(f"wrote {Path(args.out) / 'plan.csv'}, {Path(args.out) / 'plan.json'}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Calibrate, print the leave-one-out table and where the files are."""
     from labapp.cli import interrupt
+    from labapp.errors import UsageError
     from labapp.jobs.calibrate_sim import calibrate_sim
+
+    if args.plan:
+        return _run_plan(args)
+    if args.set_csv is None:
+        raise UsageError("give the calibration set SET.csv (or --plan to propose which shapes to print)")
 
     def progress(fraction: float, message: str) -> None:
         print(f"[{100 * fraction:3.0f}%] {message}", file=sys.stderr, flush=True)
