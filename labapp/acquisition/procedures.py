@@ -7,6 +7,7 @@ zero) -> a frame every ``interval_s`` with plate/probe temperature and stirring 
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import tempfile
 from dataclasses import dataclass, field
@@ -19,6 +20,7 @@ from labapp.acquisition.engine import Engine
 from labapp.acquisition.events import AlarmKind, FrameStored, Outcome, Phase, Preview, PromptKind, StateChanged
 from labapp.acquisition.live import LiveAnalyzer, is_steady
 from labapp.acquisition.settings import (
+    CHANGEABLE_DURING_RUN,
     FRAME_BYTES,
     INTERVAL,
     LOW_SPACE,
@@ -32,6 +34,8 @@ from labapp.acquisition.settings import (
     from_record,
     to_record,
 )
+from labapp.errors import UsageError
+from labapp.records import requests
 from labapp.records.audit import Action
 from labapp.records.audit import append as audit
 from labapp.records.runrecord import RecordStatus
@@ -244,13 +248,57 @@ class RunProcedure:
                 return
             self._frame(engine)
             slot = max(slot + 1, math.ceil(session.t_s() / cfg.interval_s))
-            cfg = self.config        # an audited change during the run (labapp.jobs.run.change_setting) applies
+            self._serve_requests()
+            cfg = self.config        # a setting changed by a request applies from here
             if session.t_s() >= cfg.max_duration_s:
                 session.note("info", "max-duration", f"maximum duration {cfg.max_duration_s:.0f} s reached")
                 return
             if cfg.stop_on_steady and is_steady(self.t_s, self.conc, cfg.min_duration_s):
                 session.note("info", "steady", f"steady state reached at t={self.t_s[-1]:.0f} s")
                 return
+
+    def change_setting(self, name: str, value: float, reason: str, operator: str | None = None) -> str:
+        """Change a setting of the run being recorded (stored units), with ``reason``, as ``operator`` (default
+        the current one): it applies from the next frame, ``run.json``'s settings hold it (a resume keeps it)
+        and the audit trail says who changed what from what, when and why. Returns what changed, one line.
+
+        Raises
+        ------
+        UsageError
+            For a setting that cannot change during a run, no reason, a value out of range, or no run recording.
+        labapp.records.operators.OperatorError
+            When nobody is acting (no ``operator`` and no current operator).
+        """
+        settings = {s.name: s for s in CHANGEABLE_DURING_RUN}
+        if name not in settings:
+            raise UsageError(f"{name} cannot change while a run records (only {', '.join(settings)} can); the "
+                             "other settings are fixed at the start")
+        if not reason or not reason.strip():
+            raise UsageError(f"changing {name} during a run needs a reason (it is recorded in the audit trail)")
+        if self.run is None or self.run.status != RecordStatus.RUNNING:
+            raise UsageError("no run is recording; a setting changes only during a run")
+        setting = settings[name]
+        setting.check(value, "change")
+        detail = (f"{name}: {setting.shown(getattr(self.config, name)):g} -> {setting.shown(value):g} "
+                  f"{setting.display_unit}")
+        audit(self.run.path, Action.CHANGE_SETTING, detail, reason=reason.strip(), operator=operator)
+        self.config = dataclasses.replace(self.config, **{name: value})
+        self.run.update(config=self.config.to_dict())
+        return detail
+
+    def _serve_requests(self) -> None:
+        """Carry out the requests other processes left for this run (:mod:`labapp.records.requests`)."""
+        for request, body in requests.claim(self.run.path):
+            try:
+                if body is None or body.get("action") != "change":
+                    raise UsageError(f"{request.name} is not a request this run understands")
+                detail = self.change_setting(str(body["name"]), float(body["value"]), str(body.get("reason") or ""),
+                                             operator=str(body["operator"]))
+            except (UsageError, KeyError, TypeError, ValueError) as exc:
+                requests.answer(request, {"done": False, "why": str(exc)})
+                continue
+            requests.answer(request, {"done": True, "detail": detail})
+            self.session.note("info", "setting", f"{detail}, by {body['operator']}: {body['reason']}")
 
     def _frame(self, engine: Engine) -> None:
         session, run = self.session, self.run

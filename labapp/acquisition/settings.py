@@ -20,11 +20,11 @@ from analysis.decode import REDUCE_FACTORS
 from drivers.hotplate import HEIDOLPH_HEI_TEC, HotplateConfig
 from labapp.errors import UsageError
 
-__all__ = ["ADDED_MASS", "BATH_SETTINGS", "BathSettings", "EXCURSION", "FRAME_BYTES", "GRID", "HEAT_TIMEOUT", "HOLD",
-           "INSTANT_STABLE_STEP_S", "INTERVAL", "KEEPALIVE", "LOW_SPACE", "MAX_DURATION", "MIN_DURATION", "MIRROR_COL",
-           "OBJECT_MASS", "REDUCE", "REFERENCE_ALARM_G_PER_KG", "ROOM_TEMPERATURE_C", "RUN_SETTINGS", "SERIES_REDUCE",
-           "SERIES_SETTINGS", "SETPOINT", "SETTLE", "SIM_SPEED", "STABLE_STEP", "STIRRING", "Setting", "TOLERANCE", "WATER",
-           "check_settings", "from_record", "parse_masses", "to_record"]
+__all__ = ["ADDED_MASS", "BATH_SETTINGS", "BathSettings", "CHANGEABLE_DURING_RUN", "EXCURSION", "FRAME_BYTES", "GRID",
+           "HEAT_TIMEOUT", "HOLD", "INSTANT_STABLE_STEP_S", "INTERVAL", "KEEPALIVE", "LOW_SPACE", "MAX_DURATION",
+           "MIN_DURATION", "MIRROR_COL", "OBJECT_MASS", "REDUCE", "REFERENCE_ALARM_G_PER_KG", "ROOM_TEMPERATURE_C",
+           "RUN_SETTINGS", "SERIES_REDUCE", "SERIES_SETTINGS", "SETPOINT", "SETTLE", "SIM_SPEED", "STABLE_STEP",
+           "STIRRING", "Setting", "TOLERANCE", "WATER", "check_settings", "from_record", "parse_masses", "to_record"]
 
 Number = float | int
 
@@ -186,7 +186,8 @@ INTERVAL = Setting("interval_s", "frame interval", "s", 11.0, low=0.0, low_open=
                    note="paper section 4.2")
 MAX_DURATION = Setting("max_duration_s", "maximum duration", "s", 4 * 3600.0, low=0.0, low_open=True, decimals=2,
                        flag="--max-hours", scale=3600.0, shown_unit="h")
-MIN_DURATION = Setting("min_duration_s", "shortest run before a steady-state stop", "s", 1800.0, low=0.0)
+MIN_DURATION = Setting("min_duration_s", "shortest run before a steady-state stop", "s", 1800.0, low=0.0, decimals=0,
+                       flag="--min-minutes", scale=60.0, shown_unit="min")
 OBJECT_MASS = Setting("object_mass_g", "object mass (weighed)", "g", None, low=0.0, low_open=True, optional=True,
                       decimals=4, flag="--object-mass", note="omitted: not recorded")
 FRAME_BYTES = Setting("frame_bytes_estimate", "bytes of one frame for the disk-space check", "B", None, low=0.0,
@@ -194,6 +195,9 @@ FRAME_BYTES = Setting("frame_bytes_estimate", "bytes of one frame for the disk-s
 LOW_SPACE = Setting("low_space_bytes", "free space below which a warning is logged", "B", 2_000_000_000, low=0.0,
                     integer=True, decimals=0)
 RUN_SETTINGS = (INTERVAL, MAX_DURATION, MIN_DURATION, OBJECT_MASS, FRAME_BYTES, LOW_SPACE)
+CHANGEABLE_DURING_RUN = (MAX_DURATION, MIN_DURATION)
+"""The settings a recording run may change (with a reason, audited): the acquisition reads them at every frame;
+every other setting is fixed at the start."""
 
 REFERENCE_ALARM_G_PER_KG = 0.1
 """A run's reference frame (clear water) reading further than this from the calibration's zero level, g/kg, and

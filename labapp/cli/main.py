@@ -28,7 +28,7 @@ from labapp.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, La
 
 #: The commands in the order of a lab's workflow (bench set-up, measurement, simulation and design,
 #: then the tools); commands not named here are listed after them, alphabetically.
-WORKFLOW = ("devices", "calibrate-bench", "run", "verify", "analyze", "calibrate-sim", "simulate", "design",
+WORKFLOW = ("devices", "calibrate-bench", "run", "change", "verify", "analyze", "calibrate-sim", "simulate", "design",
             "sweep", "compare", "lab", "demo", "emulate")
 #: Errors of the file system that an ``--out`` on a full, read-only or foreign disk raises: bad input (exit 2).
 OUT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM})

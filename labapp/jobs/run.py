@@ -1,17 +1,16 @@
 """Start or resume an acquisition run: the procedure the engine walks (`sfr run`, `sfr run --resume`)."""
 from __future__ import annotations
 
-import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench
 from labapp.acquisition.methods import Method
 from labapp.acquisition.procedures import RunConfig, RunProcedure
-from labapp.acquisition.settings import MAX_DURATION, MIN_DURATION
+from labapp.acquisition.settings import CHANGEABLE_DURING_RUN, INTERVAL
 from labapp.errors import UsageError
-from labapp.records.audit import Action
-from labapp.records.audit import append as audit
+from labapp.records import operators, requests
 from labapp.records.outpaths import FolderKind, check_data_dir, folder_kind
 from labapp.records.runrecord import RecordKind, RecordStatus
 from labapp.records.storage import RunSnapshot, StorageError, finalise_run, read_run
@@ -108,33 +107,46 @@ def finalise(folder: str | Path, reason: str) -> None:
     finalise_run(folder, reason.strip())
 
 
-CHANGEABLE = (MAX_DURATION, MIN_DURATION)
-"""The settings a recording run may change (the acquisition reads them at every frame); every other setting
-is fixed while the run records."""
+REQUEST_WAIT_S = 30.0
+"""How long a change waits for the recording process beyond one frame interval, s."""
 
 
-def change_setting(proc: RunProcedure, name: str, value: float, reason: str) -> None:
-    """Change a setting of the run ``proc`` is recording, as the current operator, with ``reason``: the new
-    value applies from the next frame and the change (old and new value, who, why) is in the audit trail.
+def change_setting(folder: str | Path, name: str, value: float, reason: str,
+                   should_stop: Callable[[], bool] = lambda: False) -> str:
+    """Change a setting of the run recording into ``folder`` (stored units, e.g. ``max_duration_s`` in s), as the
+    current operator, with ``reason``: the recording process (`sfr run`, the GUI) carries it out at its next
+    frame and writes the audit entry. Returns what changed, one line (old and new value).
 
     Raises
     ------
     UsageError
-        For a setting that cannot change during a run, no reason, a value out of range, or no run recording.
+        For a folder that is not a run being recorded, a setting that cannot change during a run, no reason, a
+        value out of range, or a recording process that did not answer within a frame interval and
+        :data:`REQUEST_WAIT_S` (the request is then withdrawn: nothing changed).
     labapp.records.operators.OperatorError
         When the process acts as nobody.
     """
-    settings = {s.name: s for s in CHANGEABLE}
+    folder = Path(folder)
+    settings = {s.name: s for s in CHANGEABLE_DURING_RUN}
     if name not in settings:
-        raise UsageError(f"{name} cannot change while a run records (only {', '.join(settings)} can); settings are "
-                         "fixed at the start")
+        raise UsageError(f"{name} cannot change while a run records (only {', '.join(settings)} can)")
     if not reason or not reason.strip():
         raise UsageError(f"changing {name} during a run needs a reason (it is recorded in the audit trail)")
-    if proc.run is None or proc.run.status != RecordStatus.RUNNING:
-        raise UsageError("no run is recording; a setting changes only during a run")
-    setting = settings[name]
-    setting.check(value, "change_setting")
-    old = getattr(proc.config, name)
-    audit(proc.run.path, Action.CHANGE_SETTING, f"{name}: {setting.shown(old):g} -> {setting.shown(value):g} "
-          f"{setting.display_unit}", reason=reason)
-    proc.config = dataclasses.replace(proc.config, **{name: value})
+    settings[name].check(value, "change")
+    operator = operators.require(f"changing {name} of {folder.name}")
+    try:
+        snap = read_run(folder)
+    except StorageError as exc:
+        raise UsageError(f"{folder} is not a run folder ({exc})") from None
+    if not snap.live:
+        raise UsageError(f"{folder} is not being recorded ({snap.status}); a setting changes only during a run")
+    request = requests.post(folder, {"action": "change", "name": name, "value": value, "reason": reason.strip(),
+                                     "operator": operator})
+    interval_s = float((snap.record.config or {}).get("interval_s") or INTERVAL.default)
+    outcome = requests.wait_answer(request, interval_s + REQUEST_WAIT_S, should_stop)
+    if outcome is None:
+        raise UsageError(f"the process recording {folder.name} did not take the change within "
+                         f"{interval_s + REQUEST_WAIT_S:.0f} s; nothing changed")
+    if not outcome.get("done"):
+        raise UsageError(f"the run refused the change: {outcome.get('why')}")
+    return str(outcome.get("detail"))

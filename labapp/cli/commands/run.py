@@ -6,7 +6,7 @@ import dataclasses
 import logging
 
 from labapp.acquisition.devices import CAMERA_SPECS
-from labapp.acquisition.settings import BATH_SETTINGS, INTERVAL, MAX_DURATION, OBJECT_MASS, SIM_SPEED
+from labapp.acquisition.settings import BATH_SETTINGS, INTERVAL, MAX_DURATION, MIN_DURATION, OBJECT_MASS, SIM_SPEED
 from labapp.cli import interrupt
 from labapp.cli.argtypes import add_setting, add_settings, setting_values
 from labapp.errors import EXIT_INTERRUPTED
@@ -36,7 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "records its path and SHA-256")
     parser.add_argument("--name", default="run", help="run name (part of the folder name)")
     parser.add_argument("--object", default="", help="object description")
-    for setting in (OBJECT_MASS, INTERVAL, MAX_DURATION):
+    for setting in (OBJECT_MASS, INTERVAL, MAX_DURATION, MIN_DURATION):
         add_setting(parser, setting)
     parser.add_argument("--no-steady-stop", action="store_true", help="do not stop at steady state")
     parser.add_argument("--notes", default="", help="free text stored in run.json")
@@ -85,7 +85,8 @@ def _run(args: argparse.Namespace) -> int:
     else:
         check_data_dir(args.out)
         config = RunConfig(name=args.name, interval_s=args.interval_s, max_duration_s=args.max_duration_s,
-                           stop_on_steady=not args.no_steady_stop, object_mass_g=args.object_mass_g,
+                           stop_on_steady=not args.no_steady_stop, min_duration_s=args.min_duration_s,
+                           object_mass_g=args.object_mass_g,
                            object_name=args.object, notes=args.notes, auto_drop=simulate or args.auto_drop,
                            bath=BathSettings(**setting_values(args, BATH_SETTINGS)))
     method = None

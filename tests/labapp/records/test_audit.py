@@ -222,23 +222,24 @@ def test_sign_and_audit_from_the_command_line(users, tmp_path, monkeypatch, caps
 def test_a_setting_changes_during_a_run_only_audited_with_a_reason(users, tmp_path):
     from labapp.acquisition.procedures import RunConfig, RunProcedure
     from labapp.errors import UsageError
-    from labapp.jobs.run import change_setting
+    from labapp.records.storage import read_run
 
     proc = RunProcedure(RunConfig(max_duration_s=3600.0), bench=None, data_dir=tmp_path / "data")
     with pytest.raises(UsageError, match="no run is recording"):
-        change_setting(proc, "max_duration_s", 7200.0, "slow sample")
-    proc.run = create_run(tmp_path / "data", "pill", {"simulated": True})
+        proc.change_setting("max_duration_s", 7200.0, "slow sample")
+    proc.run = create_run(tmp_path / "data", "pill", {"simulated": True, "config": proc.config.to_dict()})
     with pytest.raises(UsageError, match="interval_s cannot change while a run records"):
-        change_setting(proc, "interval_s", 5.0, "faster")
+        proc.change_setting("interval_s", 5.0, "faster")
     with pytest.raises(UsageError, match="needs a reason"):
-        change_setting(proc, "max_duration_s", 7200.0, " ")
+        proc.change_setting("max_duration_s", 7200.0, " ")
     with pytest.raises(UsageError, match="must be > 0"):
-        change_setting(proc, "max_duration_s", -1.0, "oops")
-    change_setting(proc, "max_duration_s", 7200.0, "the sample dissolves slower than expected")
+        proc.change_setting("max_duration_s", -1.0, "oops")
+    proc.change_setting("max_duration_s", 7200.0, "the sample dissolves slower than expected")
     assert proc.config.max_duration_s == 7200.0
+    assert read_run(proc.run.path).record.config["max_duration_s"] == 7200.0     # a resume keeps it
     last = check_trail(proc.run.path).entries[-1]
-    assert (last["action"], last["detail"], last["reason"]) == (
-        "change-setting", "max_duration_s: 1 -> 2 h", "the sample dissolves slower than expected")
+    assert (last["action"], last["detail"], last["reason"], last["operator"]) == (
+        "change-setting", "max_duration_s: 1 -> 2 h", "the sample dissolves slower than expected", "A. Jones")
     proc.run.close()
 
 

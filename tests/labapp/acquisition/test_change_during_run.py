@@ -1,0 +1,96 @@
+"""A setting changed while a run records, from another process (`sfr change`): carried out by the recording
+process at its next frame, audited with who and why, kept in run.json; refused with the reason otherwise."""
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from labapp.records.audit import check_trail
+from labapp.records.requests import REQUESTS_DIR
+from labapp.records.storage import read_run, verify_run
+
+
+def _sfr(*args, **kwargs):
+    return subprocess.Popen([sys.executable, "-m", "labapp.cli.main", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, env=dict(os.environ, PYTHONUNBUFFERED="1"), text=True, **kwargs)
+
+
+def _first_frames(root, n, proc, timeout_s=120):
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        assert proc.poll() is None, proc.stdout.read()
+        folders = [p for p in root.glob("*") if (p / "frames.csv").exists()]
+        if folders and len(read_run(folders[0]).frames) >= n:
+            return folders[0]
+        time.sleep(0.05)
+    raise AssertionError(f"fewer than {n} frames after {timeout_s} s")
+
+
+def test_sfr_change_extends_a_recording_run_audited_and_kept(tmp_path, sim_calibration, capsys):
+    from labapp.cli.main import main
+    from labapp.jobs.run import change_setting  # noqa: F401  (imported before the clock starts)
+
+    _, cal_path = sim_calibration
+    runs = tmp_path / "runs"
+    recording = _sfr("run", "--simulate", "--speed", "300", "--sample", "sphere", "--out", str(runs), "--calibration",
+                     str(cal_path), "--max-hours", "0.5", "--no-steady-stop", "--interval", "20")
+    folder = _first_frames(runs, 3, recording)
+    with pytest.raises(SystemExit):                     # a change without a reason: refused by argparse
+        main(["change", str(folder), "--max-hours", "0.75"])
+    assert "--reason" in capsys.readouterr().err
+    assert main(["change", str(folder), "--max-hours", "0.75", "--reason", "the sample dissolves slower than planned"]) == 0
+    assert "changed max_duration_s: 0.5 -> 0.75 h" in capsys.readouterr().out
+    out, _ = recording.communicate(timeout=120)
+    assert recording.returncode == 0, out
+
+    snap = read_run(folder)
+    assert snap.record.config["max_duration_s"] == 2700.0
+    assert 2700.0 <= snap.frames[-1].t_s < 2800.0         # past the old limit, to the first frame after the new one
+    entry = [e for e in check_trail(folder).entries if e["action"] == "change-setting"][-1]
+    assert (entry["operator"], entry["detail"], entry["reason"]) == (
+        "tester", "max_duration_s: 0.5 -> 0.75 h", "the sample dissolves slower than planned")
+    assert "maximum duration 2700 s reached" in (folder / "events.log").read_text()
+    assert verify_run(folder).ok and not list((folder / REQUESTS_DIR).iterdir())
+
+    after = subprocess.run([sys.executable, "-m", "labapp.cli.main", "change", str(folder), "--min-minutes", "10",
+                            "--reason", "too late"], capture_output=True, text=True, timeout=60)
+    assert after.returncode == 2 and "is not being recorded" in after.stderr, after.stderr
+
+
+def test_a_request_the_run_cannot_carry_out_is_answered_with_why(tmp_path):
+    from labapp.acquisition.procedures import RunConfig, RunProcedure
+    from labapp.records import requests
+    from labapp.records.storage import create_run
+
+    class Session:
+        notes = []
+
+        def note(self, *args):
+            self.notes.append(args)
+
+    proc = RunProcedure(RunConfig(), bench=None, data_dir=tmp_path)
+    proc.run = create_run(tmp_path, "pill", {"simulated": True, "config": proc.config.to_dict()})
+    proc.session = Session()
+    asked = [requests.post(proc.run.path, body) for body in (
+        {"action": "change", "name": "interval_s", "value": 5.0, "reason": "faster", "operator": "tester"},
+        {"action": "reboot"},
+        {"action": "change", "name": "min_duration_s", "value": 600.0, "reason": "fast sample", "operator": "tester"})]
+    (proc.run.path / REQUESTS_DIR / "0-garbage.json").write_text("{not json")
+    proc._serve_requests()
+    answers = [requests.wait_answer(path, 1.0) for path in asked]
+    assert [a["done"] for a in answers] == [False, False, True]
+    assert "interval_s cannot change while a run records" in answers[0]["why"]
+    assert "not a request this run understands" in answers[1]["why"]
+    assert proc.config.min_duration_s == 600.0 and proc.config.interval_s == RunConfig().interval_s
+    assert requests.wait_answer(proc.run.path / REQUESTS_DIR / "0-garbage.json", 1.0)["done"] is False
+    proc.run.close()
+
+
+def test_an_unanswered_request_is_withdrawn_so_it_never_applies_later(tmp_path):
+    from labapp.records import requests
+
+    path = requests.post(tmp_path, {"action": "change"})
+    assert requests.wait_answer(path, 0.3, poll_s=0.05) is None
+    assert list(requests.claim(tmp_path)) == []         # withdrawn: a later frame does not find it
