@@ -43,6 +43,7 @@ from design.inverse.status import DesignStatus
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.plots import hmm, time_plot
 from labapp.gui.sweep_panel import SweepPanel
+from labapp.jobs.bands import quantile_columns
 from labapp.jobs.calibrate_sim import SimCalFile, curve_of, load_simcal
 from labapp.jobs.design import DESIGN_DEFAULTS, design_folder
 from labapp.jobs.design import design as design_job
@@ -248,6 +249,8 @@ class DesignLauncher(QWidget):
         self.physical_target = self.physical_plot.plot([], [], pen=pg.mkPen("g", width=2), name="target")
         self.physical_design = self.physical_plot.plot(
             [], [], pen=pg.mkPen("m", width=2, style=Qt.PenStyle.DashLine), name="design (predicted)")
+        self.physical_band = [self.physical_plot.plot([], [], pen=pg.mkPen(None)) for _ in range(2)]
+        self.physical_plot.addItem(pg.FillBetweenItem(*self.physical_band, brush=pg.mkBrush(255, 0, 255, 50)))
 
         form = QGridLayout()
         form.addWidget(QLabel("target"), 0, 0)
@@ -369,6 +372,8 @@ class DesignLauncher(QWidget):
         if preview.measured is not None:
             self.physical_target.setData(*preview.measured)
             self.physical_design.setData([], [])
+            for curve in self.physical_band:
+                curve.setData([], [])
         self.curves.setCurrentIndex(0)
         note = ("\nA measured target is optimised anyway (its noise alone can fail the check); the report is kept "
                 "as feasibility.txt." if preview.measured is not None and not preview.feasible else "")
@@ -471,6 +476,8 @@ class DesignLauncher(QWidget):
             rows = read_curves(result.out_dir / "curves_physical.csv")
             self.physical_target.setData(rows["t_s"], rows["target_released_g"])
             self.physical_design.setData(rows["t_s"], rows["design_released_g"])
+            for curve, column in zip(self.physical_band, (f"design_released_g_{q}" for q in quantile_columns())):
+                curve.setData(rows["t_s"] if column in rows else [], rows.get(column, []))   # the prediction's band
         # the lines sfr design prints, each shown as a sentence
         lines = summary_lines(physical or result.outputs.summary, result.out_dir)
         self.status.setText("\n".join(line[:1].upper() + line[1:] for line in [f"design {lines[0]}", *lines[1:]]))

@@ -400,8 +400,8 @@ class RunBrowser(QWidget):
         self.overlay_task.start()
 
     def _overlay_ready(self, curves) -> None:
-        for label, t_s, grams, dashed in curves:
-            self.overlay.add(label, t_s, grams, dashed=dashed)
+        for curve in curves:
+            self.overlay.add(*curve)
         self.info.setText(f"overlay: {len(self.overlay.curves)} curves")
         self.views.setCurrentIndex(1)
 

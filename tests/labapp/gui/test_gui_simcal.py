@@ -67,6 +67,7 @@ def test_simulation_step_calibrates_shows_the_fit_and_activates(qtbot, tmp_path,
     browser.mesh.setText(str(calibration_set[0][1]))
     browser.overlay_prediction()                                # simulated off the GUI thread
     qtbot.waitUntil(lambda: len(browser.overlay.curves) == 1, timeout=60_000)
+    assert browser.overlay.bands == 1                          # the prediction's band, shaded
     browser.overlay.add_run(calibration_set[0][0])
     labels = [c[0] for c in browser.overlay.curves]
     assert labels[0].startswith("sphere.stl predicted (") and labels[1] == "sphere.csv"
