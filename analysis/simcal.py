@@ -468,21 +468,28 @@ def leave_one_out(shapes: Sequence[ShapeRun], model: str = "constant", *,
 
 
 # ---------------------------------------------------------------------------------------------------------
-# Print physics: parameters of the forward model itself (design.forward: anisotropy, surface offset), fitted
+# Print physics: parameters of the forward model itself (design.forward: anisotropy, surface offset, swelling), fitted
 # with the scales. The analysis never simulates: the caller gives ``shapes_at(values)``, the calibration
 # shapes simulated with those parameter values (the job caches them per mesh and values).
 
-PHYSICS_PARAMETERS = ("anisotropy", "offset_mm")
-"""Print physics the calibration can fit: z / in-plane erosion rate, printed surface outside the mesh's (mm)."""
-PHYSICS_IDENTITY = {"anisotropy": 1.0, "offset_mm": 0.0}
+PHYSICS_PARAMETERS = ("anisotropy", "offset_mm", "swelling_mm")
+"""Print physics the calibration can fit: z / in-plane erosion rate, printed surface outside the mesh's (mm), the
+width below which channels are shut by the swollen material until their walls dissolve (mm)."""
+PHYSICS_IDENTITY = {"anisotropy": 1.0, "offset_mm": 0.0, "swelling_mm": 0.0}
 """Values that switch each effect off (the paper's isotropic model of the mesh as designed)."""
 PHYSICS_GRIDS = {"anisotropy": tuple(float(x) for x in np.exp(np.linspace(math.log(0.5), math.log(2.0), 13))),
-                 "offset_mm": tuple(float(x) for x in np.round(np.linspace(-0.2, 0.3, 11), 6))}
-"""Search grid of each parameter (anisotropy log-spaced by a factor 1.12, offset in 0.05 mm steps); the
-minimum is refined by a parabola through the best grid point and its neighbours."""
-PHYSICS_CHOICES = ("none", "anisotropy", "offset", "all", "auto")
+                 "offset_mm": tuple(float(x) for x in np.round(np.linspace(-0.2, 0.3, 11), 6)),
+                 "swelling_mm": tuple(float(x) for x in np.round(np.linspace(0.0, 1.2, 13), 6))}
+"""Search grid of each parameter (anisotropy log-spaced by a factor 1.12, offset in 0.05 mm steps, swelling width
+in 0.1 mm steps from none to 1.2 mm); the minimum is refined by a parabola through the best grid point and its
+neighbours (the swelling width changes the release in voxel steps, so its loss is often flat over several grid
+points: the middle of that flat minimum is taken, `_flat_run`)."""
+PHYSICS_CHOICES = ("none", "anisotropy", "offset", "swelling", "all", "auto")
 """``--physics`` values: which parameters to fit; ``auto`` fits every subset and keeps the one leave-one-out prefers."""
-PHYSICS_SETS = {"none": (), "anisotropy": ("anisotropy",), "offset": ("offset_mm",), "all": PHYSICS_PARAMETERS}
+PHYSICS_SETS = {"none": (), "anisotropy": ("anisotropy",), "offset": ("offset_mm",), "swelling": ("swelling_mm",),
+                "anisotropy+offset": ("anisotropy", "offset_mm"), "anisotropy+swelling": ("anisotropy", "swelling_mm"),
+                "offset+swelling": ("offset_mm", "swelling_mm"), "all": PHYSICS_PARAMETERS}
+"""The parameter sets ``auto`` fits (every subset); a named ``--physics`` fits its own set and ``none``."""
 EARN_MARGIN = 0.05
 """A parameter set is kept over a smaller one only if its mean leave-one-out error is lower by more than this
 fraction: a parameter must earn its place, not win by the noise of the fit."""
@@ -503,8 +510,9 @@ class PhysicsFit:
     values : dict
         Every parameter's value (fitted or identity).
     uncertainty : dict
-        Per fitted parameter, its standard error: the larger of the jackknife over the leave-one-out
-        fits and a tenth of its grid step (for the offset also the floor the caller gives).
+        Per fitted parameter, its standard error: the largest of the jackknife over the leave-one-out
+        fits, a tenth of its grid step and the spread of a flat minimum (for the offset and the swelling width
+        also the floor the caller gives).
     loss : float
         Section 4.3 loss of the scales fitted at `values`.
     loo : tuple of LooShape
@@ -534,8 +542,24 @@ def _from_coord(name: str, c: float) -> float:
     return math.exp(c) if name == "anisotropy" else c
 
 
+def _flat_run(losses: Sequence[float], i: int) -> tuple[int, int]:
+    """The grid points either side of i whose loss equals the minimum (the same simulations: a voxel-step
+    parameter such as the swelling width changes nothing between them)."""
+    tol = 1e-12 * max(abs(losses[i]), 1e-300)
+    a = b = i
+    while a > 0 and abs(losses[a - 1] - losses[i]) <= tol:
+        a -= 1
+    while b < len(losses) - 1 and abs(losses[b + 1] - losses[i]) <= tol:
+        b += 1
+    return a, b
+
+
 def _refine(name: str, grid: Sequence[float], i: int, losses: Sequence[float]) -> float:
-    """Vertex of the parabola through grid point i and its neighbours (in log for anisotropy), kept between them."""
+    """Vertex of the parabola through grid point i and its neighbours (in log for anisotropy), kept between them;
+    the middle of a flat minimum (`_flat_run`) when several grid points share it."""
+    a, b = _flat_run(losses, i)
+    if b > a:
+        return float(_from_coord(name, 0.5 * (_grid_coord(name, grid[a]) + _grid_coord(name, grid[b]))))
     if i == 0 or i == len(grid) - 1:
         return float(grid[i])
     c = [_grid_coord(name, grid[j]) for j in (i - 1, i, i + 1)]
@@ -552,10 +576,13 @@ def _nearest(p: str, value: float) -> int:
     return int(np.argmin([abs(_grid_coord(p, g) - _grid_coord(p, value)) for g in PHYSICS_GRIDS[p]]))
 
 
-def _physics_search(loss_at: Callable[[dict], float], fitted: Sequence[str], near: dict | None = None) -> dict:
+def _physics_search(loss_at: Callable[[dict], float], fitted: Sequence[str], near: dict | None = None,
+                    flat: dict | None = None) -> dict:
     """Coordinate search over the grids of the ``fitted`` parameters (values on grid points), then a parabola
     refinement of each from its grid neighbours. Returns every parameter's value. With ``near`` (values), the
-    search starts there and covers `_LOO_WINDOW` grid points either side of it (leave-one-out refits)."""
+    search starts there and covers `_LOO_WINDOW` grid points either side of it (leave-one-out refits). ``flat``,
+    when given, receives per parameter the half-width of its flat minimum (`_flat_run`, in its grid coordinate;
+    0 for a single best point)."""
     start = near or PHYSICS_IDENTITY
     index = {p: _nearest(p, start[p]) for p in fitted}
     span = {p: (0, len(PHYSICS_GRIDS[p])) if near is None else
@@ -578,6 +605,10 @@ def _physics_search(loss_at: Callable[[dict], float], fitted: Sequence[str], nea
     for p in fitted:
         lo, hi = span[p]
         values[p] = _refine(p, PHYSICS_GRIDS[p][lo:hi], index[p] - lo, profiles[p])
+        if flat is not None:
+            a, b = _flat_run(profiles[p], index[p] - lo)
+            grid = PHYSICS_GRIDS[p][lo:hi]
+            flat[p] = 0.5 * abs(_grid_coord(p, grid[b]) - _grid_coord(p, grid[a]))
     return values
 
 
@@ -605,8 +636,8 @@ def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequenc
     progress : callable, optional
         ``progress(done, total)`` after the full fit and each left-out shape.
     offset_floor_mm : float
-        Least standard error of the offset, mm: a voxelised surface is placed only to within its voxels
-        (the caller passes half the simulations' voxel edge).
+        Least standard error of the offset and of the swelling width, mm: a voxelised surface is placed, and a
+        channel's width measured, only to within its voxels (the caller passes half the simulations' voxel edge).
 
     Returns
     -------
@@ -634,7 +665,8 @@ def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequenc
     n = len(base)
     if n < 2:
         raise AnalysisError("fitting print physics needs at least two shapes (leave-one-out)")
-    values = _physics_search(loss_without(None), fitted) if fitted else dict(PHYSICS_IDENTITY)
+    flat: dict[str, float] = {}
+    values = _physics_search(loss_without(None), fitted, flat=flat) if fitted else dict(PHYSICS_IDENTITY)
     full = _fit_prepared(prep(values), "constant", max_offset_s)
     if progress is not None:
         progress(1, n + 1)
@@ -657,7 +689,8 @@ def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequenc
         coords = np.array([_grid_coord(p, v[p]) for v in loo_values])
         jack = math.sqrt((n - 1) / n * float(np.sum((coords - coords.mean()) ** 2)))
         step = abs(_grid_coord(p, PHYSICS_GRIDS[p][1]) - _grid_coord(p, PHYSICS_GRIDS[p][0]))
-        se = max(jack, 0.1 * step)
+        # a flat minimum of half-width a: any value in it fits alike (uniform: standard error a / sqrt(3))
+        se = max(jack, 0.1 * step, flat.get(p, 0.0) / math.sqrt(3.0))
         # anisotropy is searched in log: its standard error is relative, reported in its own unit
         uncertainty[p] = float(values[p] * se) if p == "anisotropy" else float(max(se, offset_floor_mm))
     return PhysicsFit(tuple(fitted), values, uncertainty, full.loss, tuple(loo), tuple(loo_values))

@@ -10,6 +10,15 @@ target's physical release (a source shape's by the same evaluator), and its volu
 mesh's own. The design grid's figures stay as diagnostics: the density's release and the binary solid's
 (the printed mesh re-voxelised on the design grid, as the paper plots it, Fig. 6), both first-order fast
 marching with a shape-dependent O(dx) error.
+
+Print physics (`DesignConfig` ``anisotropy``, ``print_offset_mm``, ``swelling_mm``, from a simulation
+calibration): the optimised density is the solid that must come out of the printer. A print comes out
+``print_offset_mm`` larger than its mesh, so ``design.stl`` is that solid shrunk by the offset (the file to
+print), and the print is ``design.stl`` grown by it again; every print figure (fit, volume, mass, channels,
+pieces) is the grown solid's. With anisotropy or swelling the print's release is the forward model's with
+that physics on voxels half the design grid's (the reference evaluator is isotropic and has no swelling).
+Channels narrower than ``swelling_mm`` are filled before extraction (`close_narrow_channels`), the minimum
+open channel width the print must keep, and ``summary.json`` says whether the print meets it.
 """
 from __future__ import annotations
 
@@ -26,10 +35,12 @@ import numpy as np
 from design.errors import DesignError
 from design.fabrication.extract import centred_iou, count_pieces, density_mesh, mass_preserving_level, revoxelize
 from design.fabrication.printability import assess, print_mass_g, prusa_profile
+from design.files.pipeline import offset_mesh
 from design.files.records import SUMMARY, SUMMARY_FORMAT, DesignSummary
 from design.files.report import save_report
 from design.forward.reference import design_lattice, reference_release
 from design.forward.simulator import simulate
+from design.forward.swelling import shut_channels
 from design.inverse.objective import DesignObjective, rel_rmse
 from design.inverse.optimize import HISTORY_COLUMNS
 from design.inverse.rate import rate_deviation, rate_deviation_vs_target
@@ -176,22 +187,59 @@ def summary_lines(summary: DesignSummary, out_dir: Path) -> list[str]:
 
 
 def solid_release(solid: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], total_time_mm: float,
-                  dtau_mm: float) -> np.ndarray:
-    """Released volume of a full (unfolded) binary solid, simulated on its reduced grid, mm^3 per tau sample."""
+                  dtau_mm: float, anisotropy: float = 1.0, swelling_mm: float = 0.0) -> np.ndarray:
+    """Released volume of a full (unfolded) binary solid, simulated on its reduced grid (with the print physics
+    ``anisotropy`` and ``swelling_mm`` of `design.forward.simulator.simulate`), mm^3 per tau sample."""
     half = tuple(slice(n // 2 if m else 0, None) for n, m in zip(solid.shape, mirror))
     return simulate(solid[half].astype(float), dx_mm, mirror=tuple(mirror), total_time_mm=total_time_mm,
-                    dtau_mm=dtau_mm).released_mm3
+                    dtau_mm=dtau_mm, anisotropy=anisotropy, swelling_mm=swelling_mm).released_mm3
 
 
 def fine_release(mesh, dx_mm: float, origin_mm: np.ndarray, full_shape: tuple[int, int, int],
-                 mirror: tuple[bool, ...], total_time_mm: float, dtau_mm: float, factor: int) -> np.ndarray:
+                 mirror: tuple[bool, ...], total_time_mm: float, dtau_mm: float, factor: int,
+                 anisotropy: float = 1.0, swelling_mm: float = 0.0) -> np.ndarray:
     """Released volume of a printed mesh re-voxelised on voxels `factor` times smaller than the design
     grid's (same domain: `dx_mm`, `origin_mm`, `full_shape`, `mirror`), mm^3 per tau sample; zeros
-    for ``mesh`` None (no solid extracted)."""
+    for ``mesh`` None (no solid extracted). ``anisotropy`` and ``swelling_mm``: the print physics."""
     shape = tuple(factor * n for n in full_shape)
     fine_dx = dx_mm / factor
     solid = (revoxelize(mesh, fine_dx, origin_mm, shape) if mesh is not None else np.zeros(shape, dtype=bool))
-    return solid_release(solid, fine_dx, mirror, total_time_mm, dtau_mm)
+    return solid_release(solid, fine_dx, mirror, total_time_mm, dtau_mm, anisotropy, swelling_mm)
+
+
+PRINT_PHYSICS_FACTOR = 2
+"""With anisotropy or swelling, the print's release is the forward model's on voxels this many times smaller
+than the design grid's."""
+
+
+def close_narrow_channels(rho_full: np.ndarray, dx_mm: float, width_mm: float, level: float
+                          ) -> tuple[np.ndarray, int]:
+    """The minimum open channel width as a correction stage: every channel of the solid ``rho >= level`` narrower
+    than ``width_mm`` filled with material (`design.forward.swelling.shut_channels` on the full grid).
+
+    Returns
+    -------
+    rho_full : ndarray of float
+        The density with the filled voxels at 1.
+    filled : int
+        Voxels filled.
+    """
+    plug = shut_channels((np.asarray(rho_full) >= level).astype(float), dx_mm, width_mm)
+    return np.where(plug, 1.0, rho_full), int(np.count_nonzero(plug))
+
+
+def channel_constraint(solid: np.ndarray, dx_mm: float, width_mm: float, filled: int,
+                       min_channel_mm: float | None) -> dict:
+    """Whether the print keeps every open channel at least ``width_mm`` wide.
+
+    ``met`` when its narrowest open channel (`design.fabrication.printability.narrowest_channel_mm`, measured to
+    within dx/2) is none or at least ``width_mm - dx/2``. ``filled_mm3`` is what the correction stage filled;
+    ``rounded_mm3`` the void the swollen material still takes at concave corners and edges of the print (the
+    closing's fillets, which a voxel solid keeps at any width), reported, not a channel.
+    """
+    rounded = int(np.count_nonzero(shut_channels(solid.astype(float), dx_mm, width_mm)))
+    return {"width_mm": width_mm, "met": min_channel_mm is None or min_channel_mm >= width_mm - 0.5 * dx_mm,
+            "min_channel_mm": min_channel_mm, "filled_mm3": filled * dx_mm ** 3, "rounded_mm3": rounded * dx_mm ** 3}
 
 
 NOT_CONVERGED_REL_RMSE = 0.05
@@ -218,31 +266,46 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         Wall time of this session (resumes add up through the history's seconds column).
     """
     space, target = problem.space, problem.target
+    physics = {"anisotropy": config.anisotropy, "swelling_mm": config.swelling_mm}
+    offset = config.print_offset_mm
     rho = objective.density(best_x)
     dtau_mm = target.total_time_mm / (target.tau_mm.size - 1)
     # only the curves are kept: a Release holds its solve's work arrays (~300 MB at 128^3)
     density_curve = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
-                             dtau_mm=dtau_mm).released_mm3
+                             dtau_mm=dtau_mm, **physics).released_mm3
     rho_full = space.unfold(rho)
     warnings: list[str] = list(problem.warnings)
     level = mass_preserving_level(rho_full)
+    filled = 0
+    if config.swelling_mm > 0:  # the minimum open channel width: narrower channels filled (correction stage)
+        rho_full, filled = close_narrow_channels(rho_full, space.dx_mm, config.swelling_mm, level)
     if np.any(rho_full >= level):
-        mesh = density_mesh(rho_full, space.dx_mm, problem.origin_mm, level=level)
-        mesh.export(out_dir / "design.stl")
+        mesh = density_mesh(rho_full, space.dx_mm, problem.origin_mm, level=level)  # what must come out
+        stl = mesh if offset == 0 else offset_mesh(mesh, -offset, 0.5 * space.dx_mm)
+        stl.export(out_dir / "design.stl")
         for fmt in config.formats:
-            mesh.export(out_dir / f"design.{fmt}")
+            stl.export(out_dir / f"design.{fmt}")
+        if offset != 0:  # the print: the file to print grown by the offset
+            mesh = offset_mesh(stl, offset, 0.5 * space.dx_mm)
         solid = revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape)
     else:  # a run stopped very early may still be grey everywhere
         mesh = None
         solid = np.zeros(problem.full_shape, dtype=bool)
         warnings.append(f"no density reaches the extraction level {level:.3f} yet: no solid extracted "
                         "(design.stl not written)")
-    binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm)
-    # the print: design.stl released by exact surface distances, its volume the mesh's own
+    binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm, **physics)
+    # the print: design.stl (grown by the offset) released by exact surface distances, its volume the mesh's own;
+    # with anisotropy or swelling, by the forward model with them on a finer grid
+    modelled = config.anisotropy != 1.0 or config.swelling_mm > 0
     printed = (reference_release(mesh, target.tau_mm, cells=design_lattice(config.resolution))
-               if mesh is not None else None)
-    print_curve = printed.released_mm3 if printed is not None else np.zeros_like(binary_curve)
-    volume = printed.volume_mm3 if printed is not None else 0.0
+               if mesh is not None and not modelled else None)
+    if modelled:
+        print_curve = fine_release(mesh, space.dx_mm, problem.origin_mm, problem.full_shape, space.mirror,
+                                   target.total_time_mm, dtau_mm, PRINT_PHYSICS_FACTOR, **physics)
+        volume = float(mesh.volume) if mesh is not None else 0.0
+    else:
+        print_curve = printed.released_mm3 if printed is not None else np.zeros_like(binary_curve)
+        volume = printed.volume_mm3 if printed is not None else 0.0
     fit_print = rel_rmse(print_curve, target.released_mm3)
     # |rmse(a) - rmse(b)| <= max |a - b|: the two curves' stated errors bound the fit's
     fit_error = ((printed.error_mm3 if printed is not None else 0.0) + (problem.target_error_mm3 or 0.0)) \
@@ -254,8 +317,12 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         warnings.append(f"did not converge: the evaluation limit ({config.max_iter}) ended the run with the print "
                         f"{fit_print:.1%} off the target (rel. RMSE above {NOT_CONVERGED_REL_RMSE:.0%}); run the design again "
                         f"with a higher limit, e.g. --max-iter {2 * config.max_iter}")
-    facts = assess(solid, space.dx_mm, warn_channel_mm=config.warn_channel_mm)
+    facts = assess(solid, space.dx_mm, warn_channel_mm=max(config.warn_channel_mm, config.swelling_mm))
     warnings += list(facts.warnings)
+    if config.swelling_mm > 0 and not channel_constraint(solid, space.dx_mm, config.swelling_mm, filled,
+                                                         facts.min_channel_mm)["met"]:
+        warnings.append(f"the minimum open channel width {config.swelling_mm:g} mm is not met: the print's narrowest "
+                        f"channel is {facts.min_channel_mm:.2f} mm")
     np.savez_compressed(out_dir / "density.npz", rho_hat=best_x, rho=rho, rho_full=rho_full, solid=solid,
                         dx_mm=space.dx_mm, origin_mm=problem.origin_mm, mirror=np.array(space.mirror))
     curves = np.column_stack([target.tau_mm, target.released_mm3, print_curve, density_curve, binary_curve])
@@ -272,13 +339,23 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         "status": status,
         "target": target.source,
         "space": space.name,
-        "rel_rmse_print": fit_print if printed is not None else None,
+        "rel_rmse_print": fit_print if mesh is not None else None,
         "rel_rmse_print_error": fit_error if printed is not None else None,
         "rel_rmse_density": rel_rmse(density_curve, target.released_mm3),
         "rel_rmse_design_grid_binary": rel_rmse(binary_curve, target.released_mm3),
-        "reference": None if printed is None else {
+        "reference": ({"method": f"forward model with the print physics on voxels of {space.dx_mm / PRINT_PHYSICS_FACTOR:.4g} mm",
+                       "cell_mm": space.dx_mm / PRINT_PHYSICS_FACTOR, "seconds": None, "print_error_mm3": None,
+                       "target_error_mm3": problem.target_error_mm3} if modelled and mesh is not None else
+                      None if printed is None else {
             "method": printed.method, "cell_mm": printed.cell_mm, "seconds": printed.seconds,
-            "print_error_mm3": printed.error_mm3, "target_error_mm3": problem.target_error_mm3},
+            "print_error_mm3": printed.error_mm3, "target_error_mm3": problem.target_error_mm3}),
+        "print_physics": {"anisotropy": config.anisotropy, "offset_mm": offset, "swelling_mm": config.swelling_mm},
+        "print_files": {"design.stl": "the solid to print: the designed solid shrunk by the print offset "
+                                      f"({offset:g} mm)",
+                        "print": "design.stl grown by the print offset: the solid every print figure (fit, volume, "
+                                 "mass, channels, pieces) is of"},
+        "min_channel_constraint": (channel_constraint(solid, space.dx_mm, config.swelling_mm, filled,
+                                                      facts.min_channel_mm) if config.swelling_mm > 0 else None),
         "rate_dev_mid80": {name: _rate_dev(target.tau_mm, curve, target.released_mm3, False)
                            for name, curve in achieved},
         "rate_dev_mid80_vs_target": {name: _rate_dev(target.tau_mm, curve, target.released_mm3, True)

@@ -106,6 +106,11 @@ class DesignObjective:
         J_conn's plane term (`design.fabrication.connectivity.Connectivity`); False = the core term alone.
     conn_tail : float
         Slope of J_conn's tail (`design.fabrication.connectivity.TAIL_SLOPE`); 0 = no tail.
+    anisotropy : float
+        Erosion speed along z over the in-plane speed in the forward model (print physics; 1 = isotropic).
+    swelling_mm : float
+        Channels narrower than this are shut in the forward model (print physics, `design.forward.swelling`);
+        the plug is held fixed by the gradient.
     """
 
     def __init__(self, space: DesignSpace, target_mm3: np.ndarray, total_time_mm: float, *,
@@ -113,7 +118,7 @@ class DesignObjective:
                  rate_lag: int | None = None, robust_eta: float = 0.0,
                  rate_span: tuple[float, float] = (0.0, 1.0), w_conn: float = 0.0,
                  conn_coarsen: int | None = None, conn_planes: bool = True,
-                 conn_tail: float = TAIL_SLOPE) -> None:
+                 conn_tail: float = TAIL_SLOPE, anisotropy: float = 1.0, swelling_mm: float = 0.0) -> None:
         target = np.asarray(target_mm3, dtype=float)
         if target.ndim != 1 or target.size < 3 or not target[-1] > 0:
             raise DesignError(f"target must be a 1D curve with >= 3 samples and a positive end, got {target.shape}")
@@ -131,6 +136,7 @@ class DesignObjective:
         if w_fab > 0 and space.fab_term is None:
             raise DesignError(f"w_fab = {w_fab} but design space {space.name!r} has no fabrication term")
         self.space = space
+        self.physics = {"anisotropy": float(anisotropy), "swelling_mm": float(swelling_mm)}
         self.target_mm3 = target
         self.total_time_mm = float(total_time_mm)
         self.beta = float(beta)
@@ -201,7 +207,7 @@ class DesignObjective:
             rho_var = project(smoothed, self.beta, eta)
             rho = space.to_grid(rho_var)
             release = simulate(rho, space.dx_mm, mirror=space.mirror, total_time_mm=self.total_time_mm,
-                               dtau_mm=self.dtau_mm, buffers=buffers)
+                               dtau_mm=self.dtau_mm, buffers=buffers, **self.physics)
             if eta != 0.5:  # an eroded or dilated design of the robust formulation
                 rate, d_curve = self._shape_terms(release, share)
                 j_rate += share * rate

@@ -215,6 +215,19 @@ class DesignConfig:
     correction_evals : int or None
         Objective evaluations of each round, part of ``max_iter``; None = `CORRECTION_EVALS_SHARE` of ``max_iter``
         (at least 1).
+    anisotropy : float
+        Print physics (a simulation calibration's, ``sfr design --simcal``): erosion speed along z (the build
+        direction) over the in-plane speed in the forward model; 1 = the paper's isotropic model.
+    print_offset_mm : float
+        Print physics: the print comes out this much larger (smaller if negative) than its mesh, mm. The run
+        designs the solid that must come out and writes ``design.stl`` shrunk by it (`design.files.outputs`).
+    swelling_mm : float
+        Print physics: channels narrower than this are shut in the forward model until their walls dissolve
+        (`design.forward.swelling`), and it is the minimum open channel width of the print, enforced by the
+        correction stage of the outputs (narrower channels are filled), mm; 0 = none.
+
+    With any print physics the physical correction is off by default (``physical_correction`` None resolves
+    to "none"), and "defect" is refused: its reference evaluator has no print physics.
     """
 
     target: str
@@ -258,6 +271,14 @@ class DesignConfig:
     physical_correction: str | None = None
     correction_rounds: int = CORRECTION_ROUNDS
     correction_evals: int | None = None
+    anisotropy: float = 1.0
+    print_offset_mm: float = 0.0
+    swelling_mm: float = 0.0
+
+    @property
+    def has_print_physics(self) -> bool:
+        """Whether any print physics differs from the paper's isotropic model of the mesh as designed."""
+        return (self.anisotropy, self.print_offset_mm, self.swelling_mm) != (1.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         if self.space not in SPACE_CHOICES:
@@ -334,9 +355,19 @@ class DesignConfig:
         if self.optimizer == "lbfgs" and self.bounds != "cosine":
             raise DesignError("the 'lbfgs' optimiser is unconstrained: it needs bounds='cosine' (box bounds: "
                               "choose an nlopt optimizer)")
+        if not (np.isfinite(self.anisotropy) and 0.1 <= self.anisotropy <= 10.0):
+            raise DesignError(f"anisotropy must be in [0.1, 10], got {self.anisotropy}")
+        if not (np.isfinite(self.print_offset_mm) and abs(self.print_offset_mm) <= 5.0):
+            raise DesignError(f"print_offset_mm must be a finite number within +-5 mm, got {self.print_offset_mm}")
+        if not (np.isfinite(self.swelling_mm) and 0.0 <= self.swelling_mm <= 10.0):
+            raise DesignError(f"swelling_mm must be in [0, 10] mm, got {self.swelling_mm}")
         if self.physical_correction is None:
             object.__setattr__(self, "physical_correction",
-                               PHYSICAL_CORRECTIONS[0] if self.space in CORRECTION_SPACES else "none")
+                               PHYSICAL_CORRECTIONS[0] if self.space in CORRECTION_SPACES and not self.has_print_physics
+                               else "none")
+        if self.physical_correction == "defect" and self.has_print_physics:
+            raise DesignError("physical_correction 'defect' judges the print by the reference evaluator, which has no "
+                              "print physics (anisotropy, offset, swelling); use 'none' with print physics")
         if self.physical_correction not in PHYSICAL_CORRECTIONS:
             raise DesignError(f"physical_correction must be one of {PHYSICAL_CORRECTIONS}, got "
                               f"{self.physical_correction!r}")
@@ -607,7 +638,7 @@ def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
     full = [_even_ceil(s / dx - 1e-9) for s in size]
     # analytic fractions refer to the whole domain box, whatever the extrusion height
     box_volume = float(np.prod(full)) * dx ** 3
-    box_time = total_time(tuple(n // 2 for n in full), dx, (True, True, True))
+    box_time = total_time(tuple(n // 2 for n in full), dx, (True, True, True), config.anisotropy)
     height_vox = None
     if config.space == "extruded":
         height = config.height_mm or (config.height_fraction * float(size.max()) if config.height_fraction else None)
@@ -626,7 +657,7 @@ def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
     origin = centre - 0.5 * dx * np.asarray(sim_full, float)
     if config.space == "ico" and mesh is not None:
         origin[BUILD_AXIS] = lo[BUILD_AXIS]  # the source's base on the plate, z = 0 of the grid
-    t_total = total_time(space.grid_shape, dx, space.mirror)
+    t_total = total_time(space.grid_shape, dx, space.mirror, config.anisotropy)
     domain_volume = float(np.prod(sim_full)) * dx ** 3
     source_solid = None
     target_error = None

@@ -89,7 +89,7 @@ class SimCalFile:
         Water mass of the calibration runs (median), g: the default bath for predictions.
     path : Path
     physics : dict
-        The forward model's print physics (``anisotropy``, ``offset_mm``) predictions simulate with.
+        The forward model's print physics (``anisotropy``, ``offset_mm``, ``swelling_mm``) predictions simulate with.
     """
 
     cal: SimCal
@@ -108,7 +108,7 @@ class SimCalFile:
 
     def simulate_options(self) -> dict:
         """Keyword arguments of ``design.files.pipeline.simulate_mesh`` for this calibration's physics."""
-        return {"anisotropy": self.physics["anisotropy"], "offset_mm": self.physics["offset_mm"]}
+        return {p: self.physics[p] for p in PHYSICS_PARAMETERS}
 
 
 @dataclass(frozen=True)
@@ -247,7 +247,7 @@ def _simulate(mesh, mesh_path: Path, resolution: int, physics: dict | None = Non
         if key not in grids:
             grids[key] = mesh_grid(mesh, resolution=resolution, offset_mm=physics["offset_mm"])
         rho, dx, mirror = grids[key]
-        release = simulate(rho, dx, mirror=mirror, anisotropy=physics["anisotropy"])
+        release = simulate(rho, dx, mirror=mirror, anisotropy=physics["anisotropy"], swelling_mm=physics["swelling_mm"])
     except DesignError as exc:
         raise SimCalError(f"{mesh_path}: {exc}") from exc
     return release.tau_mm, release.released_mm3, dx
@@ -288,9 +288,10 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         Voxels along each mesh's longest side.
     max_offset_s : float
         Bound on each run's drop-time offset, s.
-    physics : {'none', 'anisotropy', 'offset', 'all', 'auto'}
-        Print physics of the forward model to fit with the scales (:func:`analysis.simcal.fit_physics`):
-        ``none`` keeps the isotropic model of the mesh as designed; ``auto`` fits every set and keeps the
+    physics : {'none', 'anisotropy', 'offset', 'swelling', 'all', 'auto'}
+        Print physics of the forward model to fit with the scales (:func:`analysis.simcal.fit_physics`): the
+        build-direction anisotropy, the surface offset, the swelling width below which channels are shut;
+        ``none`` keeps the isotropic model of the mesh as designed; ``auto`` fits every subset and keeps the
         one leave-one-out prefers (a parameter must earn its place). The models of ``model`` are then
         fitted on the meshes simulated with the chosen physics.
     progress : callable, optional
@@ -348,11 +349,11 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
     """The work of :func:`calibrate_sim` on checked inputs, into the locked ``out_dir``."""
     measured = []
     n = len(rows)
-    simulated: dict[tuple, tuple] = {}   # (mesh, anisotropy, offset) -> (tau, volume, dx)
+    simulated: dict[tuple, tuple] = {}   # (mesh, anisotropy, offset, swelling) -> (tau, volume, dx)
     grids: dict[tuple, tuple] = {}       # (mesh, offset) -> voxel grid
 
     def simulation(row: SetRow, values: dict) -> tuple:
-        key = (row.mesh, round(values["anisotropy"], 9), round(values["offset_mm"], 9))
+        key = (row.mesh, *(round(values[p], 9) for p in PHYSICS_PARAMETERS))
         if key not in simulated:
             simulated[key] = _simulate(meshes[row.mesh], row.mesh, resolution, values, grids)
         return simulated[key]
@@ -539,7 +540,9 @@ def load_simcal(path: str | Path) -> SimCalFile:
         cal = SimCal(doc["model"], float(doc["seconds_per_mm"]), float(doc["g_per_mm3"]),
                      None if doc.get("saturation_g_per_kg") is None else float(doc["saturation_g_per_kg"]))
         resolution, dx, water = int(doc["resolution"]), float(doc["voxel_size_mm"]), float(doc["water_g"])
-        physics = {p: float(doc["physics"][p]) for p in PHYSICS_PARAMETERS}
+        # a physics block written before the swelling width was fitted has none (0)
+        physics = {p: float(doc["physics"].get(p, PHYSICS_IDENTITY[p]) if p == "swelling_mm" else doc["physics"][p])
+                   for p in PHYSICS_PARAMETERS}
     except (KeyError, TypeError, ValueError, AnalysisError) as exc:
         raise SimCalError(f"{path}: bad or missing field ({exc})") from exc
     if not (resolution > 0 and dx > 0 and water > 0):
@@ -547,6 +550,8 @@ def load_simcal(path: str | Path) -> SimCalFile:
     if not (math.isfinite(physics["anisotropy"]) and physics["anisotropy"] > 0 and math.isfinite(physics["offset_mm"])):
         raise SimCalError(f"{path}: physics.anisotropy must be a positive number and physics.offset_mm a finite one, "
                           f"got {physics}")
+    if not (math.isfinite(physics["swelling_mm"]) and physics["swelling_mm"] >= 0):
+        raise SimCalError(f"{path}: physics.swelling_mm must be a number >= 0 (mm), got {physics['swelling_mm']}")
     return SimCalFile(cal, resolution, dx, water, path, physics)
 
 

@@ -205,6 +205,17 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
     return summary
 
 
+def with_print_physics(config, simcal: SimCalFile):
+    """The design settings with a simulation calibration's print physics: the forward model's anisotropy and
+    swelling width (its shut channels, and the print's minimum open channel width) and the print offset
+    (``design.stl`` is the designed solid shrunk by it). With print physics the physical correction, whose
+    reference evaluator has none, is off (``design.inverse.problem.DesignConfig``)."""
+    physics = simcal.physics
+    correction = None if config.physical_correction == "defect" else config.physical_correction
+    return dataclasses.replace(config, anisotropy=physics["anisotropy"], print_offset_mm=physics["offset_mm"],
+                               swelling_mm=physics["swelling_mm"], physical_correction=correction)
+
+
 def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None = None, bench_calibration=None,
                        on_iteration=None, should_stop=None, resume: bool = False):
     """Run (or resume) an inverse design whose target may be a physical curve; the job behind ``sfr design``
@@ -218,7 +229,8 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
     out_dir : str or Path
         The design folder.
     simcal : SimCalFile, optional
-        Required for a physical target; with any target it adds the physical prediction.
+        Required for a physical target; with any target it adds the physical prediction, and a new run designs
+        for its print physics (:func:`with_print_physics`; a resume keeps the settings it started with).
     bench_calibration : analysis.BenchCalibration, optional
         For a run folder target (default: the run's own ``calibration.json``).
     on_iteration, should_stop, resume
@@ -241,6 +253,8 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
         if done is not None and (simcal is None or "simcal" in done.outputs.summary):
             return done, done.outputs.summary if simcal is not None else None
     operator = operators.require(f"designing into {out_dir}")
+    if simcal is not None and config is not None and not resume:
+        config = with_print_physics(config, simcal)
     record = out_dir / "target_measured.json"
     measured: PhysicalCurve | None = None
     if config is not None and is_physical(config.target):
@@ -312,7 +326,8 @@ def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = N
     """
     try:
         rho, dx, mirror = input_grid(str(mesh), resolution=simcal.resolution, offset_mm=simcal.physics["offset_mm"])
-        release = simulate(rho, dx, mirror=mirror, anisotropy=simcal.physics["anisotropy"])
+        release = simulate(rho, dx, mirror=mirror, anisotropy=simcal.physics["anisotropy"],
+                           swelling_mm=simcal.physics["swelling_mm"])
     except DesignError as exc:
         raise SimCalError(f"{mesh}: {exc}") from exc
     water = water_g or simcal.water_g

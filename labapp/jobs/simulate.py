@@ -134,9 +134,9 @@ def simulate(source: str, out: str | Path, *, resolution: int | None = None, vox
     rho, dx, mirror, warnings = simulation_grid(source, resolution=resolution, voxel_size_mm=voxel_size_mm,
                                                 symmetry=symmetry, units=units, offset_mm=physics["offset_mm"])
     say(f"[2/3] fast marching {rho.size:,} voxels of {dx:.4g} mm ({time.perf_counter() - start:.1f} s) ...")
-    release = forward(rho, dx, mirror=mirror, anisotropy=physics["anisotropy"])
+    release = forward(rho, dx, mirror=mirror, anisotropy=physics["anisotropy"], swelling_mm=physics.get("swelling_mm", 0.0))
     say(f"      estimating its error ({time.perf_counter() - start:.1f} s) ...")
-    if physics["anisotropy"] != 1.0 or physics["offset_mm"] != 0.0:
+    if physics["anisotropy"] != 1.0 or physics["offset_mm"] != 0.0 or physics.get("swelling_mm", 0.0) != 0.0:
         error = {"error_mm3": None, "error_fraction": None,
                  "method": "not estimated: the reference evaluator has no print physics"}
     else:

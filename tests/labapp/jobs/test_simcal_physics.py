@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from analysis.simcal import PHYSICS_IDENTITY, PHYSICS_SETS
 from labapp.acquisition.printworld import PrintPhysics, world_release
 from labapp.acquisition.simbench import Material, SampleRelease
 from labapp.cli.main import main
@@ -71,12 +72,12 @@ def test_identity_physics_keeps_the_isotropic_model(tmp_path, capsys):
     doc = json.loads((tmp_path / "cal" / "simcal.json").read_text())
     physics = doc["physics"]
     assert physics["choice"] == "none" and physics["anisotropy"] == 1.0 and physics["offset_mm"] == 0.0
-    assert set(physics["candidates"]) == {"none", "anisotropy", "offset", "all"}
+    assert set(physics["candidates"]) == set(PHYSICS_SETS)
     # every fitted value is within its uncertainty's reach of the identity (observed: anisotropy 1.14 +/- 0.31,
     # offset 0.23 +/- 0.27 mm, the two together 1.13 +/- 0.10 and 0.15 +/- 0.27 mm)
     for c in physics["candidates"].values():
         for p in c["fitted"]:
-            assert abs(c["values"][p] - {"anisotropy": 1.0, "offset_mm": 0.0}[p]) < 2 * c["uncertainty"][p]
+            assert abs(c["values"][p] - PHYSICS_IDENTITY[p]) < 2 * c["uncertainty"][p]
     assert "print physics 'none'" in capsys.readouterr().out
 
 
@@ -137,3 +138,42 @@ def test_a_parameter_is_kept_only_where_it_earns_it():
     assert choose_physics({"none": none, "anisotropy": resolved, "all": both}) == "anisotropy"
     both = fit(("anisotropy", "offset_mm"), {"anisotropy": 1.5, "offset_mm": 0.3}, 0.1, 0.020)
     assert choose_physics({"none": none, "anisotropy": resolved, "all": both}) == "all"
+
+
+def _slotted(width):
+    slab = trimesh.creation.box((8.0, 8.0, 3.0))
+    return trimesh.boolean.difference([slab, trimesh.creation.box((width, 5.0, 4.0))], engine="manifold")
+
+
+SLOTTED = {"slot05": lambda: _slotted(0.5), "slot10": lambda: _slotted(1.0),
+           "sphere": lambda: trimesh.creation.icosphere(3, radius=4.0),
+           "bar": lambda: trimesh.creation.box((10, 3, 3))}
+
+
+def test_hidden_swelling_is_bracketed_by_the_slots_it_shuts_and_opens(tmp_path, monkeypatch):
+    """The bench's 0.75 mm swelling shuts the 0.5 mm slot and leaves the 1.0 mm one open: every width in
+    [0.5, 1.0) mm fits alike at 0.25 mm voxels, so the fit is the middle of that flat minimum, 0.7 mm, with
+    the flat run's spread as its uncertainty."""
+    monkeypatch.setitem(globals(), "MESHES", SLOTTED)
+    set_csv = _bench_set(tmp_path / "set", PrintPhysics(swelling_mm=0.75))
+    run = calibrate_sim(set_csv, None, tmp_path / "cal", resolution=RESOLUTION, model="constant", physics="swelling")
+    physics = run.doc["physics"]
+    assert physics["choice"] == "swelling" and physics["fitted"] == ["swelling_mm"]
+    # observed: 0.75 mm +/- 0.22 (the jackknife over leave-one-out refits, each bracketed by the slots it keeps)
+    assert abs(physics["swelling_mm"] - 0.75) < physics["uncertainty"]["swelling_mm"] < 0.3, physics
+    none, swelling = (physics["candidates"][m]["loo_rel_rmse_mean"] for m in ("none", "swelling"))
+    assert swelling < 0.9 * none  # observed: 1.96% without, 1.66% with the swelling width
+    assert load_simcal(run.path).simulate_options()["swelling_mm"] == pytest.approx(physics["swelling_mm"])
+
+
+def test_a_physics_block_without_the_swelling_width_reads_as_none(tmp_path):
+    set_csv = _bench_set(tmp_path / "set", PrintPhysics())
+    run = calibrate_sim(set_csv, None, tmp_path / "cal", resolution=16, model="constant")
+    doc = json.loads(run.path.read_text())
+    del doc["physics"]["swelling_mm"]
+    run.path.write_text(json.dumps(doc))
+    assert load_simcal(run.path).physics["swelling_mm"] == 0.0
+    doc["physics"]["swelling_mm"] = -0.1
+    run.path.write_text(json.dumps(doc))
+    with pytest.raises(Exception, match="physics.swelling_mm must be a number >= 0"):
+        load_simcal(run.path)
