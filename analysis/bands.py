@@ -209,10 +209,10 @@ class Coverage:
         return self.points_inside / self.points if self.points else math.nan
 
 
-def loo_coverage(runs: Sequence[tuple[np.ndarray, np.ndarray, float]], *, level: float = BAND_LEVEL,
-                 parameter_g: Callable[[int], np.ndarray | None] | None = None,
-                 fraction_edges: Sequence[float] = FRACTION_EDGES) -> Coverage:
-    """The leave-one-out coverage of the bands.
+def loo_bands(runs: Sequence[tuple[np.ndarray, np.ndarray, float]], *, level: float = BAND_LEVEL,
+              parameter_g: Callable[[int], np.ndarray | None] | None = None,
+              fraction_edges: Sequence[float] = FRACTION_EDGES) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each held-out run's band from the other runs (their residual model, their number its degrees of freedom).
 
     Parameters
     ----------
@@ -225,16 +225,30 @@ def loo_coverage(runs: Sequence[tuple[np.ndarray, np.ndarray, float]], *, level:
 
     Returns
     -------
-    Coverage
-        Run i's band has the residual model of the other runs (their number its degrees of freedom).
+    list of (lower_g, upper_g)
     """
     if len(runs) < 2:
         raise AnalysisError("the leave-one-out coverage needs at least two runs")
-    per_run, hits, total = [], 0, 0
-    for i, (predicted, measured, mass) in enumerate(runs):
+    out = []
+    for i, (predicted, _, mass) in enumerate(runs):
         others = residual_model([r for j, r in enumerate(runs) if j != i], fraction_edges)
-        lower, upper = band(predicted, mass, others, level=level,
-                            parameter_g=None if parameter_g is None else parameter_g(i))
+        out.append(band(predicted, mass, others, level=level, parameter_g=None if parameter_g is None else parameter_g(i)))
+    return out
+
+
+def loo_coverage(runs: Sequence[tuple[np.ndarray, np.ndarray, float]], *, level: float = BAND_LEVEL,
+                 parameter_g: Callable[[int], np.ndarray | None] | None = None,
+                 fraction_edges: Sequence[float] = FRACTION_EDGES) -> Coverage:
+    """The leave-one-out coverage of the bands: the fraction of each held-out run's measured points inside its
+    band from the other runs (:func:`loo_bands`; the arguments are its own).
+
+    Returns
+    -------
+    Coverage
+    """
+    per_run, hits, total = [], 0, 0
+    for (_, measured, _), (lower, upper) in zip(runs, loo_bands(runs, level=level, parameter_g=parameter_g,
+                                                                 fraction_edges=fraction_edges)):
         m = np.asarray(measured, float)
         k = int(np.sum((m >= lower) & (m <= upper)))
         per_run.append(k / m.size)
@@ -286,6 +300,20 @@ def spread_g(cal: SimCal, tau_mm: np.ndarray, released_mm3: np.ndarray, t_s: np.
     return parameter_spread(nominal, moved)
 
 
+def loo_parameter_spread(loo: Sequence[LooShape], shapes: Sequence[ShapeRun], loo_physics: Sequence[dict] | None,
+                         physics_sd: dict, seconds_rel_sd: float,
+                         simulate_at: Callable[[int, dict], tuple[np.ndarray, np.ndarray]]) -> Callable[[int], np.ndarray]:
+    """``parameter_g(i)`` of :func:`loo_coverage`: held-out run i's parameter spread at its leave-one-out fit
+    (its weighed mass, so no mass term)."""
+    def parameter_g(i: int) -> np.ndarray:
+        sh, s = shapes[i], loo[i]
+        physics = dict(loo_physics[i]) if loo_physics else dict(PHYSICS_IDENTITY)
+        tau, vol = simulate_at(i, physics)
+        return spread_g(s.cal, tau, vol, s.t_s, sh.water_g, sh.mass_g, seconds_rel_sd, physics, physics_sd,
+                        lambda values: simulate_at(i, values))
+    return parameter_g
+
+
 def band_block(loo: Sequence[LooShape], shapes: Sequence[ShapeRun], loo_physics: Sequence[dict] | None,
                physics_sd: dict, simulate_at: Callable[[int, dict], tuple[np.ndarray, np.ndarray]],
                level: float = BAND_LEVEL) -> dict:
@@ -314,13 +342,7 @@ def band_block(loo: Sequence[LooShape], shapes: Sequence[ShapeRun], loo_physics:
     pooled = [(masses.sum() - m) / (volumes.sum() - v) for m, v in zip(masses, volumes)]
     mass_sd = _jackknife_rel(pooled)
 
-    def parameter_g(i: int) -> np.ndarray:
-        sh, s = shapes[i], loo[i]
-        physics = dict(loo_physics[i]) if loo_physics else dict(PHYSICS_IDENTITY)
-        tau, vol = simulate_at(i, physics)
-        return spread_g(s.cal, tau, vol, s.t_s, sh.water_g, sh.mass_g, seconds_sd, physics, physics_sd,
-                        lambda values: simulate_at(i, values))
-
+    parameter_g = loo_parameter_spread(loo, shapes, loo_physics, physics_sd, seconds_sd, simulate_at)
     coverage = loo_coverage(runs, level=level, parameter_g=parameter_g)
     return {"level": level, "residuals": residuals.to_dict(), "seconds_per_mm_rel_sd": seconds_sd,
             "g_per_mm3_rel_sd": mass_sd, "physics_sd": {p: float(v) for p, v in physics_sd.items()},
