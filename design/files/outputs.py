@@ -181,6 +181,11 @@ def summary_lines(summary: DesignSummary, out_dir: Path) -> list[str]:
     if "simcal" in s:
         lines.append(f"physical prediction ({s['simcal']['model']} model, {s['simcal']['seconds_per_mm']:.1f} s/mm): "
                      f"rel. RMSE {s['rel_rmse_physical']:.3%} of the target's final grams (curves_physical.csv)")
+        band = s.get("band")
+        if band:
+            lines.append(f"its {band['level']:.0%} band (calibration uncertainty and leave-one-out residuals, "
+                         f"{', '.join(band['columns'])}): mean half-width {band['mean_half_width_g']:.3g} g, "
+                         f"{band['target_inside_fraction']:.0%} of the target inside")
     lines += [f"warning: {w}" for w in s["warnings"]]
     lines.append(f"results in {out_dir}: {', '.join(n for n in RESULT_FILES if (out_dir / n).exists())}")
     return lines
