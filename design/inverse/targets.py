@@ -16,6 +16,10 @@ from design.geometry.voxelize import voxelize
 
 SPHERE_AREA_COEF = (36.0 * np.pi) ** (1.0 / 3.0)
 """Surface area of a sphere of volume V is ``SPHERE_AREA_COEF * V**(2/3)``."""
+ISO_TOLERANCE = 0.15
+"""Relative slack of the feasibility check on the isoperimetric bound (`check_feasibility`)."""
+TAIL_FRACTION = 0.02
+"""The feasibility check ignores the bound once less than this fraction of the total is left to dissolve."""
 
 
 @dataclass(frozen=True)
@@ -207,12 +211,105 @@ def isoperimetric_bound(target: Target) -> tuple[np.ndarray, np.ndarray]:
     c = target.released_mm3
     rate = np.diff(c) / np.diff(target.tau_mm)
     remaining = np.clip(c[-1] - 0.5 * (c[1:] + c[:-1]), 0.0, None)
-    return rate, SPHERE_AREA_COEF * remaining ** (2.0 / 3.0)
+    return rate, _sphere_area(remaining)
+
+
+def _sphere_area(volume_mm3):
+    """Area of a sphere holding ``volume_mm3``, mm^2: the least area of any front around that volume."""
+    return SPHERE_AREA_COEF * np.asarray(volume_mm3, float) ** (2.0 / 3.0)
+
+
+def isotonic_fit(values: np.ndarray, end_block: int = 1) -> np.ndarray:
+    """The non-decreasing sequence nearest to ``values`` in least squares whose last ``end_block`` values are
+    equal (pool adjacent violators, the last ``end_block`` samples pooled from the start).
+
+    Unconstrained (``end_block`` 1), the last value is the largest mean of any tail of the data, which on a noisy
+    plateau is one high sample; pooling the last few makes the final level the mean of at least that many.
+
+    Parameters
+    ----------
+    values : (N,) ndarray of float
+    end_block : int
+        At least 1; at most N.
+
+    Returns
+    -------
+    (N,) ndarray of float
+        Each run of pooled samples holds their mean; where ``values`` never decreases (and its last
+        ``end_block`` are equal) it is returned unchanged.
+    """
+    y = np.asarray(values, float)
+    end_block = min(max(int(end_block), 1), y.size)
+    head = y[:y.size - end_block]
+    blocks = [(float(v), 1) for v in head] + ([(float(np.mean(y[head.size:])), end_block)] if y.size else [])
+    means, counts = [], []
+    for mean, count in blocks:
+        means.append(mean)
+        counts.append(count)
+        while len(means) > 1 and means[-2] > means[-1]:      # pool the last two blocks
+            n = counts[-2] + counts[-1]
+            means[-2] = (means[-2] * counts[-2] + means[-1] * counts[-1]) / n
+            counts[-2] = n
+            del means[-1], counts[-1]
+    return np.repeat(means, counts)
+
+
+def project_isoperimetric(tau_mm: np.ndarray, released_mm3: np.ndarray, slack: float = 0.5 * ISO_TOLERANCE,
+                          tail_fraction: float = TAIL_FRACTION) -> np.ndarray:
+    """The curve lowered as little as needed to release at least ``(1 - slack)`` times the isoperimetric bound
+    (`isoperimetric_bound`, section 5.2) on every interval until only ``tail_fraction`` of the total is left, its
+    final value kept: the set `check_feasibility` accepts, with its slack and tail (which it widens by the voxel
+    size) or stricter.
+
+    A sweep from the end: on the interval from sample k to k+1 (sample k+1 already final) the bound
+    ``(c[k+1] - c[k]) / dtau >= (1 - slack) A(c_end - (c[k] + c[k+1]) / 2)`` holds for every c[k] at or below one
+    value (with u = c[k+1] - c[k], ``u - a (r + u / 2)^(2/3)`` is convex and <= 0 at u = 0, so it has one root),
+    which bisection finds; c[k] is lowered to it where it lies above, and never below 0. The result is
+    non-decreasing wherever release remains.
+
+    Parameters
+    ----------
+    tau_mm, released_mm3 : (N,) ndarray of float
+        A non-decreasing curve on increasing tau, mm and mm^3.
+    slack : float
+        In [0, 1): the bound is relaxed by this fraction (the check allows `ISO_TOLERANCE`; the default
+        keeps half of that as a margin for resampling onto the design grid).
+    tail_fraction : float
+        Intervals with less than this fraction of the total left to dissolve (at their middle) are not
+        constrained, as in the check.
+
+    Returns
+    -------
+    (N,) ndarray of float, mm^3
+    """
+    tau = np.asarray(tau_mm, float)
+    c = np.array(released_mm3, float)
+    end = c[-1]
+    factor = 1.0 - slack
+    tail = tail_fraction * abs(end)
+    for k in range(c.size - 2, -1, -1):
+        a = factor * (tau[k + 1] - tau[k])
+        r = max(end - c[k + 1], 0.0)
+        left = r + 0.5 * (c[k + 1] - c[k])
+        if left <= tail or c[k + 1] - c[k] >= a * _sphere_area(left):
+            continue
+        lo, hi = 0.0, max(c[k + 1], 0.0)                    # u in [lo, hi]: hi is the most c[k] can drop
+        if hi - a * _sphere_area(r + 0.5 * hi) < 0.0:
+            c[k] = 0.0                                       # not even from 0: flat at 0 (the check names it)
+            continue
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            if mid - a * _sphere_area(r + 0.5 * mid) >= 0.0:
+                hi = mid
+            else:
+                lo = mid
+        c[k] = c[k + 1] - hi
+    return c
 
 
 def check_feasibility(target: Target, domain_volume_mm3: float, *, dx_mm: float = 0.0,
-                      domain_area_mm2: float = 0.0, iso_tolerance: float = 0.15,
-                      tail_fraction: float = 0.02) -> Feasibility:
+                      domain_area_mm2: float = 0.0, iso_tolerance: float = ISO_TOLERANCE,
+                      tail_fraction: float = TAIL_FRACTION) -> Feasibility:
     """Check a target before optimising: monotone, starts at 0, fits the domain, isoperimetric bound.
 
     Parameters

@@ -80,7 +80,7 @@ MESH_FILTER = "meshes (" + " ".join(f"*{s}" for s in MESH_SUFFIXES) + ")"
 @dataclasses.dataclass(frozen=True)
 class TargetPreview:
     """What a target becomes before a design: its curve in simulation units, the feasibility report and,
-    for a measured target, the measured curve (s, g)."""
+    for a measured target, the measured curve (s, g) and what making it feasible changed (one line)."""
 
     tau_mm: np.ndarray
     released_mm3: np.ndarray
@@ -88,23 +88,26 @@ class TargetPreview:
     feasible: bool
     measured: tuple[np.ndarray, np.ndarray] | None
     warnings: tuple[str, ...]
+    adjustment: str = ""
 
 
 def preview_target(target: str, space: str, resolution: int, simcal: SimCalFile | None) -> TargetPreview:
     """The target curve on the design grid and its feasibility report, without designing (slow for a mesh:
     it is simulated; call it off the GUI thread). A measured target goes through ``simcal`` as ``sfr design``
     converts it (``labapp.jobs.physical.write_target_csv``)."""
-    measured = None
+    measured, adjustment = None, ""
     with tempfile.TemporaryDirectory() as tmp:
         if is_physical(target):
             if simcal is None:
                 raise ValueError(NO_SIMCAL)
             curve = curve_of(target)
             measured = (np.asarray(curve.t_s, float), np.asarray(curve.released_g, float))
-            target = str(write_target_csv(curve, simcal, Path(tmp) / "target.csv"))
+            written = write_target_csv(curve, simcal, Path(tmp) / "target.csv")
+            target, adjustment = str(written.csv), written.text()
         problem = load_problem(DesignConfig(target=target, space=space, resolution=resolution))
     return TargetPreview(np.asarray(problem.target.tau_mm), np.asarray(problem.target.released_mm3),
-                         problem.feasibility.text(), problem.feasibility.feasible, measured, tuple(problem.warnings))
+                         problem.feasibility.text(), problem.feasibility.feasible, measured, tuple(problem.warnings),
+                         adjustment)
 
 
 class SolidView(QWidget):
@@ -187,7 +190,6 @@ class DesignLauncher(QWidget):
                                "active simulation calibration), a tau_mm,released_mm3 CSV, a mesh "
                                f"({', '.join(MESH_SUFFIXES)}), a sample shape ({', '.join(SAMPLE_SHAPES)}), "
                                "zero-order[:final=F,duration=D] or accel:q=Q[,final=F,duration=D]")
-        self.source.textChanged.connect(self._target_changed)
         run_button, csv_button, mesh_button = QPushButton("Run..."), QPushButton("CSV..."), QPushButton("Mesh...")
         run_button.clicked.connect(self._pick_run)
         csv_button.clicked.connect(self._pick_csv)
@@ -320,11 +322,6 @@ class DesignLauncher(QWidget):
         self.source.setText(str(target))
         self.check()
 
-    def _target_changed(self) -> None:
-        measured = is_physical(self.source.text().strip())
-        if measured:
-            self.allow_infeasible.setChecked(True)
-
     def sweep_settings(self) -> tuple[str, dict, str | None]:
         """The target, fixed design settings and simulation calibration a sweep starts from: this form's."""
         fixed = {"space": self.space.currentText(), "resolution": self.resolution.value(),
@@ -375,8 +372,7 @@ class DesignLauncher(QWidget):
             for curve in self.physical_band:
                 curve.setData([], [])
         self.curves.setCurrentIndex(0)
-        note = ("\nA measured target is optimised anyway (its noise alone can fail the check); the report is kept "
-                "as feasibility.txt." if preview.measured is not None and not preview.feasible else "")
+        note = f"\n{preview.adjustment[:1].upper()}{preview.adjustment[1:]}." if preview.adjustment else ""
         warnings = "".join(f"\nWarning: {w}" for w in preview.warnings)
         self.status.setText(f"Target {self.source.text().strip()}: {preview.released_mm3[-1]:.4g} mm\u00b3 over "
                             f"tau {preview.tau_mm[-1]:.4g} mm.\n{preview.report[:1].upper()}{preview.report[1:]}"

@@ -1,7 +1,7 @@
 """Physical curves into and out of the simulator through a simulation calibration (``simcal.json``).
 
 - a measured curve (grams over seconds) becomes an inverse-design target in simulation units
-  (:func:`write_target_csv`);
+  (:func:`write_target_csv`), made feasible: a monotone least-squares fit projected onto the isoperimetric bound;
 - a simulated release becomes ``release_physical.csv`` (:func:`write_release_physical`);
 - a finished design gets ``curves_physical.csv``, ``rel_rmse_physical`` and a report in grams over hours
   (:func:`write_design_physical`).
@@ -24,6 +24,7 @@ from design.files.pipeline import input_grid
 from design.files.records import load_summary
 from design.files.rundir import finished_run, run_design
 from design.forward.simulator import simulate
+from design.inverse.targets import ISO_TOLERANCE, isotonic_fit, project_isoperimetric, resample_monotone
 from labapp.jobs import bands
 from labapp.jobs.calibrate_sim import SimCalError, SimCalFile, curve_of
 from labapp.jobs.compare import prediction_metrics
@@ -55,21 +56,114 @@ def is_physical(spec: str | Path) -> bool:
     return "t_s" in header
 
 
-def write_target_csv(curve: PhysicalCurve, simcal: SimCalFile, out_csv: Path) -> Path:
-    """Write a measured curve as a ``tau_mm,released_mm3`` target through the calibration.
+@dataclasses.dataclass(frozen=True)
+class MeasuredTarget:
+    """A measured curve written as a design target (:func:`write_target_csv`), and what was changed to make it
+    one: grams are of released solid; percentages are of ``mass_g``.
 
-    The curve is taken from the drop on (t >= 0), starts at (0, 0) and is made non-decreasing; water is
-    the run's own when it records one, else the calibration's.
+    Attributes
+    ----------
+    csv : Path
+        The target CSV; beside it ``<stem>.json`` holds these notes.
+    mass_g : float
+        The object's weighed mass, else the curve's final (fitted) release, g: the base of the percentages.
+    mass_basis : str
+        ``weighed`` or ``final release``.
+    noise_g : float
+        The measurement's noise, g (standard deviation, robust, from its second differences).
+    fit_max_g : float
+        Largest change by the monotone least-squares fit, g.
+    projection_max_g : float
+        Largest lowering by the projection onto the isoperimetric bound, g.
+    points_lowered : int
+        Samples the projection moved.
+    """
+
+    csv: Path
+    mass_g: float
+    mass_basis: str
+    noise_g: float
+    fit_max_g: float
+    projection_max_g: float
+    points_lowered: int
+
+    def pct(self, grams: float) -> float:
+        """``grams`` in % of :attr:`mass_g`."""
+        return 100.0 * grams / self.mass_g if self.mass_g > 0 else float("nan")
+
+    def text(self) -> str:
+        """One line for logs and the launcher."""
+        return (f"measured target adjusted to a feasible curve: monotone least-squares fit (changes up to "
+                f"{self.pct(self.fit_max_g):.2f} % of the {self.mass_basis} mass {self.mass_g:.4g} g), then "
+                f"{self.points_lowered} points lowered onto the isoperimetric bound (up to "
+                f"{self.pct(self.projection_max_g):.2f} %); the measurement's noise is about "
+                f"{self.pct(self.noise_g):.2f} %")
+
+    def notes(self) -> dict:
+        """The record written beside the CSV."""
+        return {"method": "isotonic (monotone least-squares) fit of the released grams, then projection onto "
+                          f"the isoperimetric bound relaxed by {TARGET_SLACK:g} (design.inverse.targets."
+                          "project_isoperimetric); columns t_s, measured_g, target_g give both curves",
+                "mass_g": self.mass_g, "mass_basis": self.mass_basis,
+                "noise_g": self.noise_g, "noise_pct": self.pct(self.noise_g),
+                "fit_max_g": self.fit_max_g, "fit_max_pct": self.pct(self.fit_max_g),
+                "projection_max_g": self.projection_max_g, "projection_max_pct": self.pct(self.projection_max_g),
+                "points_lowered": self.points_lowered, "text": self.text()}
+
+
+END_SAMPLES = 5
+"""The last samples of a measured curve are fitted as one level (their mean), not as the highest of them."""
+REFINE = 8
+"""A measured target is written on a tau grid this many times finer than its samples."""
+TARGET_SLACK = 0.5 * ISO_TOLERANCE
+"""A measured target is projected onto the isoperimetric bound relaxed by half the feasibility check's slack:
+the other half is the margin for its resampling onto the design grid."""
+
+
+def noise_sd(values: np.ndarray) -> float:
+    """Standard deviation of white noise on a smooth sampled curve: 1.4826 MAD of the second differences over
+    sqrt(6) (a second difference of white noise has variance 6 sigma^2; the curve's own curvature is small)."""
+    d2 = np.diff(np.asarray(values, float), 2)
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0)) if d2.size else 0.0
+
+
+def write_target_csv(curve: PhysicalCurve, simcal: SimCalFile, out_csv: Path) -> MeasuredTarget:
+    """Write a measured curve as a feasible ``tau_mm,released_mm3`` target through the calibration.
+
+    The curve is taken from the drop on (t >= 0) and starts at (0, 0); its released grams are replaced by their
+    monotone least-squares fit (:func:`design.inverse.targets.isotonic_fit`), mapped to simulation units (water:
+    the run's own when it records one, else the calibration's), and lowered where needed onto the isoperimetric
+    bound the feasibility check applies (:func:`design.inverse.targets.project_isoperimetric`), so that noise
+    does not make the target infeasible. The CSV also lists ``t_s``, ``measured_g`` and ``target_g``, and
+    ``<stem>.json`` beside it says how much was changed.
     """
     t = np.asarray(curve.t_s, float)
     keep = t > 0
     t = np.concatenate([[0.0], t[keep]])
-    grams = np.concatenate([[0.0], np.maximum.accumulate(np.clip(curve.released_g[keep], 0.0, None))])
-    tau, vol = simcal.cal.to_simulation(t, grams, curve.water_g or simcal.water_g)
-    rows = "tau_mm,released_mm3\n" + "".join(f"{a:.6f},{b:.5f}\n" for a, b in zip(tau, vol))
+    measured = np.concatenate([[0.0], np.asarray(curve.released_g, float)[keep]])
+    fitted = np.concatenate([[0.0], np.clip(isotonic_fit(measured[1:], END_SAMPLES), 0.0, None)])
+    water = curve.water_g or simcal.water_g
+    tau_knots, vol_knots = simcal.cal.to_simulation(t, fitted, water)
+    # the monotone fit between the samples as the design reads a curve (PCHIP), on a grid REFINE times finer,
+    # projected there: the design's own resampling of the result then averages over several fine intervals
+    tau = np.linspace(0.0, tau_knots[-1], REFINE * (tau_knots.size - 1) + 1)
+    vol = resample_monotone(tau_knots, vol_knots, tau)
+    adjusted = project_isoperimetric(tau, vol, TARGET_SLACK)
+    grams = adjusted * simcal.cal.g_per_mm3
+    t_fine = np.interp(tau, tau_knots, t)
+    at_knots = np.interp(t, t_fine, grams)
+    weighed = curve.object_mass_g is not None and curve.object_mass_g > 0
+    result = MeasuredTarget(Path(out_csv), float(curve.object_mass_g if weighed else fitted[-1]),
+                            "weighed" if weighed else "final release", noise_sd(measured[1:]),
+                            float(np.max(np.abs(fitted - measured))), float(np.max(fitted - at_knots)),
+                            int(np.count_nonzero(at_knots < fitted - 1e-12 * max(fitted[-1], 1e-300))))
+    rows = "tau_mm,released_mm3,t_s,target_g\n" + "".join(
+        f"{a:.7f},{b:.6f},{c:.3f},{d:.7f}\n" for a, b, c, d in zip(tau, adjusted, t_fine, grams))
     atomic_write(Path(out_csv), rows.encode())
-    log.info("target %s from %s: %d points, %.1f mm^3 over %.3f mm", out_csv, curve.source, len(tau), vol[-1], tau[-1])
-    return Path(out_csv)
+    atomic_write(Path(out_csv).with_suffix(".json"), (json.dumps(result.notes(), indent=2) + "\n").encode())
+    log.info("target %s from %s: %d points, %.1f mm^3 over %.3f mm; %s", out_csv, curve.source, len(tau),
+             adjusted[-1], tau[-1], result.text())
+    return result
 
 
 def physical_times(simcal: SimCalFile, tau_mm: np.ndarray, released_mm3: np.ndarray, water_g: float) -> np.ndarray:
@@ -266,9 +360,9 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
             raise SimCalError(f"{out_dir} already holds a design run; resume it or choose another folder")
         measured = curve_of(config.target, bench_calibration)
         out_dir.mkdir(parents=True, exist_ok=True)
-        target_csv = write_target_csv(measured, simcal, out_dir / TARGET_CSV)
+        target = write_target_csv(measured, simcal, out_dir / TARGET_CSV)
         _write_measured(record, measured)
-        config = dataclasses.replace(config, target=str(target_csv.resolve()))
+        config = dataclasses.replace(config, target=str(target.csv.resolve()))
     elif resume and record.is_file():
         measured = _read_measured(record)
     out_dir.mkdir(parents=True, exist_ok=True)
