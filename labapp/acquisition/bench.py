@@ -38,6 +38,13 @@ def heat_timeout_text(setpoint_c: float, tolerance_c: float, hold_s: float, time
             "reached (choose no heating)")
 
 
+def monitor_poll_s(keepalive_s: float, clock_speed: float) -> float:
+    """Wall seconds between two polls of the hotplate: every ``keepalive_s`` of the engine's clock, so that on an
+    accelerated clock a reading is as recent as on the real bench (at most 20 polls a wall second; the serial
+    link itself bounds the rate)."""
+    return max(keepalive_s / max(clock_speed, 1.0), min(keepalive_s, 0.05))
+
+
 class ProcedureError(LabError):
     """A procedure cannot go on (bath never stable, camera gone for good); the message says why."""
 
@@ -125,9 +132,7 @@ class BenchSession:
         if hp is None:
             return
         hp.connect()
-        # poll every keepalive_s of procedure time, so that on an accelerated clock the reading logged with a
-        # frame is as recent as on the real bench (the serial link itself bounds the rate)
-        poll_s = max(self.keepalive_s / max(self.engine.clock.speed, 1.0), min(self.keepalive_s, 0.05))
+        poll_s = monitor_poll_s(self.keepalive_s, self.engine.clock.speed)
         self.monitor = HotplateMonitor(hp, self._monitor_report, poll_s=poll_s, on_reading=self._publish_reading)
         if setpoint_c is not None:
             self.monitor.command(hp.set_temperature, setpoint_c)

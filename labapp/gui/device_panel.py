@@ -1,9 +1,10 @@
 """Device panel: pick the camera and hotplate (real ports or simulated), camera settings, the bath, connect,
 readouts.
 
-The hotplate's readouts come from the engine's monitor, which polls the plate off the GUI thread while a
-procedure holds the bench (every ``keepalive_s`` of the engine's clock); the last one is published after the
-heating was switched off. The heater's state (heating ON or OFF, setpoint, bath, stirring) is shown in one
+The hotplate's readouts come from polls of the plate off the GUI thread, every ``keepalive_s`` of the engine's
+clock, whenever a bench is connected: by the procedure's monitor while a procedure holds the bench (its last
+reading is taken after the heating was switched off), and by the window's idle poller between procedures
+(:mod:`labapp.gui.plate_poller`). The heater's state (heating ON or OFF, setpoint, bath, stirring) is shown in one
 prominent line, and every readout turns grey with "stale since hh:mm:ss" once no reading has arrived for
 :data:`STALE_AFTER_S`.
 """
@@ -164,7 +165,7 @@ class DevicePanel(QWidget):
         if stale and self._received_wall is not None:
             since = time.strftime("%H:%M:%S", time.localtime(self._received_wall))
             self.stale_label.setText(f"stale since {since}: no reading for more than {self.stale_after_s:g} s "
-                                     "(the plate is polled while a procedure holds the bench)")
+                                     "(the plate is polled while the bench is connected: Connect checks the link again)")
         elif not stale:
             self.stale_label.setText("")
         heating = self.last_reading is not None and self.last_reading.heating

@@ -49,6 +49,7 @@ from labapp.acquisition.events import (
 )
 from labapp.acquisition.methods import load_method, method_from_config, save_method
 from labapp.acquisition.procedures import PreviewProcedure, RunConfig
+from labapp.acquisition.settings import KEEPALIVE
 from labapp.acquisition.simbench import SampleRelease, SimulatedBench, resume_clock, sample_release
 from labapp.acquisition.status import RunStatus
 from labapp.errors import UsageError
@@ -59,6 +60,7 @@ from labapp.gui.calibration_wizard import CalibrationWizard
 from labapp.gui.design_launcher import DesignLauncher
 from labapp.gui.device_panel import SIMULATED, DevicePanel
 from labapp.gui.live_view import LiveView
+from labapp.gui.plate_poller import HeldProcedure, IdlePlatePoller
 from labapp.gui.plots import PlotsPanel, hmm
 from labapp.gui.run_browser import RunBrowser, interrupted_runs
 from labapp.gui.run_controls import RunControls
@@ -125,6 +127,10 @@ class MainWindow(QMainWindow):
         self.status = RunStatus()
         self.engine.subscribe(self.status.update)       # before the bridge: the status is current when a signal lands
         self.bridge = EngineBridge(self.engine, self)
+        self.plate_poller = IdlePlatePoller(self.engine)
+        """Polls the connected bench's hotplate between procedures (the device panel stays current)."""
+        self.bench_hotplate = None
+        """The hotplate of the bench the last procedure used: the one polled while idle."""
         self.sim: SimulatedBench | None = None
         self._release: SampleRelease | None = None
         self.procedure = None
@@ -388,6 +394,9 @@ class MainWindow(QMainWindow):
 
     def _set_sim(self, sim: SimulatedBench | None) -> None:
         if self.sim is not None and self.sim is not sim:
+            if self.sim.hotplate is not None and self.sim.hotplate is self.bench_hotplate:
+                self.plate_poller.release()        # the emulator goes: its port with it
+                self.bench_hotplate = None
             self.sim.close()
         self.sim = sim
 
@@ -463,7 +472,8 @@ class MainWindow(QMainWindow):
             self.on_message("warning", "the engine is busy; stop the current procedure first")
             return False
         self.procedure = procedure
-        self.engine.start(procedure)
+        self.bench_hotplate = getattr(getattr(procedure, "bench", None), "hotplate", None)
+        self.engine.start(HeldProcedure(procedure, self.plate_poller))   # takes the hotplate from the idle poller
         self.controls.set_running(True)
         self.lock_settings(not isinstance(procedure, PreviewProcedure))
         return True
@@ -714,6 +724,18 @@ class MainWindow(QMainWindow):
                 self.wizard.show_result(f"series ended ({done.outcome}) without a calibration")
         self.on_message("info", f"{getattr(proc, 'name', 'procedure')} ended: {done.outcome}")
         self.browser.refresh()
+        self.poll_idle()
+
+    def poll_idle(self) -> None:
+        """Poll the connected bench's hotplate while no procedure holds it (every keepalive of the engine's clock,
+        off the GUI thread): the panel and the status line show the heater as it is after a run, and while idle."""
+        if self._closed or self.bench_hotplate is None:
+            return
+        try:
+            keepalive_s = self.devices.bath().keepalive_s
+        except Exception:                          # a field being edited: the default period
+            keepalive_s = KEEPALIVE.default
+        self.plate_poller.hold(self.bench_hotplate, keepalive_s)
 
     def set_simcal(self, path: str) -> None:
         """Make a ``simcal.json`` the active simulation calibration of the design launcher and run browser
@@ -815,6 +837,7 @@ class MainWindow(QMainWindow):
         self.close_timer.stop()
         self.bridge.detach()
         self.log_bridge.detach()
+        self.plate_poller.close()                 # heating and stirring off, as every close of the hotplate
         self._set_sim(None)
 
 
