@@ -87,7 +87,7 @@ def test_version_1_file_loads_as_isotropic(tmp_path):
            "water_g": 500.0, "resolution": 32, "voxel_size_mm": 0.5}
     (tmp_path / "simcal.json").write_text(json.dumps(doc))
     simcal = load_simcal(tmp_path / "simcal.json")
-    assert simcal.physics == {"anisotropy": 1.0, "offset_mm": 0.0}
+    assert simcal.physics == {"anisotropy": 1.0, "offset_mm": 0.0, "swelling_mm": 0.0}
     doc.update(format="sfr-simcal/2", physics={"anisotropy": -1.0, "offset_mm": 0.0})
     (tmp_path / "simcal.json").write_text(json.dumps(doc))
     with pytest.raises(Exception, match="physics.anisotropy"):
@@ -113,7 +113,7 @@ def test_predictions_simulate_with_the_calibrated_physics(tmp_path):
     assert truth.released_mm3[-1] > 1.02 * iso.released_mm3[-1]   # the offset grows the print
     assert main(["simulate", "sample:pill", "--simcal", str(tmp_path / "simcal.json"), "--out", str(tmp_path / "sim")]) == 0
     summary = json.loads((tmp_path / "sim" / "summary.json").read_text())
-    assert summary["physics"] == {"anisotropy": 1.5, "offset_mm": 0.1}
+    assert summary["physics"] == {"anisotropy": 1.5, "offset_mm": 0.1, "swelling_mm": 0.0}
     assert summary["volume_mm3"] == pytest.approx(truth.volume_mm3, rel=1e-12)
     assert summary["total_time_mm"] == pytest.approx(truth.total_time_mm, rel=1e-12)
 
