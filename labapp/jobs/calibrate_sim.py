@@ -27,6 +27,7 @@ from analysis.simcal import (
     DEFAULT_MAX_OFFSET_S,
     MODELS,
     PHYSICS_CHOICES,
+    PHYSICS_GRIDS,
     PHYSICS_IDENTITY,
     PHYSICS_PARAMETERS,
     PHYSICS_SETS,
@@ -292,7 +293,8 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         Print physics of the forward model to fit with the scales (:func:`analysis.simcal.fit_physics`): the
         build-direction anisotropy, the surface offset, the swelling width below which channels are shut;
         ``none`` keeps the isotropic model of the mesh as designed; ``auto`` fits every subset and keeps the
-        one leave-one-out prefers (a parameter must earn its place). The models of ``model`` are then
+        one leave-one-out prefers (a parameter must earn its place; the sets with the swelling width only when
+        a shape has a channel the widest width searched would shut). The models of ``model`` are then
         fitted on the meshes simulated with the chosen physics.
     progress : callable, optional
         ``progress(fraction, message)`` before each run and each fit; it may raise ``KeyboardInterrupt`` to stop
@@ -330,6 +332,14 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         _make_out(out_dir)
         return _fit_and_write(set_csv, rows, bench, bench_calibration, meshes, out_dir, model, resolution,
                               max_offset_s, say, operator, physics)
+
+
+def _has_channels(grid: tuple) -> bool:
+    """Whether a calibration shape's voxel grid has a channel the widest swelling width searched would shut."""
+    from design.forward.swelling import shut_channels
+
+    rho, dx, mirror = grid
+    return bool(shut_channels(rho, dx, max(PHYSICS_GRIDS["swelling_mm"]), mirror).any())
 
 
 def _physics_doc(fits: dict[str, PhysicsFit], chosen: str, rows: list[SetRow]) -> dict:
@@ -392,6 +402,9 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
     chosen_physics = "none"
     if physics != "none":
         names = [m for m in PHYSICS_SETS if physics == "auto" or m in ("none", physics)]
+        if physics == "auto" and not any(_has_channels(grids[(row.mesh, 0.0)]) for row in rows):
+            # no shape has a channel the widest swelling width would shut: its release cannot tell the width
+            names = [m for m in names if "swelling_mm" not in PHYSICS_SETS[m]]
         for j, name in enumerate(names):
             base, span = 0.1 + 0.5 * j / len(names), 0.5 / len(names)
             say(base, f"fitting print physics '{name}' and its leave-one-out ...")
