@@ -74,10 +74,11 @@ def test_the_stl_is_the_solid_to_print_shrunk_by_the_offset(tmp_path):
     target = problem.target
     grown = offset_mesh(stl, offset, 0.25)
     cells = design_lattice(22)
-    # the printed STL grown by the offset releases as the target, to the design grid's error (observed 0.6%)
+    # the printed STL grown by the offset releases as the target, to the design grid's error (observed 0.88%;
+    # the STL itself, released as if it were the print, misses by 17%)
     fit_grown = rel_rmse(reference_release(grown, target.tau_mm, cells=cells).released_mm3, target.released_mm3)
     assert fit_grown < 0.015, fit_grown
-    # while the STL itself is smaller than the target's solid by the offset's shell (22% of its volume)
+    # while the STL itself is smaller than the target's solid by the offset's shell (23% of its volume)
     assert stl.volume == pytest.approx(sphere.volume - sphere.area * offset, rel=0.03)
     assert summary["rel_rmse_print"] == pytest.approx(fit_grown, abs=0.005)
     assert stl.volume == pytest.approx(grown.volume - stl.area * offset, rel=0.03)
