@@ -7,7 +7,7 @@
    frame and a hotplate link drop injected on purpose, and its offline analysis;
 5. an inverse design whose target is that object's measured curve, predicted in grams over hours;
 6. one picture: the leave-one-out predictions, and the further object measured, predicted from its mesh
-   and designed.
+   and designed, each prediction with its error band (:mod:`labapp.jobs.bands`).
 
 The bench's material is hidden (:class:`labapp.acquisition.simbench.Material`); ``truth.json`` beside the results
 records it for comparison and nothing in the loop reads it. Simulated time is driven, never slept.
@@ -37,6 +37,7 @@ from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.acquisition.settings import INTERVAL, BathSettings
 from labapp.acquisition.simbench import SCENE, WATER_G, Material, SampleRelease, SimulatedBench, sample_release
 from labapp.errors import UsageError
+from labapp.jobs.bands import prediction_band, quantile_columns, source_simulator
 from labapp.jobs.calibrate_sim import MAX_RESOLUTION as MAX_SIMCAL_RESOLUTION
 from labapp.jobs.calibrate_sim import MIN_RESOLUTION as MIN_SIMCAL_RESOLUTION
 from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
@@ -274,9 +275,15 @@ def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interva
     sim = simulate_mesh(sample_shape(sample), resolution=simcal.resolution, **simcal.simulate_options())
     predicted = simcal.cal.to_physical(sim.tau_mm, sim.released_mm3, measured.t_s, measured.water_g or WATER_G)
     rel_pred = float(np.sqrt(np.mean((predicted - measured.released_g) ** 2)) / measured.released_g.max())
+    band = prediction_band(simcal, sim.tau_mm, sim.released_mm3, measured.t_s, measured.water_g or WATER_G,
+                           source_simulator(f"sample:{sample}", simcal.resolution))
+    inside = None if band is None else float(np.mean((measured.released_g >= band[0]) & (measured.released_g <= band[1])))
+    if band is not None:
+        progress(f"   {100 * inside:.0f}% of the further object's measured points lie inside its predicted "
+                 f"{100 * cal_run.doc['band']['level']:.0f}% band")
     figure = out_dir / "demo.png"
     designed = np.genfromtxt(design_dir / "curves_physical.csv", delimiter=",", names=True)
-    _plot(cal_run, measured, predicted, designed, sample, figure)
+    _plot(cal_run, measured, predicted, designed, sample, figure, band)
 
     truth = {"material": dataclasses.asdict(material), "objects": truths,
              "note": "hidden ground truth of the simulated bench; no step of the loop reads this file"}
@@ -292,13 +299,17 @@ def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interva
     summary["design_status"] = result.status
     summary["print_mass_g"] = physical["print_mass_g"]
     summary["min_channel_mm"] = physical["min_channel_mm"]
+    if band is not None:
+        summary["band"] = {"level": cal_run.doc["band"]["level"], "loo_coverage": cal_run.doc["band"]["loo_coverage"],
+                           "prediction_points_inside": inside}
     result_.summary_path.write_text(json.dumps(summary, indent=2) + "\n")
     return result_
 
 
-def _plot(run, measured, predicted: np.ndarray, designed, sample: str, path: Path) -> None:
+def _plot(run, measured, predicted: np.ndarray, designed, sample: str, path: Path,
+          band: tuple[np.ndarray, np.ndarray] | None = None) -> None:
     """Left: the calibration set measured vs leave-one-out predicted; right: the further object measured,
-    predicted from its mesh, and the design's predicted release."""
+    predicted from its mesh with its band, and the design's predicted release with its band."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -313,11 +324,22 @@ def _plot(run, measured, predicted: np.ndarray, designed, sample: str, path: Pat
                   label=f"{name}: left-out prediction ({100 * shape.rel_rmse:.1f}%)")
     left.set_title(f"calibration: {doc['seconds_per_mm']:.0f} s/mm, {doc['g_per_mm3'] * 1000:.3f} g/cm$^3$ "
                    f"({doc['model']} model)", fontsize=10)
+    level = (doc.get("band") or {}).get("level")
+    if band is not None:
+        right.fill_between(measured.t_s / 3600, band[0], band[1], color="C3", alpha=0.15, lw=0,
+                           label=f"{100 * level:.0f}% band of the prediction")
+    low, high = (f"design_released_g_{q}" for q in quantile_columns())
+    if high in (designed.dtype.names or ()):
+        right.fill_between(designed["t_s"] / 3600, designed[low], designed[high], color="C2", alpha=0.15, lw=0,
+                           label=f"{100 * level:.0f}% band of the design")
     right.plot(measured.t_s / 3600, measured.released_g, color="C0", lw=2.5, label=f"{sample}: measured")
     right.plot(measured.t_s / 3600, predicted, "--", color="C3", lw=1.5, label=f"{sample}: predicted from its mesh")
     right.plot(designed["t_s"] / 3600, designed["design_released_g"], "-", color="C2", lw=1.5,
                label="design for the measured curve (predicted)")
-    right.set_title("a further object, and a design from its measured curve", fontsize=10)
+    coverage = (doc.get("band") or {}).get("loo_coverage")
+    right.set_title("a further object, and a design from its measured curve" + (
+        "" if coverage is None else f"\nleave-one-out: {100 * coverage['fraction']:.0f}% of held-out points inside "
+                                    f"their {100 * level:.0f}% bands"), fontsize=10)
     for ax in (left, right):
         ax.set_xlabel("time since drop (h)")
         ax.set_ylabel("released (g)")
