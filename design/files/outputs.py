@@ -294,13 +294,22 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         rho_full, filled = close_narrow_channels(rho_full, space.dx_mm, config.swelling_mm, level)
     if np.any(rho_full >= level):
         mesh = density_mesh(rho_full, space.dx_mm, problem.origin_mm, level=level)  # what must come out
-        stl = mesh if offset == 0 else offset_mesh(mesh, -offset, 0.5 * space.dx_mm)
-        stl.export(out_dir / "design.stl")
-        for fmt in config.formats:
-            stl.export(out_dir / f"design.{fmt}")
-        if offset != 0:  # the print: the file to print grown by the offset
-            mesh = offset_mesh(stl, offset, 0.5 * space.dx_mm)
-        solid = revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape)
+        try:
+            stl = mesh if offset == 0 else offset_mesh(mesh, -offset, 0.5 * space.dx_mm)
+        except DesignError as exc:  # every wall of the solid thinner than twice the offset
+            stl = None
+            warnings.append(f"design.stl not written: the solid shrunk by the print offset {offset:g} mm is empty "
+                            f"or not closed ({exc})")
+        if stl is not None:
+            stl.export(out_dir / "design.stl")
+            for fmt in config.formats:
+                stl.export(out_dir / f"design.{fmt}")
+            if offset != 0:  # the print: the file to print grown by the offset
+                mesh = offset_mesh(stl, offset, 0.5 * space.dx_mm)
+        else:
+            mesh = None
+        solid = (revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape) if mesh is not None
+                 else np.zeros(problem.full_shape, dtype=bool))
     else:  # a run stopped very early may still be grey everywhere
         mesh = None
         solid = np.zeros(problem.full_shape, dtype=bool)
@@ -334,8 +343,9 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     warnings += list(facts.warnings)
     if config.swelling_mm > 0 and not channel_constraint(solid, space.dx_mm, config.swelling_mm, filled,
                                                          facts.min_channel_mm)["met"]:
-        warnings.append(f"the minimum open channel width {config.swelling_mm:g} mm is not met: the print's narrowest "
-                        f"channel is {facts.min_channel_mm:.2f} mm")
+        narrowest = "narrower than that" if facts.min_channel_mm is None else f"of {facts.min_channel_mm:.2f} mm"
+        warnings.append(f"the minimum open channel width {config.swelling_mm:g} mm is not met: the print has a "
+                        f"channel {narrowest}")
     np.savez_compressed(out_dir / "density.npz", rho_hat=best_x, rho=rho, rho_full=rho_full, solid=solid,
                         dx_mm=space.dx_mm, origin_mm=problem.origin_mm, mirror=np.array(space.mirror))
     curves = np.column_stack([target.tau_mm, target.released_mm3, print_curve, density_curve, binary_curve])
