@@ -8,6 +8,7 @@ while something runs stops it and closes once it has finished.
 from __future__ import annotations
 
 import multiprocessing
+import threading
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -394,10 +395,13 @@ class MainWindow(QMainWindow):
 
     def _set_sim(self, sim: SimulatedBench | None) -> None:
         if self.sim is not None and self.sim is not sim:
-            if self.sim.hotplate is not None and self.sim.hotplate is self.bench_hotplate:
-                self.plate_poller.release()        # the emulator goes: its port with it
-                self.bench_hotplate = None
-            self.sim.close()
+            old = self.sim
+            if old.hotplate is not None and old.hotplate is self.bench_hotplate:
+                self.bench_hotplate = None         # the emulator goes, its port with it: the idle poller lets go
+                threading.Thread(target=_release_then_close, args=(self.plate_poller, old), name="old-bench",
+                                 daemon=True).start()    # of it first (up to a poll and a close: off this thread)
+            else:
+                old.close()
         self.sim = sim
 
     @property
@@ -839,6 +843,11 @@ class MainWindow(QMainWindow):
         self.log_bridge.detach()
         self.plate_poller.close()                 # heating and stirring off, as every close of the hotplate
         self._set_sim(None)
+
+
+def _release_then_close(poller: IdlePlatePoller, sim: SimulatedBench) -> None:
+    poller.release(sim.hotplate)
+    sim.close()
 
 
 def _scrolled(widget: QWidget) -> QScrollArea:

@@ -90,10 +90,12 @@ class IdlePlatePoller:
     def _report(self, level: str, kind: str, message: str) -> None:
         self.engine.emit(Message(level, f"{message} (polling while idle)", topic=kind))
 
-    def release(self) -> None:
-        """Stop polling and close the hotplate (blocks for one poll at most); the next :meth:`hold` opens it again."""
+    def release(self, hotplate: Hotplate | None = None) -> None:
+        """Stop polling and close the hotplate (only if it is ``hotplate``, when given); blocks for one poll at
+        most. The next :meth:`hold` opens it again."""
         with self._lock:
-            self._release_locked()
+            if hotplate is None or hotplate is self.hotplate:
+                self._release_locked()
 
     def _release_locked(self) -> None:
         hotplate, monitor, opener = self.hotplate, self.monitor, self._opener

@@ -118,3 +118,20 @@ def test_the_runs_list_counts_the_frames_of_a_run_still_recording(qtbot, browser
         assert item.text(FRAMES_COLUMN) == "17" and ", 17 frames," in browser.info.text()
     finally:
         run.close()
+
+
+def test_each_stored_frame_updates_the_runs_list(qtbot, tmp_path):
+    from labapp.acquisition.events import FrameStored
+    from labapp.gui.main_window import MainWindow
+
+    run = create_run(tmp_path / "runs", "pill", {"kind": "run", "config": {}})
+    win = MainWindow(tmp_path / "runs", simulate=True, speed=200.0)
+    qtbot.addWidget(win)
+    try:
+        item = win.browser.tree.topLevelItem(0)
+        assert item.text(FRAMES_COLUMN) == "0"
+        win.on_frame(FrameStored(41, "frame_0041.jpg", str(run.path / "frame_0041.jpg"), 451.0, 42))
+        assert item.text(FRAMES_COLUMN) == "42"
+    finally:
+        win.shutdown()
+        run.close()
