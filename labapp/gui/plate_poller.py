@@ -21,7 +21,7 @@ import time
 
 from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
 from labapp.acquisition.bench import monitor_poll_s
-from labapp.acquisition.engine import Engine
+from labapp.acquisition.engine import Engine, Procedure
 from labapp.acquisition.events import Message, Outcome, Reading
 from labapp.acquisition.monitor import HotplateMonitor
 from labapp.acquisition.settings import KEEPALIVE
@@ -137,7 +137,7 @@ class HeldProcedure:
     """A procedure as the engine walks it when the window polls the plate while idle: the poller gives the
     hotplate up before the procedure's startup and may take it back after its shutdown."""
 
-    def __init__(self, procedure, poller: IdlePlatePoller) -> None:
+    def __init__(self, procedure: Procedure, poller: IdlePlatePoller) -> None:
         self.procedure, self.poller = procedure, poller
         self.name = procedure.name
 

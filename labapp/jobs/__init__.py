@@ -11,6 +11,7 @@ Monte Carlo simulation         :func:`labapp.jobs.simulate_mc.simulate_mc_job`  
 design                         :func:`labapp.jobs.design.design`               ``design``
 start a run                    :func:`labapp.jobs.run.new_run`                 ``run``
 resume an interrupted run      :func:`labapp.jobs.run.resume_run`              ``run --resume``
+finalise an interrupted run    :func:`labapp.jobs.run.finalise`                (the GUI's Runs tab, Finalise)
 verify a folder                :func:`labapp.jobs.verify.verify`               ``verify``
 calibrate the simulation       :func:`labapp.jobs.calibrate_sim.calibrate_sim`  ``calibrate-sim``
 evaluate the forward model     :func:`labapp.jobs.evaluate.evaluate_models`    ``evaluate``
