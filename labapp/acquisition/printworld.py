@@ -79,6 +79,8 @@ class WorldRelease:
     voxel_mm: float
 
 
+SEALED_VOID_SPEED = 1.0e3
+"""Front speed inside a sealed void once reached (water floods it), relative to the erosion of the solid."""
 BAND_VOXELS = 3
 """Within this many voxels of the surface the print's signed distance is exact (point to triangle);
 farther out only its sign matters to the solvers, and the voxels' own distance transform gives it."""
@@ -139,10 +141,16 @@ def world_release(mesh: trimesh.Trimesh, physics: PrintPhysics, *, resolution: i
     sd, h = _print_distance(mesh, physics.offset_mm, margin, resolution)
     solid = sd > 0
     shut = _closing(solid, h, physics.swelling_mm) & ~solid  # channels plugged by swollen material
-    # the surface water first touches: the print's, except across the plugs
-    phi = np.where(shut, 0.5 * h, sd)
-    # the anisotropy as a metric: a z step of h counts as h / anisotropy of in-plane erosion depth
-    arrival = np.asarray(skfmm.travel_time(phi, np.ones_like(phi), dx=[h, h, h / physics.anisotropy], order=2))
+    # sealed voids hold air: water enters one only when the front dissolving its wall reaches it, then floods it
+    water, _ = ndimage.label(~solid & ~shut)
+    sealed = (water > 0) & ~np.isin(water, np.unique(np.concatenate([water[0], water[-1], water[:, 0], water[:, -1],
+                                                                        water[:, :, 0], water[:, :, -1]], axis=None)))
+    # the surface water first touches: the print's, except across the plugs and around sealed voids
+    phi = np.where(shut | sealed, 0.5 * h, sd)
+    # the anisotropy as a metric: a z step of h counts as h / anisotropy of in-plane erosion depth; a reached void
+    # floods at once (a speed of SEALED_VOID_SPEED)
+    speed = np.where(sealed, SEALED_VOID_SPEED, 1.0)
+    arrival = np.asarray(skfmm.travel_time(phi, speed, dx=[h, h, h / physics.anisotropy], order=2))
     # each voxel holds the fraction of the print the surface's distance gives it (exact for a plane
     # parallel to a face), and releases it linearly as the front crosses the voxel
     weight = np.clip(0.5 + sd / h, 0.0, 1.0)
