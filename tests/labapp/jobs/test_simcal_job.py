@@ -111,8 +111,11 @@ def test_the_loop_measured_curve_to_design_within_3_percent(tmp_path, releases):
     assert summary["rel_rmse_physical"] < 0.03
     assert summary["print_mass_g"] == pytest.approx(further.mass_g, rel=0.05)
     rows = np.genfromtxt(out / "curves_physical.csv", delimiter=",", names=True)
-    assert rows.dtype.names == ("t_s", "target_released_g", "design_released_g")
+    assert rows.dtype.names == ("t_s", "target_released_g", "design_released_g", "design_released_g_q05",
+                                "design_released_g_q95")
     np.testing.assert_allclose(rows["t_s"], t)
+    assert np.all(rows["design_released_g_q05"] <= rows["design_released_g"])
+    assert np.all(rows["design_released_g"] <= rows["design_released_g_q95"])
     assert (out / "report.png").is_file() and (out / "report_simulation.png").is_file()
 
 
@@ -121,7 +124,7 @@ def test_simulate_with_simcal_writes_the_physical_curve_and_refuses_another_reso
     simcal = tmp_path / "cal" / "simcal.json"
     assert main(["simulate", "sample:pill", "--simcal", str(simcal), "--out", str(tmp_path / "sim")]) == 0
     rows = np.genfromtxt(tmp_path / "sim" / "release_physical.csv", delimiter=",", names=True)
-    assert rows.dtype.names == ("t_s", "released_g", "conc_g_per_kg")
+    assert rows.dtype.names == ("t_s", "released_g", "conc_g_per_kg", "released_g_q05", "released_g_q95")
     truth = releases["pill"]
     assert rows["released_g"][-1] == pytest.approx(truth.mass_g, rel=0.03)
     half = [np.interp(0.5 * c["released_g"][-1], c["released_g"], c["t_s"]) for c in (rows, truth.__dict__)]
