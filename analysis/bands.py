@@ -15,8 +15,10 @@ and the calibrated parameters themselves are uncertain. The band at each time is
 - ``s_par(t)``: each parameter moved by its standard error (jackknife over the leave-one-out refits),
   the prediction's change at each time, added in quadrature (the linearised propagation
   sqrt(sum_p (dg/dp sigma_p)^2) with central differences, :func:`parameter_spread`).
-- ``s_mass(t)``: the mass scale's standard error times the predicted volume, for a prediction whose mass
-  is not weighed (leave-one-out predicts each run from its weighed mass, so its residuals lack this term).
+- ``s_mass(t)``: the mass scale's predictive spread (how one more print's grams per simulated mm^3 differ from
+  the pooled scale: the calibration prints' spread times sqrt(1 + 1/n)) times the predicted release, for a
+  prediction whose mass is not weighed (leave-one-out predicts each run from its weighed mass, so its
+  residuals lack this term).
 - ``q``: Student's t quantile of the band's level with as many degrees of freedom as runs gave residuals
   (the residual mean square of k runs around a zero mean has k degrees of freedom): with few runs the
   band widens, as a prediction interval from a small sample must.
@@ -337,10 +339,11 @@ def band_block(loo: Sequence[LooShape], shapes: Sequence[ShapeRun], loo_physics:
     runs = [(s.predicted_g, s.measured_g, sh.mass_g) for s, sh in zip(loo, shapes)]
     residuals = residual_model(runs)
     seconds_sd = _jackknife_rel([s.cal.seconds_per_mm for s in loo])
-    volumes = np.array([sh.volume_mm3 for sh in shapes])
-    masses = np.array([sh.mass_g for sh in shapes])
-    pooled = [(masses.sum() - m) / (volumes.sum() - v) for m, v in zip(masses, volumes)]
-    mass_sd = _jackknife_rel(pooled)
+    # a new print's own mass per simulated mm^3 differs from the pooled scale as the calibration prints' differ
+    # (print density, surface offset over its area, voxelisation): the predictive spread of one more print,
+    # sd * sqrt(1 + 1/n), not the standard error of the pooled mean
+    ratios = np.log([sh.mass_g / sh.volume_mm3 for sh in shapes])
+    mass_sd = float(np.std(ratios, ddof=1) * math.sqrt(1.0 + 1.0 / ratios.size)) if ratios.size > 1 else 0.0
 
     parameter_g = loo_parameter_spread(loo, shapes, loo_physics, physics_sd, seconds_sd, simulate_at)
     coverage = loo_coverage(runs, level=level, parameter_g=parameter_g)
