@@ -21,6 +21,19 @@ because nlopt's LD_LBFGS (Luksan's code) handles active box bounds poorly on thi
 because, unlike a sigmoid map, whose saturated variables lose their gradient for good, the periodic
 map has no flat region in which L-BFGS can report success far from a minimum.
 
+The cosine map has one trap: ``d rho_hat / dz = sqrt(rho_hat (1 - rho_hat))`` vanishes at the bounds, so a
+variable at exactly 0 or 1 has a zero gradient in z whatever dJ/d rho_hat, and is a stationary point in z even
+where J would fall as it moves inside (a saddle, not a minimum). J_binary drives the variables of an extruded
+design to 0 and 1 (to round-off) within its first beta stage; every later session (the next beta stages, the restarts,
+the defect-correction rounds of `design.inverse.defect`, whose targets have moved) then began with a zero
+gradient for all of them and ended at once, its design unchanged. So every new session of an extruded design
+starts from rho_hat moved `SESSION_FLOOR` inside the bounds (``from_x``), where the gradient in z is about
+``sqrt(SESSION_FLOOR)`` of dJ/d rho_hat: the variables whose J falls inwards move, the others return to the
+bound. A run's first session starts inside anyway (`design.inverse.objective.START_OUTSIDE`), and a resumed
+session restores its optimiser's own variables, so resumes stay exact. Free 3D (nfc) designs keep their
+sessions' variables as they are: there the floor helped one of two shapes and set the other back
+(docs/design.md#optimiser-sessions-start-inside-the-bounds).
+
 One "iteration" here is one objective-and-gradient evaluation; L-BFGS line searches occasionally
 need more than one per step, so the evaluation count bounds the work exactly.
 
@@ -63,6 +76,10 @@ MAX_RESTARTS = 20
 """L-BFGS restarts from the best point after the optimiser ends early (module doc)."""
 RESTART_GAIN = 1e-3
 """Relative decrease of J a session must achieve for another restart to be tried."""
+SESSION_FLOOR = {"extruded": 1e-3}
+"""With the cosine map, how far inside the bounds 0 and 1 every new session (a beta stage, a restart, a defect
+correction round) starts each variable of rho_hat, per design space (0 for the spaces it does not name; module
+doc)."""
 BETA_STAGES = 4
 """Stages of the beta continuation (`DesignConfig.beta_final`)."""
 _ERROR = "error"
@@ -183,8 +200,12 @@ class _Run:
         return 0.5 * (1.0 - np.cos(z)) if self.cosine else z
 
     def from_x(self, x: np.ndarray) -> np.ndarray:
-        """The optimiser's variables from rho_hat."""
-        return np.arccos(np.clip(1.0 - 2.0 * x, -1.0, 1.0)) if self.cosine else x
+        """The optimiser's variables of a new session from rho_hat, with the cosine map each at least the design
+        space's `SESSION_FLOOR` inside the bounds (module doc)."""
+        if not self.cosine:
+            return x
+        edge = 1.0 - 2.0 * SESSION_FLOOR.get(self.objective.space.name, 0.0)
+        return np.arccos(np.clip(1.0 - 2.0 * x, -edge, edge))
 
     def __call__(self, z: np.ndarray, grad: np.ndarray) -> float:
         """nlopt's ``f(x, grad)``. Stops go through ``opt.force_stop()``: an exception raised in
