@@ -215,6 +215,9 @@ class SimulationStep(QWidget):
                  "leave-one-out rel. RMSE " + ", ".join(f"{Path(r['mesh']).stem} {100 * r['rel_rmse']:.2f}%"
                                                         for r in doc["loo"])]
         lines += [f"{m}: mean {100 * v['loo_rel_rmse_mean']:.2f}%" for m, v in doc["models"].items()]
+        if doc.get("band"):
+            cov = doc["band"]["loo_coverage"]
+            lines.append(f"{100 * doc['band']['level']:.0f}% bands: {100 * cov['fraction']:.0f}% of held-out points inside")
         self.result.setText("; ".join(lines) + f" ({run.path})")
         self.figure.setPixmap(QPixmap(str(run.path.with_name("simcal.png"))).scaledToWidth(700))
         self.activate_button.setEnabled(True)

@@ -37,6 +37,7 @@ def test_simulation_step_calibrates_shows_the_fit_and_activates(qtbot, tmp_path,
     step.calibrate()
     qtbot.waitUntil(step.activate_button.isEnabled, timeout=120_000)
     assert "leave-one-out" in step.result.text() and "constant: mean" in step.result.text()
+    assert "90% bands:" in step.result.text() and "of held-out points inside" in step.result.text()
     assert not step.figure.pixmap().isNull()
     with qtbot.waitSignal(step.simcal_activated) as signal:
         step.activate()
