@@ -95,7 +95,7 @@ def main() -> None:
     h = problem.space.grid_shape[BUILD_AXIS] * problem.dx_mm
     print(f"{args.target}, extruded, resolution {args.resolution}: h = {h:.4g} mm, T = {tau[-1]:.4g} mm, "
           f"target {target[-1]:.1f} mm^3")
-    curves = [("the simulated source (the design's target)", target)]
+    curves = [("the source's physical release (the design's target)", target)]
     if args.target == "sphere":
         lo, hi = sample_shape(args.target).bounds
         radius = 0.5 * float(hi[0] - lo[0])
