@@ -47,7 +47,7 @@ from labapp.jobs.bands import quantile_columns
 from labapp.jobs.calibrate_sim import SimCalFile, curve_of, load_simcal
 from labapp.jobs.design import DESIGN_DEFAULTS, design_folder
 from labapp.jobs.design import design as design_job
-from labapp.jobs.physical import is_physical, write_target_csv
+from labapp.jobs.physical import adjustment_line, is_physical, write_target_csv
 
 NO_SIMCAL = ("no active simulation calibration: a measured run cannot become a target until one is made "
              "(calibration wizard, simulation step) and made active")
@@ -80,7 +80,8 @@ MESH_FILTER = "meshes (" + " ".join(f"*{s}" for s in MESH_SUFFIXES) + ")"
 @dataclasses.dataclass(frozen=True)
 class TargetPreview:
     """What a target becomes before a design: its curve in simulation units, the feasibility report and,
-    for a measured target, the measured curve (s, g) and what making it feasible changed (one line)."""
+    for a measured target, the measured curve (s, g) and what making it feasible changed
+    (:func:`labapp.jobs.physical.adjustment_line`)."""
 
     tau_mm: np.ndarray
     released_mm3: np.ndarray
@@ -103,7 +104,7 @@ def preview_target(target: str, space: str, resolution: int, simcal: SimCalFile 
             curve = curve_of(target)
             measured = (np.asarray(curve.t_s, float), np.asarray(curve.released_g, float))
             written = write_target_csv(curve, simcal, Path(tmp) / "target.csv")
-            target, adjustment = str(written.csv), written.text()
+            target, adjustment = str(written.csv), adjustment_line(written)
         problem = load_problem(DesignConfig(target=target, space=space, resolution=resolution))
     return TargetPreview(np.asarray(problem.target.tau_mm), np.asarray(problem.target.released_mm3),
                          problem.feasibility.text(), problem.feasibility.feasible, measured, tuple(problem.warnings),
@@ -372,7 +373,7 @@ class DesignLauncher(QWidget):
             for curve in self.physical_band:
                 curve.setData([], [])
         self.curves.setCurrentIndex(0)
-        note = f"\n{preview.adjustment[:1].upper()}{preview.adjustment[1:]}." if preview.adjustment else ""
+        note = f"\n{preview.adjustment}" if preview.adjustment else ""
         warnings = "".join(f"\nWarning: {w}" for w in preview.warnings)
         self.status.setText(f"Target {self.source.text().strip()}: {preview.released_mm3[-1]:.4g} mm\u00b3 over "
                             f"tau {preview.tau_mm[-1]:.4g} mm.\n{preview.report[:1].upper()}{preview.report[1:]}"

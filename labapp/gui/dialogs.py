@@ -4,14 +4,28 @@ Every final action asks through :func:`confirm`: a warning box that names the ru
 with the safe choice ("Keep running", "Cancel") as its default and Escape button, so Enter or Escape never
 ends a run. An action that changes a record after the fact (finalising an interrupted run, reanalysing a
 recorded one) asks through :func:`ask_reason` instead: the same question with a field for the reason its
-audit entry carries, required where the job function requires one. Tests answer them by monkeypatching
-:func:`confirm` and :func:`ask_reason` (callers look them up through this module) or by driving the dialogs.
+audit entry carries, required where the job function requires one; a setting changed while a run records
+(:func:`ask_changes`) is asked the same way, with the setting fields above the reason. Tests answer them by
+monkeypatching :func:`confirm`, :func:`ask_reason`, :func:`ask_changes` and :func:`tell` (callers look them up
+through this module) or by driving the dialogs.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from PySide6.QtWidgets import QDialog, QDialogButtonBox, QLabel, QLineEdit, QMessageBox, QVBoxLayout, QWidget
+from PySide6.QtWidgets import (
+    QDialog,
+    QDialogButtonBox,
+    QFormLayout,
+    QLabel,
+    QLineEdit,
+    QMessageBox,
+    QVBoxLayout,
+    QWidget,
+)
+
+from labapp.acquisition.settings import Setting
+from labapp.gui.fields import add_rows, problems
 
 KEEP_RUNNING = "Keep running"
 CANCEL = "Cancel"
@@ -94,6 +108,67 @@ def ask_reason(parent: QWidget | None, q: Question, required: bool) -> str | Non
     ``required``), or None when the operator chose the safe button or Escape."""
     dialog = ReasonDialog(parent, q, required)
     return dialog.reason() if dialog.exec() == QDialog.DialogCode.Accepted else None
+
+
+def tell(parent: QWidget | None, title: str, text: str) -> None:
+    """Say ``text`` in a modal warning box (an action the operator asked for was refused, and why)."""
+    QMessageBox.warning(parent, title, text)
+
+
+class ChangeSettingsDialog(ReasonDialog):
+    """Settings of a recording run to change, each a field made from its declaration (:class:`SettingBox`,
+    prefilled with the current value, in the shown unit), and the required reason.
+
+    The action button refuses, with the dialog left open and the problem shown in it: a field out of its
+    setting's range, no field changed, an empty reason. :meth:`changes` are the fields changed (stored units).
+    """
+
+    def __init__(self, parent: QWidget | None, q: Question, settings: tuple[Setting, ...],
+                 current: dict[str, float]) -> None:
+        super().__init__(parent, q, required=True)
+        self.current = dict(current)
+        form = QFormLayout()
+        self.boxes = add_rows(form, settings)
+        for name, box in self.boxes.items():
+            box.set_stored(current[name])
+        self.layout().insertLayout(2, form)           # under the question, above the reason
+
+    def changes(self) -> dict[str, float]:
+        """The settings whose field differs from the current value as shown, by name, in stored units."""
+        changed = {}
+        for name, box in self.boxes.items():
+            if abs(box.value() - box.setting.shown(self.current[name])) >= 0.5 * 10.0 ** -box.decimals():
+                changed[name] = box.stored()
+        return changed
+
+    def _act(self) -> None:
+        found = problems(self.boxes)
+        if not found and not self.changes():
+            found = ["nothing changed: set a new value first"]
+        if found:
+            self.problem.setText("; ".join(found))
+            self.problem.show()
+            return
+        super()._act()
+
+
+def ask_changes(parent: QWidget | None, q: Question, settings: tuple[Setting, ...], current: dict[str, float],
+                ) -> tuple[dict[str, float], str] | None:
+    """Ask which of ``settings`` (``current``: their values now, stored units) change, and why (modal); the
+    changed values by name (stored units) and the reason, or None when the operator cancelled."""
+    dialog = ChangeSettingsDialog(parent, q, settings, current)
+    if dialog.exec() != QDialog.DialogCode.Accepted:
+        return None
+    return dialog.changes(), dialog.reason()
+
+
+def change_question(name: str, elapsed_s: float | None) -> Question:
+    """Changing the duration of the run ``name`` while it records (``labapp.jobs.run.change_setting``)."""
+    so_far = "" if elapsed_s is None else f" It has recorded for {elapsed_s / 3600:.2f} h since the drop."
+    return Question("change duration", f"Change the duration of run {name}?",
+                    f"The run takes the new values at its next frame and run.json keeps them; a maximum below the "
+                    f"time recorded ends the run at that frame.{so_far} Every other setting stays as it started.",
+                    "Change", CANCEL)
 
 
 def _what(procedure: str, name: str) -> str:

@@ -49,8 +49,8 @@ from labapp.acquisition.events import (
     StateChanged,
 )
 from labapp.acquisition.methods import load_method, method_from_config, save_method
-from labapp.acquisition.procedures import PreviewProcedure, RunConfig
-from labapp.acquisition.settings import KEEPALIVE
+from labapp.acquisition.procedures import PreviewProcedure, RunConfig, RunProcedure
+from labapp.acquisition.settings import CHANGEABLE_DURING_RUN, KEEPALIVE
 from labapp.acquisition.simbench import SampleRelease, SimulatedBench, resume_clock, sample_release
 from labapp.acquisition.status import RunStatus
 from labapp.errors import UsageError
@@ -65,8 +65,9 @@ from labapp.gui.plate_poller import HeldProcedure, IdlePlatePoller
 from labapp.gui.plots import PlotsPanel, hmm
 from labapp.gui.run_browser import RunBrowser, interrupted_runs
 from labapp.gui.run_controls import RunControls
-from labapp.jobs.run import new_run, resumable, resume_run
+from labapp.jobs.run import change_setting, new_run, resumable, resume_run
 from labapp.jobs.series import new_series
+from labapp.records.operators import OperatorError
 
 UI_MS = 100
 PREFERRED_SIZE = (1500, 950)
@@ -139,6 +140,8 @@ class MainWindow(QMainWindow):
         self.latest_frame: str | None = None
         self.crop: tuple[int, int, int] | None = None
         self.build_task: BackgroundTask | None = None
+        self.change_task: BackgroundTask | None = None
+        """A change of the recording run's duration waiting for the run's next frame (:meth:`change_duration`)."""
         self._then: Callable[[Bench], None] | None = None
         self._closed = False
         self._close_ready = False
@@ -207,6 +210,7 @@ class MainWindow(QMainWindow):
         self.controls.drop_confirmed.connect(self.confirm_drop)
         self.controls.stop_requested.connect(self.stop)
         self.controls.abort_requested.connect(self.engine.abort)
+        self.controls.change_requested.connect(self.change_duration)
         self.wizard.start_requested.connect(self.start_calibration)
         self.wizard.mass_entered.connect(self.answer_mass)
         self.wizard.finish_requested.connect(self.finish_calibration)
@@ -572,6 +576,53 @@ class MainWindow(QMainWindow):
         """Finish the current procedure cleanly."""
         self.engine.stop()
 
+    def change_duration(self) -> None:
+        """Change the recording run's maximum or minimum duration, with a reason (:func:`dialogs.ask_changes`),
+        through ``labapp.jobs.run.change_setting`` as `sfr change` does: the request waits in a worker thread for
+        the run's next frame, where the engine's thread applies it; the outcome comes back in :meth:`_changed`."""
+        proc = self.procedure
+        if not (self.engine.running and isinstance(proc, RunProcedure) and proc.run is not None):
+            self.on_message("warning", "no run is recording: its duration changes only while it records")
+            return
+        if self.change_task is not None and self.change_task.running:
+            self.on_message("warning", "a change is still waiting for the run's next frame")
+            return
+        folder = proc.run.path
+        current = {s.name: getattr(proc.config, s.name) for s in CHANGEABLE_DURING_RUN}
+        asked = dialogs.ask_changes(self, dialogs.change_question(folder.name, self.status.t_s),
+                                    CHANGEABLE_DURING_RUN, current)
+        if asked is None:
+            return
+        changes, reason = asked
+        gone = lambda: self._closed or not self.engine.running     # noqa: E731 (the run ended: withdraw)
+
+        def work(progress) -> tuple[list[str], str]:
+            done = []
+            for name, value in changes.items():
+                try:
+                    done.append(change_setting(folder, name, value, reason, should_stop=gone))
+                except (UsageError, OperatorError) as exc:
+                    return done, str(exc)
+            return done, ""
+        self.on_message("info", f"waiting for {folder.name}'s next frame to change its duration ...")
+        self.change_task = BackgroundTask(work, self)
+        self.change_task.finished.connect(self._changed)
+        self.change_task.failed.connect(self._change_failed)
+        self.change_task.start()
+
+    def _changed(self, outcome: tuple[list[str], str]) -> None:
+        """A change of the run's duration was answered: each change made in the event log, a refusal said."""
+        done, refused = outcome
+        for detail in done:
+            self.on_message("info", f"changed {detail}")
+        if refused:
+            self.on_message("error", f"not changed: {refused}")
+            if not self._closed:
+                dialogs.tell(self, "change refused", refused)
+
+    def _change_failed(self, message: str) -> None:
+        self._changed(([], message))
+
     def start_calibration(self) -> None:
         """Start a calibration series (:func:`labapp.jobs.series.new_series`) with the crop of the live view,
         the device panel's bath and the wizard's masses."""
@@ -771,6 +822,8 @@ class MainWindow(QMainWindow):
 
     def _show_progress(self) -> None:
         config, t = self.run_config, self.status.t_s
+        if isinstance(self.procedure, RunProcedure):
+            config = self.procedure.config      # the engine's: a duration changed during the run included
         recording = self.engine.running and config is not None and self.status.phase == Phase.ACQUIRING
         self.progress.setVisible(recording)
         if not recording or t is None:

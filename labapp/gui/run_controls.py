@@ -2,7 +2,9 @@
 
 Start stays disabled, with the reason shown under it, while a field holds a value outside its range or the
 settings cannot work together (a steady-state stop without a calibration); Stop and Abort ask first
-(:mod:`labapp.gui.dialogs`), naming the run and what cannot be undone.
+(:mod:`labapp.gui.dialogs`), naming the run and what cannot be undone. While a run records, its settings are
+locked except the ones declared changeable during a run (the maximum and minimum duration): "Change
+duration..." asks for them and a reason.
 """
 from __future__ import annotations
 
@@ -45,6 +47,7 @@ class RunControls(QWidget):
     drop_confirmed = Signal()
     stop_requested = Signal()
     abort_requested = Signal()
+    change_requested = Signal()
 
     def __init__(self, simulate: bool, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -86,6 +89,10 @@ class RunControls(QWidget):
         self.abort_button = QPushButton("Abort")
         self.abort_button.setStyleSheet(ABORT_STYLE)
         self.abort_button.setToolTip("end at once: heating off, the run marked 'aborted' (asks first)")
+        self.change_button = QPushButton("Change duration...")
+        self.change_button.setToolTip("while a run records: change its maximum or minimum duration, with a reason "
+                                      "for the audit trail (the other settings stay as the run started)")
+        self.change_button.clicked.connect(self.change_requested)
         self.start_reason = QLabel("")
         self.start_reason.setStyleSheet("color: #b00000;")
         self.start_reason.setWordWrap(True)
@@ -103,13 +110,14 @@ class RunControls(QWidget):
         layout = QVBoxLayout(self)
         layout.addWidget(form_box)
         layout.addLayout(row)
+        layout.addWidget(self.change_button)
         layout.addWidget(self.start_reason)
         layout.addStretch(1)                   # Abort at the far end of the panel, away from Stop
         layout.addWidget(abort_box)
         self.checks: list[Callable[[], list[str]]] = []
         """Further checks before Start (each returns the problems it finds): the device panel's bath."""
         self.procedure, self.run_name = "", ""
-        self._running, self._waiting_drop = False, False
+        self._running, self._waiting_drop, self._recording = False, False, False
         for box in (self.object_mass, self.interval, self.max_hours):
             box.problem_changed.connect(self.update_start)
         self.stop_on_steady.toggled.connect(self.update_start)
@@ -174,6 +182,8 @@ class RunControls(QWidget):
             self.procedure, self.run_name = state.procedure or "", ""
         if state.folder:
             self.run_name = Path(state.folder).name
+        self._recording = self._running and self.procedure == "run" and state.phase == Phase.ACQUIRING
+        self.change_button.setEnabled(self._recording)
 
     def ask_stop(self) -> None:
         """Stop, once the operator confirmed."""
@@ -188,6 +198,8 @@ class RunControls(QWidget):
     def set_running(self, running: bool, waiting_drop: bool = False) -> None:
         """Enable the buttons that make sense now."""
         self._running, self._waiting_drop = running, waiting_drop
+        self._recording = self._recording and running
+        self.change_button.setEnabled(self._recording)      # a run after its drop (see follow)
         self.drop_button.setEnabled(running and waiting_drop)
         self.stop_button.setEnabled(running)
         self.abort_button.setEnabled(running)

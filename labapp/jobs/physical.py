@@ -92,7 +92,7 @@ class MeasuredTarget:
         return 100.0 * grams / self.mass_g if self.mass_g > 0 else float("nan")
 
     def text(self) -> str:
-        """One line for logs and the launcher."""
+        """What was changed, one clause (logs, ``<stem>.json``); :func:`adjustment_line` is the sentence shown."""
         return (f"measured target adjusted to a feasible curve: monotone least-squares fit (changes up to "
                 f"{self.pct(self.fit_max_g):.2f} % of the {self.mass_basis} mass {self.mass_g:.4g} g), then "
                 f"{self.points_lowered} points lowered onto the isoperimetric bound (up to "
@@ -109,6 +109,34 @@ class MeasuredTarget:
                 "fit_max_g": self.fit_max_g, "fit_max_pct": self.pct(self.fit_max_g),
                 "projection_max_g": self.projection_max_g, "projection_max_pct": self.pct(self.projection_max_g),
                 "points_lowered": self.points_lowered, "text": self.text()}
+
+
+def adjustment_line(target: MeasuredTarget) -> str:
+    """The sentence `sfr design` prints and the design launcher shows for a measured target: how much making
+    it feasible changed it (:meth:`MeasuredTarget.text`, as a sentence)."""
+    text = target.text()
+    return f"{text[:1].upper()}{text[1:]}."
+
+
+def read_measured_target(csv_path: str | Path) -> MeasuredTarget | None:
+    """The notes :func:`write_target_csv` left beside ``csv_path`` (``<stem>.json``); None when there are none
+    (the target was not a measured curve).
+
+    Raises
+    ------
+    SimCalError
+        When the notes exist but are not readable or lack a field.
+    """
+    path = Path(csv_path).with_suffix(".json")
+    if not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text())
+        return MeasuredTarget(Path(csv_path), float(doc["mass_g"]), str(doc["mass_basis"]), float(doc["noise_g"]),
+                              float(doc["fit_max_g"]), float(doc["projection_max_g"]), int(doc["points_lowered"]))
+    except (OSError, ValueError, TypeError, KeyError) as exc:
+        raise SimCalError(f"{path}: not the notes of a measured target ({type(exc).__name__}: {exc}); expected "
+                          "mass_g, mass_basis, noise_g, fit_max_g, projection_max_g, points_lowered") from exc
 
 
 END_SAMPLES = 5

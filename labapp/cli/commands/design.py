@@ -137,9 +137,10 @@ def run(args: argparse.Namespace) -> int:
     from design.files.outputs import summary_lines
     from design.inverse.problem import DesignConfig
     from design.inverse.status import DesignStatus
-    from labapp.jobs.calibrate_sim import load_simcal
+    from labapp.jobs.calibrate_sim import SimCalError, load_simcal
     from labapp.jobs.design import design as design_job
     from labapp.jobs.design import failed_design
+    from labapp.jobs.physical import TARGET_CSV, adjustment_line, read_measured_target
     from labapp.records.lock import folder_lock
 
     try:
@@ -169,6 +170,13 @@ def run(args: argparse.Namespace) -> int:
     s = physical or result.outputs.summary
     if result.unchanged:
         print(f"already finished: nothing to do ({result.out_dir} is left as it is)")
+    try:
+        measured = read_measured_target(Path(result.out_dir) / TARGET_CSV)
+    except SimCalError as exc:
+        print(f"warning: {exc}", file=sys.stderr)
+    else:
+        if measured is not None:       # a measured target: what making it feasible changed, as the launcher says
+            print(adjustment_line(measured))
     for line in summary_lines(s, result.out_dir):
         print(line)
     log.debug("summary %s", json.dumps(s))

@@ -18,7 +18,7 @@ from design.inverse.problem import DesignConfig
 from design.inverse.targets import Target, isoperimetric_bound, isotonic_fit, project_isoperimetric
 from labapp.acquisition.simbench import Material, sample_release
 from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL, SimCalFile
-from labapp.jobs.physical import TARGET_CSV, TARGET_SLACK, write_target_csv
+from labapp.jobs.physical import TARGET_CSV, TARGET_SLACK, adjustment_line, read_measured_target, write_target_csv
 from labapp.records.curvefiles import PhysicalCurve
 
 MATERIAL = Material(1850.0, 1.24)
@@ -112,7 +112,7 @@ def test_a_noisy_measured_curve_becomes_feasible_within_its_noise(tmp_path, rele
     assert f"relaxed by {TARGET_SLACK:g}" in notes["method"] and "% of the weighed mass" in notes["text"]
 
 
-def test_sfr_design_takes_a_measured_run_without_the_override(tmp_path, releases):
+def test_sfr_design_takes_a_measured_run_without_the_override(tmp_path, releases, capsys):
     from labapp.cli.main import main
 
     release = releases["polyhedron"]
@@ -131,4 +131,6 @@ def test_sfr_design_takes_a_measured_run_without_the_override(tmp_path, releases
     assert "target is feasible" in (out / "feasibility.txt").read_text()
     notes = json.loads((out / TARGET_CSV).with_suffix(".json").read_text())
     assert notes["points_lowered"] > 0 and notes["projection_max_pct"] < 2.0
+    line = adjustment_line(read_measured_target(out / TARGET_CSV))      # the launcher's line, printed too
+    assert line.startswith("Measured target adjusted") and line in capsys.readouterr().out.splitlines()
     assert json.loads((out / "summary.json").read_text())["simcal"]["model"] == "constant"
