@@ -44,6 +44,9 @@ from numba import njit
 from scipy.spatial import cKDTree
 from scipy.stats import qmc
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import physical_default  # noqa: E402
+
 POINTS_LOG2 = 18
 """Sobol points per mesh, as a power of two (2^18 = 262,144)."""
 SEED = 31
@@ -362,12 +365,7 @@ def main() -> None:
         if row["difference_points"] != "-":
             differences.append(abs(float(row["difference_points"])))
         if args.csv:
-            new = not args.csv.exists()
-            with args.csv.open("a", newline="") as handle:
-                writer = csv.DictWriter(handle, list(row))
-                if new:
-                    writer.writeheader()
-                writer.writerow(row)
+            physical_default.append_row(args.csv, row)
     if not differences:
         print("largest difference: - over 0 designs (every design has an enclosed shell)")
         sys.exit(1)

@@ -62,6 +62,16 @@ def design_row(name: str, space: str, resolution: int, runs: Path, correction: s
             "iterations": s["iterations"], "round_fits": fits, "correction": correction or "defect"}
 
 
+def append_row(path: Path, row: dict) -> None:
+    """Append ``row`` to the CSV at ``path``, with a header line when the file is new."""
+    new = not path.exists()
+    with path.open("a", newline="") as handle:
+        writer = csv.DictWriter(handle, list(row))
+        if new:
+            writer.writeheader()
+        writer.writerow(row)
+
+
 def _pct(value: str) -> str:
     return "-" if value in ("", "-", None) else f"{float(value):.2f}%"
 
@@ -107,12 +117,7 @@ def main() -> None:
     for case in args.cases:
         name, _, space = case.partition(":")
         row = design_row(name, space, args.resolution, args.runs, args.correction)
-        new = not args.csv.exists()
-        with args.csv.open("a", newline="") as handle:
-            writer = csv.DictWriter(handle, list(row))
-            if new:
-                writer.writeheader()
-            writer.writerow(row)
+        append_row(args.csv, row)
         print(",".join(str(v) for v in row.values()), flush=True)
     with args.csv.open() as handle:
         print(f"rows: {sum(1 for _ in handle) - 1}")
