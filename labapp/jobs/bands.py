@@ -90,12 +90,15 @@ def prediction_band(simcal: SimCalFile, tau_mm: np.ndarray, released_mm3: np.nda
 
 def source_simulator(source: str, resolution: int, *, symmetry: str = "", units: str = "mm") -> SimulateAt:
     """``simulate_at(physics)`` for a mesh, ``sample:NAME`` or density array at a calibration's resolution
-    (``labapp.jobs.simulate.simulation_grid``; grids cached per surface offset)."""
+    (``labapp.jobs.simulate.simulation_grid``; grids cached per surface offset), a mesh's release at its
+    print's exact volume (:func:`labapp.jobs.calibrate_sim.exact_volume_release`)."""
     from design.errors import DesignError
     from design.forward.simulator import simulate
-    from labapp.jobs.simulate import simulation_grid
+    from labapp.jobs.calibrate_sim import exact_volume_release
+    from labapp.jobs.simulate import _is_density, _source_mesh, simulation_grid
 
     grids: dict[float, tuple] = {}
+    meshes: list = []   # the source's mesh, loaded once (None for a density array)
 
     def simulate_at(physics: dict) -> tuple[np.ndarray, np.ndarray]:
         offset = round(float(physics["offset_mm"]), 9)
@@ -106,12 +109,28 @@ def source_simulator(source: str, resolution: int, *, symmetry: str = "", units:
             rho, dx, mirror = grids[offset]
             # the offset is in the grid; every other print physics parameter is the forward model's keyword
             release = simulate(rho, dx, mirror=mirror, **{p: float(v) for p, v in physics.items() if p != "offset_mm"})
+            if not meshes:
+                meshes.append(None if _is_density(source) else _source_mesh(source, units))
         except DesignError as exc:
             raise SimCalError(f"{source}: {exc}") from exc
-        return release.tau_mm, release.released_mm3
+        return release.tau_mm, exact_volume_release(release.released_mm3, meshes[0], offset)
 
     return simulate_at
 
+
+
+def source_release_exact(source: str, released_mm3: np.ndarray, offset_mm: float, units: str = "mm") -> np.ndarray:
+    """A release simulated from ``source`` (mesh, ``sample:NAME`` or density array) at the print's exact volume
+    (:func:`labapp.jobs.calibrate_sim.exact_volume_release`), as :func:`source_simulator` gives it."""
+    from design.errors import DesignError
+    from labapp.jobs.calibrate_sim import exact_volume_release
+    from labapp.jobs.simulate import _is_density, _source_mesh
+
+    try:
+        mesh = None if _is_density(source) else _source_mesh(source, units)
+    except DesignError as exc:
+        raise SimCalError(f"{source}: {exc}") from exc
+    return exact_volume_release(released_mm3, mesh, offset_mm)
 
 
 def band_series(t_s: np.ndarray, band: tuple[np.ndarray, np.ndarray] | None, level: float = BAND_LEVEL

@@ -19,11 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from design.errors import DesignError
-from design.files.pipeline import input_grid
 from design.files.records import load_summary
 from design.files.rundir import finished_run, run_design
-from design.forward.simulator import simulate
 from design.inverse.targets import ISO_TOLERANCE, isotonic_fit, project_isoperimetric, resample_monotone
 from labapp.jobs import bands
 from labapp.jobs.calibrate_sim import SimCalError, SimCalFile, curve_of
@@ -432,7 +429,8 @@ def _read_measured(path: Path) -> PhysicalCurve:
 
 def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A mesh's predicted release in physical units: simulated at the calibration's resolution with its print
-    physics (anisotropy, surface offset), mapped.
+    physics (anisotropy, surface offset, swelling width) at the print's exact volume
+    (:func:`labapp.jobs.bands.source_simulator`), mapped.
 
     Parameters
     ----------
@@ -446,15 +444,10 @@ def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = N
     -------
     t_s, released_g : (Q,) ndarray of float
     """
-    try:
-        rho, dx, mirror = input_grid(str(mesh), resolution=simcal.resolution, offset_mm=simcal.physics["offset_mm"])
-        release = simulate(rho, dx, mirror=mirror, anisotropy=simcal.physics["anisotropy"],
-                           swelling_mm=simcal.physics["swelling_mm"])
-    except DesignError as exc:
-        raise SimCalError(f"{mesh}: {exc}") from exc
+    tau, vol = bands.source_simulator(str(mesh), simcal.resolution)(simcal.physics)
     water = water_g or simcal.water_g
-    t = physical_times(simcal, release.tau_mm, release.released_mm3, water)
-    return t, simcal.cal.to_physical(release.tau_mm, release.released_mm3, t, water)
+    t = physical_times(simcal, tau, vol, water)
+    return t, simcal.cal.to_physical(tau, vol, t, water)
 
 
 def predict_mesh_band(mesh: str | Path, simcal: SimCalFile, water_g: float | None = None

@@ -116,9 +116,10 @@ def _run(args: argparse.Namespace) -> int:
     seconds = summary["seconds"]
     if simcal is not None:
         from analysis.bands import BAND_LEVEL
-        from labapp.jobs.bands import source_simulator
+        from labapp.jobs.bands import source_release_exact, source_simulator
 
-        physical = write_release_physical(release.tau_mm, release.released_mm3, simcal, out, args.water_g,
+        released = source_release_exact(args.input, release.released_mm3, simcal.physics["offset_mm"], args.units)
+        physical = write_release_physical(release.tau_mm, released, simcal, out, args.water_g,
                                           title=args.input, simulate_at=source_simulator(
                                               args.input, simcal.resolution, symmetry=args.symmetry, units=args.units))
         grams = np.loadtxt(physical, delimiter=",", skiprows=1)
