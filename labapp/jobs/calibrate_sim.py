@@ -25,6 +25,7 @@ from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, SimCal
 from analysis.bands import band_block
 from analysis.simcal import (
     DEFAULT_MAX_OFFSET_S,
+    DISCRETISATION_FACTOR,
     MODELS,
     PHYSICS_CHOICES,
     PHYSICS_GRIDS,
@@ -34,6 +35,8 @@ from analysis.simcal import (
     PhysicsFit,
     choose_physics,
     fit_physics,
+    refit_physics,
+    with_discretisation,
 )
 from labapp.errors import UsageError
 from labapp.records import operators
@@ -302,7 +305,7 @@ def _loo_summary(loo: tuple[LooShape, ...], rows: list[SetRow]) -> list[dict]:
 
 def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out_dir: str | Path, *,
                   model: str = "auto", resolution: int = DEFAULT_RESOLUTION,
-                  max_offset_s: float = DEFAULT_MAX_OFFSET_S, physics: str = "none",
+                  max_offset_s: float = DEFAULT_MAX_OFFSET_S, physics: str = "none", second_resolution: int | None = None,
                   progress: Progress | None = None) -> SimCalRun:
     """Calibrate the simulator against measured runs and write ``simcal.json``, ``loo.csv``, ``simcal.png``.
 
@@ -322,6 +325,10 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         Voxels along each mesh's longest side.
     max_offset_s : float
         Bound on each run's drop-time offset, s.
+    second_resolution : int, optional
+        The fitted print physics is refitted at this resolution too (default 1.5 x ``resolution``, at most
+        the largest; 0: not): its estimated discretisation bias (:func:`analysis.simcal.with_discretisation`) is
+        added in quadrature to each parameter's standard error, and recorded in ``physics.discretisation``.
     physics : {'none', 'anisotropy', 'offset', 'swelling', 'all', 'auto'}
         Print physics of the forward model to fit with the scales (:func:`analysis.simcal.fit_physics`): the
         build-direction anisotropy, the surface offset, the swelling width below which channels are shut;
@@ -349,6 +356,12 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         raise SimCalError(f"physics {physics!r} is not one of {', '.join(PHYSICS_CHOICES)}")
     if not MIN_RESOLUTION <= resolution <= MAX_RESOLUTION:
         raise SimCalError(f"resolution {resolution} is outside {MIN_RESOLUTION}..{MAX_RESOLUTION} voxels")
+    second = (min(round(DISCRETISATION_FACTOR * resolution), MAX_RESOLUTION) if second_resolution is None
+              else int(second_resolution))
+    second = 0 if second == resolution and second_resolution is None else second   # at the largest resolution
+    if second and not resolution < second <= MAX_RESOLUTION:
+        raise SimCalError(f"second resolution {second} must be above the resolution {resolution} and at most "
+                          f"{MAX_RESOLUTION} voxels (0: no discretisation term)")
     set_csv, out_dir = Path(set_csv), Path(out_dir)
     rows = read_set(set_csv)
     check_out(out_dir, FolderKind.SIMCAL, [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)],
@@ -364,7 +377,7 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
     with folder_lock(out_dir):      # one writer (sfr calibrate-sim, the GUI's wizard); made here, after the checks
         _make_out(out_dir)
         return _fit_and_write(set_csv, rows, bench, bench_calibration, meshes, out_dir, model, resolution,
-                              max_offset_s, say, operator, physics)
+                              max_offset_s, say, operator, physics, second)
 
 
 def _has_channels(grid: tuple) -> bool:
@@ -375,10 +388,11 @@ def _has_channels(grid: tuple) -> bool:
     return bool(shut_channels(rho, dx, max(PHYSICS_GRIDS["swelling_mm"]), mirror).any())
 
 
-def _physics_doc(fits: dict[str, PhysicsFit], chosen: str, rows: list[SetRow]) -> dict:
+def _physics_doc(fits: dict[str, PhysicsFit], chosen: str, rows: list[SetRow], discretisation: dict | None = None
+                 ) -> dict:
     fit = fits[chosen]
     return {"fitted": list(fit.fitted), "choice": chosen, **{p: fit.values[p] for p in PHYSICS_PARAMETERS},
-            "uncertainty": dict(fit.uncertainty),
+            "uncertainty": dict(fit.uncertainty), **({"discretisation": discretisation} if discretisation else {}),
             "candidates": {name: {"fitted": list(f.fitted), "values": f.values, "uncertainty": f.uncertainty,
                                   "loss": f.loss, "loo_rel_rmse_mean": f.loo_rel_rmse_mean,
                                   "loo": [{"run": str(r.run), "rel_rmse": s.rel_rmse, "values": v}
@@ -388,7 +402,7 @@ def _physics_doc(fits: dict[str, PhysicsFit], chosen: str, rows: list[SetRow]) -
 
 def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, meshes: dict, out_dir: Path,
                    model: str, resolution: int, max_offset_s: float, say: Progress, operator,
-                   physics: str = "none") -> SimCalRun:
+                   physics: str = "none", second_resolution: int = 0) -> SimCalRun:
     """The work of :func:`calibrate_sim` on checked inputs, into the locked ``out_dir``."""
     measured = []
     n = len(rows)
@@ -451,6 +465,31 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
                 raise SimCalError(f"{set_csv}: {exc}") from exc
         chosen_physics = choose_physics(physics_fits) if physics == "auto" else physics
     values = physics_fits[chosen_physics].values if physics_fits else dict(PHYSICS_IDENTITY)
+    discretisation = None
+    if physics_fits and physics_fits[chosen_physics].fitted and second_resolution:
+        say(0.6, f"print physics '{chosen_physics}' refitted at resolution {second_resolution} (discretisation) ...")
+        fine: dict[tuple, tuple] = {}
+        fine_grids: dict[tuple, tuple] = {}
+
+        def fine_shapes_at(v: dict) -> list[ShapeRun]:
+            out = []
+            for row, (where, t, g, mass, water) in zip(rows, measured):
+                key = (row.mesh, *(round(v[p], 9) for p in PHYSICS_PARAMETERS))
+                if key not in fine:
+                    fine[key] = _simulate(meshes[row.mesh], row.mesh, second_resolution, v, fine_grids)
+                out.append(ShapeRun(f"{where} ({row.run.name}, {row.mesh.name})", *fine[key][:2], t, g, mass, water))
+            return out
+
+        fit_r = physics_fits[chosen_physics]
+        try:
+            refit = refit_physics(fine_shapes_at, fit_r.fitted, values, max_offset_s=max_offset_s)
+        except AnalysisError as exc:
+            raise SimCalError(f"{set_csv}: {exc}") from exc
+        combined, bias = with_discretisation(fit_r.uncertainty, values, refit,
+                                             second_resolution / resolution)
+        discretisation = {"resolution": second_resolution, "values": {p: refit[p] for p in fit_r.fitted},
+                          "bias": bias, "uncertainty_refits": dict(fit_r.uncertainty)}
+        physics_fits[chosen_physics] = dataclasses.replace(fit_r, uncertainty=combined)
     shapes = shapes_at(values)
     dxs = [simulation(row, values)[2] for row in rows]
     fits, loos = {}, {}
@@ -476,7 +515,7 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
         "water_g": float(np.median([s.water_g for s in shapes])),
         "resolution": resolution,
         "voxel_size_mm": float(np.median(dxs)),
-        "physics": (_physics_doc(physics_fits, chosen_physics, rows) if physics_fits else
+        "physics": (_physics_doc(physics_fits, chosen_physics, rows, discretisation) if physics_fits else
                     {"fitted": [], "choice": "none", **PHYSICS_IDENTITY, "uncertainty": {}, "candidates": {}}),
         "loss": fit.loss,
         "loo": _loo_summary(loos[chosen], rows),

@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from labapp.cli.argtypes import nonnegative_float, positive_float, positive_int
+from labapp.cli.argtypes import nonnegative_float, nonnegative_int, positive_float, positive_int
 
 NAME = "calibrate-sim"
 HELP = "fit seconds per mm and grams per mm^3 from measured runs and their meshes (simcal.json, loo.csv, simcal.png)"
@@ -15,7 +15,7 @@ RECORDS = True
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr calibrate-sim`."""
-    from analysis.simcal import DEFAULT_MAX_OFFSET_S, PHYSICS_CHOICES
+    from analysis.simcal import DEFAULT_MAX_OFFSET_S, DISCRETISATION_FACTOR, PHYSICS_CHOICES
     from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION
 
     parser.add_argument("set_csv", metavar="SET.csv", nargs="?",
@@ -35,6 +35,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "leave-one-out shows it earns it). Default none: the isotropic model of the mesh")
     parser.add_argument("--resolution", type=positive_int, default=DEFAULT_RESOLUTION,
                         help=f"voxels along each mesh's longest side (default {DEFAULT_RESOLUTION})")
+    parser.add_argument("--second-resolution", type=nonnegative_int, default=None,
+                        help=f"refit the fitted print physics at this resolution too and add its discretisation bias "
+                             f"to each parameter's uncertainty (default {DISCRETISATION_FACTOR:g} x --resolution; "
+                             "0 = not)")
     parser.add_argument("--max-offset-s", type=nonnegative_float, default=DEFAULT_MAX_OFFSET_S,
                         help=f"bound on each run's drop-time offset, s (default {DEFAULT_MAX_OFFSET_S:g}; 0 = none)")
 
@@ -93,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
 
     interrupt.set_hint(f"nothing written into {args.out}; rerun the same command to calibrate")
     done = calibrate_sim(args.set_csv, args.calibration, args.out, model=args.model, resolution=args.resolution,
-                         max_offset_s=args.max_offset_s, physics=args.physics, progress=progress)
+                         max_offset_s=args.max_offset_s, physics=args.physics,
+                         second_resolution=args.second_resolution, progress=progress)
     print_summary(done.doc)
     out = Path(args.out)
     print(f"wrote {out / 'simcal.json'}, {out / 'loo.csv'}, {out / 'simcal.png'}")

@@ -15,7 +15,7 @@ from analysis.simcal import PHYSICS_IDENTITY, PHYSICS_SETS
 from labapp.acquisition.printworld import PrintPhysics, world_release
 from labapp.acquisition.simbench import Material, SampleRelease
 from labapp.cli.main import main
-from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
+from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal, print_volume_mm3
 
 MESHES = {"slab": lambda: trimesh.creation.box((16, 16, 5)),
           "column": lambda: trimesh.creation.cylinder(radius=3.5, height=18, sections=48),
@@ -53,6 +53,13 @@ def test_hidden_anisotropy_is_recovered_and_earns_its_place(tmp_path):
     assert physics["choice"] == "anisotropy" and physics["fitted"] == ["anisotropy"]
     assert abs(physics["anisotropy"] - 1.4) < physics["uncertainty"]["anisotropy"]
     assert physics["uncertainty"]["anisotropy"] < 0.3
+    # the discretisation term: the physics refitted at 1.5 x the resolution, its extrapolated difference added in
+    # quadrature to the spread of the leave-one-out refits
+    disc = physics["discretisation"]
+    assert disc["resolution"] == 48 and set(disc["values"]) == {"anisotropy"}
+    assert disc["bias"]["anisotropy"] == pytest.approx(3.0 * abs(disc["values"]["anisotropy"] - physics["anisotropy"]))
+    assert physics["uncertainty"]["anisotropy"] == pytest.approx(
+        np.hypot(disc["uncertainty_refits"]["anisotropy"], disc["bias"]["anisotropy"]))
     iso, aniso = (physics["candidates"][m]["loo_rel_rmse_mean"] for m in ("none", "anisotropy"))
     # observed: isotropic 4.41 %, calibrated anisotropy 3.18 % of the weighed mass
     assert aniso < 0.8 * iso
@@ -109,12 +116,17 @@ def test_predictions_simulate_with_the_calibrated_physics(tmp_path):
     t, grams = predict_mesh("sample:pill", simcal)
     truth = simulate_mesh(sample_shape("pill"), resolution=24, anisotropy=1.5, offset_mm=0.1)
     assert t[-1] == pytest.approx(truth.tau_mm[-1] * 1500.0, rel=1e-9)
-    assert grams[-1] == pytest.approx(truth.released_mm3[-1] * 0.00125, rel=1e-9)
+    # the grams are the print's exact volume (the pill's mesh grown by 0.1 mm), the curve's shape the voxels'
+    exact = print_volume_mm3(sample_shape("pill"), 0.1)
+    assert grams[-1] == pytest.approx(exact * 0.00125, rel=1e-9)
+    np.testing.assert_allclose(np.interp(truth.tau_mm * 1500.0, t, grams / grams[-1]),
+                               truth.released_mm3 / truth.released_mm3[-1], atol=1e-3)
     iso = simulate_mesh(sample_shape("pill"), resolution=24)
     assert truth.released_mm3[-1] > 1.02 * iso.released_mm3[-1]   # the offset grows the print
     assert main(["simulate", "sample:pill", "--simcal", str(tmp_path / "simcal.json"), "--out", str(tmp_path / "sim")]) == 0
     summary = json.loads((tmp_path / "sim" / "summary.json").read_text())
     assert summary["physics"] == {"anisotropy": 1.5, "offset_mm": 0.1, "swelling_mm": 0.0}
+    assert summary["physical"]["mass_g"] == pytest.approx(exact * 0.00125, rel=1e-6)   # the CSV's digits
     assert summary["volume_mm3"] == pytest.approx(truth.volume_mm3, rel=1e-12)
     assert summary["total_time_mm"] == pytest.approx(truth.total_time_mm, rel=1e-12)
 
