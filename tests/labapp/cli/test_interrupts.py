@@ -2,6 +2,7 @@
 prints one ``interrupted: ...`` line and exits with 130, leaving a folder that resumes or reruns."""
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import random
@@ -78,6 +79,21 @@ class WarmSfr:
             self.server = subprocess.Popen([sys.executable, str(Path(__file__).with_name("warm_cli.py"))], cwd=ROOT,
                                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err, text=True)
         self.started = 0
+        self.running: set[int] = set()
+
+    def __enter__(self) -> WarmSfr:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """Children still running (a failed test) are killed; the server ends."""
+        for pid in self.running:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        self.server.stdin.close()
+        try:
+            self.server.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            self.server.kill()
 
     def ask(self, request: dict) -> dict:
         self.server.stdin.write(json.dumps(request) + "\n")
@@ -94,15 +110,16 @@ class WarmSfr:
         """The child's pid and its standard error's file."""
         self.started += 1
         log = self.folder / f"command_{self.started}"
-        return self.ask({"run": args, "cwd": str(self.folder), "log": str(log)})["pid"], log.with_suffix(".err")
+        pid = self.ask({"run": args, "cwd": str(self.folder), "log": str(log)})["pid"]
+        self.running.add(pid)
+        return pid, log.with_suffix(".err")
 
     def poll(self, pid: int) -> int | None:
         """The child's exit code, None while it runs."""
-        return self.ask({"poll": pid})["code"]
-
-    def close(self) -> None:
-        self.server.stdin.close()
-        self.server.wait(timeout=60)
+        code = self.ask({"poll": pid})["code"]
+        if code is not None:
+            self.running.discard(pid)
+        return code
 
 
 @dataclass
@@ -135,8 +152,15 @@ def test_ctrl_c_at_twenty_random_moments_of_a_design_an_analysis_and_a_calibrati
         return {"design": DESIGN + ["--out", str(out)],
                 "analysis": ["analyze", str(BENCH / "run"), "--calibration", str(cal), "--out", str(out)],
                 "calibration": ["calibrate-bench", str(BENCH / "calibration"), "--out", str(out) + ".json"]}[kind]
+    with WarmSfr(tmp_path) as sfr:
+        caught = _twenty_moments(sfr, command, tmp_path)
+    assert caught >= 18, f"only {caught} of 20 moments fell inside a command"
+
+
+def _twenty_moments(sfr: WarmSfr, command, tmp_path: Path) -> int:
+    """Warm up, then stop 20 commands at random moments and complete each; how many moments fell inside."""
+    cal = tmp_path / "cal.json"
     kinds = ("calibration", "analysis", "design")
-    sfr = WarmSfr(tmp_path)
     durations = dict(zip(kinds, sfr.warm([command("calibration", cal.with_suffix("")),
                                           command("analysis", tmp_path / "reference"),
                                           command("design", tmp_path / "reference_design")])))
@@ -172,20 +196,21 @@ def test_ctrl_c_at_twenty_random_moments_of_a_design_an_analysis_and_a_calibrati
                                           moment.delay / 2, moment.tries - 1))
             else:
                 caught += 1
-                follow_up = _assert_interrupted(moment, code, err)
+                follow_up = _assert_interrupted(moment, code, err, command)
                 if follow_up is None:
                     running.remove(moment)
+                    if moment.kind != "design":         # its outputs were complete when the signal came
+                        _assert_completed(moment, reference_curve, reference_k)
                 else:
-                    moment.pid, moment.err = sfr.start(follow_up(command))
+                    moment.pid, moment.err = sfr.start(follow_up)
                     moment.following_up = True
         time.sleep(0.02)
-    sfr.close()
-    assert caught >= 18, f"only {caught} of 20 moments fell inside a command"
+    return caught
 
 
-def _assert_interrupted(moment: Moment, code: int, err: str):
-    """The checks of an interrupted command; the command that completes its work (a function of the command
-    builder), or None when nothing is left to complete."""
+def _assert_interrupted(moment: Moment, code: int, err: str, command) -> list[str] | None:
+    """The checks of an interrupted command; the command that completes its work, or None when there is none
+    to run: a design stopped before it began (nothing left behind) or a calibration whose file is complete."""
     assert code == 130, f"{moment.where}: exit {code}\n{err}"
     assert err.strip().splitlines()[-1].startswith("interrupted: "), f"{moment.where}\n{err}"
     assert not any(sign in err for sign in BAD_SIGNS), f"{moment.where}\n{err}"
@@ -195,12 +220,13 @@ def _assert_interrupted(moment: Moment, code: int, err: str):
         if not (out / "config.json").exists():     # stopped before it began: nothing left behind
             assert not out.exists() or not any(out.iterdir()), f"{moment.where}: left {list(out.iterdir())}"
             return None
-        return lambda command: DESIGN + ["--resume", "--out", str(out)]
-    if moment.kind == "analysis":
+        return DESIGN + ["--resume", "--out", str(out)]
+    if moment.kind == "analysis":                   # an analysis reruns into its own folder
         assert finished or not (out / "curve.csv").exists(), moment.where
-    else:
-        assert finished or not Path(str(out) + ".json").exists(), moment.where
-    return lambda command: command(moment.kind, out)
+        return command(moment.kind, out)
+    written = Path(str(out) + ".json").exists()     # a calibration file is never overwritten
+    assert finished or not written, moment.where
+    return None if written else command(moment.kind, out)
 
 
 def _assert_completed(moment: Moment, reference_curve: str, reference_k: list) -> None:
