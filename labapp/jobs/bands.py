@@ -15,7 +15,6 @@ as a floor, the mass scale's spread added, Student's t quantile). This module
 """
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 
@@ -35,23 +34,6 @@ def quantile_columns(level: float = BAND_LEVEL) -> tuple[str, str]:
     return f"q{tail:02.0f}", f"q{100.0 - tail:02.0f}"
 
 
-def load_band(simcal: SimCalFile) -> dict | None:
-    """The ``band`` block of a calibration file, or None for a file made without one."""
-    try:
-        doc = json.loads(Path(simcal.path).read_text())
-    except (OSError, ValueError) as exc:
-        raise SimCalError(f"{simcal.path}: cannot read ({exc})") from exc
-    block = doc.get("band")
-    if block is None:
-        return None
-    try:
-        ResidualModel.from_dict(block["residuals"])
-        float(block["seconds_per_mm_rel_sd"]), float(block["g_per_mm3_rel_sd"]), float(block["level"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise SimCalError(f"{simcal.path}: bad band block ({exc}); recalibrate with sfr calibrate-sim") from exc
-    return block
-
-
 def prediction_band(simcal: SimCalFile, tau_mm: np.ndarray, released_mm3: np.ndarray, t_s: np.ndarray,
                     water_g: float, simulate_at: SimulateAt | None = None, mass_g: float | None = None,
                     block: dict | None = None) -> tuple[np.ndarray, np.ndarray] | None:
@@ -69,13 +51,13 @@ def prediction_band(simcal: SimCalFile, tau_mm: np.ndarray, released_mm3: np.nda
     mass_g : float, optional
         A weighed mass (then the mass scale's spread is left out).
     block : dict, optional
-        The calibration's band block (default: read from the file).
+        The calibration's band block (default: the file's, ``simcal.band``).
 
     Returns
     -------
     (lower_g, upper_g) or None
     """
-    block = load_band(simcal) if block is None else block
+    block = simcal.band if block is None else block
     if block is None:
         return None
     cal = simcal.cal

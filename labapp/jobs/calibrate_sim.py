@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, SimCal, fit_simcal, leave_one_out
-from analysis.bands import band_block
+from analysis.bands import ResidualModel, band_block
 from analysis.simcal import (
     DEFAULT_MAX_OFFSET_S,
     DISCRETISATION_FACTOR,
@@ -94,6 +94,9 @@ class SimCalFile:
     path : Path
     physics : dict
         The forward model's print physics (``anisotropy``, ``offset_mm``, ``swelling_mm``) predictions simulate with.
+    band : dict or None
+        The file's ``band`` block (checked), what a prediction's error band is made from; None for a file made
+        without one.
     """
 
     cal: SimCal
@@ -102,6 +105,7 @@ class SimCalFile:
     water_g: float
     path: Path
     physics: dict = dataclasses.field(default_factory=lambda: dict(PHYSICS_IDENTITY))
+    band: dict | None = None
 
     def describe(self) -> str:
         """One line for reports and GUI labels."""
@@ -637,7 +641,14 @@ def load_simcal(path: str | Path) -> SimCalFile:
                           f"got {physics}")
     if not (math.isfinite(physics["swelling_mm"]) and physics["swelling_mm"] >= 0):
         raise SimCalError(f"{path}: physics.swelling_mm must be a number >= 0 (mm), got {physics['swelling_mm']}")
-    return SimCalFile(cal, resolution, dx, water, path, physics)
+    band = doc.get("band")
+    if band is not None:
+        try:
+            ResidualModel.from_dict(band["residuals"])
+            float(band["seconds_per_mm_rel_sd"]), float(band["g_per_mm3_rel_sd"]), float(band["level"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise SimCalError(f"{path}: bad band block ({exc}); recalibrate with sfr calibrate-sim") from exc
+    return SimCalFile(cal, resolution, dx, water, path, physics, band)
 
 
 def check_resolution(simcal: SimCalFile, resolution: int | None) -> int:
