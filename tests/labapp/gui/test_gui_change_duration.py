@@ -92,8 +92,8 @@ def test_the_maximum_duration_changes_during_the_run_with_a_reason(qtbot, record
 
     qtbot.waitUntil(lambda: "changed max_duration_s: 0.1 -> 0.2 h" in win.messages.toPlainText(), timeout=15_000)
     assert win.engine.running, "the run ended before the change was applied"      # applied at ~t = 1-2 min
-    win._show_progress()
-    assert win.progress.maximum() == int(NEW_MAX_S) and "of 0:12" in win.progress.format(), win.progress.format()
+    qtbot.waitUntil(lambda: win.progress.maximum() == int(NEW_MAX_S), timeout=15_000)   # at the next status tick
+    assert "of 0:12" in win.progress.format(), win.progress.format()
     qtbot.waitUntil(lambda: not win.engine.running and not c.change_button.isEnabled(), timeout=30_000)
     assert win.engine.outcome == "complete" and told == []
 
