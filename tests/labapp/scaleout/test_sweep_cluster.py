@@ -20,6 +20,7 @@ space = "nfc"
 resolution = 32
 max_iter = {MAX_ITER}
 checkpoint_every = 3
+physical_correction = "none"
 [grid]
 w_binary = [10, 20]
 radius_vox = [2.0, 3.0]
