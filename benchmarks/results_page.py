@@ -1,4 +1,4 @@
-"""Write docs/results.md: what `sfr design` achieves today, with its current defaults.
+"""Write docs/results_samples.md: what `sfr design` achieves today on the shipped samples, with its current defaults.
 
     .venv/bin/python benchmarks/results_page.py [--quick] [--out PAGE] [--keep DIR]
 
@@ -240,7 +240,7 @@ def _before_after(rows: list[dict], before: dict) -> list[str]:
 
 def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | None, quick: bool,
          before: dict | None = None) -> str:
-    """The Markdown of docs/results.md (``before``: the runs without the physical correction, by (target, space))."""
+    """The Markdown of the page (``before``: the runs without the physical correction, by (target, space))."""
     from design.files.outputs import software_versions
 
     done = [r for r in rows if "folder" in r]
@@ -349,10 +349,10 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help=f"resolution {QUICK_RESOLUTION}; print the page")
-    parser.add_argument("--out", type=Path, help="page to write (default docs/results.md; with --quick: print)")
+    parser.add_argument("--out", type=Path, help="page to write (default docs/results_samples.md; with --quick: print)")
     parser.add_argument("--keep", type=Path, help="keep the design run folders in this new folder")
     args = parser.parse_args(argv)
-    out = args.out or (None if args.quick else ROOT / "docs" / "results.md")
+    out = args.out or (None if args.quick else ROOT / "docs" / "results_samples.md")
     resolution = QUICK_RESOLUTION if args.quick else RESOLUTION
     if args.keep is not None and args.keep.exists():
         parser.error(f"--keep {args.keep} exists; name a new folder")

@@ -3,29 +3,18 @@ process at its next frame, audited with who and why, kept in run.json; refused w
 import os
 import subprocess
 import sys
-import time
 
 import pytest
 
 from labapp.records.audit import check_trail
 from labapp.records.requests import REQUESTS_DIR
 from labapp.records.storage import read_run, verify_run
+from tests.labapp.acquisition.runwait import wait_frames
 
 
 def _sfr(*args, **kwargs):
     return subprocess.Popen([sys.executable, "-m", "labapp.cli.main", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, env=dict(os.environ, PYTHONUNBUFFERED="1"), text=True, **kwargs)
-
-
-def _first_frames(root, n, proc, timeout_s=120):
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        assert proc.poll() is None, proc.stdout.read()
-        folders = [p for p in root.glob("*") if (p / "frames.csv").exists()]
-        if folders and len(read_run(folders[0]).frames) >= n:
-            return folders[0]
-        time.sleep(0.05)
-    raise AssertionError(f"fewer than {n} frames after {timeout_s} s")
 
 
 def test_sfr_change_extends_a_recording_run_audited_and_kept(tmp_path, sim_calibration, capsys):
@@ -36,7 +25,7 @@ def test_sfr_change_extends_a_recording_run_audited_and_kept(tmp_path, sim_calib
     runs = tmp_path / "runs"
     recording = _sfr("run", "--simulate", "--speed", "300", "--sample", "sphere", "--out", str(runs), "--calibration",
                      str(cal_path), "--max-hours", "0.5", "--no-steady-stop", "--interval", "20")
-    folder = _first_frames(runs, 3, recording)
+    folder = wait_frames(runs, 3, recording)
     with pytest.raises(SystemExit):                     # a change without a reason: refused by argparse
         main(["change", str(folder), "--max-hours", "0.75"])
     assert "--reason" in capsys.readouterr().err

@@ -3,10 +3,10 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 from labapp.records.runrecord import RecordStatus
 from labapp.records.storage import read_run, unrecorded_frames, verify_run
+from tests.labapp.acquisition.runwait import wait_frames
 
 
 def _sfr_run(*args):
@@ -15,23 +15,12 @@ def _sfr_run(*args):
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
 
 
-def _wait_frames(root, n, proc, timeout_s=120):
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        assert proc.poll() is None, proc.stdout.read()
-        folders = [p for p in root.glob("*") if (p / "frames.csv").exists()]
-        if folders and len(read_run(folders[0]).frames) >= n:
-            return folders[0]
-        time.sleep(0.1)
-    raise AssertionError(f"fewer than {n} frames after {timeout_s} s")
-
-
 def test_sigkill_mid_run_then_resume_into_the_same_folder(tmp_path, sim_calibration):
     _, cal_path = sim_calibration
     runs = tmp_path / "runs"
     first = _sfr_run("--speed", "200", "--sample", "sphere", "--out", str(runs), "--calibration", str(cal_path),
                      "--max-hours", "3", "--no-steady-stop")
-    folder = _wait_frames(runs, 15, first)
+    folder = wait_frames(runs, 15, first)
     first.send_signal(signal.SIGKILL)
     first.wait(30)
 
@@ -43,7 +32,7 @@ def test_sigkill_mid_run_then_resume_into_the_same_folder(tmp_path, sim_calibrat
     assert report.ok or report.unlisted == unrecorded_frames(read_run(folder)) != []   # one killed mid-record
 
     second = _sfr_run("--speed", "200", "--resume", str(folder))
-    _wait_frames(runs, len(before.frames) + 10, second)
+    wait_frames(runs, len(before.frames) + 10, second)
     second.send_signal(signal.SIGINT)                  # Ctrl-C: a clean stop
     out, _ = second.communicate(timeout=60)
     assert second.returncode == 130, out
