@@ -18,7 +18,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", help="the run folder being recorded (by `sfr run` or `sfr lab`)")
     for setting in CHANGEABLE_DURING_RUN:
         parser.add_argument(setting.flag, dest=setting.name, type=setting_type(setting), default=None,
-                            metavar=setting.display_unit.upper(), help=f"new {setting.label}, {setting.display_unit} ({setting.range_text(shown=True)})")
+                            metavar=setting.display_unit.upper(),
+                            help=f"new {setting.label}, {setting.display_unit} ({setting.range_text(shown=True)})")
     parser.add_argument("--reason", required=True, help="why (recorded in the run's audit trail)")
 
 

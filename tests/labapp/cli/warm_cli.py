@@ -4,7 +4,7 @@ once, then forks a child per command, so each command starts in milliseconds ins
 A child runs :func:`labapp.cli.main.main` as ``python -m labapp.cli.main`` would, in its own process with its
 own signal handling, its standard output and error in files. The protocol is one JSON object per line:
 
-    stdin  {"warm": [[ARG, ...], ...], "cwd": DIR}    stdout {"seconds": [SECONDS, ...]}  (each command's)
+    stdin  {"warm": [[ARG, ...], ...], "cwd": DIR}    stdout {"warmed": true}
     stdin  {"run": [ARG, ...], "cwd": DIR, "log": PREFIX}  stdout {"pid": PID}   (PREFIX.out, PREFIX.err)
     stdin  {"poll": PID}                               stdout {"code": EXIT CODE, or null while it runs}
  The commands' own output during the warm-up goes to the
@@ -21,7 +21,6 @@ import json
 import os
 import sys
 import threading
-import time
 import traceback
 from pathlib import Path
 
@@ -52,22 +51,18 @@ def _child(args: list[str], cwd: str, log: str) -> None:
         os._exit(code)
 
 
-def _warm(commands: list[list[str]], cwd: str) -> list[float]:
-    """Run each command once in this process (imports and compiled code stay); the seconds each took."""
+def _warm(commands: list[list[str]], cwd: str) -> None:
+    """Run each command once in this process: the imports and the compiled code stay for every child."""
     from labapp.cli.main import main
 
     os.chdir(cwd)
-    seconds = []
     for args in commands:
-        t0 = time.monotonic()
         with contextlib.redirect_stdout(sys.stderr):
             code = main(args)
-        seconds.append(time.monotonic() - t0)
         if code not in (0, 1):
             raise RuntimeError(f"warm-up of {args} ended with exit code {code}")
     if threading.active_count() != 1:   # forking with a live thread could copy a held lock into every child
         raise RuntimeError(f"threads still running after the warm-up: {threading.enumerate()}")
-    return seconds
 
 
 def serve() -> None:
@@ -75,7 +70,8 @@ def serve() -> None:
     for line in sys.stdin:
         request = json.loads(line)
         if "warm" in request:
-            reply = {"seconds": _warm(request["warm"], request["cwd"])}
+            _warm(request["warm"], request["cwd"])
+            reply = {"warmed": True}
         elif "run" in request:
             sys.stdout.flush()
             pid = os.fork()
