@@ -30,6 +30,7 @@ from labapp.acquisition.settings import (
     REFERENCE_ALARM_G_PER_KG,
     RUN_SETTINGS,
     BathSettings,
+    Setting,
     check_settings,
     from_record,
     to_record,
@@ -42,6 +43,24 @@ from labapp.records.runrecord import RecordStatus
 from labapp.records.storage import RunFolder, check_disk_space, create_run, free_bytes, open_run, read_run
 
 _STATUS = {outcome: RecordStatus(outcome) for outcome in Outcome}
+
+
+def check_change(name: str, value: float, reason: str) -> Setting:
+    """The declaration of ``name`` if it may change during a run to ``value`` (stored units) with ``reason``.
+
+    Raises
+    ------
+    UsageError
+        For a setting fixed at the start, no reason, or a value out of its range.
+    """
+    settings = {s.name: s for s in CHANGEABLE_DURING_RUN}
+    if name not in settings:
+        raise UsageError(f"{name} cannot change while a run records (only {', '.join(settings)} can); the other "
+                         "settings are fixed at the start")
+    if not reason or not reason.strip():
+        raise UsageError(f"changing {name} during a run needs a reason (it is recorded in the audit trail)")
+    settings[name].check(value, "change")
+    return settings[name]
 
 
 @dataclass(frozen=True)
@@ -269,16 +288,9 @@ class RunProcedure:
         labapp.records.operators.OperatorError
             When nobody is acting (no ``operator`` and no current operator).
         """
-        settings = {s.name: s for s in CHANGEABLE_DURING_RUN}
-        if name not in settings:
-            raise UsageError(f"{name} cannot change while a run records (only {', '.join(settings)} can); the "
-                             "other settings are fixed at the start")
-        if not reason or not reason.strip():
-            raise UsageError(f"changing {name} during a run needs a reason (it is recorded in the audit trail)")
+        setting = check_change(name, value, reason)
         if self.run is None or self.run.status != RecordStatus.RUNNING:
             raise UsageError("no run is recording; a setting changes only during a run")
-        setting = settings[name]
-        setting.check(value, "change")
         detail = (f"{name}: {setting.shown(getattr(self.config, name)):g} -> {setting.shown(value):g} "
                   f"{setting.display_unit}")
         audit(self.run.path, Action.CHANGE_SETTING, detail, reason=reason.strip(), operator=operator)

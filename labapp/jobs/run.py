@@ -7,8 +7,8 @@ from pathlib import Path
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench
 from labapp.acquisition.methods import Method
-from labapp.acquisition.procedures import RunConfig, RunProcedure
-from labapp.acquisition.settings import CHANGEABLE_DURING_RUN, INTERVAL
+from labapp.acquisition.procedures import RunConfig, RunProcedure, check_change
+from labapp.acquisition.settings import INTERVAL
 from labapp.errors import UsageError
 from labapp.records import operators, requests
 from labapp.records.outpaths import FolderKind, check_data_dir, folder_kind
@@ -127,12 +127,7 @@ def change_setting(folder: str | Path, name: str, value: float, reason: str,
         When the process acts as nobody.
     """
     folder = Path(folder)
-    settings = {s.name: s for s in CHANGEABLE_DURING_RUN}
-    if name not in settings:
-        raise UsageError(f"{name} cannot change while a run records (only {', '.join(settings)} can)")
-    if not reason or not reason.strip():
-        raise UsageError(f"changing {name} during a run needs a reason (it is recorded in the audit trail)")
-    settings[name].check(value, "change")
+    check_change(name, value, reason)       # refused at once, not after waiting for the next frame
     operator = operators.require(f"changing {name} of {folder.name}")
     try:
         snap = read_run(folder)
