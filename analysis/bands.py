@@ -12,8 +12,9 @@ and the calibrated parameters themselves are uncertain. The band at each time is
   centres, times the prediction's mass. They already hold the error of parameters fitted on one run fewer,
   so the parameter spread of the time scale and the print physics, ``s_par(t)``, is a floor, not an addend:
   it takes over where a prediction is more sensitive to those parameters than the calibration runs were.
-- ``s_par(t)``: each parameter moved by its standard error (jackknife over the leave-one-out refits),
-  the prediction's change at each time, added in quadrature (the linearised propagation
+- ``s_par(t)``: each parameter moved by its standard error (jackknife over the leave-one-out refits; the wetting
+  lag moves the clock, the print physics are simulated again), the prediction's change at each time, added in
+  quadrature (the linearised propagation
   sqrt(sum_p (dg/dp sigma_p)^2) with central differences, :func:`parameter_spread`).
 - ``s_mass(t)``: the mass scale's predictive spread (how one more print's grams per simulated mm^3 differ from
   the pooled scale: the calibration prints' spread times sqrt(1 + 1/n)) times the predicted release, for a
@@ -28,6 +29,7 @@ built from the other runs only: the residual model of the others and their quant
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -36,7 +38,7 @@ import numpy as np
 from scipy import stats
 
 from analysis.errors import AnalysisError
-from analysis.simcal import PHYSICS_IDENTITY, PHYSICS_PARAMETERS, LooShape, ShapeRun, SimCal
+from analysis.simcal import LAG, PHYSICS_IDENTITY, PHYSICS_PARAMETERS, LooShape, ShapeRun, SimCal
 
 BAND_LEVEL = 0.90
 """Nominal coverage of the bands: the central 90% (the 5th and 95th percentiles)."""
@@ -268,8 +270,9 @@ def _jackknife_rel(values: Sequence[float]) -> float:
     return float(math.sqrt((n - 1) / n * float(np.sum((logs - logs.mean()) ** 2))))
 
 
-def _cal_moved(cal: SimCal, seconds_factor: float) -> SimCal:
-    return SimCal(cal.model, cal.seconds_per_mm * seconds_factor, cal.g_per_mm3, cal.saturation_g_per_kg)
+def _cal_moved(cal: SimCal, seconds_factor: float = 1.0, lag_s: float | None = None) -> SimCal:
+    return dataclasses.replace(cal, seconds_per_mm=cal.seconds_per_mm * seconds_factor,
+                               lag_s=cal.lag_s if lag_s is None else max(lag_s, 0.0))
 
 
 def _moved_physics(physics: dict, sd: dict) -> list[tuple[dict, dict]]:
@@ -294,6 +297,10 @@ def spread_g(cal: SimCal, tau_mm: np.ndarray, released_mm3: np.ndarray, t_s: np.
     nominal = cal.to_physical(tau_mm, released_mm3, t_s, water_g, mass_g=mass_g)
     moved = [tuple(_cal_moved(cal, math.exp(sign * seconds_rel_sd)).to_physical(tau_mm, released_mm3, t_s, water_g,
                                                                                  mass_g=mass_g) for sign in (1, -1))]
+    lag_sd = float(physics_sd.get(LAG) or 0.0)
+    if lag_sd > 0:   # the wetting lag moves the clock, nothing is simulated again (a lag is never below 0)
+        moved.append(tuple(_cal_moved(cal, lag_s=cal.lag_s + sign * lag_sd).to_physical(
+            tau_mm, released_mm3, t_s, water_g, mass_g=mass_g) for sign in (1, -1)))
     if simulate_at is not None:
         for up, down in _moved_physics(physics, physics_sd):
             # with a weighed mass the moved print keeps it; without, its volume changes its mass

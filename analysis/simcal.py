@@ -54,11 +54,15 @@ SECONDS_PER_MM_BOUNDS = (1.0, 1.0e6)
 """Search range of the time scale, s per mm of tau."""
 DEFAULT_MAX_OFFSET_S = 120.0
 """Default bound on a run's drop-time offset, s (about ten frames at 11 s)."""
+LAG_BOUNDS_S = (0.0, 1200.0)
+"""Search range of the wetting lag, s (PVA prints wet for one to ten minutes before they release)."""
 W_SLOPE = 1.0
 """w_s of the section 4.3 loss (1, as in the paper)."""
 _HOUR_S = 3600.0
 _SCAN_PER_DECADE = 24
 _ROUNDS = 3
+_LAG_SCAN = 41      # lag grid points over LAG_BOUNDS_S (30 s apart)
+_LAG_ROUNDS = 5
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,12 +143,17 @@ class SimCal:
         Released grams per mm^3 of simulated solid.
     saturation_g_per_kg : float or None
         c_sat of the ``saturation`` model, g/kg; None for ``constant``.
+    lag_s : float
+        Wetting lag, s: the print releases nothing for this long after the drop, then as the model says (a
+        property of the material and the print shared by every run; 0: none). The bench's time t is the model's
+        clock plus the lag.
     """
 
     model: str
     seconds_per_mm: float
     g_per_mm3: float
     saturation_g_per_kg: float | None = None
+    lag_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -157,6 +166,8 @@ class SimCal:
             raise AnalysisError("saturation_g_per_kg is given exactly for the 'saturation' model")
         if self.saturation_g_per_kg is not None and not self.saturation_g_per_kg > 0:
             raise AnalysisError(f"saturation_g_per_kg = {self.saturation_g_per_kg!r} must be positive")
+        if not (math.isfinite(self.lag_s) and self.lag_s >= 0):
+            raise AnalysisError(f"lag_s = {self.lag_s!r} must be a number of seconds >= 0")
 
     def clock_s(self, tau_mm: np.ndarray, released_g: np.ndarray, water_g: float) -> np.ndarray:
         """Physical time at each tau sample, s (tau / k, or Appendix B's remapping).
@@ -202,20 +213,23 @@ class SimCal:
         Returns
         -------
         (Q,) ndarray of float, g
+            Nothing before the wetting lag (``lag_s``), then the simulated release on the model's clock.
         """
         vol = np.asarray(released_mm3, float)
         grams = vol * (self.g_per_mm3 if mass_g is None else mass_g / vol[-1])
-        return np.interp(np.asarray(t_s, float), self.clock_s(tau_mm, grams, water_g), grams, left=0.0)
+        return np.interp(np.asarray(t_s, float) - self.lag_s, self.clock_s(tau_mm, grams, water_g), grams, left=0.0)
 
     def to_simulation(self, t_s: np.ndarray, released_g: np.ndarray, water_g: float) -> tuple[np.ndarray, np.ndarray]:
         """A measured curve in simulation units: tau (mm) and released volume (mm^3).
 
         The measured release is known at every t, so Appendix B's ODE integrates directly:
-        tau(t) = k int_0^t (1 - c(t') / c_sat) dt' (trapezoid), tau = t / seconds_per_mm for ``constant``.
+        tau(t) = k int_lag^t (1 - c(t') / c_sat) dt' (trapezoid), tau = (t - lag) / seconds_per_mm for
+        ``constant``: the model's clock starts when the wetting lag ends.
 
         Parameters
         ----------
-        t_s : (N,) ndarray of float, s since the drop, increasing, >= 0
+        t_s : (N,) ndarray of float, s since the drop, increasing, >= ``lag_s`` (the release before the lag
+            ends is nothing the model can make)
         released_g : (N,) ndarray of float, g
         water_g : float
 
@@ -223,7 +237,7 @@ class SimCal:
         -------
         tau_mm, released_mm3 : (N,) ndarray of float
         """
-        t = np.asarray(t_s, float)
+        t = np.asarray(t_s, float) - self.lag_s
         grams = np.asarray(released_g, float)
         if self.saturation_g_per_kg is None:
             tau = t / self.seconds_per_mm
@@ -340,13 +354,21 @@ def _scan_then_refine(f: Callable[[float], float], grid: np.ndarray, xatol: floa
 
 
 def _fit_time(prepared: Sequence[_Prepared], inv_csat: float, max_offset_s: float,
-              around: float | None = None) -> tuple[float, list[float], list[float]]:
-    """Shared seconds_per_mm and per-run offsets for a given 1/c_sat; returns (s, offsets, losses)."""
+              around: float | None = None, lag: bool = False) -> tuple[float, float, list[float], list[float]]:
+    """Shared seconds_per_mm, wetting lag (with ``lag``; else 0) and per-run offsets for a given 1/c_sat;
+    returns (s, lag_s, offsets, losses).
+
+    Run i's measured time is compared at t - lag - t0_i. The lag is shared by all runs (a property of the
+    material); the offsets are each run's jitter of its logged drop, bounded by ``max_offset_s``. A shift common to
+    every run cannot tell one from the other, so with the lag fitted the offsets are centred: their mean goes into
+    the lag (clipped to `LAG_BOUNDS_S`), and the lag is the mean delay of the runs.
+    """
     offsets = [0.0] * len(prepared)
+    lag_s = 0.0
 
     def total(log_s: float) -> float:
         s = math.exp(log_s)
-        return sum(p.loss(s, inv_csat, o) for p, o in zip(prepared, offsets))
+        return sum(p.loss(s, inv_csat, lag_s + o) for p, o in zip(prepared, offsets))
 
     lo, hi = (math.log(b) for b in SECONDS_PER_MM_BOUNDS)
     full_grid = np.linspace(lo, hi, int(round((hi - lo) / math.log(10) * _SCAN_PER_DECADE)) + 1)
@@ -357,13 +379,25 @@ def _fit_time(prepared: Sequence[_Prepared], inv_csat: float, max_offset_s: floa
         log_s, _ = _scan_then_refine(total, grid, 1e-5)
         if min(log_s - grid[0], grid[-1] - log_s) < 0.5 * (grid[1] - grid[0]):   # at the window's edge: scan all
             log_s, _ = _scan_then_refine(total, full_grid, 1e-5)
-    for _ in range(_ROUNDS if max_offset_s > 0 else 0):
+    lag_grid = np.linspace(*LAG_BOUNDS_S, _LAG_SCAN)
+    # a lag changes the time scale the first scan found (it absorbed the delay): more rounds, a wider step
+    rounds, window = (_LAG_ROUNDS, 0.15) if lag else (_ROUNDS if max_offset_s > 0 else 0, 0.05)
+    for _ in range(rounds):
         s = math.exp(log_s)
-        offset_grid = np.linspace(-max_offset_s, max_offset_s, 17)
-        offsets = [_scan_then_refine(lambda o, p=p: p.loss(s, inv_csat, o), offset_grid, 0.1)[0] for p in prepared]
-        log_s, _ = _bounded(total, log_s - 0.05, log_s + 0.05, 1e-6)
+        if lag:
+            lag_s, _ = _scan_then_refine(
+                lambda d: sum(p.loss(s, inv_csat, d + o) for p, o in zip(prepared, offsets)), lag_grid, 0.1)
+        if max_offset_s > 0:
+            offset_grid = np.linspace(-max_offset_s, max_offset_s, 17)
+            offsets = [_scan_then_refine(lambda o, p=p: p.loss(s, inv_csat, lag_s + o), offset_grid, 0.1)[0]
+                       for p in prepared]
+            if lag:
+                moved = min(max(lag_s + float(np.mean(offsets)), LAG_BOUNDS_S[0]), LAG_BOUNDS_S[1])
+                offsets = [o + lag_s - moved for o in offsets]
+                lag_s = moved
+        log_s, _ = _bounded(total, log_s - window, log_s + window, 1e-6)
     s = math.exp(log_s)
-    return s, offsets, [p.loss(s, inv_csat, o) for p, o in zip(prepared, offsets)]
+    return s, lag_s, offsets, [p.loss(s, inv_csat, lag_s + o) for p, o in zip(prepared, offsets)]
 
 
 def _prepare(shapes: Sequence[ShapeRun], window_s: float, order: int) -> list[_Prepared]:
@@ -376,36 +410,36 @@ def _prepare(shapes: Sequence[ShapeRun], window_s: float, order: int) -> list[_P
 
 
 def _fit_prepared(prepared: Sequence[_Prepared], model: str, max_offset_s: float,
-                  around: float | None = None) -> SimCalFit:
+                  around: float | None = None, lag: bool = False) -> SimCalFit:
     if model not in MODELS:
         raise AnalysisError(f"model {model!r} is not one of {', '.join(MODELS)}")
     if not 0 <= max_offset_s < math.inf:
         raise AnalysisError(f"max_offset_s = {max_offset_s!r} must be >= 0 and finite")
     shapes = [p.shape for p in prepared]
     g_per_mm3 = float(sum(s.mass_g for s in shapes) / sum(s.volume_mm3 for s in shapes))
-    s, offsets, losses = _fit_time(prepared, 0.0, max_offset_s, around=around)
+    s, lag_s, offsets, losses = _fit_time(prepared, 0.0, max_offset_s, around=around, lag=lag)
     inv_csat = 0.0
     if model == "saturation":
         # 1/c_sat from 0 (constant rate) to where the most loaded bath would reach 90% of saturation
         top = 0.9 / (1000.0 * max(p.load_fraction for p in prepared))
-        fits: dict[float, tuple[float, list[float], list[float]]] = {0.0: (s, offsets, losses)}
+        fits: dict[float, tuple[float, float, list[float], list[float]]] = {0.0: (s, lag_s, offsets, losses)}
 
         def objective(x: float) -> float:
             if x not in fits:
-                fits[x] = _fit_time(prepared, x, max_offset_s, around=s)
-            return float(sum(fits[x][2]))
+                fits[x] = _fit_time(prepared, x, max_offset_s, around=s, lag=lag)
+            return float(sum(fits[x][3]))
 
         inv_csat, _ = _scan_then_refine(objective, np.linspace(0.0, top, 10), top * 1e-4)
         objective(inv_csat)
-        s, offsets, losses = fits[inv_csat]
+        s, lag_s, offsets, losses = fits[inv_csat]
         if inv_csat <= 0:   # the constant model fits best: a bath that never saturates (c_sat 1e6 x the bound)
             inv_csat = top * 1e-6
-    cal = SimCal(model, s, g_per_mm3, 1.0 / inv_csat if model == "saturation" else None)
+    cal = SimCal(model, s, g_per_mm3, 1.0 / inv_csat if model == "saturation" else None, lag_s)
     return SimCalFit(cal, tuple(sh.g_per_mm3 for sh in shapes), tuple(offsets), tuple(losses))
 
 
 def fit_simcal(shapes: Sequence[ShapeRun], model: str = "constant", *, max_offset_s: float = DEFAULT_MAX_OFFSET_S,
-               window_s: float = DEFAULT_WINDOW_S, order: int = DEFAULT_ORDER) -> SimCalFit:
+               window_s: float = DEFAULT_WINDOW_S, order: int = DEFAULT_ORDER, lag: bool = False) -> SimCalFit:
     """Fit the simulation-to-bench map to measured shapes (section 4.3; Appendix B for ``saturation``).
 
     Parameters
@@ -417,6 +451,8 @@ def fit_simcal(shapes: Sequence[ShapeRun], model: str = "constant", *, max_offse
         Bound on each run's drop-time offset, s (0: no offsets).
     window_s, order
         Savitzky-Golay settings for the measured curves and their slopes.
+    lag : bool
+        Fit a wetting lag shared by all runs (``SimCal.lag_s``); else none.
 
     Returns
     -------
@@ -427,20 +463,20 @@ def fit_simcal(shapes: Sequence[ShapeRun], model: str = "constant", *, max_offse
     AnalysisError
         An unknown model, an empty or duplicate-named set.
     """
-    return _fit_prepared(_prepare(shapes, window_s, order), model, max_offset_s)
+    return _fit_prepared(_prepare(shapes, window_s, order), model, max_offset_s, lag=lag)
 
 
 def leave_one_out(shapes: Sequence[ShapeRun], model: str = "constant", *,
                   max_offset_s: float = DEFAULT_MAX_OFFSET_S, window_s: float = DEFAULT_WINDOW_S,
-                  order: int = DEFAULT_ORDER,
-                  progress: Callable[[int, int], None] | None = None) -> tuple[LooShape, ...]:
+                  order: int = DEFAULT_ORDER, progress: Callable[[int, int], None] | None = None,
+                  lag: bool = False) -> tuple[LooShape, ...]:
     """Predict each shape with a calibration fitted to the others (section 5.1's cross-validation).
 
     Parameters
     ----------
     shapes : sequence of ShapeRun
         At least two.
-    model, max_offset_s, window_s, order
+    model, max_offset_s, window_s, order, lag
         As in :func:`fit_simcal`.
     progress : callable, optional
         ``progress(done, total)`` after each left-out shape.
@@ -455,7 +491,7 @@ def leave_one_out(shapes: Sequence[ShapeRun], model: str = "constant", *,
         raise AnalysisError("leave-one-out needs at least two shapes")
     out = []
     for i, p in enumerate(prepared):
-        cal = _fit_prepared(prepared[:i] + prepared[i + 1:], model, max_offset_s).cal
+        cal = _fit_prepared(prepared[:i] + prepared[i + 1:], model, max_offset_s, lag=lag).cal
         sh = p.shape
         predicted = cal.to_physical(sh.tau_mm, sh.released_mm3, sh.t_s, sh.water_g, mass_g=sh.mass_g)
         measured = np.asarray(sh.released_g, float)
@@ -484,17 +520,33 @@ PHYSICS_GRIDS = {"anisotropy": tuple(float(x) for x in np.exp(np.linspace(math.l
 in 0.1 mm steps from none to 1.2 mm); the minimum is refined by a parabola through the best grid point and its
 neighbours (the swelling width changes the release in voxel steps, so its loss is often flat over several grid
 points: the middle of that flat minimum is taken, `_flat_run`)."""
-PHYSICS_CHOICES = ("none", "anisotropy", "offset", "swelling", "all", "auto")
-"""``--physics`` values: which parameters to fit; ``auto`` fits every subset and keeps the one leave-one-out prefers."""
-PHYSICS_SETS = {"none": (), "anisotropy": ("anisotropy",), "offset": ("offset_mm",), "swelling": ("swelling_mm",),
-                "anisotropy+offset": ("anisotropy", "offset_mm"), "anisotropy+swelling": ("anisotropy", "swelling_mm"),
-                "offset+swelling": ("offset_mm", "swelling_mm"), "all": PHYSICS_PARAMETERS}
-"""The parameter sets ``auto`` fits (every subset); a named ``--physics`` fits its own set and ``none``."""
+LAG = "wetting_lag_s"
+"""The wetting lag (``SimCal.lag_s``, s) as a fitted parameter: not a parameter of the forward model (nothing is
+simulated again for it) but of its clock, fitted with the time scale inside every loss evaluation
+(:func:`_fit_time`), searched on `LAG_BOUNDS_S`."""
+FIT_PARAMETERS = PHYSICS_PARAMETERS + (LAG,)
+"""Every parameter ``--physics`` can fit: the forward model's print physics and the wetting lag."""
+FIT_IDENTITY = {**PHYSICS_IDENTITY, LAG: 0.0}
+"""Values that switch each fitted effect off."""
+_SIMULATED_SETS = {"none": (), "anisotropy": ("anisotropy",), "offset": ("offset_mm",), "swelling": ("swelling_mm",),
+                   "anisotropy+offset": ("anisotropy", "offset_mm"), "anisotropy+swelling": ("anisotropy", "swelling_mm"),
+                   "offset+swelling": ("offset_mm", "swelling_mm"), "anisotropy+offset+swelling": PHYSICS_PARAMETERS}
+PHYSICS_SETS = {**{k: v for k, v in _SIMULATED_SETS.items() if k != "anisotropy+offset+swelling"},
+                **{("lag" if k == "none" else f"{k}+lag"): v + (LAG,) for k, v in _SIMULATED_SETS.items()
+                   if k != "anisotropy+offset+swelling"},
+                "anisotropy+offset+swelling": PHYSICS_PARAMETERS, "all": FIT_PARAMETERS}
+"""The parameter sets ``auto`` fits (every subset of `FIT_PARAMETERS`); a named ``--physics`` fits its own set and
+``none``. ``all`` fits every parameter, the wetting lag included."""
+PHYSICS_CHOICES = tuple(PHYSICS_SETS) + ("auto",)
+"""``--physics`` values: a set of `PHYSICS_SETS` to fit; ``auto`` fits every subset and keeps the one leave-one-out
+prefers."""
 EARN_MARGIN = 0.05
 """A parameter set is kept over a smaller one only if its mean leave-one-out error is lower by more than this
 fraction: a parameter must earn its place, not win by the noise of the fit."""
 EARN_SIGMAS = 2.0
 """... and only if each of its parameters lies more than this many standard errors from its identity value."""
+LAG_FLOOR_S = 1.0
+"""Least standard error of the wetting lag, s."""
 _PHYSICS_ROUNDS = 2
 _LOO_WINDOW = 3
 
@@ -506,9 +558,9 @@ class PhysicsFit:
     Attributes
     ----------
     fitted : tuple of str
-        The parameters fitted (names of `PHYSICS_PARAMETERS`); the others stay at `PHYSICS_IDENTITY`.
+        The parameters fitted (names of `FIT_PARAMETERS`); the others stay at `FIT_IDENTITY`.
     values : dict
-        Every parameter's value (fitted or identity).
+        Every parameter's value (fitted or identity), the wetting lag `LAG` included.
     uncertainty : dict
         Per fitted parameter, its standard error: the largest of the jackknife over the leave-one-out
         fits, a tenth of its grid step and the spread of a flat minimum (for the offset and the swelling width
@@ -630,7 +682,9 @@ def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequenc
         ``shapes_at(values)``: the calibration shapes (same order and names every call) simulated with the
         parameter values ``values`` (a dict over `PHYSICS_PARAMETERS`).
     fitted : sequence of str
-        Parameters to fit (a subset of `PHYSICS_PARAMETERS`; empty: the identity physics).
+        Parameters to fit (a subset of `FIT_PARAMETERS`; empty: the identity physics). The wetting lag `LAG`
+        is fitted with the time scale inside every loss evaluation (:func:`_fit_time`), not searched on a grid;
+        its standard error is the jackknife over the leave-one-out refits, at least `LAG_FLOOR_S`.
     max_offset_s, window_s, order
         As in :func:`fit_simcal`.
     progress : callable, optional
@@ -643,9 +697,11 @@ def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequenc
     -------
     PhysicsFit
     """
-    unknown = [p for p in fitted if p not in PHYSICS_PARAMETERS]
+    unknown = [p for p in fitted if p not in FIT_PARAMETERS]
     if unknown:
-        raise AnalysisError(f"unknown print physics {unknown}; known: {', '.join(PHYSICS_PARAMETERS)}")
+        raise AnalysisError(f"unknown print physics {unknown}; known: {', '.join(FIT_PARAMETERS)}")
+    lag = LAG in fitted
+    simulated = [p for p in fitted if p in PHYSICS_PARAMETERS]
     prepared: dict[tuple, list[_Prepared]] = {}
     base = _prepare(shapes_at(dict(PHYSICS_IDENTITY)), window_s, order)   # the measured curves, smoothed once
     around = _fit_prepared(base, "constant", max_offset_s).cal.seconds_per_mm
@@ -659,22 +715,24 @@ def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequenc
     def loss_without(skip: int | None) -> Callable[[dict], float]:
         def loss_at(values: dict) -> float:
             sub = [p for j, p in enumerate(prep(values)) if j != skip]
-            return _fit_prepared(sub, "constant", max_offset_s, around).loss
+            return _fit_prepared(sub, "constant", max_offset_s, around, lag=lag).loss
         return loss_at
 
     n = len(base)
     if n < 2:
         raise AnalysisError("fitting print physics needs at least two shapes (leave-one-out)")
     flat: dict[str, float] = {}
-    values = _physics_search(loss_without(None), fitted, flat=flat) if fitted else dict(PHYSICS_IDENTITY)
-    full = _fit_prepared(prep(values), "constant", max_offset_s)
+    values = _physics_search(loss_without(None), simulated, flat=flat) if simulated else dict(PHYSICS_IDENTITY)
+    full = _fit_prepared(prep(values), "constant", max_offset_s, lag=lag)
+    values = {**values, LAG: full.cal.lag_s}
     if progress is not None:
         progress(1, n + 1)
     loo, loo_values = [], []
     for i in range(n):
-        v = _physics_search(loss_without(i), fitted, near=values) if fitted else dict(PHYSICS_IDENTITY)
+        v = _physics_search(loss_without(i), simulated, near=values) if simulated else dict(PHYSICS_IDENTITY)
         shapes = prep(v)
-        cal = _fit_prepared(shapes[:i] + shapes[i + 1:], "constant", max_offset_s).cal
+        cal = _fit_prepared(shapes[:i] + shapes[i + 1:], "constant", max_offset_s, lag=lag).cal
+        v = {**v, LAG: cal.lag_s}
         sh = shapes[i].shape
         predicted = cal.to_physical(sh.tau_mm, sh.released_mm3, sh.t_s, sh.water_g, mass_g=sh.mass_g)
         measured = np.asarray(sh.released_g, float)
@@ -688,6 +746,9 @@ def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequenc
     for p in fitted:
         coords = np.array([_grid_coord(p, v[p]) for v in loo_values])
         jack = math.sqrt((n - 1) / n * float(np.sum((coords - coords.mean()) ** 2)))
+        if p == LAG:   # continuous, no grid: at least the search's resolution
+            uncertainty[p] = float(max(jack, LAG_FLOOR_S))
+            continue
         step = abs(_grid_coord(p, PHYSICS_GRIDS[p][1]) - _grid_coord(p, PHYSICS_GRIDS[p][0]))
         # a flat minimum of half-width a: any value in it fits alike (uniform: standard error a / sqrt(3))
         se = max(jack, 0.1 * step, flat.get(p, 0.0) / math.sqrt(3.0))
@@ -707,18 +768,22 @@ def refit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Seque
     second resolution): the same loss and search as :func:`fit_physics`, within `_LOO_WINDOW` grid points of
     ``near`` (the first fit), without leave-one-out. Returns every parameter's value."""
     if not fitted:
-        return dict(PHYSICS_IDENTITY)
+        return dict(FIT_IDENTITY)
+    lag = LAG in fitted
+    simulated = [p for p in fitted if p in PHYSICS_PARAMETERS]
     base = _prepare(shapes_at(dict(PHYSICS_IDENTITY)), window_s, order)
     around = _fit_prepared(base, "constant", max_offset_s).cal.seconds_per_mm
     prepared: dict[tuple, list[_Prepared]] = {}
 
-    def loss_at(values: dict) -> float:
+    def prep(values: dict) -> list[_Prepared]:
         key = tuple(round(values[p], 9) for p in PHYSICS_PARAMETERS)
         if key not in prepared:
             prepared[key] = [b.with_simulation(sh) for b, sh in zip(base, shapes_at(values))]
-        return _fit_prepared(prepared[key], "constant", max_offset_s, around).loss
+        return prepared[key]
 
-    return _physics_search(loss_at, fitted, near=near)
+    values = (_physics_search(lambda v: _fit_prepared(prep(v), "constant", max_offset_s, around, lag=lag).loss,
+                              simulated, near=near) if simulated else dict(PHYSICS_IDENTITY))
+    return {**values, LAG: _fit_prepared(prep(values), "constant", max_offset_s, lag=lag).cal.lag_s}
 
 
 def with_discretisation(uncertainty: dict, values: dict, refit: dict,
@@ -759,7 +824,7 @@ def choose_physics(fits: dict[str, PhysicsFit]) -> str:
         smaller = [m for m in fits if size(m) < size(name) and set(PHYSICS_SETS[m]) <= set(PHYSICS_SETS[name])]
         earns = all(fits[name].loo_rel_rmse_mean < (1 - EARN_MARGIN) * fits[m].loo_rel_rmse_mean for m in smaller)
         # and every parameter it fits is resolved away from its identity value
-        earns = earns and all(abs(fits[name].values[p] - PHYSICS_IDENTITY[p]) > EARN_SIGMAS * fits[name].uncertainty[p]
+        earns = earns and all(abs(fits[name].values[p] - FIT_IDENTITY[p]) > EARN_SIGMAS * fits[name].uncertainty[p]
                               for p in fits[name].fitted)
         if earns and fits[name].loo_rel_rmse_mean < fits[chosen].loo_rel_rmse_mean:
             chosen = name

@@ -22,6 +22,7 @@ import numpy as np
 
 from analysis.bands import BAND_LEVEL, ResidualModel, SimulateAt, spread_g
 from analysis.bands import band as _band
+from analysis.simcal import PHYSICS_PARAMETERS
 from labapp.jobs.calibrate_sim import SimCalError, SimCalFile
 
 log = logging.getLogger(__name__)
@@ -89,8 +90,10 @@ def source_simulator(source: str, resolution: int, *, symmetry: str = "", units:
                 grids[offset] = simulation_grid(source, resolution=resolution, symmetry=symmetry, units=units,
                                                 offset_mm=offset)[:3]
             rho, dx, mirror = grids[offset]
-            # the offset is in the grid; every other print physics parameter is the forward model's keyword
-            release = simulate(rho, dx, mirror=mirror, **{p: float(v) for p, v in physics.items() if p != "offset_mm"})
+            # the offset is in the grid; every other print physics parameter is the forward model's keyword (the
+            # wetting lag is the calibration map's, not the simulation's)
+            release = simulate(rho, dx, mirror=mirror, **{p: float(v) for p, v in physics.items()
+                                                          if p in PHYSICS_PARAMETERS and p != "offset_mm"})
             if not meshes:
                 meshes.append(None if _is_density(source) else _source_mesh(source, units))
         except DesignError as exc:

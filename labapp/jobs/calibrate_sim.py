@@ -26,6 +26,9 @@ from analysis.bands import ResidualModel, band_block
 from analysis.simcal import (
     DEFAULT_MAX_OFFSET_S,
     DISCRETISATION_FACTOR,
+    FIT_IDENTITY,
+    FIT_PARAMETERS,
+    LAG,
     MODELS,
     PHYSICS_CHOICES,
     PHYSICS_GRIDS,
@@ -93,7 +96,8 @@ class SimCalFile:
         Water mass of the calibration runs (median), g: the default bath for predictions.
     path : Path
     physics : dict
-        The forward model's print physics (``anisotropy``, ``offset_mm``, ``swelling_mm``) predictions simulate with.
+        The forward model's print physics (``anisotropy``, ``offset_mm``, ``swelling_mm``) predictions simulate with;
+        the wetting lag is the map's (``cal.lag_s``).
     band : dict or None
         The file's ``band`` block (checked), what a prediction's error band is made from; None for a file made
         without one.
@@ -111,6 +115,7 @@ class SimCalFile:
         """One line for reports and GUI labels."""
         sat = "" if self.cal.saturation_g_per_kg is None else f", c_sat {self.cal.saturation_g_per_kg:.3g} g/kg"
         phys = "".join(f", {k} {v:.3g}" for k, v in self.physics.items() if v != PHYSICS_IDENTITY[k])
+        phys += f", wetting lag {self.cal.lag_s:.0f} s" if self.cal.lag_s else ""
         return (f"{self.path.name}: {self.cal.model} model, {self.cal.seconds_per_mm:.1f} s/mm, "
                 f"{self.cal.g_per_mm3 * 1000:.4g} g/cm^3{sat}{phys}, resolution {self.resolution}")
 
@@ -333,9 +338,12 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         The fitted print physics is refitted at this resolution too (default 1.5 x ``resolution``, at most
         the largest; 0: not): its estimated discretisation bias (:func:`analysis.simcal.with_discretisation`) is
         added in quadrature to each parameter's standard error, and recorded in ``physics.discretisation``.
-    physics : {'none', 'anisotropy', 'offset', 'swelling', 'all', 'auto'}
-        Print physics of the forward model to fit with the scales (:func:`analysis.simcal.fit_physics`): the
-        build-direction anisotropy, the surface offset, the swelling width below which channels are shut;
+    physics : str
+        A set of ``analysis.simcal.PHYSICS_SETS`` (``none``, ``anisotropy``, ``offset``, ``swelling``, ``lag``,
+        their combinations joined by ``+``, ``all``) or ``auto``: print physics to fit with the scales
+        (:func:`analysis.simcal.fit_physics`): the build-direction anisotropy, the surface offset, the swelling
+        width below which channels are shut, the wetting lag after the drop (shared by all runs; the per-run
+        drop offsets of ``max_offset_s`` are then its jitter around it);
         ``none`` keeps the isotropic model of the mesh as designed; ``auto`` fits every subset and keeps the
         one leave-one-out prefers (a parameter must earn its place; the sets with the swelling width only when
         a shape has a channel the widest width searched would shut). The models of ``model`` are then
@@ -395,7 +403,7 @@ def _has_channels(grid: tuple) -> bool:
 def _physics_doc(fits: dict[str, PhysicsFit], chosen: str, rows: list[SetRow], discretisation: dict | None = None
                  ) -> dict:
     fit = fits[chosen]
-    return {"fitted": list(fit.fitted), "choice": chosen, **{p: fit.values[p] for p in PHYSICS_PARAMETERS},
+    return {"fitted": list(fit.fitted), "choice": chosen, **{p: fit.values[p] for p in FIT_PARAMETERS},
             "uncertainty": dict(fit.uncertainty), **({"discretisation": discretisation} if discretisation else {}),
             "candidates": {name: {"fitted": list(f.fitted), "values": f.values, "uncertainty": f.uncertainty,
                                   "loss": f.loss, "loo_rel_rmse_mean": f.loo_rel_rmse_mean,
@@ -468,7 +476,8 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
             except AnalysisError as exc:
                 raise SimCalError(f"{set_csv}: {exc}") from exc
         chosen_physics = choose_physics(physics_fits) if physics == "auto" else physics
-    values = physics_fits[chosen_physics].values if physics_fits else dict(PHYSICS_IDENTITY)
+    values = physics_fits[chosen_physics].values if physics_fits else dict(FIT_IDENTITY)
+    lag = bool(physics_fits) and LAG in physics_fits[chosen_physics].fitted
     discretisation = None
     if physics_fits and physics_fits[chosen_physics].fitted and second_resolution:
         say(0.6, f"print physics '{chosen_physics}' refitted at resolution {second_resolution} (discretisation) ...")
@@ -501,8 +510,8 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
     for j, name in enumerate(models):
         base, span = 0.6 + 0.35 * j / len(models), 0.35 / len(models)
         say(base, f"fitting the {name} model to all {n} runs ...")
-        fits[name] = fit_simcal(shapes, name, max_offset_s=max_offset_s)
-        loos[name] = leave_one_out(shapes, name, max_offset_s=max_offset_s,
+        fits[name] = fit_simcal(shapes, name, max_offset_s=max_offset_s, lag=lag)
+        loos[name] = leave_one_out(shapes, name, max_offset_s=max_offset_s, lag=lag,
                                    progress=lambda done, total, name=name, base=base, span=span: say(
                                        base + span * done / total, f"{name} model: left {done} of {total} out"))
     mean_loo = {m: float(np.mean([s.rel_rmse for s in loos[m]])) for m in models}
@@ -520,7 +529,7 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
         "resolution": resolution,
         "voxel_size_mm": float(np.median(dxs)),
         "physics": (_physics_doc(physics_fits, chosen_physics, rows, discretisation) if physics_fits else
-                    {"fitted": [], "choice": "none", **PHYSICS_IDENTITY, "uncertainty": {}, "candidates": {}}),
+                    {"fitted": [], "choice": "none", **FIT_IDENTITY, "uncertainty": {}, "candidates": {}}),
         "loss": fit.loss,
         "loo": _loo_summary(loos[chosen], rows),
         "loo_rel_rmse_mean": mean_loo[chosen],
@@ -538,6 +547,7 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "operator": operator,
     }
+    doc["physics"][LAG] = fit.cal.lag_s   # the prediction model's own lag (the same fit for the constant model)
     say(0.95, "error bands: each run's leave-one-out prediction against the band from the other runs ...")
     honest = physics_fits.get(chosen_physics)   # with print physics, the leave-one-out that refits it
     doc["band"] = band_block(honest.loo if honest else loos[chosen], shapes, honest.loo_values if honest else None,
@@ -600,7 +610,7 @@ def plot_loo(loo: tuple[LooShape, ...], labels: list[str], path: Path, title: st
 def migrate(doc: dict) -> dict:
     """A ``simcal.json`` of an earlier format as the current one: version 1 had no print physics (the identity)."""
     if doc.get("format") == "sfr-simcal/1":
-        doc = dict(doc, format=FORMAT, physics={"fitted": [], "choice": "none", **PHYSICS_IDENTITY,
+        doc = dict(doc, format=FORMAT, physics={"fitted": [], "choice": "none", **FIT_IDENTITY,
                                                 "uncertainty": {}, "candidates": {}})
     return doc
 
@@ -626,8 +636,12 @@ def load_simcal(path: str | Path) -> SimCalFile:
     if doc.get("model") not in MODELS:
         raise SimCalError(f"{path}: model {doc.get('model')!r} is not one of {', '.join(MODELS)}")
     try:
+        # a physics block written before the wetting lag was fitted has none (0)
+        lag = float(doc["physics"].get(LAG, FIT_IDENTITY[LAG]))
+        if not (math.isfinite(lag) and lag >= 0):
+            raise SimCalError(f"{path}: physics.{LAG} must be a number of seconds >= 0, got {lag}")
         cal = SimCal(doc["model"], float(doc["seconds_per_mm"]), float(doc["g_per_mm3"]),
-                     None if doc.get("saturation_g_per_kg") is None else float(doc["saturation_g_per_kg"]))
+                     None if doc.get("saturation_g_per_kg") is None else float(doc["saturation_g_per_kg"]), lag)
         resolution, dx, water = int(doc["resolution"]), float(doc["voxel_size_mm"]), float(doc["water_g"])
         # a physics block written before the swelling width was fitted has none (0)
         physics = {p: float(doc["physics"].get(p, PHYSICS_IDENTITY[p]) if p == "swelling_mm" else doc["physics"][p])

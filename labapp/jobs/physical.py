@@ -155,16 +155,23 @@ def noise_sd(values: np.ndarray) -> float:
 def write_target_csv(curve: PhysicalCurve, simcal: SimCalFile, out_csv: Path) -> MeasuredTarget:
     """Write a measured curve as a feasible ``tau_mm,released_mm3`` target through the calibration.
 
-    The curve is taken from the drop on (t >= 0) and starts at (0, 0); its released grams are replaced by their
+    The curve is taken from the end of the calibration's wetting lag on (t >= lag, 0 without one) and starts at
+    (lag, 0), where the model's clock starts (tau = 0); its released grams are replaced by their
     monotone least-squares fit (:func:`design.inverse.targets.isotonic_fit`), mapped to simulation units (water:
     the run's own when it records one, else the calibration's), and lowered where needed onto the isoperimetric
     bound the feasibility check applies (:func:`design.inverse.targets.project_isoperimetric`), so that noise
     does not make the target infeasible. The CSV also lists ``t_s``, ``measured_g`` and ``target_g``, and
     ``<stem>.json`` beside it says how much was changed.
     """
+    # the model's clock starts when the calibrated wetting lag ends: the simulated print's release is compared with
+    # the measured curve delayed by the lag (what the bench measures before it is nothing a design can shape)
+    lag = simcal.cal.lag_s
     t = np.asarray(curve.t_s, float)
-    keep = t > 0
-    t = np.concatenate([[0.0], t[keep]])
+    keep = t > lag
+    if np.count_nonzero(keep) < 2:
+        raise SimCalError(f"{curve.source}: fewer than 2 samples after the calibration's wetting lag of {lag:.0f} s; "
+                          "a design target needs the measured release")
+    t = np.concatenate([[lag], t[keep]])
     measured = np.concatenate([[0.0], np.asarray(curve.released_g, float)[keep]])
     fitted = np.concatenate([[0.0], np.clip(isotonic_fit(measured[1:], END_SAMPLES), 0.0, None)])
     water = curve.water_g or simcal.water_g
@@ -192,8 +199,9 @@ def write_target_csv(curve: PhysicalCurve, simcal: SimCalFile, out_csv: Path) ->
 
 
 def physical_times(simcal: SimCalFile, tau_mm: np.ndarray, released_mm3: np.ndarray, water_g: float) -> np.ndarray:
-    """Uniform times from 0 to when the simulated curve ends (its full dissolution), s."""
-    end = simcal.cal.clock_s(tau_mm, np.asarray(released_mm3, float) * simcal.cal.g_per_mm3, water_g)[-1]
+    """Uniform times from 0 to when the simulated curve ends (its full dissolution, after the wetting lag), s."""
+    end = simcal.cal.clock_s(tau_mm, np.asarray(released_mm3, float) * simcal.cal.g_per_mm3, water_g)[-1] \
+        + simcal.cal.lag_s
     return np.linspace(0.0, end, _PREDICTION_SAMPLES)
 
 
@@ -308,7 +316,7 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
     summary["print_mass_basis"] = f"calibrated density {cal.g_per_mm3 * 1000:.4g} g/cm^3 ({simcal.path})"
     summary["simcal"] = {"path": str(simcal.path), "model": cal.model, "seconds_per_mm": cal.seconds_per_mm,
                          "g_per_mm3": cal.g_per_mm3, "saturation_g_per_kg": cal.saturation_g_per_kg,
-                         "water_g": water}
+                         "wetting_lag_s": cal.lag_s, "water_g": water}
     summary["release_metrics"] = prediction_metrics(t, target_g, design_g)
     atomic_write(design_dir / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
     report, kept = design_dir / "report.png", design_dir / "report_simulation.png"

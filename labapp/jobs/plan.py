@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from analysis.simcal import PHYSICS_IDENTITY, PHYSICS_PARAMETERS, PHYSICS_SETS
+from analysis.simcal import LAG, PHYSICS_IDENTITY, PHYSICS_PARAMETERS, PHYSICS_SETS
 from labapp.errors import UsageError
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import atomic_write
@@ -46,10 +46,14 @@ PLAN_RESOLUTION = 32
 PLAN_NOMINAL = {"anisotropy": 1.0, "offset_mm": 0.0, "swelling_mm": 0.5}
 """Physics at which the sensitivities are taken: the identity, except a swelling width in the middle of the
 documented 0.3-0.8 mm (at zero width no channel is shut and the release does not depend on it)."""
-STEPS = {"log_seconds": 0.05, "anisotropy": 0.1, "offset_mm": 0.05, "swelling_mm": 0.1}
-"""Central-difference half-steps: log s, log anisotropy, offset (mm), swelling width (mm)."""
-PRIOR_SD = {"log_seconds": 1.0, "anisotropy": 1.0, "offset_mm": 1.0, "swelling_mm": 1.0}
-"""The weak prior's standard deviation of each parameter (log s and log anisotropy; mm)."""
+STEPS = {"log_seconds": 0.05, "anisotropy": 0.1, "offset_mm": 0.05, "swelling_mm": 0.1, LAG: 30.0}
+"""Central-difference half-steps: log s, log anisotropy, offset (mm), swelling width (mm), wetting lag (s)."""
+PRIOR_SD = {"log_seconds": 1.0, "anisotropy": 1.0, "offset_mm": 1.0, "swelling_mm": 1.0, LAG: 1000.0}
+"""The weak prior's standard deviation of each parameter (log s and log anisotropy; mm; the lag in s)."""
+PLAN_SECONDS_PER_MM = 1500.0
+"""The time scale at which the wetting lag's sensitivity is taken (the plan's clock is tau, the lag is in seconds:
+C(t) = V((t - lag) / s)); the middle of the simulated bench's 1000-2400 s/mm. Its expected standard error scales
+with the real time scale."""
 
 
 def _flat() -> trimesh.Trimesh:
@@ -130,7 +134,7 @@ def sensitivity(mesh: trimesh.Trimesh, parameters: Sequence[str], *, points: int
     ----------
     mesh : trimesh.Trimesh
     parameters : sequence of str
-        ``log_seconds`` and names of `PHYSICS_PARAMETERS`.
+        ``log_seconds``, names of `PHYSICS_PARAMETERS` and `analysis.simcal.LAG` (``wetting_lag_s``).
     points : int
         Sample times, uniform over (0, 1.1 x the nominal dissolution time].
     resolution : int
@@ -156,6 +160,8 @@ def sensitivity(mesh: trimesh.Trimesh, parameters: Sequence[str], *, points: int
         h = STEPS[p]
         if p == "log_seconds":   # C(t) = V(t / s): moving log s by h rescales the time axis
             up, down = _normalised(tau, vol, x * math.exp(-h)), _normalised(tau, vol, x * math.exp(h))
+        elif p == LAG:   # C(t) = V((t - lag) / s): moving the lag by h shifts the time axis
+            up, down = (_normalised(tau, vol, x - sign * h / PLAN_SECONDS_PER_MM) for sign in (1, -1))
         else:
             moved = []
             for sign in (1, -1):

@@ -31,7 +31,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="print physics of the forward model to fit with the scales: the build-direction "
                              "anisotropy (z / in-plane erosion rate), the surface offset (print larger or smaller "
                              "than its mesh, mm), the swelling width (channels narrower are shut until their walls "
-                             "dissolve, mm), all three, or auto (every subset; a parameter is kept only where "
+                             "dissolve, mm), the wetting lag (s after the drop, shared by all runs: lag), sets joined by +, "
+                             "all four, or auto (every subset; a parameter is kept only where "
                              "leave-one-out shows it earns it). Default none: the isotropic model of the mesh")
     parser.add_argument("--resolution", type=positive_int, default=DEFAULT_RESOLUTION,
                         help=f"voxels along each mesh's longest side (default {DEFAULT_RESOLUTION})")
