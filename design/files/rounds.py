@@ -2,13 +2,15 @@
 
 Written atomically (a temporary file renamed over the old one) each time a round begins and once the last is
 judged, so a resume reads either state; `design.inverse.defect.optimise_physical` reads it only when resuming.
-The arrays are the `RoundState` fields and ``format`` (`ROUNDS_FORMAT`).
+The arrays are the `RoundState` fields and ``format`` (`ROUNDS_FORMAT`); a file without ``step``,
+``best_grid_mm3`` and ``best_print_mm3`` (written before the rounds recorded them) reads as step 1 with the best
+design's curves not recorded, which is how such a run continued.
 """
 from __future__ import annotations
 
 import os
 import zipfile
-from dataclasses import fields
+from dataclasses import MISSING, fields
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +21,10 @@ from design.inverse.defect import RoundState
 ROUNDS = "rounds.npz"
 ROUNDS_FORMAT = 1
 """The layout of ``rounds.npz`` this version writes."""
-_SCALARS = {"round": int, "start": int, "end": int, "best_fit": float, "best_pieces": int, "status": str}
+_SCALARS = {"round": int, "start": int, "end": int, "best_fit": float, "best_pieces": int, "status": str,
+            "step": float}
+_OPTIONAL = {f.name for f in fields(RoundState) if f.default is not MISSING or f.default_factory is not MISSING}
+"""The fields a file may lack (their `RoundState` defaults)."""
 
 
 class RoundFile:
@@ -47,6 +52,8 @@ class RoundFile:
                                   f"({ROUNDS_FORMAT})")
             values = {}
             for f in fields(RoundState):
+                if f.name not in stored and f.name in _OPTIONAL:
+                    continue
                 cast = _SCALARS.get(f.name)
                 values[f.name] = cast(stored[f.name][()]) if cast else np.asarray(stored[f.name], float)
         except DesignError:

@@ -10,16 +10,26 @@ optimisation of eq. (4), each of `DesignConfig.correction_rounds` rounds
    reference evaluator (`design.forward.reference`) on the target's tau grid: P(x);
 2. takes the bias b(x) = G(x) - P(x), where G(x) is the design grid's release of the density that J_fit
    sees (eqs. 5-7);
-3. re-targets J_fit (eq. 4) at C* + b(x) and continues the optimiser from x for
+3. re-targets J_fit (eq. 4) at C* + b(x) (at a step, below) and continues the optimiser from x for
    `DesignConfig.correction_evals` evaluations at the final beta (twice it for nfc designs, `ROUND_BETA_FACTOR`).
 
 At a fixed point G(x) = C* + b(x), so P(x) = C*: the print meets the target as the reference evaluator judges
-it. The iteration converges when the bias changes little from one design to the next. The grid's error does
-not change much, but the cut's can: in a free 3D design at the final beta the grey layer the filter leaves is
-a large part of the bias and the optimiser moves it without moving the solid, so nfc rounds steepen the
-projection (the density they judge and continue is nearly binary). Extruded designs lost fit that way and keep
-the final beta. Every design a round starts
-from, and the last round's, is judged by its print; the result is the one-piece design whose print fits best
+it. The iteration converges when the bias changes little from one design to the next. The grid's error does not
+change much, but the cut's can:
+
+- in a free 3D design at the final beta the grey layer the filter leaves is a large part of the bias and the
+  optimiser moves it without moving the solid, so nfc rounds steepen the projection (the density they judge and
+  continue is nearly binary). Extruded designs lost fit that way and keep the final beta;
+- the print's volume follows the extraction level, which a small change of the density can move across its whole
+  range (an extruded design's equal-density columns pin it to an end of `design.fabrication.extract.LEVEL_RANGE`),
+  so a full step can overshoot.
+
+The rounds are therefore a safeguarded iteration. Round r, from a design x, aims J_fit at
+G(x) + s_r (C* - P(x)) = C* + b(x) - (1 - s_r) (C* - P(x)): the full correction for s_r = 1, a share s_r of the
+print's residual otherwise. The first round starts from the optimisation's result with s_1 = `FIRST_STEP` of the
+space; a round whose print beats the best so far hands its design and step to the next; one that does not sends
+the next back to the best design with `BACKTRACK` times the step. Every design a round starts from, and the last
+round's, is judged by its print; the result is the one-piece design whose print fits best
 (docs/design.md#physical-correction).
 
 `optimise_physical` runs the optimisation and the rounds; what a resume needs between rounds (the round in
@@ -32,7 +42,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable, Protocol
 
 import numpy as np
@@ -74,6 +84,16 @@ dominate its time at 2 cells; at 1 the bias they find differs from the finer one
 (docs/design.md#physical-correction). The run's reported figures are the outputs', at `design_lattice`."""
 DEFAULT_REFERENCE_PER_VOXEL = 2.0
 """`REFERENCE_PER_VOXEL` of the spaces it does not name."""
+FIRST_STEP = {"extruded": 0.5}
+"""The first round's step s per design space (1 for the spaces it does not name; module doc). An extruded design's
+density is equal along each column, so its extraction level sits at an end of `design.fabrication.extract.LEVEL_RANGE`
+and flips with a small change of the mass; the print's volume then moves several times as much as the design
+grid's (the star prism at resolution 128: +5.9% for +1.9%). A step s converges while the print moves less than
+2 / s times as much as the grid: a full step overshoots there, half a step does not
+(docs/design.md#physical-correction)."""
+BACKTRACK = 0.5
+"""The factor on the correction's step s after a round whose print does not beat the best so far; the next round
+starts from the best design (module doc, docs/design.md#physical-correction)."""
 
 
 @dataclass(frozen=True)
@@ -178,6 +198,12 @@ class RoundState:
     status : str
         How the optimisations so far ended, as a `DesignStatus`: "max_iter" while each reached its limit, else
         the first early end (the run's status unless its evaluations reach `DesignConfig.max_iter`).
+    step : float
+        The step s of the round in progress (module doc): its bias is b(x) - (1 - s) (C* - P(x)) for its start
+        design x.
+    best_grid_mm3, best_print_mm3 : (K,) ndarray of float, mm^3
+        G and P of the best design (`PrintCheck`), from which a round after one that did not improve is aimed;
+        empty in a state that did not record them (then judged again when needed).
     """
 
     round: int
@@ -190,6 +216,9 @@ class RoundState:
     best_pieces: int
     fits: np.ndarray
     status: str
+    step: float = 1.0
+    best_grid_mm3: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    best_print_mm3: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 class RoundStore(Protocol):
@@ -210,20 +239,40 @@ def _better(check: PrintCheck, state: RoundState | None) -> bool:
     return mine < theirs or (mine == theirs and check.fit < state.best_fit)
 
 
-def _judged(state: RoundState | None, check: PrintCheck, config: DesignConfig, outcome: Outcome) -> RoundState:
+def aimed_bias(check: PrintCheck, target_mm3: np.ndarray, step: float) -> np.ndarray:
+    """The bias a round from the design of ``check`` aims J_fit with at step ``step``: J_fit's aim
+    C* + bias = G + step (C* - P), that is bias = b - (1 - step) (C* - P) (b exactly for ``step`` 1), mm^3."""
+    if step == 1.0:
+        return check.bias_mm3
+    return check.bias_mm3 - (1.0 - step) * (target_mm3 - check.print_mm3)
+
+
+def _judged(state: RoundState | None, check: PrintCheck, config: DesignConfig, outcome: Outcome,
+            target_mm3: np.ndarray, judge: Callable[[np.ndarray], PrintCheck]) -> RoundState:
     """The state after judging the result of an optimisation (round ``state.round``, or the first optimisation
-    for ``state`` None): the best so far updated, and the next round set up from it (bias b(x))."""
+    for ``state`` None): the best so far updated, and the next round set up (module doc): from this design with
+    the same step when its print is the best so far, else from the best design with `BACKTRACK` times the step.
+    ``judge(x)`` judges a flat design again (a state that did not record the best design's curves)."""
     x, evaluations = np.ravel(outcome.best_x).copy(), len(outcome.history)
     round_ = 1 if state is None else state.round + 1
     best = _better(check, state)
     log.info("print of the design before round %d: rel. RMSE %.3f%%, %d piece(s)", round_, 100 * check.fit, check.pieces)
+    if best:
+        base, x_base, step = check, x, FIRST_STEP.get(config.space, 1.0) if state is None else state.step
+    else:
+        base = (PrintCheck(state.best_fit, state.best_pieces, state.best_grid_mm3, state.best_print_mm3)
+                if state.best_grid_mm3.size else judge(state.best_x))
+        x_base, step = state.best_x, BACKTRACK * state.step
+        log.info("the print did not improve: the next round starts from the best design (%.3f%%) at step %.3g",
+                 100 * state.best_fit, step)
     return RoundState(round=round_, start=evaluations, end=evaluations + config.correction_evals,
-                      bias_mm3=check.bias_mm3, x_start=x,
+                      bias_mm3=aimed_bias(base, target_mm3, step), x_start=x_base,
                       best_x=x if best else state.best_x, best_fit=check.fit if best else state.best_fit,
                       best_pieces=check.pieces if best else state.best_pieces,
                       fits=np.append([] if state is None else state.fits, check.fit),
                       status=str(outcome.status if state is None or state.status == DesignStatus.MAX_ITER
-                                 else state.status))
+                                 else state.status),
+                      step=step, best_grid_mm3=base.grid_mm3, best_print_mm3=base.print_mm3)
 
 
 def correction_plan(config: DesignConfig) -> tuple[int, int]:
@@ -286,6 +335,11 @@ def optimise_physical(objective: DesignObjective, problem: Problem, config: Desi
     t0 = time.perf_counter()
     running = _Running(store)
     beta = round_beta(config)
+    target_mm3 = problem.target.released_mm3
+
+    def judge(x: np.ndarray) -> PrintCheck:
+        return check_print(objective, problem, x.reshape(objective.space.var_shape))
+
     state = rounds.load() if saved is not None else None
     if state is None:
         outcome = optimise(objective, problem, replace(config, max_iter=first), running, saved=saved, start=start,
@@ -293,7 +347,7 @@ def optimise_physical(objective: DesignObjective, problem: Problem, config: Desi
         if not outcome.status.finished:
             return replace(outcome, session_seconds=time.perf_counter() - t0), objective
         objective.beta = beta  # the prints are judged at the rounds' beta, as the outputs cut them
-        state = _judged(None, check_print(objective, problem, outcome.best_x), config, outcome)
+        state = _judged(None, check_print(objective, problem, outcome.best_x), config, outcome, target_mm3, judge)
         rounds.save(state)
         history, saved, best_value = outcome.history, None, outcome.best_value
     else:
@@ -315,7 +369,7 @@ def optimise_physical(objective: DesignObjective, problem: Problem, config: Desi
         if not outcome.status.finished:
             return replace(outcome, session_seconds=time.perf_counter() - t0), aimed
         del aimed  # its fast-marching buffers
-        state = _judged(state, check_print(objective, problem, outcome.best_x), config, outcome)
+        state = _judged(state, check_print(objective, problem, outcome.best_x), config, outcome, target_mm3, judge)
         rounds.save(state)
     log.info("physical correction: print fits %s; keeping %.3f%%, %d piece(s)",
              ", ".join(f"{100 * f:.3f}%" for f in state.fits), 100 * state.best_fit, state.best_pieces)
