@@ -12,7 +12,7 @@ from design import simulate as forward
 from design.errors import DesignError
 from design.files.meshio import DENSITY_SUFFIXES
 from design.files.pipeline import DEFAULT_RESOLUTION, SAMPLE_PREFIX, input_grid, mesh_grid
-from design.forward.reference import reference_release
+from design.forward.reference import design_lattice, reference_release
 from design.geometry.shapes import sample_shape
 from labapp.errors import UsageError
 from labapp.jobs.meshunits import SIMULATE_BYTES_PER_VOXEL, check_memory, grid_shape, load_mesh_mm, size_warnings
@@ -78,8 +78,9 @@ def error_estimate(source: str, units: str, release, rho, dx_mm: float,
     """How far a simulated release is from the solid's physical release, mm^3 and as a fraction of its volume.
 
     A mesh (or sample shape) is released by the reference evaluator (`design.forward.reference`, exact
-    surface distances) on the same tau samples: the estimate is the largest difference, and the
-    evaluator's own stated error bounds how far that estimate can be off. A density array has no other
+    surface distances) on the same tau samples, on the lattice a design on a grid of the simulation's size
+    is judged on (`design.forward.reference.design_lattice`): the estimate is the largest difference, and
+    the evaluator's own stated error bounds how far that estimate can be off. A density array has no other
     description of its solid than its grid: the estimate is the largest difference from the same
     density averaged over blocks of 2 voxels per axis, simulated on voxels twice as large (the fast
     marcher's error is first-order in the voxel size, so the finer grid is off by about that difference).
@@ -88,7 +89,7 @@ def error_estimate(source: str, units: str, release, rho, dx_mm: float,
 
     if not _is_density(source):
         try:
-            ref = reference_release(_source_mesh(source, units), release.tau_mm)
+            ref = reference_release(_source_mesh(source, units), release.tau_mm, cells=design_lattice(max(rho.shape)))
         except DesignError as exc:  # a mesh the voxeliser takes but the evaluator does not (not closed)
             return {"error_mm3": None, "error_fraction": None, "method": f"not estimated: {exc}"}
         diff = float(np.abs(release.released_mm3 - ref.released_mm3).max())

@@ -35,8 +35,10 @@ def test_a_mesh_s_simulation_states_its_error_against_the_reference_evaluator(tm
     reference = reference_release(sample_shape("sphere"), curve[:, 0])
     error = summary["error"]
     assert error["method"] == "reference evaluator" and error["reference_method"] == "exact-distance"
-    # release.csv holds 9 significant digits
-    assert error["error_mm3"] == pytest.approx(np.abs(curve[:, 1] - reference.released_mm3).max(), rel=1e-6)
+    # the run's estimate, on the lattice of a 24-voxel grid, agrees with one against the default lattice within
+    # the two evaluations' stated errors
+    assert abs(error["error_mm3"] - np.abs(curve[:, 1] - reference.released_mm3).max()) <= (
+        error["reference_error_mm3"] + reference.error_mm3)
     assert error["error_fraction"] == pytest.approx(error["error_mm3"] / sample_shape("sphere").volume, rel=1e-9)
     # first-order fast marching at 24 voxels across misses a sphere by a few per cent, far above the
     # evaluator's own error
@@ -65,7 +67,7 @@ def test_errors_name_the_problem(tmp_path, capsys):
 def test_a_mesh_the_reference_evaluator_refuses_is_simulated_without_an_estimate(tmp_path, monkeypatch):
     import labapp.jobs.simulate
 
-    def refuse(mesh, tau_mm):
+    def refuse(mesh, tau_mm, cells):
         raise DesignError("reference release: the mesh has inconsistent face winding")
     monkeypatch.setattr(labapp.jobs.simulate, "reference_release", refuse)
     assert main(["simulate", "sample:sphere", "--resolution", "12", "--out", str(tmp_path / "o")]) == 0
