@@ -123,7 +123,7 @@ def test_rate_term_lowers_the_rate_deviation_on_a_tiny_problem(tmp_path):
                               max_iter=80, w_rate=w_rate, rate_span=span, allow_pieces=True, robust_eta=0.0)
         summary = run_design(config, tmp_path / f"w{w_rate}_{span[0]}").outputs.summary
         devs[w_rate, span] = summary["rate_dev_mid80"]["density"]
-    # measured 0.37 without the term, 0.23 with it over the whole curve, 0.29 over the target's 5%-95%
+    # measured 1.15 without the term, 0.72 with it over the whole curve, 0.61 over the target's 5%-95%
     assert devs[1.0, (0.0, 1.0)] < 0.75 * devs[0.0, (0.0, 1.0)], devs
     assert devs[1.0, (0.05, 0.95)] < 0.85 * devs[0.0, (0.0, 1.0)], devs
 
