@@ -9,7 +9,7 @@ from PySide6.QtCore import Signal
 from PySide6.QtGui import QPixmap
 from PySide6.QtWidgets import (
     QFileDialog,
-    QFormLayout,
+    QGridLayout,
     QGroupBox,
     QHBoxLayout,
     QLabel,
@@ -24,7 +24,7 @@ from PySide6.QtWidgets import (
 from design.files.meshio import MESH_SUFFIXES
 from labapp.acquisition.settings import ADDED_MASS, parse_masses
 from labapp.gui.bridge import BackgroundTask
-from labapp.gui.fields import SettingBox
+from labapp.gui.fields import SettingBox, narrow_form
 from labapp.jobs.calibrate_sim import SET_COLUMNS, calibrate_sim
 from labapp.records.storage import timestamp_name
 
@@ -65,7 +65,7 @@ class CalibrationWizard(QWidget):
         self.mass.problem_changed.connect(self._mass_checked)
         self._asking = False
         box = QGroupBox("calibration series (paper section 4.2)")
-        form = QFormLayout(box)
+        form = narrow_form(box)
         form.addRow("simulated masses", self.masses)
         self.mass.add_to(form, "cumulative mass added")
         row = QHBoxLayout()
@@ -138,13 +138,15 @@ class SimulationStep(QWidget):
         self.figure.setScaledContents(False)
         self.path: Path | None = None
         self.task: BackgroundTask | None = None
-        box = QGroupBox("simulation calibration (paper section 4.3): seconds per mm, grams per mm^3")
+        box = QGroupBox("simulation calibration (paper section 4.3)")
+        box.setToolTip("fits the simulation's time scale (seconds per mm) and mass scale (grams per mm^3) to "
+                       "measured runs")
         inner = QVBoxLayout(box)
         inner.addWidget(self.table, 1)
-        row = QHBoxLayout()
-        for b in (self.add_button, self.load_button, self.calibrate_button, self.activate_button):
-            row.addWidget(b)
-        inner.addLayout(row)
+        buttons = QGridLayout()           # two by two: the dock stays narrow
+        for i, b in enumerate((self.add_button, self.load_button, self.calibrate_button, self.activate_button)):
+            buttons.addWidget(b, i // 2, i % 2)
+        inner.addLayout(buttons)
         inner.addWidget(self.result)
         inner.addWidget(self.figure, 2)
         QVBoxLayout(self).addWidget(box)

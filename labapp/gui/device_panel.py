@@ -13,13 +13,13 @@ from __future__ import annotations
 import time
 
 from PySide6.QtCore import QTimer
-from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QPushButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QComboBox, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QPushButton, QVBoxLayout, QWidget
 
 from drivers.camera.base import CameraSettings
 from labapp.acquisition.devices import CAMERA_SPECS
 from labapp.acquisition.events import Reading
 from labapp.acquisition.settings import BATH_SETTINGS, KEEPALIVE, SETPOINT, BathSettings
-from labapp.gui.fields import add_rows, problems
+from labapp.gui.fields import add_rows, narrow_form, problems
 
 SIMULATED = "simulated"
 NO_HOTPLATE = "none"
@@ -77,20 +77,20 @@ class DevicePanel(QWidget):
         self.stale = True
         self._look: tuple[bool, bool] | None = None
         devices = QGroupBox("devices")
-        form = QFormLayout(devices)
+        form = narrow_form(devices)
         form.addRow("camera", self.camera)
         form.addRow("hotplate", self.hotplate)
         settings = QGroupBox("camera settings (paper: f/22, 1/125 s, ISO 160)")
-        sform = QFormLayout(settings)
+        sform = narrow_form(settings)
         sform.addRow("aperture", self.aperture)
         sform.addRow("shutter", self.shutter)
         sform.addRow("ISO", self.iso)
         sform.addRow("format", self.image_format)
         bath = QGroupBox("bath (runs and calibration series)")
-        self.bath_fields = add_rows(QFormLayout(bath), tuple(s for s in BATH_SETTINGS if s.flag),
+        self.bath_fields = add_rows(narrow_form(bath), tuple(s for s in BATH_SETTINGS if s.flag),
                                     none_text={SETPOINT.name: "no heating"})
         readout = QGroupBox("hotplate")
-        rform = QFormLayout(readout)
+        rform = narrow_form(readout)
         rform.addRow(self.heater)
         rform.addRow(self.stale_label)
         for key, label in (("plate_c", "plate (\u00b0C)"), ("probe_c", "probe (\u00b0C)"), ("speed_rpm", "stirring (rpm)"),

@@ -123,6 +123,14 @@ class SettingBox(QDoubleSpinBox):
         self.error_label.setVisible(bool(self._problem))
 
 
+def narrow_form(parent: QWidget | None = None) -> QFormLayout:
+    """A form whose rows put a field under its label when the form is too narrow for both side by side, so
+    that a form in the bench dock never needs a horizontal scroll bar."""
+    form = QFormLayout(parent)
+    form.setRowWrapPolicy(QFormLayout.RowWrapPolicy.WrapLongRows)
+    return form
+
+
 def add_rows(form: QFormLayout, settings: tuple[Setting, ...], none_text: dict[str, str] | None = None,
              ) -> dict[str, SettingBox]:
     """A row per setting (its label, its box, and under it the box's error line) in ``form``; returns the

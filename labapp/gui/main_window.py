@@ -75,6 +75,10 @@ PREFERRED_SIZE = (1500, 950)
 TITLE_BAR_PX = 32
 """Room left for the window manager's title bar when fitting the window to the screen."""
 LOG_HEIGHT_PX = 110
+BENCH_DOCK_MAX_SHARE = 0.4
+"""The bench dock takes at most this share of the window's width when the window is fitted to the screen."""
+BENCH_DOCK_SLACK_PX = 12
+"""Pixels the bench dock gets beyond its widest tab's minimum (the dock's own frame and splitter)."""
 GAP_FACTOR, GAP_MIN_S = 5.0, 120.0
 """A frame arriving more than this many intervals, and at least this long, after the previous one marks a gap
 on the plots (an accelerated simulation may lag its interval a little: that is no gap)."""
@@ -186,7 +190,6 @@ class MainWindow(QMainWindow):
         self.log_dock.setWidget(self.messages)
         self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.log_dock)
         self.resizeDocks([self.log_dock], [LOG_HEIGHT_PX], Qt.Orientation.Vertical)
-        self.resizeDocks([self.bench_dock], [410], Qt.Orientation.Horizontal)
         self._menus()
         self.statusBar().addPermanentWidget(self.progress)
 
@@ -289,6 +292,16 @@ class MainWindow(QMainWindow):
         self.resize(width, height)
         self.move(available.x() + (available.width() - width) // 2,
                   available.y() + max(0, (available.height() - TITLE_BAR_PX - height) // 2))
+        self.resizeDocks([self.bench_dock], [min(self._bench_width(), int(BENCH_DOCK_MAX_SHARE * width))],
+                         Qt.Orientation.Horizontal)
+
+    def _bench_width(self) -> int:
+        """Width (px) at which the widest tab of the bench dock shows without a horizontal scroll bar."""
+        areas = [self.bench_tabs.widget(i) for i in range(self.bench_tabs.count())]
+        content = max(area.widget().minimumSizeHint().width() for area in areas)
+        scroll_bar = max(area.verticalScrollBar().sizeHint().width() for area in areas)
+        frames = self.bench_tabs.sizeHint().width() - self.bench_tabs.currentWidget().sizeHint().width()
+        return content + scroll_bar + max(frames, 0) + BENCH_DOCK_SLACK_PX
 
     # -- settings ---------------------------------------------------------------------------------------------
     def restore_settings(self) -> None:

@@ -15,7 +15,6 @@ from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (
     QCheckBox,
     QFileDialog,
-    QFormLayout,
     QGroupBox,
     QHBoxLayout,
     QLabel,
@@ -29,7 +28,7 @@ from labapp.acquisition.events import Phase, StateChanged
 from labapp.acquisition.procedures import RunConfig
 from labapp.acquisition.settings import EXCURSION, INTERVAL, MAX_DURATION, OBJECT_MASS, BathSettings
 from labapp.gui import dialogs
-from labapp.gui.fields import SettingBox, problems
+from labapp.gui.fields import SettingBox, narrow_form, problems
 
 NO_CALIBRATION_STEADY = ("stop at steady state needs a bench calibration (the live concentration decides it): "
                          "choose a calibration, or untick it")
@@ -69,7 +68,7 @@ class RunControls(QWidget):
         self.band_label = QLabel("")
         self.band_label.setWordWrap(True)
         form_box = QGroupBox("run")
-        form = QFormLayout(form_box)
+        form = narrow_form(form_box)
         form.addRow("name", self.name)
         form.addRow("object", self.object_name)
         for box in (self.object_mass, self.interval, self.max_hours):

@@ -82,3 +82,14 @@ def test_view_menu_brings_back_every_dock(window, qtbot):
         assert not dock.isVisible()
         actions[dock.windowTitle()].trigger()
         assert dock.isVisible()
+
+
+def test_every_bench_tab_fits_its_dock_without_a_horizontal_scroll_bar(window, qtbot):
+    tabs = window.bench_tabs
+    for index in range(tabs.count()):
+        tabs.setCurrentIndex(index)
+        qtbot.wait(50)
+        area = tabs.widget(index)
+        assert not area.horizontalScrollBar().isVisible(), (tabs.tabText(index), area.widget().minimumSizeHint(),
+                                                            area.viewport().width())
+    assert window.bench_dock.width() <= 0.4 * window.width() + 1
