@@ -88,8 +88,8 @@ FIRST_STEP = {"extruded": 0.5}
 """The first round's step s per design space (1 for the spaces it does not name; module doc). An extruded design's
 density is equal along each column, so its extraction level sits at an end of `design.fabrication.extract.LEVEL_RANGE`
 and flips with a small change of the mass; the print's volume then moves several times as much as the design
-grid's (the star prism at resolution 128: +5.9% for +1.9%). A step s converges while the print moves less than
-2 / s times as much as the grid: a full step overshoots there, half a step does not
+grid's (the star prism at resolution 128: by 5.7% of the target's volume for 1.9%). A step s converges while
+the print moves less than 2 / s times as much as the grid: a full step overshoots there, half a step does not
 (docs/design.md#physical-correction)."""
 BACKTRACK = 0.5
 """The factor on the correction's step s after a round whose print does not beat the best so far; the next round
