@@ -12,6 +12,7 @@ from PySide6.QtWidgets import (
     QGridLayout,
     QGroupBox,
     QHBoxLayout,
+    QHeaderView,
     QLabel,
     QLineEdit,
     QPushButton,
@@ -125,6 +126,7 @@ class SimulationStep(QWidget):
         self.bench_calibration: Callable[[], str | None] = lambda: None
         self.table = QTableWidget(0, len(SET_COLUMNS))
         self.table.setHorizontalHeaderLabels(["run (folder or curve CSV)", "mesh", "weighed mass (g, empty: run's)"])
+        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)  # scrolls inside
         self.add_button, self.load_button = QPushButton("Add run + mesh..."), QPushButton("Load set CSV...")
         self.calibrate_button, self.activate_button = QPushButton("Calibrate"), QPushButton("Make active")
         self.add_button.clicked.connect(self._pick_row)

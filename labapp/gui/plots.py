@@ -22,6 +22,8 @@ REDRAW_MS = 100
 DEGREES_C = "\u00b0C"
 TIME_LABEL = "time since drop (h:mm)"
 _STEPS_S = (1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600, 7200, 3 * 3600, 6 * 3600, 12 * 3600, 86400)
+LEGEND_BRUSH = pg.mkBrush(0, 0, 0, 170)
+"""A legend's background: dark enough to read its labels over the traces it may cover."""
 
 #: Colour of each kind of mark (any other kind is drawn magenta).
 MARK_COLOURS: dict[str, tuple[int, int, int]] = {
@@ -88,14 +90,14 @@ class PlotsPanel(QWidget):
         self.release = self.release_widget.getPlotItem()
         self.release.setLabel("left", "concentration (g/kg)")
         self.release.showAxis("right")
-        self.release.addLegend(offset=(10, 10))
+        self.release.addLegend(offset=(10, 10), brush=LEGEND_BRUSH)
         self.raw_curve = self.release.plot([], [], pen=None, symbol="o", symbolSize=4, symbolBrush=(120, 120, 255),
                                            name="measured")
         self.smooth_curve = self.release.plot([], [], pen=pg.mkPen("r", width=2), name="Savitzky-Golay")
         self.bath_widget = time_plot("bath")
         self.temps = self.bath_widget.getPlotItem()
         self.temps.setLabel("left", f"temperature ({DEGREES_C})")
-        self.temps.addLegend(offset=(10, 10))
+        self.temps.addLegend(offset=(10, 10), brush=LEGEND_BRUSH)
         self.band = pg.LinearRegionItem(orientation="horizontal", movable=False, brush=pg.mkBrush(255, 140, 0, 40),
                                         pen=pg.mkPen((255, 140, 0, 120), style=Qt.PenStyle.DotLine))
         self.band.setZValue(-10)

@@ -73,8 +73,8 @@ class RunControls(QWidget):
         form.addRow("object", self.object_name)
         for box in (self.object_mass, self.interval, self.max_hours):
             box.add_to(form, box.setting.label)
-        form.addRow("", self.stop_on_steady)
-        form.addRow("", self.auto_drop)
+        form.addRow(self.stop_on_steady)
+        form.addRow(self.auto_drop)
         cal_row = QHBoxLayout()
         cal_row.addWidget(self.calibration, 1)
         cal_row.addWidget(browse)
