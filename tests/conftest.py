@@ -1,11 +1,16 @@
 """Shared test set-up: headless Qt everywhere, numba kernels compiled once before the workers start."""
 import gc
 import os
+import tempfile
 
 import pytest
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the simulated bench's print releases (`labapp.acquisition.worldcache`) are cached for this test session only,
+# never in the user's own cache; set here, in the controlling process, so that the workers and every `sfr`
+# they start share it
+os.environ.setdefault("SFR_CACHE", tempfile.mkdtemp(prefix="sfr-cache-"))
 
 
 def _test_operator() -> None:

@@ -34,8 +34,9 @@ from drivers.sim import BenchScene
 from drivers.sim.heidolph_emulator import HeidolphEmulator
 from labapp.acquisition.bench import Bench
 from labapp.acquisition.clock import Clock, ScaledClock, SteppedClock, WallClock
-from labapp.acquisition.printworld import WORLD_RESOLUTION, PrintPhysics, world_release
+from labapp.acquisition.printworld import WORLD_RESOLUTION, PrintPhysics
 from labapp.acquisition.settings import WATER
+from labapp.acquisition.worldcache import cached_world_release
 from labapp.records.storage import FRAMES_CSV, read_run
 
 log = logging.getLogger(__name__)
@@ -147,8 +148,9 @@ def sample_release(shape: str = "pill", index: int = 0, resolution: int = WORLD_
         Which print: each has its own few-percent deviation of rate and density.
     resolution : int
         Voxels along the longest side of the bench's own release computation
-        (:func:`labapp.acquisition.printworld.world_release`, or the forward model's grid for a material
-        without print physics).
+        (:func:`labapp.acquisition.printworld.world_release`, kept in the user's cache by
+        :mod:`labapp.acquisition.worldcache`, or the forward model's grid for a material without print
+        physics).
     material : Material, optional
         Default :meth:`Material.draw`.
     """
@@ -159,7 +161,7 @@ def sample_release(shape: str = "pill", index: int = 0, resolution: int = WORLD_
         model = simulate_mesh(sample_shape(shape), resolution=resolution)
         release = SampleRelease.from_simulation(shape, model.tau_mm, model.released_mm3, seconds_per_mm, g_per_mm3)
     else:
-        world = world_release(sample_shape(shape), physics, resolution=resolution)
+        world = cached_world_release(sample_shape(shape), physics, resolution=resolution)
         release = SampleRelease.from_simulation(shape, world.tau_mm, world.released_mm3, seconds_per_mm, g_per_mm3,
                                                 lag_s=physics.wetting_lag_s)
         release.truth["physics"] = dataclasses.asdict(physics)
