@@ -71,38 +71,15 @@ def prediction_band(simcal: SimCalFile, tau_mm: np.ndarray, released_mm3: np.nda
                  parameter_g=spread, mass_sd_g=mass_sd)
 
 
-def _mesh_release(source: str, resolution: int, symmetry: str, units: str, method: str, grids: dict, meshes: list,
-                  tau_mm: np.ndarray, released_mm3: np.ndarray, offset_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """A release simulated from ``source`` at the print's exact volume, corrected for the grid's bias against
-    the reference evaluator when ``method`` is ``calibrate_sim.RELEASE_METHOD``
-    (:func:`labapp.jobs.calibrate_sim.bias_corrected_release`; a density array has no mesh and keeps its release)."""
-    from labapp.jobs.calibrate_sim import RELEASE_METHOD, bias_corrected_release, exact_volume_release, grid_bias
-    from labapp.jobs.simulate import _is_density, _source_mesh, simulation_grid
-
-    if not meshes:
-        meshes.append(None if _is_density(source) else _source_mesh(source, units))
-    mesh = meshes[0]
-    if mesh is None or method != RELEASE_METHOD:
-        return np.asarray(tau_mm, float), exact_volume_release(released_mm3, mesh, offset_mm)
-    if 0.0 not in grids:
-        grids[0.0] = simulation_grid(source, resolution=resolution, symmetry=symmetry, units=units, offset_mm=0.0)[:3]
-    return bias_corrected_release(tau_mm, released_mm3, mesh, offset_mm, grid_bias(mesh, grids[0.0], resolution))
-
-
-def source_simulator(source: str, resolution: int, *, symmetry: str = "", units: str = "mm",
-                     method: str | None = None) -> SimulateAt:
+def source_simulator(source: str, resolution: int, *, symmetry: str = "", units: str = "mm") -> SimulateAt:
     """``simulate_at(physics)`` for a mesh, ``sample:NAME`` or density array at a calibration's resolution
     (``labapp.jobs.simulate.simulation_grid``; grids cached per surface offset), a mesh's release at its
-    print's exact volume (:func:`labapp.jobs.calibrate_sim.exact_volume_release`) and, with ``method``
-    ``calibrate_sim.RELEASE_METHOD`` (the default; give the calibration's ``release_method``), corrected for the
-    grid's bias against the reference evaluator (:func:`labapp.jobs.calibrate_sim.bias_corrected_release`), as
-    the calibration made its meshes' releases."""
+    print's exact volume (:func:`labapp.jobs.calibrate_sim.exact_volume_release`)."""
     from design.errors import DesignError
     from design.forward.simulator import simulate
-    from labapp.jobs.calibrate_sim import RELEASE_METHOD
-    from labapp.jobs.simulate import simulation_grid
+    from labapp.jobs.calibrate_sim import exact_volume_release
+    from labapp.jobs.simulate import _is_density, _source_mesh, simulation_grid
 
-    method = RELEASE_METHOD if method is None else method
     grids: dict[float, tuple] = {}
     meshes: list = []   # the source's mesh, loaded once (None for a density array)
 
@@ -117,29 +94,28 @@ def source_simulator(source: str, resolution: int, *, symmetry: str = "", units:
             # wetting lag is the calibration map's, not the simulation's)
             release = simulate(rho, dx, mirror=mirror, **{p: float(v) for p, v in physics.items()
                                                           if p in PHYSICS_PARAMETERS and p != "offset_mm"})
-            return _mesh_release(source, resolution, symmetry, units, method, grids, meshes, release.tau_mm,
-                                 release.released_mm3, offset)
+            if not meshes:
+                meshes.append(None if _is_density(source) else _source_mesh(source, units))
         except DesignError as exc:
             raise SimCalError(f"{source}: {exc}") from exc
+        return release.tau_mm, exact_volume_release(release.released_mm3, meshes[0], offset)
 
     return simulate_at
 
 
-def source_release_exact(source: str, tau_mm: np.ndarray, released_mm3: np.ndarray, offset_mm: float,
-                         units: str = "mm", *, resolution: int, symmetry: str = "", method: str | None = None
-                         ) -> tuple[np.ndarray, np.ndarray]:
-    """A release simulated from ``source`` (mesh, ``sample:NAME`` or density array) at ``resolution`` made as
-    :func:`source_simulator` makes it: at the print's exact volume, corrected for the grid's bias with ``method``
-    ``calibrate_sim.RELEASE_METHOD`` (the default). Returns ``(tau_mm, released_mm3)`` (the bias's depths join
-    the simulation's)."""
+
+def source_release_exact(source: str, released_mm3: np.ndarray, offset_mm: float, units: str = "mm") -> np.ndarray:
+    """A release simulated from ``source`` (mesh, ``sample:NAME`` or density array) at the print's exact volume
+    (:func:`labapp.jobs.calibrate_sim.exact_volume_release`), as :func:`source_simulator` gives it."""
     from design.errors import DesignError
-    from labapp.jobs.calibrate_sim import RELEASE_METHOD
+    from labapp.jobs.calibrate_sim import exact_volume_release
+    from labapp.jobs.simulate import _is_density, _source_mesh
 
     try:
-        return _mesh_release(source, resolution, symmetry, units, RELEASE_METHOD if method is None else method, {}, [],
-                             tau_mm, released_mm3, offset_mm)
+        mesh = None if _is_density(source) else _source_mesh(source, units)
     except DesignError as exc:
         raise SimCalError(f"{source}: {exc}") from exc
+    return exact_volume_release(released_mm3, mesh, offset_mm)
 
 
 def band_series(t_s: np.ndarray, band: tuple[np.ndarray, np.ndarray] | None, level: float = BAND_LEVEL
@@ -165,7 +141,7 @@ def design_band(design_dir: Path, simcal: SimCalFile, tau_mm: np.ndarray, releas
     """The band of a design's predicted release: the print physics' spread from its ``design.stl`` simulated
     at the calibration's resolution (a design without one: the scales' spread and the residuals only)."""
     stl = Path(design_dir) / "design.stl"
-    simulate_at = source_simulator(str(stl), simcal.resolution, method=simcal.release_method) if stl.is_file() else None
+    simulate_at = source_simulator(str(stl), simcal.resolution) if stl.is_file() else None
     try:
         return prediction_band(simcal, tau_mm, released_mm3, t_s, water_g, simulate_at)
     except SimCalError as exc:

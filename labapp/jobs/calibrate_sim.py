@@ -57,12 +57,6 @@ OLD_FORMATS = ("sfr-simcal/1",)
 """Earlier formats :func:`load_simcal` reads by :func:`migrate` (version 1 had no print physics: the identity)."""
 FORWARD_MODEL = "design.forward.simulator: fast marching, eqs. 2-10"
 """The simulator a calibration holds for; a file naming another is refused."""
-RELEASE_METHOD = "grid+reference-bias"
-"""How a mesh's simulated release is made (``simcal.json``'s ``release_method``): the forward model's grid release
-with the print physics, plus the grid's bias against the reference evaluator's exact release (:func:`grid_bias`)."""
-OLD_RELEASE_METHOD = "grid"
-"""The grid release alone (at the print's exact volume): what a file without ``release_method`` was made with."""
-RELEASE_METHODS = (RELEASE_METHOD, OLD_RELEASE_METHOD)
 DEFAULT_RESOLUTION = 64
 """Voxels along each mesh's longest side when calibrating (``sfr simulate``'s default)."""
 MIN_RESOLUTION, MAX_RESOLUTION = 8, 512
@@ -107,9 +101,6 @@ class SimCalFile:
     band : dict or None
         The file's ``band`` block (checked), what a prediction's error band is made from; None for a file made
         without one.
-    release_method : str
-        How the calibration made each mesh's release (:data:`RELEASE_METHODS`), and so how its predictions do: a
-        file without the field was made by the grid alone (:data:`OLD_RELEASE_METHOD`).
     """
 
     cal: SimCal
@@ -119,7 +110,6 @@ class SimCalFile:
     path: Path
     physics: dict = dataclasses.field(default_factory=lambda: dict(PHYSICS_IDENTITY))
     band: dict | None = None
-    release_method: str = RELEASE_METHOD
 
     def describe(self) -> str:
         """One line for reports and GUI labels."""
@@ -289,107 +279,21 @@ def exact_volume_release(released_mm3: np.ndarray, mesh, offset_mm: float = 0.0)
     return released * (exact / released[-1])
 
 
-BIAS_SAMPLES = 1025
-"""Erosion depths (uniform, plus the grid's own) at which a mesh's grid bias is evaluated."""
-_BIAS_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
-_BIAS_CACHE_SIZE = 64
-
-
-def _mesh_key(mesh, grid: tuple) -> tuple:
-    """What a mesh's grid bias depends on: its vertices and faces, and its isotropic grid (voxels, size, mirrors)."""
-    rho, dx, mirror = grid
-    digest = hashlib.sha256()
-    for a in (np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64), np.asarray(rho, np.float64)):
-        digest.update(np.ascontiguousarray(a).tobytes())
-        digest.update(str(a.shape).encode())
-    return digest.hexdigest(), round(float(dx), 12), tuple(bool(m) for m in mirror)
-
-
-def grid_bias(mesh, grid: tuple, resolution: int) -> tuple[np.ndarray, np.ndarray]:
-    """The first-order fast marching's discretisation bias of a mesh, as a fraction of its volume:
-    ``b(tau) = R(tau) / V - G(tau) / G_end``, with R the reference release by exact surface distances
-    (``design.forward.reference.reference_release`` on ``design_lattice(resolution)``: isotropic, no swelling,
-    :doc:`forward.md` reference evaluator) and G the forward model's isotropic release of ``grid`` (the mesh's
-    voxels at the calibration's resolution, no surface offset). The bias is by shape (a curved print's grid front
-    runs ahead of the exact one more than a box's), so no time scale can absorb it.
-
-    Evaluated once per mesh, grid and tau grid in a process (cached): the leave-one-out refits and the print
-    physics scan reuse it.
-
-    Returns
-    -------
-    tau_mm, fraction : (K,) ndarray of float
-        Erosion depths (0 to past both curves' end, where b = 0) and b at them.
-    """
-    from design.forward.reference import design_lattice, reference_release
-    from design.forward.simulator import simulate
-
-    key = (*_mesh_key(mesh, grid), int(resolution), BIAS_SAMPLES)
-    if key in _BIAS_CACHE:
-        return _BIAS_CACHE[key]
-    rho, dx, mirror = grid
-    identity = simulate(rho, dx, mirror=mirror)
-    g_tau, g_vol = np.asarray(identity.tau_mm, float), np.asarray(identity.released_mm3, float)
-    if not (g_vol.size and g_vol[-1] > 0):
-        raise SimCalError("the mesh's voxel grid holds no solid; expected a closed mesh in mm")
-    end = 2.0 * float(g_tau[-1])
-    while True:
-        tau = np.union1d(np.linspace(0.0, end, BIAS_SAMPLES), g_tau[g_tau <= end])
-        ref = reference_release(mesh, tau, cells=design_lattice(resolution))
-        if ref.total_time_mm < tau[-1]:
-            break
-        end = 1.5 * float(ref.total_time_mm)
-    fraction = ref.released_mm3 / ref.volume_mm3 - np.interp(tau, g_tau, g_vol) / g_vol[-1]
-    fraction[tau >= max(ref.total_time_mm, float(g_tau[-1]))] = 0.0   # both curves whole: no bias
-    if len(_BIAS_CACHE) >= _BIAS_CACHE_SIZE:
-        _BIAS_CACHE.pop(next(iter(_BIAS_CACHE)))
-    _BIAS_CACHE[key] = (tau, fraction)
-    return _BIAS_CACHE[key]
-
-
-def bias_corrected_release(tau_mm: np.ndarray, released_mm3: np.ndarray, mesh, offset_mm: float, bias: tuple
-                           ) -> tuple[np.ndarray, np.ndarray]:
-    """A mesh's simulated release (with any print physics) corrected for the grid's bias (:func:`grid_bias`):
-    ``G_phys(tau) V_print / G_phys_end + b(tau) V_print`` on the union of both tau grids, V_print the print's exact
-    volume (:func:`print_volume_mm3`), kept monotone within [0, V_print]. With identity physics (no offset) it is
-    the reference release R(tau) itself at every node.
-
-    The bias is that of the mesh as designed, scaled to the print's volume, also when the print physics offsets
-    the surface: the offsets calibrated (a few tenths of a mm, under a voxel) move the surface within the voxels
-    the bias is made on, and the bias, a property of the surface's curvature against the grid's axes, changes with
-    them by far less than the grid's own placement of an offset surface (half a voxel)."""
-    tau_b, frac_b = bias
-    tau_g, vol_g = np.asarray(tau_mm, float), exact_volume_release(released_mm3, mesh, offset_mm)
-    if mesh is None or vol_g.size == 0 or not vol_g[-1] > 0:
-        return tau_g, vol_g
-    total = print_volume_mm3(mesh, offset_mm)
-    tau = np.union1d(tau_g, tau_b)
-    released = np.interp(tau, tau_g, vol_g) + np.interp(tau, tau_b, frac_b, right=0.0) * total
-    return tau, np.clip(np.maximum.accumulate(released), 0.0, total)
-
-
-def _simulate(mesh, mesh_path: Path, resolution: int, physics: dict | None = None, grids: dict | None = None,
-              method: str | None = None):
-    """A mesh's simulated release with print physics, at its exact volume (:func:`exact_volume_release`), corrected
-    for the grid's bias (:func:`bias_corrected_release`) when ``method`` is :data:`RELEASE_METHOD`; ``grids``
-    caches voxelisations per (mesh, offset)."""
+def _simulate(mesh, mesh_path: Path, resolution: int, physics: dict | None = None, grids: dict | None = None):
+    """A mesh's simulated release with print physics, at its exact volume (:func:`exact_volume_release`);
+    ``grids`` caches voxelisations per (mesh, offset)."""
     from design.errors import DesignError
     from design.files.pipeline import mesh_grid
     from design.forward.simulator import simulate
 
     physics = physics or PHYSICS_IDENTITY
-    method = RELEASE_METHOD if method is None else method
     grids = {} if grids is None else grids
     try:
-        for offset in {0.0, physics["offset_mm"]}:
-            if (mesh_path, offset) not in grids:
-                grids[(mesh_path, offset)] = mesh_grid(mesh, resolution=resolution, offset_mm=offset)
-        rho, dx, mirror = grids[(mesh_path, physics["offset_mm"])]
+        key = (mesh_path, physics["offset_mm"])
+        if key not in grids:
+            grids[key] = mesh_grid(mesh, resolution=resolution, offset_mm=physics["offset_mm"])
+        rho, dx, mirror = grids[key]
         release = simulate(rho, dx, mirror=mirror, anisotropy=physics["anisotropy"], swelling_mm=physics["swelling_mm"])
-        if method == RELEASE_METHOD:
-            bias = grid_bias(mesh, grids[(mesh_path, 0.0)], resolution)
-            return (*bias_corrected_release(release.tau_mm, release.released_mm3, mesh, physics["offset_mm"], bias),
-                    dx)
     except DesignError as exc:
         raise SimCalError(f"{mesh_path}: {exc}") from exc
     return release.tau_mm, exact_volume_release(release.released_mm3, mesh, physics["offset_mm"]), dx
@@ -616,7 +520,6 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
     doc = {
         "format": FORMAT,
         "forward_model": FORWARD_MODEL,
-        "release_method": RELEASE_METHOD,
         "model": chosen,
         "seconds_per_mm": fit.cal.seconds_per_mm,
         "g_per_mm3": fit.cal.g_per_mm3,
@@ -752,9 +655,6 @@ def load_simcal(path: str | Path) -> SimCalFile:
                           f"got {physics}")
     if not (math.isfinite(physics["swelling_mm"]) and physics["swelling_mm"] >= 0):
         raise SimCalError(f"{path}: physics.swelling_mm must be a number >= 0 (mm), got {physics['swelling_mm']}")
-    method = doc.get("release_method", OLD_RELEASE_METHOD)
-    if method not in RELEASE_METHODS:
-        raise SimCalError(f"{path}: release_method {method!r} is not one of {', '.join(RELEASE_METHODS)}")
     band = doc.get("band")
     if band is not None:
         try:
@@ -762,7 +662,7 @@ def load_simcal(path: str | Path) -> SimCalFile:
             float(band["seconds_per_mm_rel_sd"]), float(band["g_per_mm3_rel_sd"]), float(band["level"])
         except (KeyError, TypeError, ValueError) as exc:
             raise SimCalError(f"{path}: bad band block ({exc}); recalibrate with sfr calibrate-sim") from exc
-    return SimCalFile(cal, resolution, dx, water, path, physics, band, method)
+    return SimCalFile(cal, resolution, dx, water, path, physics, band)
 
 
 def check_resolution(simcal: SimCalFile, resolution: int | None) -> int:
