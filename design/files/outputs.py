@@ -262,7 +262,7 @@ warning that it did not converge, with the limit to raise."""
 
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
                   history: list[list[float]], config, *, status: DesignStatus,
-                  session_seconds: float) -> DesignOutputs:
+                  session_seconds: float, announce: bool = True) -> DesignOutputs:
     """Extract, re-simulate, assess and write every output of a design run.
 
     Parameters
@@ -277,6 +277,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     status : DesignStatus
     session_seconds : float
         Wall time of this session (resumes add up through the history's seconds column).
+    announce : bool
+        Log the run's warnings as warnings (False: at INFO level, naming ``out_dir``; a coarse start's).
     """
     space, target = problem.space, problem.target
     physics = {"anisotropy": config.anisotropy, "swelling_mm": config.swelling_mm}
@@ -411,7 +413,10 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         "config": asdict(config),
     }
     for w in warnings:
-        log.warning("%s", w)
+        if announce:
+            log.warning("%s", w)
+        else:
+            log.info("%s: %s", out_dir, w)
     save_report(out_dir / "report.png", target.tau_mm, target.released_mm3, print_curve, density_curve,
                 binary_curve, rho_full, solid,
                 f"{target.source} | {space.name} | print rel. RMSE {print_fit_text(summary)} | design grid: "

@@ -136,7 +136,7 @@ class _StartFolders:
         folder = self.folder(k)
         resume = (folder / CONFIG).exists()
         return run_design(None if resume else config, folder, on_iteration=on_iteration,
-                          should_stop=self.should_stop, resume=resume, start=start).status
+                          should_stop=self.should_stop, resume=resume, start=start, coarse_start=True).status
 
     def best_value(self, k: int) -> float:
         history = np.loadtxt(self.folder(k) / "history.csv", delimiter=",", skiprows=1, ndmin=2)
@@ -253,7 +253,7 @@ def _check_size(saved: Checkpoint, problem: Problem, out_dir: Path) -> None:
                           f"{size} ({CONFIG} changed since it was written?); restore the files or start a new run")
 
 
-def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint) -> DesignResult:
+def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint, coarse_start: bool) -> DesignResult:
     """The outputs of a run whose optimisation finished, from its last checkpoint: its best design, history
     and status, with the objective as the run left it (`restore_objective`: the final beta)."""
     problem = _problem(config, out_dir)
@@ -264,13 +264,13 @@ def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint) -> 
     best = np.asarray(saved.best_x, float).reshape(problem.space.var_shape)
     history = [list(row) for row in saved.history]
     outputs = write_outputs(out_dir, problem, objective, best, history, config, status=saved.status,
-                            session_seconds=0.0)
+                            session_seconds=0.0, announce=not coarse_start)
     return DesignResult(out_dir, saved.status, len(history), float(saved.best_value), outputs)
 
 
 def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration: IterationCallback | None = None,
                should_stop: Callable[[], bool] | None = None, resume: bool = False,
-               start: StartDesign | None = None) -> DesignResult:
+               start: StartDesign | None = None, coarse_start: bool = False) -> DesignResult:
     """Run (or resume) an inverse design in ``out_dir``.
 
     Parameters
@@ -295,6 +295,9 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         ``start(objective, problem)`` returns the start variables of a new run (variable shape);
         default the uniform start of section 5.2 (`DesignObjective.uniform_start`), or for
         ``config.starts`` > 1 the refined best of the coarse starts (`design.inverse.multistart`).
+    coarse_start : bool
+        The run is a coarse start of a multi-start (``starts/NN``): its warnings (pieces, evaluation limit)
+        are about that start, not the design, and are logged at INFO level; its summary keeps them.
 
     Returns
     -------
@@ -317,7 +320,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         if ckpt.exists():
             saved = load_checkpoint(ckpt)
         if saved is not None and saved.status is not None and _finished(saved, out_dir, config):
-            return _rewrite_outputs(out_dir, stored, saved)  # the optimisation ended, not all outputs got written
+            return _rewrite_outputs(out_dir, stored, saved, coarse_start)  # the optimisation ended, not all outputs got written
         if config != stored:  # a raised evaluation limit
             save_config(out_dir, config)
     else:
@@ -340,6 +343,6 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     outcome, objective = optimise_physical(objective, problem, config, CheckpointFile(ckpt), RoundFile(out_dir / ROUNDS),
                                            saved=saved, start=start, on_iteration=on_iteration, should_stop=should_stop)
     outputs = write_outputs(out_dir, problem, objective, outcome.best_x, outcome.history, config,
-                            status=outcome.status, session_seconds=outcome.session_seconds)
+                            status=outcome.status, session_seconds=outcome.session_seconds, announce=not coarse_start)
     log.info("design %s after %d evaluations: %s", outcome.status, outcome.iterations, outputs.summary_path)
     return DesignResult(out_dir, outcome.status, outcome.iterations, outcome.best_value, outputs)

@@ -1,5 +1,6 @@
 """Multi-start: coarse seeded starts, the best refined at full resolution; interpolation between grids."""
 import json
+import logging
 
 import numpy as np
 import pytest
@@ -24,10 +25,19 @@ def test_coarse_resolution_halves_and_stays_even():
     assert coarse_resolution(128) == 64 and coarse_resolution(66) == 32 and coarse_resolution(16) == 16
 
 
-def test_multistart_runs_the_starts_and_refines_the_best(tmp_path):
+def test_multistart_runs_the_starts_and_refines_the_best(tmp_path, caplog):
     config = DesignConfig(target="sphere", space="extruded", resolution=32, max_iter=6, radius_vox=1.5, starts=2)
     phases = []
-    result = run_design(config, tmp_path / "run", on_iteration=lambda k, x, terms: phases.append(terms["phase"]))
+    with caplog.at_level(logging.INFO):
+        result = run_design(config, tmp_path / "run", on_iteration=lambda k, x, terms: phases.append(terms["phase"]))
+    # a coarse start's own warnings (6 evaluations: not converged) stay the start's: in its summary and at INFO
+    # level naming its folder, never as the design's warnings
+    start_warnings = json.loads((tmp_path / "run" / "starts" / "00" / "summary.json").read_text())["warnings"]
+    assert start_warnings
+    infos = [r.getMessage() for r in caplog.records if r.levelno == logging.INFO]
+    assert f"{tmp_path / 'run' / 'starts' / '00'}: {start_warnings[0]}" in infos
+    warned = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert sorted(warned) == sorted(result.outputs.summary["warnings"]), warned
     # progress names the run each evaluation belongs to
     assert list(dict.fromkeys(phases)) == ["coarse start 1 of 2 at resolution 16",
                                            "coarse start 2 of 2 at resolution 16", "refinement at resolution 32"]
