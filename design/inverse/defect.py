@@ -232,8 +232,9 @@ class RoundStore(Protocol):
 
 
 def _better(check: PrintCheck, state: RoundState | None) -> bool:
-    """Whether a judged design beats the best so far: fewer pieces above one, else a lower fit."""
-    if state is None:
+    """Whether a judged design beats the best so far: fewer pieces above one, else a lower fit. Of two designs with
+    no print yet, the later one (the optimisation's progress)."""
+    if state is None or (check.pieces == 0 and state.best_pieces == 0):
         return True
     mine, theirs = max(check.pieces, 1), max(state.best_pieces, 1)
     return mine < theirs or (mine == theirs and check.fit < state.best_fit)
@@ -241,7 +242,11 @@ def _better(check: PrintCheck, state: RoundState | None) -> bool:
 
 def aimed_bias(check: PrintCheck, target_mm3: np.ndarray, step: float) -> np.ndarray:
     """The bias a round from the design of ``check`` aims J_fit with at step ``step``: J_fit's aim
-    C* + bias = G + step (C* - P), that is bias = b - (1 - step) (C* - P) (b exactly for ``step`` 1), mm^3."""
+    C* + bias = G + step (C* - P), that is bias = b - (1 - step) (C* - P) (b exactly for ``step`` 1), mm^3.
+    A design with no print yet (no density reaches the extraction level) has no bias to measure: 0, the round
+    aims at the target itself."""
+    if check.pieces == 0:
+        return np.zeros_like(target_mm3)
     if step == 1.0:
         return check.bias_mm3
     return check.bias_mm3 - (1.0 - step) * (target_mm3 - check.print_mm3)

@@ -261,3 +261,18 @@ def test_a_half_first_step_lands_near_the_fixed_point_the_full_one_overshoots(am
         fits[step] = rounds.states[-1].fits
     np.testing.assert_array_equal(fits[1.0][0], fits[0.5][0])  # the same optimisation before the round
     assert fits[1.0][1] > 1.1 * fits[1.0][0] and fits[0.5][1] < 0.5 * fits[0.5][0]
+
+
+def test_a_design_with_no_print_yet_is_not_corrected_and_the_rounds_carry_on_from_the_latest():
+    """No density at the extraction level: no bias can be measured (the round aims at the target itself), and of
+    two designs with no print the later one is kept as the rounds' start, never backtracked to the earlier."""
+    target = np.linspace(0.0, 10.0, 5)
+    empty = defect.PrintCheck(np.inf, 0, np.full(5, 3.0), np.zeros(5))
+    assert np.array_equal(defect.aimed_bias(empty, target, 1.0), np.zeros(5))
+    assert np.array_equal(defect.aimed_bias(empty, target, 0.5), np.zeros(5))
+    state = RoundState(round=1, start=0, end=10, bias_mm3=np.zeros(5), x_start=np.zeros(3), best_x=np.zeros(3),
+                       best_fit=np.inf, best_pieces=0, fits=np.array([np.inf]), status="max_iter")
+    assert defect._better(empty, state)
+    printed = defect.PrintCheck(0.02, 1, np.full(5, 3.0), np.full(5, 2.0))
+    assert defect._better(printed, state)
+    assert not defect._better(empty, replace(state, best_fit=0.02, best_pieces=1))

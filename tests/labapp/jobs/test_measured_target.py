@@ -126,7 +126,7 @@ def test_sfr_design_takes_a_measured_run_without_the_override(tmp_path, releases
                                   "physics": {"anisotropy": 1.0, "offset_mm": 0.0}, "seconds_per_mm": 1850.0,
                                   "g_per_mm3": 1.24e-3, "resolution": 32, "voxel_size_mm": 0.5, "water_g": 500.0}))
     out = tmp_path / "design"
-    assert main(["design", "--target", str(run), "--simcal", str(simcal), "--resolution", "24", "--max-iter", "40",
+    assert main(["design", "--target", str(run), "--simcal", str(simcal), "--resolution", "24", "--max-iter", "120",
                  "--out", str(out)]) == 0
     assert "target is feasible" in (out / "feasibility.txt").read_text()
     notes = json.loads((out / TARGET_CSV).with_suffix(".json").read_text())
