@@ -50,6 +50,30 @@ class DensityPrint:
         self.rho = rho
 
 
+def _reachable(config: DesignConfig):
+    """The problem of ``config`` with a target the design grid can meet: the sphere's own release on it."""
+    problem = prepare(config)
+    reachable = target_from_mesh(problem.source_mesh, problem.dx_mm, problem.target.total_time_mm, "sphere on the grid",
+                                 config.samples, origin_mm=problem.origin_mm, shape=problem.full_shape)
+    return replace(problem, target=reachable)
+
+
+def _install_print(monkeypatch, problem, printed_of) -> None:
+    """Stand-in prints: each design's print is its density, released as ``printed_of(grid, goal)`` from its design
+    grid release and the target's (mm^3), one piece wherever the density exceeds one half."""
+    space, target = problem.space, problem.target
+    dtau = target.total_time_mm / (target.tau_mm.size - 1)
+
+    def release(mesh, tau_mm, cells=None):
+        grid = simulate(mesh.rho, space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
+                        dtau_mm=dtau).released_mm3
+        return type("Reference", (), {"released_mm3": printed_of(grid, target.released_mm3)})()
+
+    monkeypatch.setattr(defect, "printed_mesh", lambda objective, problem, x: DensityPrint(objective.density(x)))
+    monkeypatch.setattr(defect, "reference_release", release)
+    monkeypatch.setattr(defect, "revoxelize", lambda mesh, *grid: space.unfold(mesh.rho) > 0.5)
+
+
 SHORTFALL = 0.02
 """The stand-in print releases this share less than the design grid at every tau."""
 
@@ -59,29 +83,12 @@ def short_print(monkeypatch):
     """Prints that release `SHORTFALL` less than the design grid's density at every tau (as if the cut lost 2% of
     the material): the correction's fixed point is a density releasing C* / (1 - SHORTFALL) on the grid."""
 
-    def install(problem):
-        space, target = problem.space, problem.target
-        dtau = target.total_time_mm / (target.tau_mm.size - 1)
-
-        def release(mesh, tau_mm, cells=None):
-            curve = simulate(mesh.rho, space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
-                             dtau_mm=dtau).released_mm3
-            return type("Reference", (), {"released_mm3": (1.0 - SHORTFALL) * curve})()
-
-        monkeypatch.setattr(defect, "printed_mesh", lambda objective, problem, x: DensityPrint(objective.density(x)))
-        monkeypatch.setattr(defect, "reference_release", release)
-        monkeypatch.setattr(defect, "revoxelize", lambda mesh, *grid: space.unfold(mesh.rho) > 0.5)
-
-    return install
+    return lambda problem: _install_print(monkeypatch, problem, lambda grid, goal: (1.0 - SHORTFALL) * grid)
 
 
 def test_a_known_shortfall_of_the_print_is_corrected(short_print):
     config = DesignConfig(max_iter=140, correction_rounds=3, correction_evals=20, **SMALL)
-    problem = prepare(config)
-    # a target the design grid can meet: the sphere's own release on it
-    reachable = target_from_mesh(problem.source_mesh, problem.dx_mm, problem.target.total_time_mm, "sphere on the grid",
-                                 config.samples, origin_mm=problem.origin_mm, shape=problem.full_shape)
-    problem = replace(problem, target=reachable)
+    problem = _reachable(config)
     short_print(problem)
     rounds = MemoryRounds()
     outcome, objective = optimise_physical(build_objective(problem, config), problem, config, MemoryStore(), rounds)
@@ -167,29 +174,13 @@ def amplified_print(monkeypatch):
     The fixed point is G = C* + D. A full correction step from a design with e = G - C* - D lands at e' = -k e
     (worse for k > 1); a step s from it at e' = (1 - s (1 + k)) e: s = 1/2 gives -e / 4."""
 
-    def install(problem):
-        space, target = problem.space, problem.target
-        dtau = target.total_time_mm / (target.tau_mm.size - 1)
-        goal = target.released_mm3
-
-        def release(mesh, tau_mm, cells=None):
-            grid = simulate(mesh.rho, space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
-                            dtau_mm=dtau).released_mm3
-            return type("Reference", (), {"released_mm3": goal + (1 + AMPLIFY) * (grid - (1 + OFFSET) * goal)})()
-
-        monkeypatch.setattr(defect, "printed_mesh", lambda objective, problem, x: DensityPrint(objective.density(x)))
-        monkeypatch.setattr(defect, "reference_release", release)
-        monkeypatch.setattr(defect, "revoxelize", lambda mesh, *grid: space.unfold(mesh.rho) > 0.5)
-
-    return install
+    return lambda problem: _install_print(monkeypatch, problem,
+                                          lambda grid, goal: goal + (1 + AMPLIFY) * (grid - (1 + OFFSET) * goal))
 
 
 def test_a_round_that_overshoots_is_retried_from_the_best_design_with_half_the_step(amplified_print):
     config = DesignConfig(max_iter=140, correction_rounds=3, correction_evals=20, **SMALL)
-    problem = prepare(config)
-    reachable = target_from_mesh(problem.source_mesh, problem.dx_mm, problem.target.total_time_mm, "sphere on the grid",
-                                 config.samples, origin_mm=problem.origin_mm, shape=problem.full_shape)
-    problem = replace(problem, target=reachable)
+    problem = _reachable(config)
     amplified_print(problem)
     rounds = MemoryRounds()
     outcome, objective = optimise_physical(build_objective(problem, config), problem, config, MemoryStore(), rounds)
@@ -220,10 +211,7 @@ def test_a_run_resumed_before_a_backtrack_repeats_the_uninterrupted_one(amplifie
     # stored state lacks the best design's curves (as a state written before they were recorded), so the resume
     # judges the best design again to aim the second round.
     config = DesignConfig(max_iter=140, correction_rounds=3, correction_evals=20, **SMALL)
-    problem = prepare(config)
-    reachable = target_from_mesh(problem.source_mesh, problem.dx_mm, problem.target.total_time_mm, "sphere on the grid",
-                                 config.samples, origin_mm=problem.origin_mm, shape=problem.full_shape)
-    problem = replace(problem, target=reachable)
+    problem = _reachable(config)
     amplified_print(problem)
     whole_rounds = MemoryRounds()
     whole, _ = optimise_physical(build_objective(problem, config), problem, config, MemoryStore(), whole_rounds)
@@ -247,10 +235,7 @@ def test_a_half_first_step_lands_near_the_fixed_point_the_full_one_overshoots(am
     # round's step of a space is `FIRST_STEP` (half for extruded designs, whose cut amplifies the grid's changes)
     assert defect.FIRST_STEP == {"extruded": 0.5} and defect.FIRST_STEP.get("nfc", 1.0) == 1.0
     config = DesignConfig(max_iter=100, correction_rounds=1, correction_evals=20, **SMALL)
-    problem = prepare(config)
-    reachable = target_from_mesh(problem.source_mesh, problem.dx_mm, problem.target.total_time_mm, "sphere on the grid",
-                                 config.samples, origin_mm=problem.origin_mm, shape=problem.full_shape)
-    problem = replace(problem, target=reachable)
+    problem = _reachable(config)
     amplified_print(problem)
     fits = {}
     for step in (1.0, 0.5):
