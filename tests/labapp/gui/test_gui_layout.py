@@ -6,7 +6,7 @@ pytest.importorskip("pytestqt")
 
 from PySide6.QtCore import QPoint, QRect
 
-from labapp.gui.main_window import PREFERRED_SIZE, MainWindow
+from labapp.gui.main_window import BENCH_DOCK_MAX_SHARE, PREFERRED_SIZE, MainWindow
 
 SCREEN = QRect(0, 0, 1280, 800)
 READABLE_PX = 250
@@ -92,4 +92,4 @@ def test_every_bench_tab_fits_its_dock_without_a_horizontal_scroll_bar(window, q
         area = tabs.widget(index)
         assert not area.horizontalScrollBar().isVisible(), (tabs.tabText(index), area.widget().minimumSizeHint(),
                                                             area.viewport().width())
-    assert window.bench_dock.width() <= 0.4 * window.width() + 1
+    assert window.bench_dock.width() <= BENCH_DOCK_MAX_SHARE * window.width() + 1
