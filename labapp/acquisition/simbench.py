@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from design.files.pipeline import simulate_mesh
+from design.forward.reference import design_lattice, reference_release
 from design.geometry.shapes import sample_shape
 from drivers.camera import SimulatedCamera
 from drivers.camera.base import CameraSettings, Capture
@@ -158,8 +159,13 @@ def sample_release(shape: str = "pill", index: int = 0, resolution: int = WORLD_
     seconds_per_mm, g_per_mm3 = material.printed(index)
     physics = material.physics
     if physics is None:
-        model = simulate_mesh(sample_shape(shape), resolution=resolution)
-        release = SampleRelease.from_simulation(shape, model.tau_mm, model.released_mm3, seconds_per_mm, g_per_mm3)
+        # the release the calibration's model gives with identity physics: the exact one (reference evaluator)
+        mesh = sample_shape(shape)
+        end = 2.0 * simulate_mesh(mesh, resolution=resolution).tau_mm[-1]
+        model = reference_release(mesh, np.linspace(0.0, end, 801), cells=design_lattice(resolution))
+        whole = min(int(np.searchsorted(model.tau_mm, model.total_time_mm)) + 1, model.tau_mm.size)   # to its end
+        release = SampleRelease.from_simulation(shape, model.tau_mm[:whole], model.released_mm3[:whole], seconds_per_mm,
+                                                g_per_mm3)
     else:
         world = cached_world_release(sample_shape(shape), physics, resolution=resolution)
         release = SampleRelease.from_simulation(shape, world.tau_mm, world.released_mm3, seconds_per_mm, g_per_mm3,

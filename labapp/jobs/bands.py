@@ -71,15 +71,43 @@ def prediction_band(simcal: SimCalFile, tau_mm: np.ndarray, released_mm3: np.nda
                  parameter_g=spread, mass_sd_g=mass_sd)
 
 
-def source_simulator(source: str, resolution: int, *, symmetry: str = "", units: str = "mm") -> SimulateAt:
-    """``simulate_at(physics)`` for a mesh, ``sample:NAME`` or density array at a calibration's resolution
-    (``labapp.jobs.simulate.simulation_grid``; grids cached per surface offset), a mesh's release at its
-    print's exact volume (:func:`labapp.jobs.calibrate_sim.exact_volume_release`)."""
-    from design.errors import DesignError
-    from design.forward.simulator import simulate
-    from labapp.jobs.calibrate_sim import exact_volume_release
+def _mesh_release(source: str, resolution: int, symmetry: str, units: str, method: str, grids: dict, meshes: list,
+                  tau_mm: np.ndarray, released_mm3: np.ndarray, offset_mm: float, anisotropy: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """A release simulated from ``source`` (with build-direction ``anisotropy`` and surface ``offset_mm``) at the
+    print's exact volume, corrected for the grid's bias at that anisotropy and offset against the reference evaluator
+    when ``method`` is ``calibrate_sim.RELEASE_METHOD`` (:func:`labapp.jobs.calibrate_sim.bias_corrected_release`; a
+    density array has no mesh and keeps its release)."""
+    from labapp.jobs.calibrate_sim import RELEASE_METHOD, bias_corrected_release, exact_volume_release, grid_bias
     from labapp.jobs.simulate import _is_density, _source_mesh, simulation_grid
 
+    if not meshes:
+        meshes.append(None if _is_density(source) else _source_mesh(source, units))
+    mesh = meshes[0]
+    if mesh is None or method != RELEASE_METHOD:
+        return np.asarray(tau_mm, float), exact_volume_release(released_mm3, mesh, offset_mm)
+    offset = round(float(offset_mm), 9)
+    if offset not in grids:
+        grids[offset] = simulation_grid(source, resolution=resolution, symmetry=symmetry, units=units,
+                                        offset_mm=offset)[:3]
+    return bias_corrected_release(tau_mm, released_mm3, mesh, offset_mm,
+                                  grid_bias(mesh, grids[offset], resolution, anisotropy, offset_mm))
+
+
+def source_simulator(source: str, resolution: int, *, symmetry: str = "", units: str = "mm",
+                     method: str | None = None) -> SimulateAt:
+    """``simulate_at(physics)`` for a mesh, ``sample:NAME`` or density array at a calibration's resolution
+    (``labapp.jobs.simulate.simulation_grid``; grids cached per surface offset), a mesh's release at its
+    print's exact volume (:func:`labapp.jobs.calibrate_sim.exact_volume_release`) and, with ``method``
+    ``calibrate_sim.RELEASE_METHOD`` (the default; give the calibration's ``release_method``), corrected for the
+    grid's bias against the reference evaluator (:func:`labapp.jobs.calibrate_sim.bias_corrected_release`), as
+    the calibration made its meshes' releases."""
+    from design.errors import DesignError
+    from design.forward.simulator import simulate
+    from labapp.jobs.calibrate_sim import RELEASE_METHOD
+    from labapp.jobs.simulate import simulation_grid
+
+    method = RELEASE_METHOD if method is None else method
     grids: dict[float, tuple] = {}
     meshes: list = []   # the source's mesh, loaded once (None for a density array)
 
@@ -94,28 +122,29 @@ def source_simulator(source: str, resolution: int, *, symmetry: str = "", units:
             # wetting lag is the calibration map's, not the simulation's)
             release = simulate(rho, dx, mirror=mirror, **{p: float(v) for p, v in physics.items()
                                                           if p in PHYSICS_PARAMETERS and p != "offset_mm"})
-            if not meshes:
-                meshes.append(None if _is_density(source) else _source_mesh(source, units))
+            return _mesh_release(source, resolution, symmetry, units, method, grids, meshes, release.tau_mm,
+                                 release.released_mm3, offset, float(physics.get("anisotropy", 1.0)))
         except DesignError as exc:
             raise SimCalError(f"{source}: {exc}") from exc
-        return release.tau_mm, exact_volume_release(release.released_mm3, meshes[0], offset)
 
     return simulate_at
 
 
-
-def source_release_exact(source: str, released_mm3: np.ndarray, offset_mm: float, units: str = "mm") -> np.ndarray:
-    """A release simulated from ``source`` (mesh, ``sample:NAME`` or density array) at the print's exact volume
-    (:func:`labapp.jobs.calibrate_sim.exact_volume_release`), as :func:`source_simulator` gives it."""
+def source_release_exact(source: str, tau_mm: np.ndarray, released_mm3: np.ndarray, offset_mm: float,
+                         units: str = "mm", *, resolution: int, symmetry: str = "", method: str | None = None,
+                         anisotropy: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """A release simulated from ``source`` (mesh, ``sample:NAME`` or density array) at ``resolution`` made as
+    :func:`source_simulator` makes it: at the print's exact volume, corrected for the grid's bias with ``method``
+    ``calibrate_sim.RELEASE_METHOD`` (the default; at the release's ``anisotropy`` and ``offset_mm``). Returns
+    ``(tau_mm, released_mm3)`` (the bias's depths join the simulation's)."""
     from design.errors import DesignError
-    from labapp.jobs.calibrate_sim import exact_volume_release
-    from labapp.jobs.simulate import _is_density, _source_mesh
+    from labapp.jobs.calibrate_sim import RELEASE_METHOD
 
     try:
-        mesh = None if _is_density(source) else _source_mesh(source, units)
+        return _mesh_release(source, resolution, symmetry, units, RELEASE_METHOD if method is None else method, {}, [],
+                             tau_mm, released_mm3, offset_mm, anisotropy)
     except DesignError as exc:
         raise SimCalError(f"{source}: {exc}") from exc
-    return exact_volume_release(released_mm3, mesh, offset_mm)
 
 
 def band_series(t_s: np.ndarray, band: tuple[np.ndarray, np.ndarray] | None, level: float = BAND_LEVEL
@@ -141,7 +170,7 @@ def design_band(design_dir: Path, simcal: SimCalFile, tau_mm: np.ndarray, releas
     """The band of a design's predicted release: the print physics' spread from its ``design.stl`` simulated
     at the calibration's resolution (a design without one: the scales' spread and the residuals only)."""
     stl = Path(design_dir) / "design.stl"
-    simulate_at = source_simulator(str(stl), simcal.resolution) if stl.is_file() else None
+    simulate_at = source_simulator(str(stl), simcal.resolution, method=simcal.release_method) if stl.is_file() else None
     try:
         return prediction_band(simcal, tau_mm, released_mm3, t_s, water_g, simulate_at)
     except SimCalError as exc:

@@ -25,7 +25,6 @@ import numpy as np
 
 from analysis import BenchCalibration, analyze_run, write_cells_csv, write_curve_csv
 from design.errors import DesignError
-from design.files.pipeline import simulate_mesh
 from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.inverse.problem import DesignConfig
 from drivers.sim import BenchScene
@@ -272,11 +271,11 @@ def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interva
     result, physical = design_from_target(config, design_dir, simcal=simcal)
 
     measured = read_physical_curve(analysis_dir / "curve.csv")
-    sim = simulate_mesh(sample_shape(sample), resolution=simcal.resolution, **simcal.simulate_options())
-    predicted = simcal.cal.to_physical(sim.tau_mm, sim.released_mm3, measured.t_s, measured.water_g or WATER_G)
+    simulate_at = source_simulator(f"sample:{sample}", simcal.resolution, method=simcal.release_method)
+    tau, vol = simulate_at(simcal.physics)
+    predicted = simcal.cal.to_physical(tau, vol, measured.t_s, measured.water_g or WATER_G)
     rel_pred = float(np.sqrt(np.mean((predicted - measured.released_g) ** 2)) / measured.released_g.max())
-    band = prediction_band(simcal, sim.tau_mm, sim.released_mm3, measured.t_s, measured.water_g or WATER_G,
-                           source_simulator(f"sample:{sample}", simcal.resolution))
+    band = prediction_band(simcal, tau, vol, measured.t_s, measured.water_g or WATER_G, simulate_at)
     inside = None if band is None else float(np.mean((measured.released_g >= band[0]) & (measured.released_g <= band[1])))
     if band is not None:
         progress(f"   {100 * inside:.0f}% of the further object's measured points lie inside its predicted "

@@ -437,8 +437,9 @@ def _read_measured(path: Path) -> PhysicalCurve:
 
 def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A mesh's predicted release in physical units: simulated at the calibration's resolution with its print
-    physics (anisotropy, surface offset, swelling width) at the print's exact volume
-    (:func:`labapp.jobs.bands.source_simulator`), mapped.
+    physics (anisotropy, surface offset, swelling width) at the print's exact volume, corrected for the grid's bias
+    against the reference evaluator as the calibration's releases were (:func:`labapp.jobs.bands.source_simulator`),
+    mapped.
 
     Parameters
     ----------
@@ -452,7 +453,7 @@ def predict_mesh(mesh: str | Path, simcal: SimCalFile, water_g: float | None = N
     -------
     t_s, released_g : (Q,) ndarray of float
     """
-    tau, vol = bands.source_simulator(str(mesh), simcal.resolution)(simcal.physics)
+    tau, vol = bands.source_simulator(str(mesh), simcal.resolution, method=simcal.release_method)(simcal.physics)
     water = water_g or simcal.water_g
     t = physical_times(simcal, tau, vol, water)
     return t, simcal.cal.to_physical(tau, vol, t, water)
@@ -462,7 +463,7 @@ def predict_mesh_band(mesh: str | Path, simcal: SimCalFile, water_g: float | Non
                       ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
     """:func:`predict_mesh` with the prediction's band (:func:`labapp.jobs.bands.prediction_band`; None for a
     calibration file without one): the GUI's overlays and the demo's picture."""
-    simulate_at = bands.source_simulator(str(mesh), simcal.resolution)
+    simulate_at = bands.source_simulator(str(mesh), simcal.resolution, method=simcal.release_method)
     tau, vol = simulate_at(simcal.physics)
     water = water_g or simcal.water_g
     t = physical_times(simcal, tau, vol, water)

@@ -118,10 +118,14 @@ def _run(args: argparse.Namespace) -> int:
         from analysis.bands import BAND_LEVEL
         from labapp.jobs.bands import source_release_exact, source_simulator
 
-        released = source_release_exact(args.input, release.released_mm3, simcal.physics["offset_mm"], args.units)
-        physical = write_release_physical(release.tau_mm, released, simcal, out, args.water_g,
+        tau, released = source_release_exact(args.input, release.tau_mm, release.released_mm3,
+                                             simcal.physics["offset_mm"], args.units, resolution=simcal.resolution,
+                                             symmetry=args.symmetry, method=simcal.release_method,
+                                             anisotropy=simcal.physics["anisotropy"])
+        physical = write_release_physical(tau, released, simcal, out, args.water_g,
                                           title=args.input, simulate_at=source_simulator(
-                                              args.input, simcal.resolution, symmetry=args.symmetry, units=args.units))
+                                              args.input, simcal.resolution, symmetry=args.symmetry, units=args.units,
+                                              method=simcal.release_method))
         grams = np.loadtxt(physical, delimiter=",", skiprows=1)
         summary["physical"] = {"simcal": str(simcal.path), "model": simcal.cal.model,
                                "mass_g": float(grams[-1, 1]), "duration_s": float(grams[-1, 0]),
