@@ -18,7 +18,9 @@ print), and the print is ``design.stl`` grown by it again; every print figure (f
 pieces) is the grown solid's. With anisotropy or swelling the print's release is the forward model's with
 that physics on voxels half the design grid's (the reference evaluator is isotropic and has no swelling).
 Channels narrower than ``swelling_mm`` are filled before extraction (`close_narrow_channels`), the minimum
-open channel width the print must keep, and ``summary.json`` says whether the print meets it.
+open channel width the print must keep, and ``summary.json`` says whether the print meets it and how many voxels
+the fill added (``channel_fill_voxels``: 0 when the objective's channel-width term, weight ``w_channel``, kept the
+optimised design's channels open by itself).
 """
 from __future__ import annotations
 
@@ -381,6 +383,8 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
                                  "mass, channels, pieces) is of"},
         "min_channel_constraint": (channel_constraint(solid, space.dx_mm, config.swelling_mm, filled,
                                                       facts.min_channel_mm) if config.swelling_mm > 0 else None),
+        "w_channel": config.w_channel or 0.0,
+        "channel_fill_voxels": filled if config.swelling_mm > 0 else None,
         "rate_dev_mid80": {name: _rate_dev(target.tau_mm, curve, target.released_mm3, False)
                            for name, curve in achieved},
         "rate_dev_mid80_vs_target": {name: _rate_dev(target.tau_mm, curve, target.released_mm3, True)

@@ -89,7 +89,8 @@ def migrate_config(stored: Mapping[str, Any], what: str = CONFIG) -> dict[str, A
     """A ``config.json`` object of any known layout in the current one (`CONFIG_FORMAT`); a new dict.
 
     Every layout stores the configuration resolved, where a ``beta_final`` of None always meant a fixed
-    beta: it reads as ``beta``.
+    beta: it reads as ``beta``; and a record without ``w_channel`` was written before the channel-width term:
+    with ``swelling_mm`` > 0 it reads as 0 (its run had no such term), else as None (no term, as written now).
 
     Raises
     ------
@@ -99,6 +100,7 @@ def migrate_config(stored: Mapping[str, Any], what: str = CONFIG) -> dict[str, A
     record = _upgrade(stored, CONFIG_FORMAT, _CONFIG_UPGRADES, what)
     if record.get("beta_final") is None:
         record["beta_final"] = record.get("beta")
+    record.setdefault("w_channel", 0.0 if (record.get("swelling_mm") or 0.0) > 0 else None)
     return record
 
 

@@ -1,9 +1,11 @@
 """The inverse-design objective of eq. (4) and its gradient with respect to the design variables.
 
-``J = J_fit + w_b J_binary + w_f J_fab + w_r J_rate + w_c J_conn`` with
+``J = J_fit + w_b J_binary + w_f J_fab + w_r J_rate + w_c J_conn + w_ch J_chan`` with
 ``rho = project(smooth(rho_hat, r), beta)``; J_rate (`design.inverse.rate.rate_fit`) is an optional rate-fit term
 beyond the paper (w_r = 0 gives eq. 4), and so is J_conn (`design.fabrication.connectivity`), the penalty on material
-that does not connect to the design's symmetry centre (w_c = 0 allows pieces, as in the paper).
+that does not connect to the design's symmetry centre (w_c = 0 allows pieces, as in the paper), and J_chan
+(`design.fabrication.channels`), the void of open channels narrower than a minimum width (the print's swelling
+width), measured by a smooth closing of the nominal design (w_ch = 0: no minimum width, as in the paper).
 
 The chain is: variables -> smoothing filter -> projection -> design-space map (replication for
 extruded designs) -> fast-marching release (eqs. 5-7) -> J; the gradient runs the chain backwards
@@ -31,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from design.errors import DesignError
+from design.fabrication.channels import NarrowVoids
 from design.fabrication.connectivity import TAIL_SLOPE, Connectivity
 from design.forward.fmm import MarchBuffers
 from design.forward.simulator import Release, release_gradient, simulate
@@ -56,7 +59,7 @@ class Evaluation:
     value : float
         J of eq. (4) in the rescaled units.
     terms : dict of str to float
-        ``J_fit``, ``J_binary``, ``J_fab``, ``J_rate``, ``J_conn`` (unweighted) and ``grad_norm``.
+        ``J_fit``, ``J_binary``, ``J_fab``, ``J_rate``, ``J_conn``, ``J_chan`` (unweighted) and ``grad_norm``.
     grad : ndarray of float, variable shape
         dJ/d rho_hat.
     rho : ndarray of float, reduced grid shape
@@ -111,6 +114,11 @@ class DesignObjective:
     swelling_mm : float
         Channels narrower than this are shut in the forward model (print physics, `design.forward.swelling`);
         the plug is held fixed by the gradient.
+    w_channel : float
+        Weight of J_chan (`design.fabrication.channels`; 0 = off), evaluated on the nominal design's grid in the
+        rescaled units of J_binary (mm^3 of the whole object).
+    channel_mm : float or None
+        J_chan's minimum open channel width, mm; None = ``swelling_mm``. Needs a width > 0 when w_channel > 0.
     """
 
     def __init__(self, space: DesignSpace, target_mm3: np.ndarray, total_time_mm: float, *,
@@ -118,7 +126,8 @@ class DesignObjective:
                  rate_lag: int | None = None, robust_eta: float = 0.0,
                  rate_span: tuple[float, float] = (0.0, 1.0), w_conn: float = 0.0,
                  conn_coarsen: int | None = None, conn_planes: bool = True,
-                 conn_tail: float = TAIL_SLOPE, anisotropy: float = 1.0, swelling_mm: float = 0.0) -> None:
+                 conn_tail: float = TAIL_SLOPE, anisotropy: float = 1.0, swelling_mm: float = 0.0,
+                 w_channel: float = 0.0, channel_mm: float | None = None) -> None:
         target = np.asarray(target_mm3, dtype=float)
         if target.ndim != 1 or target.size < 3 or not target[-1] > 0:
             raise DesignError(f"target must be a 1D curve with >= 3 samples and a positive end, got {target.shape}")
@@ -133,6 +142,11 @@ class DesignObjective:
             raise DesignError(f"rate_span must be two fractions 0 <= lo < hi <= 1, got {rate_span}")
         if w_conn < 0:
             raise DesignError(f"w_conn must be >= 0, got {w_conn}")
+        width_mm = float(swelling_mm if channel_mm is None else channel_mm)
+        if not (np.isfinite(w_channel) and w_channel >= 0):
+            raise DesignError(f"w_channel must be a finite number >= 0, got {w_channel}")
+        if w_channel > 0 and not width_mm > 0:
+            raise DesignError(f"w_channel = {w_channel} needs a minimum channel width > 0 mm, got {width_mm}")
         if w_fab > 0 and space.fab_term is None:
             raise DesignError(f"w_fab = {w_fab} but design space {space.name!r} has no fabrication term")
         self.space = space
@@ -165,6 +179,9 @@ class DesignObjective:
         self.connectivity = (Connectivity(space.var_shape, space.var_mirror, space.dx_mm, coarsen,
                                           planes=conn_planes, tail_slope=conn_tail)
                              if self.w_conn > 0 else None)
+        self.w_channel = float(w_channel)
+        self.channels = (NarrowVoids(space.grid_shape, space.dx_mm, width_mm, space.mirror)
+                         if self.w_channel > 0 else None)
 
     def density(self, x: np.ndarray) -> np.ndarray:
         """The reduced simulation density ``rho`` of variables ``x`` (eq. 4 filter chain)."""
@@ -201,7 +218,7 @@ class DesignObjective:
         space = self.space
         smoothed = self.filter.apply(x)
         share = 1.0 / len(self.thresholds)  # J_rate is the mean over the simulated designs
-        j_rate = j_bin = j_fab = j_conn = fab_seconds = 0.0
+        j_rate = j_bin = j_fab = j_conn = j_chan = fab_seconds = 0.0
         grad_var = np.zeros(space.var_shape)
         for eta, buffers in zip(self.thresholds, self._buffers):
             rho_var = project(smoothed, self.beta, eta)
@@ -227,15 +244,19 @@ class DesignObjective:
                 j_fab, g_fab = space.fab_term(rho)
                 fab_seconds = time.perf_counter() - t_fab
                 grad_rho += self.w_fab * g_fab
+            if self.channels is not None:
+                j_chan, g_chan = self.channels(rho, cell)
+                grad_rho += self.w_channel * g_chan
             g_proj = space.to_grid_adjoint(grad_rho)
             if self.connectivity is not None:  # one variable voxel stands for its whole extruded column
                 j_conn, g_conn = self.connectivity(rho_var, cell * rho.size / rho_var.size)
                 g_proj = g_proj + self.w_conn * g_conn
             grad_var += project_adjoint(smoothed, self.beta, g_proj, eta)
         grad = self.filter.adjoint(grad_var)
-        value = j_fit + self.w_binary * j_bin + self.w_fab * j_fab + self.w_rate * j_rate + self.w_conn * j_conn
+        value = (j_fit + self.w_binary * j_bin + self.w_fab * j_fab + self.w_rate * j_rate + self.w_conn * j_conn
+                 + self.w_channel * j_chan)
         terms = {"J": value, "J_fit": j_fit, "J_binary": j_bin, "J_fab": float(j_fab), "J_rate": j_rate,
-                 "J_conn": j_conn, "grad_norm": float(np.linalg.norm(grad)), "fab_seconds": fab_seconds}
+                 "J_conn": j_conn, "J_chan": j_chan, "grad_norm": float(np.linalg.norm(grad)), "fab_seconds": fab_seconds}
         return Evaluation(value, terms, grad, nominal_rho, nominal_release)
 
     def _curve_terms(self, release: Release, rate_share: float) -> tuple[float, float, np.ndarray]:

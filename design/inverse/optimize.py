@@ -417,6 +417,7 @@ def build_objective(problem: Problem, config: DesignConfig) -> DesignObjective:
                            w_conn=0.0 if config.allow_pieces else config.w_connect,
                            conn_planes=config.connect_planes, conn_tail=config.connect_tail,
                            anisotropy=config.anisotropy, swelling_mm=config.swelling_mm,
+                           w_channel=config.w_channel or 0.0, channel_mm=config.swelling_mm,
                            rate_lag=max(1, round(config.rate_window_vox * problem.space.dx_mm * (config.samples - 1)
                                                  / problem.target.total_time_mm)))
 

@@ -68,6 +68,10 @@ shrink as the resolution grows (docs/design.md#smoothing-radius-in-mm)."""
 W_CONNECT = 5.0
 """Default weight of the connectivity penalty J_conn (`design.fabrication.connectivity`), which holds a
 design to one printable piece (docs/design.md#one-printable-piece)."""
+W_CHANNEL = 100.0
+"""Default weight of the channel-width term J_chan (`design.fabrication.channels`) when the print swells
+(`DesignConfig.swelling_mm` > 0; 0 otherwise): the optimiser keeps the open channels at least the swelling width
+wide, so that the fill of the outputs has little or nothing left to change (docs/design.md#minimum-open-channel-width)."""
 START_FILL = 2.0 / 3.0
 """Density of the compact start of an extruded design (`start_region`): a target without a source starts
 at it, and a start is hollowed only as far as its band still holds the target's volume at it."""
@@ -225,6 +229,11 @@ class DesignConfig:
         Print physics: channels narrower than this are shut in the forward model until their walls dissolve
         (`design.forward.swelling`), and it is the minimum open channel width of the print, enforced by the
         correction stage of the outputs (narrower channels are filled), mm; 0 = none.
+    w_channel : float or None
+        Weight of the channel-width term J_chan (`design.fabrication.channels`), which holds the optimised design's
+        open channels to at least ``swelling_mm``; None = `W_CHANNEL` when ``swelling_mm`` > 0 (resolved), else no
+        term (None stays, so that a configuration given print physics later gets the default). Runs stored before
+        the term resume without it (0).
 
     With any print physics the physical correction is off by default (``physical_correction`` None resolves
     to "none"), and "defect" is refused: its reference evaluator has no print physics.
@@ -274,6 +283,7 @@ class DesignConfig:
     anisotropy: float = 1.0
     print_offset_mm: float = 0.0
     swelling_mm: float = 0.0
+    w_channel: float | None = None
 
     @property
     def has_print_physics(self) -> bool:
@@ -361,6 +371,14 @@ class DesignConfig:
             raise DesignError(f"print_offset_mm must be a finite number within +-5 mm, got {self.print_offset_mm}")
         if not (np.isfinite(self.swelling_mm) and 0.0 <= self.swelling_mm <= 10.0):
             raise DesignError(f"swelling_mm must be in [0, 10] mm, got {self.swelling_mm}")
+        if self.w_channel is None and self.swelling_mm > 0:
+            object.__setattr__(self, "w_channel", W_CHANNEL)
+        if self.w_channel is not None and (isinstance(self.w_channel, bool) or not isinstance(self.w_channel, (int, float))
+                                           or not (np.isfinite(self.w_channel) and self.w_channel >= 0)):
+            raise DesignError(f"w_channel must be a finite number >= 0, got {self.w_channel!r}")
+        if self.w_channel and not self.swelling_mm > 0:
+            raise DesignError(f"w_channel = {self.w_channel:g} weighs the minimum open channel width, which is "
+                              "swelling_mm: it needs swelling_mm > 0")
         if self.physical_correction is None:
             object.__setattr__(self, "physical_correction",
                                PHYSICAL_CORRECTIONS[0] if self.space in CORRECTION_SPACES and not self.has_print_physics
