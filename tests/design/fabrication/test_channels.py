@@ -1,6 +1,7 @@
 """J_chan, the channel-width term: its gradient, its value on slots narrower and wider than the width, the
 mirror faces, and its place in the design objective and configuration."""
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -152,6 +153,10 @@ def test_objective_and_config_guards():
     assert DesignConfig(target="sphere", swelling_mm=0.6).w_channel == W_CHANNEL
     assert DesignConfig(target="sphere", swelling_mm=0.6, w_channel=0.0).w_channel == 0.0
     assert DesignConfig(target="sphere").w_channel is None
+    # a configuration given print physics later (`sfr design --simcal`) gets the default, an explicit 0 stays
+    later = DesignConfig(target="sphere", physical_correction="none")
+    assert replace(later, swelling_mm=0.6).w_channel == W_CHANNEL
+    assert replace(later, w_channel=0.0, swelling_mm=0.6).w_channel == 0.0
     for bad in (-1.0, float("nan"), float("inf"), "5"):
         with pytest.raises(DesignError, match="w_channel must be a finite number >= 0"):
             DesignConfig(target="sphere", swelling_mm=0.6, w_channel=bad)
