@@ -53,6 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--w-connect", type=nonnegative_float,
                         help="weight of the connectivity penalty J_conn (default 5; 10 for analytic targets "
                              "in extruded)")
+    parser.add_argument("--w-channel", type=nonnegative_float,
+                        help="weight of the channel-width term J_chan, which keeps open channels at least the "
+                             "calibration's swelling width (--simcal with one; default 100, 0 = off)")
     parser.add_argument("--starts", type=positive_int,
                         help="seeded starts at half the resolution, the best then refined at full resolution "
                              "(default 4 for nfc and extruded designs of a source shape at resolution 128 or "
@@ -198,7 +201,8 @@ def _given_options(args: argparse.Namespace) -> dict:
              ("bounds", args.bounds), ("line_search", args.line_search), ("warn_channel_mm", args.warn_channel_mm),
              ("domain_mm", tuple(args.domain_mm) if args.domain_mm else None), ("height_mm", args.height),
              ("w_binary", args.w_binary), ("radius_vox", args.radius), ("radius_mm", args.radius_mm),
-             ("allow_pieces", args.allow_pieces or None), ("w_connect", args.w_connect), ("beta", args.beta),
+             ("allow_pieces", args.allow_pieces or None), ("w_connect", args.w_connect), ("w_channel", args.w_channel),
+             ("beta", args.beta),
              ("beta_final", args.beta_final), ("w_rate", args.w_rate), ("preset", args.preset),
              ("w_fab", args.w_fab), ("optimizer", args.optimizer or None),
              ("allow_infeasible", args.allow_infeasible or None), ("formats", tuple(args.formats) or None),

@@ -1,5 +1,5 @@
-"""`sfr design --physical-correction` and `--correction-rounds` reach the design configuration; a bad choice is one
-clear error from it."""
+"""`sfr design --physical-correction`, `--correction-rounds` and `--w-channel` reach the design configuration; a bad
+choice is one clear error from it."""
 import argparse
 
 import pytest
@@ -27,3 +27,14 @@ def test_the_correction_flags_become_design_settings():
 def test_an_unknown_correction_is_refused_by_the_design_configuration():
     with pytest.raises(DesignError, match="physical_correction must be one of"):
         DesignConfig(**_options("--physical-correction", "finer"))
+
+
+def test_the_channel_weight_becomes_a_design_setting():
+    from design.inverse.problem import W_CHANNEL
+
+    options = _options("--w-channel", "40")
+    assert options["w_channel"] == 40.0
+    assert DesignConfig(**options, swelling_mm=0.6).w_channel == 40.0
+    assert DesignConfig(**_options(), swelling_mm=0.6).w_channel == W_CHANNEL
+    with pytest.raises(DesignError, match="w_channel"):   # a weight without a swelling width has nothing to keep open
+        DesignConfig(**options)
