@@ -14,16 +14,19 @@ noise on the simulated bench is of that order; the pipeline itself is exercised 
    honest leave-one-out (print physics refitted without each run), the recovered parameters with their
    uncertainties against the hidden ones, and the error bands' leave-one-out coverage.
 3. The unseen print predicted from its mesh by each calibration, with its band.
-4. With ``--design``: a design (``sfr design --simcal``'s job) for the unseen print's measured curve through each
-   calibration, its ``design.stl`` printed on the bench (released by the bench's hidden physics), against the
-   measured target: RMS % of the final mass.
+4. With ``--design``: a design (``sfr design --simcal``'s job) for an unseen print's measured curve (``--design-for``:
+   the pill, or a flat wafer) through each calibration, in the design space and domain given (``--design-space``,
+   ``--design-domain``, ``--design-height``: e.g. an extruded prism, printable without supports, for the wafer's
+   curve), its ``design.stl`` printed on the bench (released by the bench's hidden physics), against the measured
+   target: RMS % of the final mass.
 5. The plan's Cramer-Rao standard error of the anisotropy for these four prints, against the jackknife over
    the leave-one-out refits (without the discretisation term the stated uncertainty adds).
 
     nice -n 10 .venv/bin/python benchmarks/physics_loop.py --out /tmp/physics_loop --seed 11 [--design]
 
 Prints a markdown table and writes ``physics_loop_SEED.png`` (and ``physics_loop_design_SEED.png``) into
-``--docs`` (default ``docs/figures``) and ``results.json`` into ``--out``.
+``--docs`` (default ``docs/figures``) and ``results.json`` into ``--out`` (with a design other than the pill's nfc one,
+``results_FOR_SPACE.json``).
 """
 from __future__ import annotations
 
@@ -39,6 +42,12 @@ WORLD_RESOLUTION = 96
 """Voxels along the longest side of the bench's own release computation."""
 INTERVAL_S, NOISE, WATER_G = 30.0, 0.002, 500.0
 UNSEEN = "pill"
+DESIGN_TARGETS = (UNSEEN, "wafer")
+"""Prints whose measured curve ``--design-for`` may take as the design's target: the unseen pill, or an unseen flat
+wafer (a disc 18 mm across and 3.2 mm thick, released mostly through its faces along the build direction)."""
+UNSEEN_PRINTS = (*DESIGN_TARGETS, "csg")
+"""The prints no calibration sees: the pill (the figure's), the wafer and the csg sample (12 mm tall, with a
+through-hole), each predicted from its mesh by every calibration."""
 DESIGN_BAR = 0.03
 """A design printed on the bench must match its measured target within this RMS fraction of the final mass."""
 LABELS = {"none": "isotropic"}
@@ -68,7 +77,8 @@ def _meshes(resolution: int | None = None, channelled: bool = False):
         side = _even_voxels(6.0, 22.0, resolution)
         bar = trimesh.creation.box((22.0, side, side))
     return {"flat": flat, "tall": GENERATED["tall"][0](), "sphere": sample_shape("sphere"), "bar": bar,
-            **({"channelled": GENERATED["channelled"][0]()} if channelled else {}), UNSEEN: sample_shape(UNSEEN)}
+            **({"channelled": GENERATED["channelled"][0]()} if channelled else {}), UNSEEN: sample_shape(UNSEEN),
+            "wafer": trimesh.creation.cylinder(radius=9.0, height=3.2, sections=96), "csg": sample_shape("csg")}
 
 
 def bench_run(mesh, name: str, material, index: int, folder: Path) -> tuple[Path, float]:
@@ -118,6 +128,12 @@ def main() -> None:
                         help="a fifth calibration print, the channelled slab, so that the swelling width can be learned")
     parser.add_argument("--reuse", action="store_true", help="reuse the runs and calibrations already in --out")
     parser.add_argument("--design", action="store_true", help="also design for the unseen print's measured curve")
+    parser.add_argument("--design-for", choices=DESIGN_TARGETS, default=UNSEEN,
+                        help="the unseen print whose measured curve the design takes as its target")
+    parser.add_argument("--design-space", choices=("nfc", "extruded"), default="nfc")
+    parser.add_argument("--design-domain", default="",
+                        help="the design's domain X,Y,Z in mm (default: the design's own, a cube)")
+    parser.add_argument("--design-height", type=float, default=None, help="an extruded design's height, mm")
     parser.add_argument("--design-resolution", type=int, default=40)
     parser.add_argument("--design-iterations", type=int, default=100)
     parser.add_argument("--docs", type=Path, default=Path(__file__).resolve().parents[1] / "docs" / "figures")
@@ -140,17 +156,19 @@ def run_loop(args) -> dict:
         tuple(e for e in args.without.split(",") if e)
     material = dataclasses.replace(material, physics=material.physics.without(*effects))
     meshes = _meshes(None if args.mesh_boxes else args.resolution, args.channelled)
-    names = [n for n in meshes if n != UNSEEN]
+    names = [n for n in meshes if n not in UNSEEN_PRINTS]
     set_csv = runs_dir / "set.csv"
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    rows, masses = ["run,mesh,object_mass_g"], {}
+    for index, (name, mesh) in enumerate(meshes.items()):   # each print's own rate and density draw: by its index
+        if (runs_dir / f"{name}.csv").is_file():
+            continue   # a run already made (--reuse)
+        mesh.export(runs_dir / f"{name}.stl")
+        path, masses[name] = bench_run(mesh, name, material, index, runs_dir)
+        if name not in UNSEEN_PRINTS:
+            rows.append(f"{path.name},{name}.stl,{masses[name]:.4f}")
+        print(f"  {name}: {masses[name]:.3f} g ({time.perf_counter() - start:.0f} s)", flush=True)
     if not set_csv.is_file():
-        runs_dir.mkdir(parents=True)
-        rows, masses = ["run,mesh,object_mass_g"], {}
-        for index, (name, mesh) in enumerate(meshes.items()):
-            mesh.export(runs_dir / f"{name}.stl")
-            path, masses[name] = bench_run(mesh, name, material, index, runs_dir)
-            if name != UNSEEN:
-                rows.append(f"{path.name},{name}.stl,{masses[name]:.4f}")
-            print(f"  {name}: {masses[name]:.3f} g ({time.perf_counter() - start:.0f} s)", flush=True)
         set_csv.write_text("\n".join(rows) + "\n")
 
     results = {"seed": args.seed, "without": list(effects), "mesh_boxes": args.mesh_boxes, "channelled": args.channelled,
@@ -189,18 +207,67 @@ def run_loop(args) -> dict:
             "unseen_weighed_rel_rmse": float(np.sqrt(np.mean((weighed - unseen["released_g"]) ** 2)) / final),
             "density_g_per_cm3": doc["density_g_per_cm3"],
             "unseen": {"predicted": predicted.tolist(), "lower": band[0].tolist(), "upper": band[1].tolist()},
+            "unseen_prints": {n: unseen_errors(runs_dir, n, simcal) for n in UNSEEN_PRINTS},
             "candidates": {k: c["loo_rel_rmse_mean"] for k, c in doc["physics"]["candidates"].items()},
             "seconds": seconds, "simcal": str(run.path)}
         print(f"  {label}: {choice}, leave-one-out {100 * np.mean(honest):.2f}%, unseen "
               f"{100 * results['models'][label]['unseen_rel_rmse']:.2f}% ({seconds:.0f} s)", flush=True)
+    results["floor"] = {n: floor_errors(runs_dir, n, meshes[n], material, args.resolution) for n in UNSEEN_PRINTS}
     results["plan_check"] = plan_check(meshes, names, results, args.resolution)
     if args.design:
         results["design"] = design_check(args, runs_dir, material, results)
     results["wall_s"] = time.perf_counter() - start
-    (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    name = f"results{_design_suffix(args)}.json" if args.design else "results.json"
+    (args.out / name).write_text(json.dumps(results, indent=2) + "\n")
     figure(results, unseen, args)
     print(table(results))
     return results
+
+
+def _curve(runs_dir: Path, name: str):
+    return np.genfromtxt(runs_dir / f"{name}.csv", delimiter=",", names=True)
+
+
+def _errors(curve, predicted_g, weighed_g) -> dict:
+    """RMS error of a prediction from the mesh and from the weighed mass, fractions of the measured final mass."""
+    final = float(curve["released_g"].max())
+    return {"mesh": float(np.sqrt(np.mean((predicted_g - curve["released_g"]) ** 2)) / final),
+            "weighed": float(np.sqrt(np.mean((weighed_g - curve["released_g"]) ** 2)) / final)}
+
+
+def _weighed_mass(curve) -> float:
+    """The print's mass as the bench weighs it: the measured plateau (the last ten points)."""
+    return float(np.mean(curve["released_g"][-10:]))
+
+
+def unseen_errors(runs_dir: Path, name: str, simcal) -> dict:
+    """An unseen print's prediction from its mesh through a calibration: from the pooled density and from its
+    weighed mass."""
+    from labapp.jobs.bands import source_simulator
+
+    curve = _curve(runs_dir, name)
+    tau, vol = source_simulator(str(runs_dir / f"{name}.stl"), simcal.resolution,
+                                method=simcal.release_method)(simcal.physics)
+    predicted = simcal.cal.to_physical(tau, vol, curve["t_s"], WATER_G)
+    weighed = simcal.cal.to_physical(tau, vol, curve["t_s"], WATER_G, mass_g=_weighed_mass(curve))
+    return _errors(curve, predicted, weighed)
+
+
+def floor_errors(runs_dir: Path, name: str, mesh, material, resolution: int) -> dict:
+    """The error floor of an unseen print's prediction: the calibration's release with the bench's hidden physics
+    (``labapp.jobs.calibrate_sim``'s, at ``resolution``) mapped by the material's mean rate and density and its
+    wetting lag. What is left is each print's own rate and density draw and the bench's noise, which no calibration
+    can know."""
+    from labapp.jobs.calibrate_sim import _simulate
+
+    hidden = material.physics
+    physics = {"anisotropy": hidden.anisotropy, "offset_mm": hidden.offset_mm, "swelling_mm": hidden.swelling_mm}
+    tau, vol, _ = _simulate(mesh, name, resolution, physics)
+    curve = _curve(runs_dir, name)
+    depth = np.clip((curve["t_s"] - hidden.wetting_lag_s) / material.seconds_per_mm, 0.0, None)
+    released = np.interp(depth, tau, vol)
+    return _errors(curve, released * material.density_g_per_cm3 * 1e-3,
+                   released / vol[-1] * _weighed_mass(curve))
 
 
 def plan_check(meshes: dict, names: list[str], results: dict, resolution: int) -> dict | None:
@@ -220,8 +287,8 @@ def plan_check(meshes: dict, names: list[str], results: dict, resolution: int) -
 
 
 def design_check(args, runs_dir: Path, material, results: dict) -> dict:
-    """A design for the unseen print's measured curve through each calibration (once per distinct physics),
-    printed on the bench."""
+    """A design for an unseen print's measured curve (``--design-for``) through each calibration (once per distinct
+    physics), printed on the bench."""
     import trimesh
 
     from design.inverse.problem import DesignConfig
@@ -230,7 +297,11 @@ def design_check(args, runs_dir: Path, material, results: dict) -> dict:
     from labapp.jobs.calibrate_sim import load_simcal
     from labapp.jobs.physical import design_from_target
 
-    target = np.genfromtxt(runs_dir / f"{UNSEEN}.csv", delimiter=",", names=True)
+    target_csv = runs_dir / f"{args.design_for}.csv"
+    if not target_csv.is_file():
+        raise SystemExit(f"{target_csv} is missing: the runs in {runs_dir} were made without the {args.design_for} print")
+    target = np.genfromtxt(target_csv, delimiter=",", names=True)
+    domain = tuple(float(x) for x in args.design_domain.split(",")) if args.design_domain else None
     final = float(target["released_g"].max())
     out, done = {}, {}
     for label, model in results["models"].items():
@@ -240,10 +311,11 @@ def design_check(args, runs_dir: Path, material, results: dict) -> dict:
             continue
         done[key] = label
         simcal = load_simcal(model["simcal"])
-        config = DesignConfig(target=str(runs_dir / f"{UNSEEN}.csv"), space="nfc", resolution=args.design_resolution,
-                              max_iter=args.design_iterations, allow_infeasible=True)
+        config = DesignConfig(target=str(target_csv), space=args.design_space, resolution=args.design_resolution,
+                              domain_mm=domain, height_mm=args.design_height, max_iter=args.design_iterations,
+                              allow_infeasible=True)
         start = time.perf_counter()
-        folder = args.out / f"design_{label}"
+        folder = args.out / f"design_{label}{_design_suffix(args)}_{args.design_iterations}"
         resume = (folder / "summary.json").is_file()
         result, summary = design_from_target(None if resume else config, folder, simcal=simcal, resume=resume)
         mesh = trimesh.load(result.out_dir / "design.stl")
@@ -258,7 +330,15 @@ def design_check(args, runs_dir: Path, material, results: dict) -> dict:
                       "seconds": time.perf_counter() - start, "folder": str(result.out_dir)}
         print(f"  design ({label}): printed on the bench {100 * out[label]['rel_rmse_printed']:.2f}% of the final "
               f"mass, predicted {100 * summary['rel_rmse_physical']:.2f}%", flush=True)
-    return out
+    return {"for": args.design_for, "space": args.design_space, "domain_mm": domain, "height_mm": args.design_height,
+            "t_s": target["t_s"].tolist(), "target_g": target["released_g"].tolist(), "models": out}
+
+
+def _design_suffix(args) -> str:
+    """The design folder's and figure's suffix naming a design other than the default (nfc, for the pill)."""
+    parts = ([args.design_for] if args.design_for != UNSEEN else []) + \
+        ([args.design_space] if args.design_space != "nfc" else [])
+    return "".join(f"_{p}" for p in parts)
 
 
 def _sigmas(value: float, hidden: float, sd: float) -> str:
@@ -286,18 +366,27 @@ def table(results: dict) -> str:
                  for p, v in m["values"].items())) if m["values"] else m["physics_choice"])]
     lines += [row(f"leave-one-out, {n}", lambda m, c, n=n: f"{100 * m['loo_per_run'][n]:.2f}%") for n in names]
     lines += [row("leave-one-out, mean", lambda m, c: f"{100 * m['loo_mean']:.2f}%"),
-              row(f"unseen print ({UNSEEN}) from its mesh", lambda m, c: f"{100 * m['unseen_rel_rmse']:.2f}%"),
-              row(f"unseen print ({UNSEEN}) from its mesh and weighed mass",
-                  lambda m, c: f"{100 * m['unseen_weighed_rel_rmse']:.2f}%"),
+              *[row(f"unseen {n} from its mesh (from its weighed mass)",
+                    lambda m, c, n=n: f"{100 * m['unseen_prints'][n]['mesh']:.2f}% "
+                                      f"({100 * m['unseen_prints'][n]['weighed']:.2f}%)") for n in UNSEEN_PRINTS],
+              row("unseen prints, mean from the mesh (from the weighed mass)", lambda m, c: "{:.2f}% ({:.2f}%)".format(
+                  *(100 * np.mean([e[k] for e in m["unseen_prints"].values()]) for k in ("mesh", "weighed")))),
               row("pooled print density (hidden: see above)", lambda m, c: f"{m['density_g_per_cm3']:.3f} g/cm^3"),
               row("90% band: held-out points inside", lambda m, c: f"{100 * m['band_coverage']['fraction']:.0f}%"),
               row("90% band: unseen print's points inside", lambda m, c: f"{100 * m['unseen_inside_band']:.0f}%")]
     if "design" in results:
         d = results["design"]
-        lines.append(row("design for the unseen print's measured curve, printed on the bench (bar: 3%)",
-                         lambda m, c: f"{100 * d[c]['rel_rmse_printed']:.2f}% "
-                                      f"({'within' if d[c]['rel_rmse_printed'] <= DESIGN_BAR else 'misses'} the bar; "
-                                      f"predicted {100 * d[c]['rel_rmse_predicted']:.2f}%)"))
+        what = d.get("for", UNSEEN) + (f", {d['space']} design" if d.get("space", "nfc") != "nfc" else "")
+        lines.append(row(f"design for the unseen {what}'s measured curve, printed on the bench (bar: 3%)",
+                         lambda m, c: f"{100 * d['models'][c]['rel_rmse_printed']:.2f}% "
+                                      f"({'within' if d['models'][c]['rel_rmse_printed'] <= DESIGN_BAR else 'misses'} "
+                                      f"the bar; predicted {100 * d['models'][c]['rel_rmse_predicted']:.2f}%)"))
+    floor = results["floor"]
+    lines += ["", "Floor: the hidden physics with the material's mean rate and density predicts " + ", ".join(
+        f"{n} {100 * e['mesh']:.2f}% ({100 * e['weighed']:.2f}%)" for n, e in floor.items())
+        + f"; mean {100 * np.mean([e['mesh'] for e in floor.values()]):.2f}% "
+          f"({100 * np.mean([e['weighed'] for e in floor.values()]):.2f}%). What is left is each print's own rate and "
+          "density draw and the bench's noise."]
     plan = results.get("plan_check")
     if plan:
         lines += ["", f"Plan check: the Cramer-Rao standard error of the anisotropy for these four prints at the "
@@ -323,9 +412,11 @@ def figure(results: dict, unseen, args) -> None:
                         label="90% band of the prediction")
         ax.plot(hours, unseen["released_g"], color="C0", lw=2.2, label=f"{UNSEEN}: measured on the bench")
         ax.plot(hours, m["unseen"]["predicted"], "--", color="C3", lw=1.6, label="predicted from its mesh")
-        if "design" in results:
-            ax.plot(hours, results["design"][label]["printed"], "-", color="C2", lw=1.4,
-                    label=f"design for it, printed ({100 * results['design'][label]['rel_rmse_printed']:.1f}%)")
+        design = results.get("design")
+        if design and design["for"] == UNSEEN:
+            printed = design["models"][label]
+            ax.plot(hours, printed["printed"], "-", color="C2", lw=1.4,
+                    label=f"design for it, printed ({100 * printed['rel_rmse_printed']:.1f}%)")
         kept = "isotropic (paper)" if label == "isotropic" else f"--physics {label}: {m['physics_choice']}"
         ax.set_title(f"{kept}\nleave-one-out {100 * m['loo_mean']:.2f}%, unseen {100 * m['unseen_rel_rmse']:.2f}%, "
                      f"band {100 * m['band_coverage']['fraction']:.0f}% / {100 * m['unseen_inside_band']:.0f}%",
@@ -341,6 +432,34 @@ def figure(results: dict, unseen, args) -> None:
     suffix = ("" if not results["without"] else "_without_" + "_".join(e.split("_")[0] for e in results["without"])) \
         + ("_mesh_boxes" if results["mesh_boxes"] else "") + ("_channelled" if results.get("channelled") else "")
     fig.savefig(args.docs / f"physics_loop_{results['seed']}{suffix}.png")
+    plt.close(fig)
+    design = results.get("design")
+    if design and design["for"] != UNSEEN:
+        design_figure(results, design, args.docs / f"physics_loop_design_{results['seed']}{suffix}{_design_suffix(args)}.png")
+
+
+def design_figure(results: dict, design: dict, path: Path) -> None:
+    """The design's target (a measured curve) and each calibration's design printed on the bench."""
+    import matplotlib.pyplot as plt
+
+    hours = np.asarray(design["t_s"]) / 3600.0
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=110)
+    ax.plot(hours, design["target_g"], color="C0", lw=2.4, label=f"{design['for']}: measured on the bench (target)")
+    for k, (label, d) in enumerate(design["models"].items()):
+        kept = "isotropic (paper)" if label == "isotropic" else f"--physics {label}"
+        ax.plot(hours, d["printed"], "--" if k else ":", color=f"C{k + 1}", lw=1.8,
+                label=f"{kept} design, printed: {100 * d['rel_rmse_printed']:.2f}% "
+                      f"(its own prediction {100 * d['rel_rmse_predicted']:.2f}%)")
+    ax.set_xlabel("time since drop (h)")
+    ax.set_ylabel("released (g)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right", fontsize=7)
+    h = results["hidden"]
+    ax.set_title(f"{design['space']} design for the {design['for']}'s measured curve, printed on the bench\n"
+                 f"(hidden anisotropy {h['anisotropy']:.2f}, offset {h['offset_mm']:.2f} mm, swelling "
+                 f"{h['swelling_mm']:.2f} mm, lag {h['wetting_lag_s']:.0f} s)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
     plt.close(fig)
 
 
