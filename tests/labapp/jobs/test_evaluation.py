@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from design.files.pipeline import simulate_mesh
+from design.forward.reference import design_lattice, reference_release
 from design.geometry.shapes import sample_shape
 from design.montecarlo.erosion import MonteCarloParams
 from labapp.cli.main import main
@@ -18,16 +18,18 @@ RESOLUTION = 16
 
 @pytest.fixture(scope="module")
 def calibration_set(tmp_path_factory):
-    """Three objects 'measured' as the forward model's release at a known time and mass scale."""
+    """Three objects 'measured' as the release the calibration simulates (the reference evaluator's exact one,
+    which the calibration's grid release is corrected to) at a known time and mass scale."""
     root = tmp_path_factory.mktemp("set")
     rows = ["run,mesh,object_mass_g,water_g"]
     for name in ("sphere", "pill", "spinner_top"):
         mesh = sample_shape(name)
         mesh.export(root / f"{name}.stl")
-        release = simulate_mesh(mesh, resolution=RESOLUTION)
-        t = np.arange(0.0, release.tau_mm[-1] * SECONDS_PER_MM * 1.1, 30.0)
-        grams = np.interp(t / SECONDS_PER_MM, release.tau_mm, release.released_mm3) * G_PER_MM3
-        mass = float(release.released_mm3[-1] * G_PER_MM3)
+        tau = np.linspace(0.0, 0.5 * max(mesh.extents), 1025)
+        release = reference_release(mesh, tau, cells=design_lattice(RESOLUTION))
+        t = np.arange(0.0, release.total_time_mm * SECONDS_PER_MM * 1.1, 30.0)
+        grams = np.interp(t / SECONDS_PER_MM, tau, release.released_mm3) * G_PER_MM3
+        mass = float(release.volume_mm3 * G_PER_MM3)
         np.savetxt(root / f"{name}.csv", np.column_stack([t, grams]), delimiter=",", header="t_s,released_g",
                    comments="", fmt="%.6f")
         rows.append(f"{name}.csv,{name}.stl,{mass:.6f},500")
