@@ -16,6 +16,7 @@ from design.files.pipeline import mesh_grid
 from design.forward.simulator import simulate
 from labapp.jobs.calibrate_sim import calibrate_sim, exact_volume_release, load_simcal, print_volume_mm3
 from labapp.jobs.physical import predict_mesh
+from tests.labapp.jobs.simcal_sets import write_run, write_set
 
 DENSITY, SECONDS_PER_MM, RESOLUTION = 1.3e-3, 1200.0, 40
 MESHES = {"bar": lambda: trimesh.creation.box((22, 6, 6)),
@@ -53,7 +54,7 @@ def test_odd_voxel_box_gets_its_volume_at_full_release():
 
 def _synthetic_set(folder):
     folder.mkdir(parents=True, exist_ok=True)
-    rows = ["run,mesh,object_mass_g"]
+    rows = []
     for name, make in MESHES.items():
         mesh = make()
         rho, dx, mirror = mesh_grid(mesh, resolution=64)
@@ -62,13 +63,8 @@ def _synthetic_set(folder):
         mass = DENSITY * float(mesh.volume)
         t = np.arange(30.0, 1.1 * SECONDS_PER_MM * release.tau_mm[-1], 30.0)
         grams = mass * np.interp(t / SECONDS_PER_MM, release.tau_mm, fraction)
-        conc = grams / 0.5
-        np.savetxt(folder / f"{name}.csv", np.column_stack([t, conc, conc, grams]), delimiter=",", comments="",
-                   header="t_s,conc_g_per_kg,conc_smooth_g_per_kg,released_g", fmt="%.8f")
-        mesh.export(folder / f"{name}.stl")
-        rows.append(f"{name}.csv,{name}.stl,{mass:.6f}")
-    (folder / "set.csv").write_text("\n".join(rows) + "\n")
-    return folder / "set.csv"
+        rows.append(write_run(folder, name, mesh, t, grams, mass, fmt="%.8f"))
+    return write_set(folder, rows)
 
 
 def test_pooled_density_and_predicted_grams_follow_the_exact_volume(tmp_path):

@@ -20,6 +20,7 @@ from labapp.jobs import calibrate_sim as cs
 from labapp.jobs.bands import source_release_exact, source_simulator
 from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
 from labapp.jobs.physical import predict_mesh
+from tests.labapp.jobs.simcal_sets import write_run, write_set
 
 DENSITY, SECONDS_PER_MM, RESOLUTION, WATER_G = 1.3e-3, 1200.0, 24, 5000.0
 
@@ -48,20 +49,15 @@ def _capsule():
 
 def _set(folder):
     folder.mkdir(parents=True, exist_ok=True)
-    rows = ["run,mesh,object_mass_g,water_g"]
+    rows = []
     for name, make in (("sphere", _sphere), ("box", _box)):
         mesh, exact = make()
         mass = DENSITY * float(mesh.volume)
         end = 1.1 * SECONDS_PER_MM * max(mesh.extents) / 2
         t = np.arange(30.0, end, 30.0)
         grams = DENSITY * exact(t / SECONDS_PER_MM)
-        conc = grams / (WATER_G / 1000)
-        np.savetxt(folder / f"{name}.csv", np.column_stack([t, conc, conc, grams]), delimiter=",", comments="",
-                   header="t_s,conc_g_per_kg,conc_smooth_g_per_kg,released_g", fmt="%.9f")
-        mesh.export(folder / f"{name}.stl")
-        rows.append(f"{name}.csv,{name}.stl,{mass:.9f},{WATER_G}")
-    (folder / "set.csv").write_text("\n".join(rows) + "\n")
-    return folder / "set.csv"
+        rows.append(write_run(folder, name, mesh, t, grams, mass, WATER_G))
+    return write_set(folder, rows)
 
 
 def _calibrate(tmp_path, name):

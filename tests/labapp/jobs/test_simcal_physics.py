@@ -16,6 +16,7 @@ from labapp.acquisition.printworld import PrintPhysics, world_release
 from labapp.acquisition.simbench import Material, SampleRelease
 from labapp.cli.main import main
 from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal, print_volume_mm3
+from tests.labapp.jobs.simcal_sets import write_run, write_set
 
 MESHES = {"slab": lambda: trimesh.creation.box((16, 16, 5)),
           "column": lambda: trimesh.creation.cylinder(radius=3.5, height=18, sections=48),
@@ -27,7 +28,7 @@ WORLD_RESOLUTION, RESOLUTION = 64, 32
 def _bench_set(folder, physics):
     folder.mkdir(parents=True, exist_ok=True)
     material = Material(1500.0, 1.25, physics=physics)
-    rows = ["run,mesh,object_mass_g"]
+    rows = []
     for i, (name, make) in enumerate(MESHES.items()):
         mesh = make()
         seconds_per_mm, g_per_mm3 = material.printed(i)
@@ -37,13 +38,8 @@ def _bench_set(folder, physics):
         t = np.arange(30.0, 1.15 * release.duration_s, 30.0)
         grams = np.interp(t, release.t_s, release.released_g)
         grams += 0.002 * release.mass_g * np.random.default_rng(i).standard_normal(t.size)
-        conc = grams / 0.5
-        np.savetxt(folder / f"{name}.csv", np.column_stack([t, conc, conc, grams]), delimiter=",", comments="",
-                   header="t_s,conc_g_per_kg,conc_smooth_g_per_kg,released_g", fmt="%.6f")
-        mesh.export(folder / f"{name}.stl")
-        rows.append(f"{name}.csv,{name}.stl,{release.mass_g:.4f}")
-    (folder / "set.csv").write_text("\n".join(rows) + "\n")
-    return folder / "set.csv"
+        rows.append(write_run(folder, name, mesh, t, grams, release.mass_g, fmt="%.6f"))
+    return write_set(folder, rows)
 
 
 def test_hidden_anisotropy_is_recovered_and_earns_its_place(tmp_path):
