@@ -134,6 +134,8 @@ def main() -> None:
     parser.add_argument("--design-domain", default="",
                         help="the design's domain X,Y,Z in mm (default: the design's own, a cube)")
     parser.add_argument("--design-height", type=float, default=None, help="an extruded design's height, mm")
+    parser.add_argument("--design-starts", type=int, default=None,
+                        help="seeded starts at half the resolution, the best refined (sfr design --starts)")
     parser.add_argument("--design-resolution", type=int, default=40)
     parser.add_argument("--design-iterations", type=int, default=100)
     parser.add_argument("--docs", type=Path, default=Path(__file__).resolve().parents[1] / "docs" / "figures")
@@ -313,9 +315,11 @@ def design_check(args, runs_dir: Path, material, results: dict) -> dict:
         simcal = load_simcal(model["simcal"])
         config = DesignConfig(target=str(target_csv), space=args.design_space, resolution=args.design_resolution,
                               domain_mm=domain, height_mm=args.design_height, max_iter=args.design_iterations,
+                              starts=args.design_starts,
                               allow_infeasible=True)
         start = time.perf_counter()
-        folder = args.out / f"design_{label}{_design_suffix(args)}_{args.design_iterations}"
+        folder = args.out / (f"design_{label}{_design_suffix(args)}_{args.design_iterations}"
+                             + (f"_starts{args.design_starts}" if args.design_starts else ""))
         resume = (folder / "summary.json").is_file()
         result, summary = design_from_target(None if resume else config, folder, simcal=simcal, resume=resume)
         mesh = trimesh.load(result.out_dir / "design.stl")
