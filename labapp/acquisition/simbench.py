@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 
-from design.files.pipeline import simulate_mesh
 from design.forward.reference import design_lattice, reference_release
 from design.geometry.shapes import sample_shape
 from drivers.camera import SimulatedCamera
@@ -161,7 +160,7 @@ def sample_release(shape: str = "pill", index: int = 0, resolution: int = WORLD_
     if physics is None:
         # the release the calibration's model gives with identity physics: the exact one (reference evaluator)
         mesh = sample_shape(shape)
-        end = 2.0 * simulate_mesh(mesh, resolution=resolution).tau_mm[-1]
+        end = 0.5 * float(np.max(mesh.extents))   # no point of the solid lies deeper
         model = reference_release(mesh, np.linspace(0.0, end, 801), cells=design_lattice(resolution))
         whole = min(int(np.searchsorted(model.tau_mm, model.total_time_mm)) + 1, model.tau_mm.size)   # to its end
         release = SampleRelease.from_simulation(shape, model.tau_mm[:whole], model.released_mm3[:whole], seconds_per_mm,

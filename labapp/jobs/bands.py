@@ -22,7 +22,7 @@ import numpy as np
 
 from analysis.bands import BAND_LEVEL, ResidualModel, SimulateAt, spread_g
 from analysis.bands import band as _band
-from analysis.simcal import PHYSICS_PARAMETERS
+from analysis.simcal import PHYSICS_IDENTITY, PHYSICS_PARAMETERS
 from labapp.jobs.calibrate_sim import SimCalError, SimCalFile
 
 log = logging.getLogger(__name__)
@@ -71,45 +71,31 @@ def prediction_band(simcal: SimCalFile, tau_mm: np.ndarray, released_mm3: np.nda
                  parameter_g=spread, mass_sd_g=mass_sd)
 
 
-def _mesh_release(source: str, resolution: int, symmetry: str, units: str, method: str, grids: dict, meshes: list,
-                  tau_mm: np.ndarray, released_mm3: np.ndarray, offset_mm: float, anisotropy: float
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """A release simulated from ``source`` (with build-direction ``anisotropy`` and surface ``offset_mm``) at the
-    print's exact volume, corrected for the grid's bias at that anisotropy and offset against the reference evaluator
-    when ``method`` is ``calibrate_sim.RELEASE_METHOD`` (:func:`labapp.jobs.calibrate_sim.bias_corrected_release`; a
-    density array has no mesh and keeps its release)."""
-    from labapp.jobs.calibrate_sim import RELEASE_METHOD, bias_corrected_release, exact_volume_release, grid_bias
-    from labapp.jobs.simulate import _is_density, _source_mesh, simulation_grid
+def _source_mesh_once(source: str, units: str, meshes: list):
+    """The source's mesh (None for a density array), loaded on the first call into ``meshes``."""
+    from labapp.jobs.simulate import _is_density, _source_mesh
 
     if not meshes:
         meshes.append(None if _is_density(source) else _source_mesh(source, units))
-    mesh = meshes[0]
-    if mesh is None or method != RELEASE_METHOD:
-        return np.asarray(tau_mm, float), exact_volume_release(released_mm3, mesh, offset_mm)
-    offset = round(float(offset_mm), 9)
-    if offset not in grids:
-        grids[offset] = simulation_grid(source, resolution=resolution, symmetry=symmetry, units=units,
-                                        offset_mm=offset)[:3]
-    return bias_corrected_release(tau_mm, released_mm3, mesh, offset_mm,
-                                  grid_bias(mesh, grids[offset], resolution, anisotropy, offset_mm))
+    return meshes[0]
 
 
 def source_simulator(source: str, resolution: int, *, symmetry: str = "", units: str = "mm",
                      method: str | None = None) -> SimulateAt:
     """``simulate_at(physics)`` for a mesh, ``sample:NAME`` or density array at a calibration's resolution
-    (``labapp.jobs.simulate.simulation_grid``; grids cached per surface offset), a mesh's release at its
-    print's exact volume (:func:`labapp.jobs.calibrate_sim.exact_volume_release`) and, with ``method``
-    ``calibrate_sim.RELEASE_METHOD`` (the default; give the calibration's ``release_method``), corrected for the
-    grid's bias against the reference evaluator (:func:`labapp.jobs.calibrate_sim.bias_corrected_release`), as
-    the calibration made its meshes' releases."""
+    (``labapp.jobs.simulate.simulation_grid``; grids cached per surface offset), made as the calibration made its
+    meshes' releases: with ``method`` ``calibrate_sim.RELEASE_METHOD`` (the default; give the calibration's
+    ``release_method``) a mesh's :func:`labapp.jobs.calibrate_sim.print_release`, otherwise (and for a density
+    array, which has no mesh) the grid's release at the print's exact volume
+    (:func:`labapp.jobs.calibrate_sim.exact_volume_release`)."""
     from design.errors import DesignError
     from design.forward.simulator import simulate
-    from labapp.jobs.calibrate_sim import RELEASE_METHOD
+    from labapp.jobs.calibrate_sim import RELEASE_METHOD, exact_volume_release, print_release
     from labapp.jobs.simulate import simulation_grid
 
     method = RELEASE_METHOD if method is None else method
     grids: dict[float, tuple] = {}
-    meshes: list = []   # the source's mesh, loaded once (None for a density array)
+    meshes: list = []
 
     def simulate_at(physics: dict) -> tuple[np.ndarray, np.ndarray]:
         offset = round(float(physics["offset_mm"]), 9)
@@ -117,32 +103,40 @@ def source_simulator(source: str, resolution: int, *, symmetry: str = "", units:
             if offset not in grids:
                 grids[offset] = simulation_grid(source, resolution=resolution, symmetry=symmetry, units=units,
                                                 offset_mm=offset)[:3]
+            mesh = _source_mesh_once(source, units, meshes)
+            if mesh is not None and method == RELEASE_METHOD:
+                return print_release(mesh, grids[offset], resolution, {**PHYSICS_IDENTITY, **physics})
             rho, dx, mirror = grids[offset]
             # the offset is in the grid; every other print physics parameter is the forward model's keyword (the
             # wetting lag is the calibration map's, not the simulation's)
             release = simulate(rho, dx, mirror=mirror, **{p: float(v) for p, v in physics.items()
                                                           if p in PHYSICS_PARAMETERS and p != "offset_mm"})
-            return _mesh_release(source, resolution, symmetry, units, method, grids, meshes, release.tau_mm,
-                                 release.released_mm3, offset, float(physics.get("anisotropy", 1.0)))
+            return np.asarray(release.tau_mm, float), exact_volume_release(release.released_mm3, mesh, offset)
         except DesignError as exc:
             raise SimCalError(f"{source}: {exc}") from exc
 
     return simulate_at
 
 
-def source_release_exact(source: str, tau_mm: np.ndarray, released_mm3: np.ndarray, offset_mm: float,
-                         units: str = "mm", *, resolution: int, symmetry: str = "", method: str | None = None,
-                         anisotropy: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """A release simulated from ``source`` (mesh, ``sample:NAME`` or density array) at ``resolution`` made as
-    :func:`source_simulator` makes it: at the print's exact volume, corrected for the grid's bias with ``method``
-    ``calibrate_sim.RELEASE_METHOD`` (the default; at the release's ``anisotropy`` and ``offset_mm``). Returns
-    ``(tau_mm, released_mm3)`` (the bias's depths join the simulation's)."""
+def source_release_exact(source: str, release, physics: dict, units: str = "mm", *, resolution: int,
+                         symmetry: str = "", method: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A ``Release`` already simulated from ``source`` (mesh, ``sample:NAME`` or density array) at ``resolution``
+    with print ``physics``, made as :func:`source_simulator` makes it (a mesh's
+    :func:`labapp.jobs.calibrate_sim.print_release` with ``method`` ``calibrate_sim.RELEASE_METHOD``, the default;
+    else at the print's exact volume). Returns ``(tau_mm, released_mm3)``."""
     from design.errors import DesignError
-    from labapp.jobs.calibrate_sim import RELEASE_METHOD
+    from labapp.jobs.calibrate_sim import RELEASE_METHOD, exact_volume_release, print_release
+    from labapp.jobs.simulate import simulation_grid
 
+    physics = {**PHYSICS_IDENTITY, **physics}
     try:
-        return _mesh_release(source, resolution, symmetry, units, RELEASE_METHOD if method is None else method, {}, [],
-                             tau_mm, released_mm3, offset_mm, anisotropy)
+        mesh = _source_mesh_once(source, units, [])
+        if mesh is None or (RELEASE_METHOD if method is None else method) != RELEASE_METHOD:
+            return np.asarray(release.tau_mm, float), exact_volume_release(release.released_mm3, mesh,
+                                                                            physics["offset_mm"])
+        grid = simulation_grid(source, resolution=resolution, symmetry=symmetry, units=units,
+                               offset_mm=physics["offset_mm"])[:3]
+        return print_release(mesh, grid, resolution, physics, release)
     except DesignError as exc:
         raise SimCalError(f"{source}: {exc}") from exc
 

@@ -366,7 +366,7 @@ def reference_fraction(mesh, resolution: int, anisotropy: float = 1.0, offset_mm
     Returns
     -------
     tau_mm, fraction : (K,) ndarray of float
-        Erosion depths (0 to the end) and the released fraction at them (1 at the end).
+        Erosion depths (0 to the end) and the released fraction at them, non-decreasing to 1 at the end.
     """
     tau0, released0, scaled = _reference(mesh, resolution, anisotropy)
     d = metric_offset_mm(mesh, anisotropy, offset_mm)
@@ -383,6 +383,7 @@ def reference_fraction(mesh, resolution: int, anisotropy: float = 1.0, offset_mm
         released = np.concatenate([[0.0], released0[keep] - start])
     else:
         tau, released = tau0, released0
+    released = np.maximum.accumulate(released)   # monotone: the quadrature's rounding on the plateau
     return tau, released / released[-1]
 
 
@@ -440,11 +441,31 @@ def bias_corrected_release(tau_mm: np.ndarray, released_mm3: np.ndarray, mesh, o
     return tau, np.clip(np.maximum.accumulate(released), 0.0, total)
 
 
+def print_release(mesh, grid: tuple, resolution: int, physics: dict, release=None) -> tuple[np.ndarray, np.ndarray]:
+    """A mesh's print release as a calibration of :data:`RELEASE_METHOD` makes it, mm^3 at the print's exact volume:
+    ``grid`` the print's voxels (made with the physics' offset), ``physics`` the print physics. Without swelling the
+    grid's release corrected for its bias is the exact release (:func:`bias_corrected_release`), so it is
+    :func:`reference_fraction` times the print's volume and the grid is not simulated; with swelling it is the
+    grid's release with the physics (``release``, a ``Release`` of ``grid``; simulated when None) corrected by
+    :func:`grid_bias`."""
+    from design.forward.simulator import simulate
+
+    anisotropy, offset, swelling = (float(physics[p]) for p in ("anisotropy", "offset_mm", "swelling_mm"))
+    if swelling == 0.0:
+        tau, fraction = reference_fraction(mesh, resolution, anisotropy, offset)
+        return tau, fraction * print_volume_mm3(mesh, offset)
+    if release is None:
+        rho, dx, mirror = grid
+        release = simulate(rho, dx, mirror=mirror, anisotropy=anisotropy, swelling_mm=swelling)
+    return bias_corrected_release(release.tau_mm, release.released_mm3, mesh, offset,
+                                  grid_bias(mesh, grid, resolution, anisotropy, offset))
+
+
 def _simulate(mesh, mesh_path: Path, resolution: int, physics: dict | None = None, grids: dict | None = None,
               method: str | None = None):
-    """A mesh's simulated release with print physics, at its exact volume (:func:`exact_volume_release`), corrected
-    for the grid's bias (:func:`bias_corrected_release`) when ``method`` is :data:`RELEASE_METHOD`; ``grids``
-    caches voxelisations per (mesh, offset)."""
+    """A mesh's simulated release with print physics: :func:`print_release` when ``method`` is
+    :data:`RELEASE_METHOD`, else the grid's release at the print's exact volume (:func:`exact_volume_release`);
+    ``grids`` caches voxelisations per (mesh, offset). Returns ``(tau_mm, released_mm3, dx_mm)``."""
     from design.errors import DesignError
     from design.files.pipeline import mesh_grid
     from design.forward.simulator import simulate
@@ -457,11 +478,9 @@ def _simulate(mesh, mesh_path: Path, resolution: int, physics: dict | None = Non
         if key not in grids:
             grids[key] = mesh_grid(mesh, resolution=resolution, offset_mm=physics["offset_mm"])
         rho, dx, mirror = grids[key]
-        release = simulate(rho, dx, mirror=mirror, anisotropy=physics["anisotropy"], swelling_mm=physics["swelling_mm"])
         if method == RELEASE_METHOD:
-            bias = grid_bias(mesh, grids[key], resolution, physics["anisotropy"], physics["offset_mm"])
-            return (*bias_corrected_release(release.tau_mm, release.released_mm3, mesh, physics["offset_mm"], bias),
-                    dx)
+            return (*print_release(mesh, grids[key], resolution, physics), dx)
+        release = simulate(rho, dx, mirror=mirror, anisotropy=physics["anisotropy"], swelling_mm=physics["swelling_mm"])
     except DesignError as exc:
         raise SimCalError(f"{mesh_path}: {exc}") from exc
     return release.tau_mm, exact_volume_release(release.released_mm3, mesh, physics["offset_mm"]), dx

@@ -118,10 +118,9 @@ def _run(args: argparse.Namespace) -> int:
         from analysis.bands import BAND_LEVEL
         from labapp.jobs.bands import source_release_exact, source_simulator
 
-        tau, released = source_release_exact(args.input, release.tau_mm, release.released_mm3,
-                                             simcal.physics["offset_mm"], args.units, resolution=simcal.resolution,
-                                             symmetry=args.symmetry, method=simcal.release_method,
-                                             anisotropy=simcal.physics["anisotropy"])
+        tau, released = source_release_exact(args.input, release, simcal.physics, args.units,
+                                             resolution=simcal.resolution, symmetry=args.symmetry,
+                                             method=simcal.release_method)
         physical = write_release_physical(tau, released, simcal, out, args.water_g,
                                           title=args.input, simulate_at=source_simulator(
                                               args.input, simcal.resolution, symmetry=args.symmetry, units=args.units,

@@ -10,12 +10,14 @@ released as the capsule of its mesh's volume: the points deeper than t form a ca
 """
 import json
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import trimesh
 
 from design.files.pipeline import mesh_grid
+from design.forward.simulator import simulate
 from labapp.jobs import calibrate_sim as cs
 from labapp.jobs.bands import source_release_exact, source_simulator
 from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
@@ -115,7 +117,6 @@ def test_anisotropic_release_is_corrected_at_its_own_anisotropy(anisotropy):
     bias (measured at 24 voxels: 5.6 % of the volume at most at a = 0.7, 6.8 % at 1.5); corrected at the same
     anisotropy it is within the reference's quadrature error (bound 0.5 %; measured 0.02 % for both). Corrected by
     the isotropic bias instead it stays off (measured: 1.7 %, 1.8 %)."""
-    from design.forward.simulator import simulate
 
     mesh = trimesh.creation.icosphere(4, radius=4.0)
     mesh.apply_scale([1.0, 1.0, anisotropy])
@@ -153,7 +154,11 @@ def test_calibration_recovers_time_scale_and_predicts_unseen_curved_shape(tmp_pa
 
     # the grid alone (no bias): the sphere's front runs ahead of the box's, so neither the time scale nor the
     # capsule comes out right (measured: the time scale 6.8 % off, the capsule 3.2 % of its mass)
-    monkeypatch.setattr(cs, "grid_bias", lambda *args: (np.zeros(1), np.zeros(1)))
+    def grid_alone(mesh, grid, resolution, physics, release=None):
+        plain = simulate(*grid[:2], mirror=grid[2], anisotropy=physics["anisotropy"])
+        return plain.tau_mm, cs.exact_volume_release(plain.released_mm3, mesh, physics["offset_mm"])
+
+    monkeypatch.setattr(cs, "print_release", grid_alone)
     old = _calibrate(tmp_path, "grid")
     assert abs(old.doc["seconds_per_mm"] / SECONDS_PER_MM - 1) > 5 * abs(run.doc["seconds_per_mm"] / SECONDS_PER_MM - 1)
     assert abs(old.doc["seconds_per_mm"] / SECONDS_PER_MM - 1) > 0.015
@@ -172,7 +177,6 @@ def test_older_file_reads_as_grid_method_and_predicts_with_it(tmp_path):
     mesh.export(tmp_path / "ball.stl")
     tau, vol = source_simulator(str(tmp_path / "ball.stl"), RESOLUTION, method=simcal.release_method)(simcal.physics)
     grid = mesh_grid(mesh, resolution=RESOLUTION)
-    from design.forward.simulator import simulate
 
     plain = simulate(*grid[:2], mirror=grid[2])
     np.testing.assert_allclose(vol, cs.exact_volume_release(plain.released_mm3, mesh))
@@ -188,7 +192,9 @@ def test_density_array_keeps_its_release(tmp_path):
     rho[2:8, 2:8, 3:7] = 1.0
     np.save(tmp_path / "block.npy", rho)
     tau, released = np.linspace(0, 3, 7), np.linspace(0, 144, 7)
-    out_tau, out = source_release_exact(str(tmp_path / "block.npy"), tau, released, 0.0, resolution=RESOLUTION)
+    release = SimpleNamespace(tau_mm=tau, released_mm3=released)
+    out_tau, out = source_release_exact(str(tmp_path / "block.npy"), release, dict(cs.PHYSICS_IDENTITY),
+                                        resolution=RESOLUTION)
     np.testing.assert_array_equal(out_tau, tau)
     np.testing.assert_array_equal(out, released)
 
