@@ -135,7 +135,7 @@ def main() -> None:
                         help="the design's domain X,Y,Z in mm (default: the design's own, a cube)")
     parser.add_argument("--design-height", type=float, default=None, help="an extruded design's height, mm")
     parser.add_argument("--design-starts", type=int, default=None,
-                        help="seeded starts at half the resolution, the best refined (sfr design --starts)")
+                        help="the design's starts (sfr design --starts; default the design's own)")
     parser.add_argument("--design-resolution", type=int, default=40)
     parser.add_argument("--design-iterations", type=int, default=100)
     parser.add_argument("--docs", type=Path, default=Path(__file__).resolve().parents[1] / "docs" / "figures")
@@ -320,7 +320,7 @@ def design_check(args, runs_dir: Path, material, results: dict) -> dict:
         start = time.perf_counter()
         folder = args.out / (f"design_{label}{_design_suffix(args)}_{args.design_iterations}"
                              + (f"_starts{args.design_starts}" if args.design_starts else ""))
-        resume = (folder / "summary.json").is_file()
+        resume = (folder / "config.json").is_file()  # a design begun (or finished) before: resumed
         result, summary = design_from_target(None if resume else config, folder, simcal=simcal, resume=resume)
         mesh = trimesh.load(result.out_dir / "design.stl")
         world = world_release(mesh, material.physics, resolution=WORLD_RESOLUTION)

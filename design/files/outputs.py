@@ -15,8 +15,9 @@ Print physics (`DesignConfig` ``anisotropy``, ``print_offset_mm``, ``swelling_mm
 calibration): the optimised density is the solid that must come out of the printer. A print comes out
 ``print_offset_mm`` larger than its mesh, so ``design.stl`` is that solid shrunk by the offset (the file to
 print), and the print is ``design.stl`` grown by it again; every print figure (fit, volume, mass, channels,
-pieces) is the grown solid's. With anisotropy or swelling the print's release is the forward model's with
-that physics on voxels half the design grid's (the reference evaluator is isotropic and has no swelling).
+pieces) is the grown solid's. With anisotropy the reference evaluator releases the print at it (exact
+distances with z scaled by 1/a); with swelling the print's release is the forward model's with the print
+physics on voxels half the design grid's (the reference evaluator does not shut channels).
 Channels narrower than ``swelling_mm`` are filled before extraction (`close_narrow_channels`), the minimum
 open channel width the print must keep, and ``summary.json`` says whether the print meets it and how many voxels
 the fill added (``channel_fill_voxels``: 0 when the objective's channel-width term, weight ``w_channel``, kept the
@@ -222,7 +223,7 @@ def fine_release(mesh, dx_mm: float, origin_mm: np.ndarray, full_shape: tuple[in
 
 
 PRINT_PHYSICS_FACTOR = 2
-"""With anisotropy or swelling, the print's release is the forward model's on voxels this many times smaller
+"""With swelling, the print's release is the forward model's on voxels this many times smaller
 than the design grid's."""
 
 
@@ -320,10 +321,11 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         warnings.append(f"no density reaches the extraction level {level:.3f} yet: no solid extracted "
                         "(design.stl not written)")
     binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm, **physics)
-    # the print: design.stl (grown by the offset) released by exact surface distances, its volume the mesh's own;
-    # with anisotropy or swelling, by the forward model with them on a finer grid
-    modelled = config.anisotropy != 1.0 or config.swelling_mm > 0
-    printed = (reference_release(mesh, target.tau_mm, cells=design_lattice(config.resolution))
+    # the print: design.stl (grown by the offset) released by exact surface distances at the print's anisotropy,
+    # its volume the mesh's own; with swelling, by the forward model with the print physics on a finer grid
+    modelled = config.swelling_mm > 0
+    printed = (reference_release(mesh, target.tau_mm, cells=design_lattice(config.resolution),
+                                 anisotropy=config.anisotropy)
                if mesh is not None and not modelled else None)
     if modelled:
         print_curve = fine_release(mesh, space.dx_mm, problem.origin_mm, problem.full_shape, space.mirror,

@@ -4,8 +4,10 @@ A run folder holds ``config.json`` (the `DesignConfig`), ``feasibility.txt`` (th
 ``checkpoint.npz`` (the optimiser's `Checkpoint`, rewritten atomically every few evaluations) and, once the
 run stops, the outputs of `design.files.outputs`; the three records and their formats are
 `design.files.records`. A run with physical correction keeps where its rounds stand in ``rounds.npz``
-(`design.files.rounds`). A multi-start run (`DesignConfig.starts` > 1) keeps its coarse runs as ordinary run
-folders in ``starts/NN`` and its choice in ``multistart.json``; the refinement runs in the folder itself.
+(`design.files.rounds`). A multi-start run (`DesignConfig.starts` > 1) keeps its starts as ordinary run
+folders in ``starts/NN`` and its choice in ``multistart.json``; the refinement runs in the folder itself, or,
+for starts at the run's resolution, the chosen start's checkpoint and rounds are copied into it and its
+outputs written there.
 """
 from __future__ import annotations
 
@@ -142,18 +144,40 @@ class _StartFolders:
         history = np.loadtxt(self.folder(k) / "history.csv", delimiter=",", skiprows=1, ndmin=2)
         return float(history[:, 1].min())
 
+    def print_fit(self, k: int) -> float:
+        fit = load_summary(self.folder(k)).get("rel_rmse_print")
+        return np.inf if fit is None else float(fit)
+
+    def adopt(self, k: int) -> Checkpoint:
+        """Make finished start ``k`` the run's own: its last checkpoint and correction rounds copied into the run
+        folder (each written atomically, the rounds first), and that checkpoint returned."""
+        folder = self.folder(k)
+        state = RoundFile(folder / ROUNDS).load()
+        if state is not None:
+            RoundFile(self.out_dir / ROUNDS).save(state)
+        saved = load_checkpoint(folder / CHECKPOINT)
+        save_checkpoint(self.out_dir / CHECKPOINT, saved)
+        return saved
+
 
 def _multistart(config: DesignConfig, out_dir: Path, on_iteration: IterationCallback | None,
-                should_stop: Callable[[], bool] | None) -> StartDesign | None:
-    """Run the coarse starts of a multi-start in ``out_dir/starts``, record the choice in ``multistart.json`` and
-    return the refinement's start (None when `should_stop` ended a coarse run)."""
+                should_stop: Callable[[], bool] | None) -> StartDesign | Checkpoint | None:
+    """Run the starts of a multi-start in ``out_dir/starts`` and record the choice in ``multistart.json``. Returns
+    the refinement's start, or for starts at the run's resolution the chosen start's last checkpoint, now the
+    run's own (`_StartFolders.adopt`); None when `should_stop` ended a start."""
     folders = _StartFolders(out_dir, should_stop)
     choice = coarse_start(config, folders, on_iteration=on_iteration)
     if choice is None:
         return None
-    (out_dir / MULTISTART).write_text(json.dumps(
-        {"coarse_resolution": choice.coarse_resolution, "refined": start_name(choice.refined),
-         "best_J": {start_name(k): value for k, value in enumerate(choice.best_values)}}, indent=2))
+    record = {"coarse_resolution": choice.coarse_resolution, "refined": start_name(choice.refined),
+              "best_J": {start_name(k): value for k, value in enumerate(choice.best_values)}}
+    if choice.final:
+        record = {"resolution": choice.coarse_resolution, "chosen": start_name(choice.refined),
+                  "print_fit": {start_name(k): fit for k, fit in enumerate(choice.print_fits)},
+                  "best_J": record["best_J"]}
+    (out_dir / MULTISTART).write_text(json.dumps(record, indent=2))
+    if choice.final:
+        return folders.adopt(choice.refined)
     density = folders.folder(choice.refined) / "density.npz"
     try:
         with np.load(density, allow_pickle=False) as data:
@@ -336,8 +360,10 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     objective = build_objective(problem, config)
     if saved is not None:
         log.info("resuming %s at evaluation %d", out_dir, len(saved.history))
-    if saved is None and start is None and config.starts > 1:  # coarse-to-fine multi-start
+    if saved is None and start is None and config.starts > 1:  # multi-start
         start = _multistart(config, out_dir, on_iteration, should_stop)
+        if isinstance(start, Checkpoint):  # the chosen start is the design
+            return _rewrite_outputs(out_dir, config, start, coarse_start)
     if config.starts > 1:
         on_iteration = with_phase(on_iteration, refinement_phase(config.resolution))
     outcome, objective = optimise_physical(objective, problem, config, CheckpointFile(ckpt), RoundFile(out_dir / ROUNDS),

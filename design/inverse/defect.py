@@ -7,7 +7,7 @@ matches the target on the grid therefore misses it in the print by a shape-depen
 optimisation of eq. (4), each of `DesignConfig.correction_rounds` rounds
 
 1. extracts the printed solid of the current design x, as the run's outputs do, and releases it with the
-   reference evaluator (`design.forward.reference`) on the target's tau grid: P(x);
+   reference evaluator (`design.forward.reference`, at the print's anisotropy) on the target's tau grid: P(x);
 2. takes the bias b(x) = G(x) - P(x), where G(x) is the design grid's release of the density that J_fit
    sees (eqs. 5-7);
 3. re-targets J_fit (eq. 4) at C* + b(x) (at a step, below) and continues the optimiser from x for
@@ -137,16 +137,17 @@ def printed_mesh(objective: DesignObjective, problem: Problem, x: np.ndarray):
 def check_print(objective: DesignObjective, problem: Problem, x: np.ndarray) -> PrintCheck:
     """Judge design variables ``x`` (variable shape) by their print: G(x), P(x), the print's fit and pieces."""
     space, target = objective.space, problem.target
+    anisotropy = objective.physics["anisotropy"]
     dtau_mm = target.total_time_mm / (target.tau_mm.size - 1)
     grid = simulate(objective.density(x), space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
-                    dtau_mm=dtau_mm).released_mm3
+                    dtau_mm=dtau_mm, anisotropy=anisotropy).released_mm3
     mesh = printed_mesh(objective, problem, x)
     if mesh is None:
         return PrintCheck(np.inf, 0, grid, np.zeros_like(grid))
     per_voxel = REFERENCE_PER_VOXEL.get(space.name, DEFAULT_REFERENCE_PER_VOXEL)
     cells = int(np.clip(np.ceil(per_voxel * float(np.max(mesh.extents)) / space.dx_mm), MIN_CELLS,
                         DEFAULT_CELLS))
-    printed = reference_release(mesh, target.tau_mm, cells=cells).released_mm3
+    printed = reference_release(mesh, target.tau_mm, cells=cells, anisotropy=anisotropy).released_mm3
     pieces = count_pieces(revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape))
     return PrintCheck(rel_rmse(printed, target.released_mm3), pieces, grid, printed)
 

@@ -1,12 +1,14 @@
-"""Multi-start, coarse-to-fine inverse design (``sfr design --starts N``, `DesignConfig.starts`).
+"""Multi-start inverse design (``sfr design --starts N``, `DesignConfig.starts`).
 
-N seeded starts run cheaply at a coarse resolution (half the run's by default: an nfc evaluation
-there costs about an eighth), each from the usual start design plus smooth seeded noise (start 0
-unperturbed). The coarse design with the lowest J is interpolated onto the full-resolution grid and
-refined there from that start. Every run is an ordinary resumable design folder: the coarse ones in
-``OUT/starts/NN``, the refinement in ``OUT`` itself, so an interrupted multi-start resumes where it
-stopped (finished starts are not run again). The whole costs about ``1 + N / 8`` single nfc runs of
-the same iteration limit (``1 + N / 4`` extruded).
+N seeded starts, each from one of the problem's start outlines (`Problem.start_regions`, in turn) as it is,
+then plus smooth seeded noise. From resolution `MULTISTART_MIN_RESOLUTION` on they run cheaply at half the
+resolution (an nfc evaluation there costs about an eighth); the coarse design with the lowest J is
+interpolated onto the full-resolution grid and refined there from that start, the whole about ``1 + N / 8``
+single nfc runs of the same iteration limit (``1 + N / 4`` extruded). Below it every start is a whole run at
+the run's resolution, its print corrected, and the start whose print fits the target best is the design
+(N single runs). Every run is an ordinary resumable design folder: the starts in ``OUT/starts/NN``, the
+refinement (or the chosen start's outputs) in ``OUT`` itself, so an interrupted multi-start resumes where
+it stopped (finished starts are not run again).
 
 `coarse_start` decides which starts run and which is refined; the folders are `CoarseRuns`' business
 (`design.files.rundir` keeps them).
@@ -22,7 +24,7 @@ from scipy import ndimage
 
 from design.inverse.objective import DesignObjective
 from design.inverse.optimize import IterationCallback, StartDesign, with_phase
-from design.inverse.problem import DesignConfig, Problem
+from design.inverse.problem import MULTISTART_MIN_RESOLUTION, DesignConfig, Problem
 from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)
@@ -36,8 +38,12 @@ MIN_COARSE_RESOLUTION = 16
 
 
 def coarse_resolution(resolution: int) -> int:
-    """Half the resolution, even and at least `MIN_COARSE_RESOLUTION` (never above the original)."""
-    return min(resolution, max(MIN_COARSE_RESOLUTION, 2 * (resolution // 4)))
+    """The starts' resolution: from `MULTISTART_MIN_RESOLUTION` on half the run's, even and at least
+    `MIN_COARSE_RESOLUTION`; below it the run's own (on a grid half as fine the smoothing radius is about a voxel,
+    and the starts' J ranks them unlike the full grid's, docs/design.md#multi-start)."""
+    if resolution < MULTISTART_MIN_RESOLUTION:
+        return resolution
+    return max(MIN_COARSE_RESOLUTION, 2 * (resolution // 4))
 
 
 def start_name(k: int) -> str:
@@ -45,9 +51,10 @@ def start_name(k: int) -> str:
     return f"{k:02d}"
 
 
-def coarse_phase(k: int, starts: int, resolution: int) -> str:
-    """The progress phase (``terms["phase"]``) of coarse start ``k`` (from 0) of ``starts``."""
-    return f"coarse start {k + 1} of {starts} at resolution {resolution}"
+def coarse_phase(k: int, starts: int, resolution: int, coarse: bool = True) -> str:
+    """The progress phase (``terms["phase"]``) of start ``k`` (from 0) of ``starts``: a coarse one, or one at the
+    run's own resolution (``coarse`` False)."""
+    return f"{'coarse start' if coarse else 'start'} {k + 1} of {starts} at resolution {resolution}"
 
 
 def refinement_phase(resolution: int) -> str:
@@ -56,11 +63,13 @@ def refinement_phase(resolution: int) -> str:
 
 
 def perturbed_start(seed: int) -> StartDesign:
-    """A run's start design: the default start plus smooth noise seeded by ``seed``."""
+    """Start ``seed``'s design: the problem's start outlines in turn (`Problem.start_regions`), each as it is the
+    first time and with smooth noise seeded by ``seed`` after that."""
 
     def start(objective: DesignObjective, problem: Problem) -> np.ndarray:
-        x = objective.uniform_start(problem.start_region)
-        if seed == 0:
+        regions = problem.start_regions
+        x = objective.uniform_start(regions[seed % len(regions)])
+        if seed < len(regions):
             return x
         noise = ndimage.gaussian_filter(np.random.default_rng(seed).standard_normal(x.shape), NOISE_SIGMA_VOX)
         noise *= NOISE_AMPLITUDE / max(float(np.abs(noise).max()), 1e-12)
@@ -100,59 +109,81 @@ class CoarseRuns(Protocol):
     def best_value(self, k: int) -> float:
         """The lowest J of finished start ``k``."""
 
+    def print_fit(self, k: int) -> float:
+        """The print's fit of finished start ``k`` (its ``rel_rmse_print``; inf without a print)."""
+
 
 @dataclass(frozen=True)
 class CoarseChoice:
-    """The outcome of the coarse starts: their resolution, the one refined and each one's lowest J."""
+    """The outcome of the starts: their resolution, the one chosen, each one's lowest J and, for starts at the
+    run's own resolution, each one's print fit (they are ranked by it, and the chosen one is the design)."""
 
     coarse_resolution: int
     refined: int
     best_values: tuple[float, ...]
+    print_fits: tuple[float, ...] | None = None
+
+    @property
+    def final(self) -> bool:
+        """Whether the chosen start is the design itself (the starts ran at the run's resolution): no refinement."""
+        return self.print_fits is not None
 
 
 def coarse_start(config: DesignConfig, runs: CoarseRuns, *,
                  on_iteration: IterationCallback | None = None) -> CoarseChoice | None:
-    """Run ``config.starts`` coarse seeded starts and choose the one the full-resolution run refines.
+    """Run ``config.starts`` seeded starts and choose the best.
 
-    Called by `design.files.rundir.run_design` for a new (or not yet started) run with ``starts > 1``.
+    Called by `design.files.rundir.run_design` for a new (or not yet started) run with ``starts > 1``. At
+    `coarse_resolution` below the run's, each start is ``config`` at that resolution with a single start and no
+    physical correction, they are ranked by their lowest J, and the best is refined at full resolution
+    (`refine_start`). At the run's own resolution each start is ``config`` with a single start, physical
+    correction included, they are ranked by their print's fit, and the best is the design
+    (`CoarseChoice.final`): start 0 is the single run's, so the design fits no worse than it.
 
     Parameters
     ----------
     config : DesignConfig
-        The full-resolution run; every coarse start uses it at `coarse_resolution`, with the same
-        iteration limit, a single start and no physical correction.
+        The run.
     runs : CoarseRuns
         Runs the starts not finished yet (a finished start is not run again).
     on_iteration : callable, optional
-        As for `design.files.rundir.run_design`, passed to every coarse run with its phase.
+        As for `design.files.rundir.run_design`, passed to every start with its phase.
 
     Returns
     -------
     CoarseChoice or None
-        The start with the lowest J (the first of equals); None when `should_stop` ended a coarse run
-        (the caller then stops at once too). `refine_start` makes its design the full run's start.
+        The best start (the first of equals); None when `should_stop` ended a start (the caller then stops at
+        once too).
 
     Raises
     ------
     KeyboardInterrupt
-        When a coarse run was interrupted (Ctrl-C); resuming continues with that start.
+        When a start was interrupted (Ctrl-C); resuming continues with that start.
     """
-    # the coarse runs only rank the starts by J: the refinement corrects the print (design.inverse.defect)
-    coarse = replace(config, resolution=coarse_resolution(config.resolution), starts=1, physical_correction="none")
+    resolution = coarse_resolution(config.resolution)
+    final = resolution == config.resolution
+    # coarse runs only rank the starts by J: the refinement corrects the print (design.inverse.defect)
+    start_config = (replace(config, starts=1) if final else
+                    replace(config, resolution=resolution, starts=1, physical_correction="none"))
     values = []
     for k in range(config.starts):
         if not runs.finished(k):
-            phase = coarse_phase(k, config.starts, coarse.resolution)
+            phase = coarse_phase(k, config.starts, resolution, coarse=not final)
             log.info(phase)
-            status = runs.run(k, coarse, perturbed_start(k), with_phase(on_iteration, phase))
+            status = runs.run(k, start_config, perturbed_start(k), with_phase(on_iteration, phase))
             if status == DesignStatus.INTERRUPTED:
                 raise KeyboardInterrupt
             if status == DesignStatus.STOPPED:
                 return None
         values.append(runs.best_value(k))
-    best = min(range(len(values)), key=values.__getitem__)
-    log.info("refining start %s (J = %.6g at resolution %d)", start_name(best), values[best], coarse.resolution)
-    return CoarseChoice(coarse.resolution, best, tuple(values))
+    fits = tuple(runs.print_fit(k) for k in range(config.starts)) if final else None
+    rank = fits if final else values
+    best = min(range(len(rank)), key=rank.__getitem__)
+    if final:
+        log.info("keeping start %s (its print %.3f%% off the target)", start_name(best), 100 * rank[best])
+    else:
+        log.info("refining start %s (J = %.6g at resolution %d)", start_name(best), values[best], resolution)
+    return CoarseChoice(resolution, best, tuple(values), fits)
 
 
 def refine_start(x_coarse: np.ndarray, dx_coarse_mm: float) -> StartDesign:

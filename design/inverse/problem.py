@@ -73,14 +73,18 @@ W_CHANNEL = 100.0
 (`DesignConfig.swelling_mm` > 0; 0 otherwise): the optimiser keeps the open channels at least the swelling width
 wide, so that the fill of the outputs has little or nothing left to change (docs/design.md#minimum-open-channel-width)."""
 START_FILL = 2.0 / 3.0
-"""Density of the compact start of an extruded design (`start_region`): a target without a source starts
+"""Density of the compact start of an extruded design (`start_regions`): a target without a source starts
 at it, and a start is hollowed only as far as its band still holds the target's volume at it."""
 MULTISTART_STARTS = 4
 MULTISTART_MIN_RESOLUTION = 128
 MULTISTART_SPACES = ("nfc", "extruded")
 """Default multi-start (`DesignConfig.starts`): 4 seeded starts at half the resolution, then the best
-refined, for nfc and extruded designs of a source shape at resolution 128 or finer; curve targets and
-ICO designs keep one start. Why: docs/design.md#multi-start."""
+refined, for nfc and extruded designs of a source shape at resolution 128 or finer; ICO designs and curve
+targets in nfc keep one start. Why: docs/design.md#multi-start."""
+CURVE_EXTRUDED_STARTS = 2
+"""Default starts of an extruded design of a curve target (`DesignConfig.starts`): its two start outlines, a
+square and a cross (`start_regions`; a noisy square for a target with the square alone), each a whole run
+below `MULTISTART_MIN_RESOLUTION`, the one whose print fits best kept (docs/design.md#multi-start)."""
 OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
 """`DesignConfig.optimizer` choices: `design.inverse.lbfgs` (default) and three nlopt algorithms."""
 ANALYTIC_W_RATE = 1.0
@@ -153,10 +157,11 @@ class DesignConfig:
         Slope of J_conn's tail (`design.fabrication.connectivity.TAIL_SLOPE`); runs stored before the tail
         resume without it (0).
     starts : int or None
-        Seeded starts run at half the resolution before the best is refined at full resolution
-        (`design.inverse.multistart`); 1 = a single run from the start design. None = `MULTISTART_STARTS` for
-        nfc and extruded designs of a source shape at resolution `MULTISTART_MIN_RESOLUTION` or
-        finer, else 1.
+        Seeded starts (`design.inverse.multistart`): from resolution `MULTISTART_MIN_RESOLUTION` on run at half
+        the resolution, the best refined at full resolution; below it each a whole run, the one whose print
+        fits best kept. 1 = a single run from the start design. None = `MULTISTART_STARTS` for nfc and extruded
+        designs of a source shape at resolution `MULTISTART_MIN_RESOLUTION` or finer,
+        `CURVE_EXTRUDED_STARTS` for extruded designs of a curve target, else 1.
     w_fab : float or None
         Weight w_f of the space's fabrication term (ico only; None = preset or `SPACE_DEFAULTS`,
         0 for spaces without one).
@@ -235,8 +240,9 @@ class DesignConfig:
         term (None stays, so that a configuration given print physics later gets the default). Runs stored before
         the term resume without it (0).
 
-    With any print physics the physical correction is off by default (``physical_correction`` None resolves
-    to "none"), and "defect" is refused: its reference evaluator has no print physics.
+    With swelling the physical correction is off by default (``physical_correction`` None resolves to "none"),
+    and "defect" is refused: its reference evaluator has the print's anisotropy but does not shut channels. The
+    print offset does not enter it: the designed solid is the print (the STL is it shrunk by the offset).
     """
 
     target: str
@@ -284,11 +290,6 @@ class DesignConfig:
     print_offset_mm: float = 0.0
     swelling_mm: float = 0.0
     w_channel: float | None = None
-
-    @property
-    def has_print_physics(self) -> bool:
-        """Whether any print physics differs from the paper's isotropic model of the mesh as designed."""
-        return (self.anisotropy, self.print_offset_mm, self.swelling_mm) != (1.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         if self.space not in SPACE_CHOICES:
@@ -341,9 +342,11 @@ class DesignConfig:
         if not self.connect_tail >= 0:
             raise DesignError(f"connect_tail must be >= 0, got {self.connect_tail}")
         if self.starts is None:
-            multi = (self.space in MULTISTART_SPACES and self.resolution >= MULTISTART_MIN_RESOLUTION
-                     and _is_shape_target(self.target))
-            object.__setattr__(self, "starts", MULTISTART_STARTS if multi else 1)
+            shape = _is_shape_target(self.target)
+            multi = self.space in MULTISTART_SPACES and self.resolution >= MULTISTART_MIN_RESOLUTION and shape
+            outlines = self.space == "extruded" and not shape
+            object.__setattr__(self, "starts", MULTISTART_STARTS if multi else CURVE_EXTRUDED_STARTS if outlines
+                               else 1)
         if not 1 <= self.starts <= 64:
             raise DesignError(f"starts must be in [1, 64], got {self.starts}")
         if self.beta is not None and not 0 < self.beta <= 64:
@@ -381,11 +384,12 @@ class DesignConfig:
                               "swelling_mm: it needs swelling_mm > 0")
         if self.physical_correction is None:
             object.__setattr__(self, "physical_correction",
-                               PHYSICAL_CORRECTIONS[0] if self.space in CORRECTION_SPACES and not self.has_print_physics
+                               PHYSICAL_CORRECTIONS[0] if self.space in CORRECTION_SPACES and not self.swelling_mm > 0
                                else "none")
-        if self.physical_correction == "defect" and self.has_print_physics:
-            raise DesignError("physical_correction 'defect' judges the print by the reference evaluator, which has no "
-                              "print physics (anisotropy, offset, swelling); use 'none' with print physics")
+        if self.physical_correction == "defect" and self.swelling_mm > 0:
+            raise DesignError(f"physical_correction 'defect' judges the print by the reference evaluator, which does "
+                              f"not shut channels narrower than swelling_mm ({self.swelling_mm:g} mm); use 'none' "
+                              f"with swelling")
         if self.physical_correction not in PHYSICAL_CORRECTIONS:
             raise DesignError(f"physical_correction must be one of {PHYSICAL_CORRECTIONS}, got "
                               f"{self.physical_correction!r}")
@@ -417,8 +421,8 @@ class Problem:
         The source mesh voxelised on the full design grid (for the recovery check).
     radius_vox : float
         Smoothing radius r on this grid, voxels (`DesignConfig.radius_vox` or its ``radius_mm``).
-    start_region : ndarray of bool or None
-        Where the start design holds material (`start_region`); None = the whole domain.
+    start_regions : tuple of (ndarray of bool or None)
+        Where the start designs hold material (`start_regions`), the default first; None = the whole domain.
     warnings : tuple of str
         What is known about the source and the target before the run (`source_warnings`,
         `rate_resolution_warnings`); logged when the problem is prepared and kept in the run's summary.
@@ -437,10 +441,15 @@ class Problem:
     full_shape: tuple[int, int, int]
     source_solid: np.ndarray | None
     radius_vox: float
-    start_region: np.ndarray | None = None
+    start_regions: tuple[np.ndarray | None, ...] = (None,)
     warnings: tuple[str, ...] = ()
     source_mesh: trimesh.Trimesh | None = None
     target_error_mm3: float | None = None
+
+    @property
+    def start_region(self) -> np.ndarray | None:
+        """Where a single run's start design holds material: the first of `start_regions`."""
+        return self.start_regions[0]
 
 
 def source_warnings(source_solid: np.ndarray | None, allow_pieces: bool) -> tuple[str, ...]:
@@ -548,9 +557,12 @@ def extrusion_height_mm(target: Target, dx_mm: float) -> float:
     return max(target.final_mm3 ** (1.0 / 3.0), 2.0 * end + 2.0 * dx_mm)
 
 
-def start_region(space: DesignSpace, target: Target, half_extent_mm: np.ndarray | None,
-                 radius_mm: float) -> np.ndarray | None:
-    """Where an extruded design starts with material (`DesignObjective.uniform_start`), or None (everywhere).
+def start_regions(space: DesignSpace, target: Target, half_extent_mm: np.ndarray | None,
+                  radius_mm: float) -> tuple[np.ndarray | None, ...]:
+    """Where an extruded design may start with material (`DesignObjective.uniform_start`), the default first.
+
+    A single run starts in the first; the starts of a multi-start take them in turn
+    (`design.inverse.multistart.perturbed_start`). None stands for the whole domain.
 
     The outline is the source's footprint (its bounding box plus a voxel), or for a target without a
     source a centred square. Spreading the start over the whole domain footprint, as for the other
@@ -566,35 +578,65 @@ def start_region(space: DesignSpace, target: Target, half_extent_mm: np.ndarray 
     as far as the band that remains holds the target's volume at density `START_FILL`, and not at all
     when its half-width would be below the smoothing radius (the filter would keep it a grey pin-hole
     that the printed solid opens). A target without a source starts in the square that holds its
-    volume at `START_FILL` throughout, so it has no room for a hole: a square ring start with the
-    core's connectivity penalty closes up instead.
+    volume at `START_FILL` throughout, so it has no room for a hole (a square ring start with the
+    core's connectivity penalty closes up). When a solid square of its volume would release its core
+    after D, a second outline is a cross of arms about 2 D wide (`cross_region`): which of the two the
+    optimisation makes the better design of depends on the target, so its multi-start tries both.
 
     Returns
     -------
-    ndarray of bool, variable shape, or None
+    tuple of (ndarray of bool, variable shape, or None)
     """
     if not space.extruded:
-        return None
+        return (None,)
     dx = space.dx_mm
     height_mm = space.grid_shape[BUILD_AXIS] * dx
     end_mm = curve_end_mm(target.tau_mm, target.released_mm3)
     need_cells = target.final_mm3 / (START_FILL * height_mm * dx * dx * space.multiplicity)
+    late = end_mm < 0.5 * height_mm - 0.5 * dx  # the faces alone do not dissolve the core in time
+    alternatives: tuple[np.ndarray | None, ...] = ()
     if half_extent_mm is None:
-        side = np.sqrt(target.final_mm3 / (height_mm * START_FILL))
-        half = np.array([0.5 * side, 0.5 * side])
+        area = target.final_mm3 / (height_mm * START_FILL)
+        if late and 0.5 * np.sqrt(area * START_FILL) > end_mm:  # a solid square's core releases after D
+            cross = cross_region(space, area, end_mm)
+            alternatives = () if cross is None else (cross,)
+        half = np.full(2, 0.5 * np.sqrt(area))
     else:
         half = np.array([half_extent_mm[ax] for ax in range(3) if ax != BUILD_AXIS]) + dx
     half = np.minimum(half, np.asarray(space.var_shape, float) * dx)  # within the domain
     centres = [(np.arange(n) + 0.5) * dx for n in space.var_shape]
     depth = np.minimum.outer(half[0] - centres[0], half[1] - centres[1])  # to the outline's edge, mm
     region = depth > 0
-    if end_mm < 0.5 * height_mm - 0.5 * dx:  # the faces alone do not dissolve the core in time
+    if late:
         inside = np.sort(depth[region])
         width = 2.0 * end_mm + 0.5 * dx
         if np.count_nonzero(inside <= width) < need_cells:
             width = inside[min(int(np.ceil(need_cells)), inside.size - 1)]
         if inside[-1] - width >= radius_mm:
             region &= depth <= width
+    return (region if region.any() and not region.all() else None,) + alternatives
+
+
+def cross_region(space: DesignSpace, area_mm2: float, end_mm: float) -> np.ndarray | None:
+    """A centred cross of two arms about 2 ``end_mm`` wide whose footprint is ``area_mm2`` (mm^2, all quadrants).
+
+    Its material lies within ``end_mm`` of an edge (at the crossing within sqrt(2) ``end_mm`` of the corners), so
+    it releases about when the target ends; arms longer than the domain allows are widened instead. The arms
+    lie on the mirror planes, so each quadrant holds one connected L. Widths and lengths are whole cells.
+    Returns the region in the variable's quadrant, or None (no cross fits the domain).
+    """
+    dx = space.dx_mm
+    longest = min(space.var_shape) - 1  # cells from the symmetry centre, a cell short of the domain's edge
+    width = max(1, int(round(end_mm / dx)))  # half-width, cells
+    length = int(round((area_mm2 / dx ** 2 + 4.0 * width ** 2) / (8.0 * width)))  # 8 l w - 4 w^2 = area
+    if length > longest:
+        disc = 64.0 * longest ** 2 - 16.0 * area_mm2 / dx ** 2
+        if disc < 0.0:
+            return None
+        length, width = longest, max(width, int(round((8.0 * longest - np.sqrt(disc)) / 8.0)))
+    cells = [np.arange(n) for n in space.var_shape]
+    region = np.logical_and.outer(cells[0] < length, cells[1] < width) | \
+        np.logical_and.outer(cells[0] < width, cells[1] < length)
     return region if region.any() and not region.all() else None
 
 
@@ -700,4 +742,4 @@ def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
     for warning in warnings:
         log.warning("%s", warning)
     return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, radius_vox,
-                   start_region(space, target, half_mm, radius_vox * dx), warnings, mesh, target_error)
+                   start_regions(space, target, half_mm, radius_vox * dx), warnings, mesh, target_error)

@@ -335,8 +335,9 @@ def write_design_physical(design_dir: Path, simcal: SimCalFile, target: Physical
 def with_print_physics(config, simcal: SimCalFile):
     """The design settings with a simulation calibration's print physics: the forward model's anisotropy and
     swelling width (its shut channels, and the print's minimum open channel width) and the print offset
-    (``design.stl`` is the designed solid shrunk by it). With print physics the physical correction, whose
-    reference evaluator has none, is off (``design.inverse.problem.DesignConfig``)."""
+    (``design.stl`` is the designed solid shrunk by it). The physical correction takes its default again: on at
+    the print's anisotropy, off with swelling, which its reference evaluator does not model
+    (``design.inverse.problem.DesignConfig``)."""
     physics = simcal.physics
     correction = None if config.physical_correction == "defect" else config.physical_correction
     return dataclasses.replace(config, anisotropy=physics["anisotropy"], print_offset_mm=physics["offset_mm"],

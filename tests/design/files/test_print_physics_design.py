@@ -32,11 +32,12 @@ def test_the_objective_with_print_physics_has_the_exact_gradient(anisotropy, swe
     assert build_objective(prepare(plain), plain).evaluate(x).value != pytest.approx(evaluation.value, rel=1e-3)
 
 
-def test_print_physics_turn_the_reference_correction_off():
-    assert DesignConfig(target="sphere", anisotropy=1.2).physical_correction == "none"
+def test_swelling_turns_the_reference_correction_off_and_anisotropy_and_offset_keep_it():
     assert DesignConfig(target="sphere").physical_correction == "defect"
-    with pytest.raises(DesignError, match="no print physics"):
-        DesignConfig(target="sphere", print_offset_mm=0.1, physical_correction="defect")
+    assert DesignConfig(target="sphere", anisotropy=1.2, print_offset_mm=0.1).physical_correction == "defect"
+    assert DesignConfig(target="sphere", anisotropy=1.2, swelling_mm=0.5).physical_correction == "none"
+    with pytest.raises(DesignError, match="does not shut channels narrower than swelling_mm"):
+        DesignConfig(target="sphere", swelling_mm=0.5, physical_correction="defect")
     with pytest.raises(DesignError, match="swelling_mm must be"):
         DesignConfig(target="sphere", swelling_mm=-1.0)
 

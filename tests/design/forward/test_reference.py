@@ -126,6 +126,27 @@ def test_release_matches_the_analytic_curve(shape):
     assert np.all(np.diff(ref.released_mm3) >= -1e-9 * ref.volume_mm3)
 
 
+@pytest.mark.parametrize("anisotropy", [0.6, 1.5])
+def test_an_anisotropic_box_releases_its_faces_at_their_own_rates(anisotropy):
+    # a box X x Y x Z whose z faces erode at a and side faces at 1: X Y Z - (X - 2t)(Y - 2t)(Z - 2 a t), each
+    # factor at least 0
+    extents = np.array([12.0, 8.0, 5.0])
+    mesh = trimesh.creation.box(extents=extents)
+    tau = np.linspace(0.0, 4.5, 181)
+    ref = reference_release(mesh, tau, cells=CELLS, anisotropy=anisotropy)
+    rates = np.array([1.0, 1.0, anisotropy])
+    left = np.prod(np.clip(extents[None, :] - 2.0 * tau[:, None] * rates[None, :], 0.0, None), axis=1)
+    exact = np.prod(extents) - left
+    assert ref.volume_mm3 == pytest.approx(np.prod(extents), rel=1e-12)
+    assert np.abs(ref.released_mm3 - exact).max() <= TOLERANCE * ref.volume_mm3
+    assert ref.method == f"exact-distance, anisotropy {anisotropy:g}"
+    # the isotropic release is clearly another curve (z faces at 1)
+    iso = reference_release(mesh, tau, cells=CELLS).released_mm3
+    assert np.abs(iso - exact).max() > 10 * TOLERANCE * ref.volume_mm3
+    with pytest.raises(DesignError, match="anisotropy"):
+        reference_release(mesh, tau, cells=16, anisotropy=0.0)
+
+
 def test_method_names_sealed_voids():
     assert reference_release(box()[0], [0.0, 1.0], cells=16).method == "exact-distance"
     assert reference_release(hollow()[0], [0.0, 1.0], cells=16).method == "exact-distance-voids"

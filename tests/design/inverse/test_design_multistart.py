@@ -1,4 +1,5 @@
-"""Multi-start: coarse seeded starts, the best refined at full resolution; interpolation between grids."""
+"""Multi-start: coarse seeded starts, the best refined at full resolution; below the multi-start resolution,
+whole starts from each start outline, the best print kept; interpolation between grids."""
 import json
 import logging
 
@@ -7,8 +8,10 @@ import pytest
 
 from design.errors import DesignError
 from design.files.rundir import run_design
+import design.inverse.multistart
+from design.files.records import load_checkpoint
 from design.inverse.multistart import coarse_resolution, perturbed_start, upsample
-from design.inverse.problem import MULTISTART_STARTS, DesignConfig
+from design.inverse.problem import CURVE_EXTRUDED_STARTS, MULTISTART_STARTS, DesignConfig, prepare
 
 
 def test_upsample_keeps_a_linear_field_and_the_mirror_face():
@@ -21,11 +24,15 @@ def test_upsample_keeps_a_linear_field_and_the_mirror_face():
     np.testing.assert_allclose(fine[inner], expected[inner], atol=1e-12)
 
 
-def test_coarse_resolution_halves_and_stays_even():
-    assert coarse_resolution(128) == 64 and coarse_resolution(66) == 32 and coarse_resolution(16) == 16
+def test_coarse_resolution_halves_and_stays_even_from_the_multistart_resolution_on():
+    assert coarse_resolution(128) == 64 and coarse_resolution(258) == 128 and coarse_resolution(130) == 64
+    # below it the starts run at the run's own resolution
+    assert coarse_resolution(66) == 66 and coarse_resolution(16) == 16
 
 
-def test_multistart_runs_the_starts_and_refines_the_best(tmp_path, caplog):
+def test_multistart_runs_the_starts_and_refines_the_best(tmp_path, caplog, monkeypatch):
+    # the coarse path, as from resolution 128 on, at a resolution a test can afford
+    monkeypatch.setattr(design.inverse.multistart, "MULTISTART_MIN_RESOLUTION", 32)
     config = DesignConfig(target="sphere", space="extruded", resolution=32, max_iter=6, radius_vox=1.5, starts=2)
     phases = []
     with caplog.at_level(logging.INFO):
@@ -61,10 +68,21 @@ def test_perturbed_starts_differ_by_seed_and_start_zero_is_the_default():
             return np.full((8, 8), 0.3)
 
     class _Prob:
-        start_region = None
+        start_regions = (None,)
 
     a, b, zero = (perturbed_start(k)(_Obj(), _Prob()) for k in (1, 2, 0))
     assert not np.allclose(a, b) and np.all(zero == 0.3) and a.min() >= 0.02 and a.max() <= 0.98
+
+    class _Outlines:
+        start_regions = ("square", "cross")
+
+    class _Marks:
+        def uniform_start(self, region):
+            return np.full((8, 8), 0.3 if region == "square" else 0.6)
+
+    # the outlines in turn, each unperturbed the first time
+    first, second, third = (perturbed_start(k)(_Marks(), _Outlines()) for k in (0, 1, 2))
+    assert np.all(first == 0.3) and np.all(second == 0.6) and not np.allclose(third, 0.3)
     with pytest.raises(DesignError, match="starts"):
         DesignConfig(target="sphere", starts=0)
 
@@ -76,7 +94,39 @@ def test_multistart_is_the_default_at_fine_resolutions_only():
     assert DesignConfig(target="sphere", space="extruded", resolution=64).starts == 1
     assert DesignConfig(target="sphere", space="ico", resolution=128).starts == 1
     assert DesignConfig(target="sphere", space="nfc", resolution=128, starts=1).starts == 1
-    # curve targets (analytic, CSV, measured) keep one start
+    # curve targets (analytic, CSV, measured) keep one start in nfc, and try both start outlines extruded
     assert DesignConfig(target="zero-order", space="nfc", resolution=128).starts == 1
     assert DesignConfig(target="mesh.stl", space="nfc", resolution=128).starts == 4
     assert DesignConfig(target="curve.csv", space="nfc", resolution=128).starts == 1
+    assert DesignConfig(target="curve.csv", space="extruded", resolution=40).starts == CURVE_EXTRUDED_STARTS == 2
+    assert DesignConfig(target="zero-order", space="extruded", resolution=200).starts == 2
+
+
+def test_whole_starts_from_both_outlines_keep_the_best_print(tmp_path):
+    # a curve target whose solid square would release its core late: a square start and a cross start, each a
+    # whole run with its print corrected; the design is the start whose print fits best, as it is
+    config = DesignConfig(target="zero-order:final=0.15,duration=0.2", space="extruded", resolution=24, max_iter=12,
+                          w_rate=0.0, robust_eta=0.0)
+    assert config.starts == 2 and len(prepare(config).start_regions) == 2
+    out = tmp_path / "run"
+    result = run_design(config, out)
+    record = json.loads((out / "multistart.json").read_text())
+    fits = record["print_fit"]
+    assert record["resolution"] == 24 and set(fits) == {"00", "01"} and record["chosen"] == min(fits, key=fits.get)
+    chosen = out / "starts" / record["chosen"]
+    start_summary = json.loads((chosen / "summary.json").read_text())
+    assert start_summary["config"]["resolution"] == 24 and start_summary["config"]["starts"] == 1
+    assert start_summary["config"]["physical_correction"] == config.physical_correction == "defect"
+    # the run's outputs are the chosen start's: its print, its evaluations, its solid
+    summary = result.outputs.summary
+    assert summary["rel_rmse_print"] == pytest.approx(fits[record["chosen"]], rel=1e-9)
+    assert summary["config"]["starts"] == 2 and result.iterations == start_summary["iterations"]
+    np.testing.assert_array_equal(load_checkpoint(out / "checkpoint.npz").best_x,
+                                  load_checkpoint(chosen / "checkpoint.npz").best_x)
+    assert (out / "design.stl").read_bytes() == (chosen / "design.stl").read_bytes()
+    # the two starts began from their own outlines: different designs
+    other = out / "starts" / ("01" if record["chosen"] == "00" else "00")
+    assert not np.allclose(load_checkpoint(other / "checkpoint.npz").best_x,
+                           load_checkpoint(chosen / "checkpoint.npz").best_x)
+    # a resume has nothing left to do
+    assert run_design(None, out, resume=True).unchanged
