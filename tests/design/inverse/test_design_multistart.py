@@ -6,10 +6,10 @@ import logging
 import numpy as np
 import pytest
 
-from design.errors import DesignError
-from design.files.rundir import run_design
 import design.inverse.multistart
+from design.errors import DesignError
 from design.files.records import load_checkpoint
+from design.files.rundir import run_design
 from design.inverse.multistart import coarse_resolution, perturbed_start, upsample
 from design.inverse.problem import CURVE_EXTRUDED_STARTS, MULTISTART_STARTS, DesignConfig, prepare
 
