@@ -64,7 +64,7 @@ def _install_print(monkeypatch, problem, printed_of) -> None:
     space, target = problem.space, problem.target
     dtau = target.total_time_mm / (target.tau_mm.size - 1)
 
-    def release(mesh, tau_mm, cells=None):
+    def release(mesh, tau_mm, cells=None, anisotropy=1.0):
         grid = simulate(mesh.rho, space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
                         dtau_mm=dtau).released_mm3
         return type("Reference", (), {"released_mm3": printed_of(grid, target.released_mm3)})()

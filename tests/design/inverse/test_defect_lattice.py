@@ -19,9 +19,9 @@ def test_rounds_release_the_print_at_the_space_lattice(monkeypatch, space, per_v
     objective = build_objective(problem, config)
     seen = []
 
-    def release(mesh, tau_mm, cells):
+    def release(mesh, tau_mm, cells, anisotropy):
         seen.append((cells, float(np.max(mesh.extents))))
-        return reference_release(mesh, tau_mm, cells=MIN_CELLS)
+        return reference_release(mesh, tau_mm, cells=MIN_CELLS, anisotropy=anisotropy)
 
     monkeypatch.setattr(defect, "reference_release", release)
     check = check_print(objective, problem, np.full(objective.space.var_shape, 0.9))
