@@ -8,7 +8,7 @@ noise on the simulated bench is of that order; the pipeline itself is exercised 
 
 1. Four calibration prints (the flat slab and tall column ``sfr calibrate-sim --plan`` proposes for anisotropy, a
    sphere, a bar lying down; with ``--channelled`` also the slab with three 0.5 mm slots that ``--plan`` proposes for
-   the swelling width) and an unseen one (the pill, lying along x).
+   the swelling width, with ``--add-prints`` further ones) and unseen ones (the pill lying along x, a wafer, csg).
 2. ``calibrate-sim --physics none`` (isotropic) and ``--physics auto`` (anisotropy, offset and wetting lag: every
    subset; the swelling width needs channelled prints) on the four, resolution ``--resolution``:
    honest leave-one-out (print physics refitted without each run), the recovered parameters with their
@@ -62,10 +62,12 @@ def _even_voxels(side_mm: float, longest_mm: float, resolution: int) -> float:
     return 2 * max(round(side_mm / (2 * dx)), 1) * dx
 
 
-def _meshes(resolution: int | None = None, channelled: bool = False):
-    """The calibration prints and the unseen one; with ``resolution``, the boxes' short sides are whole even
+def _meshes(resolution: int | None = None, channelled: bool = False, added: tuple[str, ...] = ()):
+    """The calibration prints and the unseen ones; with ``resolution``, the boxes' short sides are whole even
     numbers of voxels at it (see `_even_voxels`); with ``channelled``, a fifth calibration print: the slab with three
-    0.5 mm slots that ``--plan`` proposes for the swelling width."""
+    0.5 mm slots that ``--plan`` proposes for the swelling width; ``added``: further calibration prints (shipped
+    samples or ``--plan``'s generated shapes, by name), after the unseen prints so that every other print keeps its
+    index and so its own rate and density draw."""
     import trimesh
 
     from design.geometry.shapes import sample_shape
@@ -78,7 +80,8 @@ def _meshes(resolution: int | None = None, channelled: bool = False):
         bar = trimesh.creation.box((22.0, side, side))
     return {"flat": flat, "tall": GENERATED["tall"][0](), "sphere": sample_shape("sphere"), "bar": bar,
             **({"channelled": GENERATED["channelled"][0]()} if channelled else {}), UNSEEN: sample_shape(UNSEEN),
-            "wafer": trimesh.creation.cylinder(radius=9.0, height=3.2, sections=96), "csg": sample_shape("csg")}
+            "wafer": trimesh.creation.cylinder(radius=9.0, height=3.2, sections=96), "csg": sample_shape("csg"),
+            **{name: GENERATED[name][0]() if name in GENERATED else sample_shape(name) for name in added}}
 
 
 def bench_run(mesh, name: str, material, index: int, folder: Path) -> tuple[Path, float]:
@@ -126,6 +129,9 @@ def main() -> None:
                              "(default: their short sides an even number of voxels at --resolution)")
     parser.add_argument("--channelled", action="store_true",
                         help="a fifth calibration print, the channelled slab, so that the swelling width can be learned")
+    parser.add_argument("--add-prints", default="",
+                        help="further calibration prints, comma-separated: shipped samples or --plan's shapes (e.g. "
+                             "spinner_top, which --plan proposes for the offset)")
     parser.add_argument("--reuse", action="store_true", help="reuse the runs and calibrations already in --out")
     parser.add_argument("--design", action="store_true", help="also design for the unseen print's measured curve")
     parser.add_argument("--design-for", choices=DESIGN_TARGETS, default=UNSEEN,
@@ -157,7 +163,8 @@ def run_loop(args) -> dict:
     effects = ("anisotropy", "offset_mm", "swelling_mm", "wetting_lag_s") if args.without == "all" else \
         tuple(e for e in args.without.split(",") if e)
     material = dataclasses.replace(material, physics=material.physics.without(*effects))
-    meshes = _meshes(None if args.mesh_boxes else args.resolution, args.channelled)
+    added = tuple(n for n in args.add_prints.split(",") if n)
+    meshes = _meshes(None if args.mesh_boxes else args.resolution, args.channelled, added)
     names = [n for n in meshes if n not in UNSEEN_PRINTS]
     set_csv = runs_dir / "set.csv"
     runs_dir.mkdir(parents=True, exist_ok=True)
@@ -174,6 +181,7 @@ def run_loop(args) -> dict:
         set_csv.write_text("\n".join(rows) + "\n")
 
     results = {"seed": args.seed, "without": list(effects), "mesh_boxes": args.mesh_boxes, "channelled": args.channelled,
+               "added_prints": list(added),
                "extents": {n: [round(float(x), 3) for x in m.extents] for n, m in meshes.items()},
                "hidden": dataclasses.asdict(material.physics),
                "material": {"seconds_per_mm": material.seconds_per_mm, "density_g_per_cm3": material.density_g_per_cm3},
@@ -434,7 +442,8 @@ def figure(results: dict, unseen, args) -> None:
                  f"swelling {h['swelling_mm']:.2f} mm, lag {h['wetting_lag_s']:.0f} s): an unseen print", fontsize=10)
     fig.tight_layout()
     suffix = ("" if not results["without"] else "_without_" + "_".join(e.split("_")[0] for e in results["without"])) \
-        + ("_mesh_boxes" if results["mesh_boxes"] else "") + ("_channelled" if results.get("channelled") else "")
+        + ("_mesh_boxes" if results["mesh_boxes"] else "") + ("_channelled" if results.get("channelled") else "") \
+        + "".join(f"_{name}" for name in results.get("added_prints", ()))
     fig.savefig(args.docs / f"physics_loop_{results['seed']}{suffix}.png")
     plt.close(fig)
     design = results.get("design")
