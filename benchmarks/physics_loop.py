@@ -19,7 +19,7 @@ noise on the simulated bench is of that order; the pipeline itself is exercised 
    ``--design-domain``, ``--design-height``: e.g. an extruded prism, printable without supports, for the wafer's
    curve), its ``design.stl`` printed on the bench (released by the bench's hidden physics), against the measured
    target: RMS % of the final mass.
-5. The plan's Cramer-Rao standard error of the anisotropy for these four prints, against the jackknife over
+5. The plan's Cramer-Rao standard error of the anisotropy for these calibration prints, against the jackknife over
    the leave-one-out refits (without the discretisation term the stated uncertainty adds).
 
     nice -n 10 .venv/bin/python benchmarks/physics_loop.py --out /tmp/physics_loop --seed 11 [--design]
@@ -281,7 +281,7 @@ def floor_errors(runs_dir: Path, name: str, mesh, material, resolution: int) -> 
 
 
 def plan_check(meshes: dict, names: list[str], results: dict, resolution: int) -> dict | None:
-    """The plan's Cramer-Rao standard error of the anisotropy for the four calibration prints, with the
+    """The plan's Cramer-Rao standard error of the anisotropy for the calibration prints, with the
     anisotropy model's own leave-one-out RMS as the error at each of `PLAN_POINTS` points, against its jackknife."""
     from labapp.jobs.plan import PLAN_POINTS, expected_std, sensitivity
 
@@ -292,7 +292,8 @@ def plan_check(meshes: dict, names: list[str], results: dict, resolution: int) -
     parameters = ("log_seconds", "anisotropy")
     jac = [sensitivity(meshes[n], parameters, resolution=resolution) for n in names]
     noise = model["loo_mean"]
-    return {"noise": noise, "points": PLAN_POINTS, "expected_std_anisotropy": expected_std(parameters, jac, noise)["anisotropy"],
+    return {"noise": noise, "points": PLAN_POINTS, "prints": len(names),
+            "expected_std_anisotropy": expected_std(parameters, jac, noise)["anisotropy"],
             "jackknife_anisotropy": model["uncertainty_refits"]["anisotropy"]}
 
 
@@ -401,7 +402,8 @@ def table(results: dict) -> str:
           "density draw and the bench's noise."]
     plan = results.get("plan_check")
     if plan:
-        lines += ["", f"Plan check: the Cramer-Rao standard error of the anisotropy for these four prints at the "
+        lines += ["", f"Plan check: the Cramer-Rao standard error of the anisotropy for these {plan.get('prints', 4)} "
+                      f"prints at the "
                       f"anisotropy model's leave-one-out error ({100 * plan['noise']:.2f}% at {plan['points']} points "
                       f"per run) is {plan['expected_std_anisotropy']:.3f}; its jackknife over the refits: "
                       f"{plan['jackknife_anisotropy']:.3f}."]
