@@ -169,12 +169,12 @@ def _multistart(config: DesignConfig, out_dir: Path, on_iteration: IterationCall
     choice = coarse_start(config, folders, on_iteration=on_iteration)
     if choice is None:
         return None
-    record = {"coarse_resolution": choice.coarse_resolution, "refined": start_name(choice.refined),
-              "best_J": {start_name(k): value for k, value in enumerate(choice.best_values)}}
+    best_j = {start_name(k): value for k, value in enumerate(choice.best_values)}
     if choice.final:
         record = {"resolution": choice.coarse_resolution, "chosen": start_name(choice.refined),
-                  "print_fit": {start_name(k): fit for k, fit in enumerate(choice.print_fits)},
-                  "best_J": record["best_J"]}
+                  "print_fit": {start_name(k): fit for k, fit in enumerate(choice.print_fits)}, "best_J": best_j}
+    else:
+        record = {"coarse_resolution": choice.coarse_resolution, "refined": start_name(choice.refined), "best_J": best_j}
     (out_dir / MULTISTART).write_text(json.dumps(record, indent=2))
     if choice.final:
         return folders.adopt(choice.refined)
@@ -277,10 +277,12 @@ def _check_size(saved: Checkpoint, problem: Problem, out_dir: Path) -> None:
                           f"{size} ({CONFIG} changed since it was written?); restore the files or start a new run")
 
 
-def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint, coarse_start: bool) -> DesignResult:
+def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint, coarse_start: bool,
+                     problem: Problem | None = None) -> DesignResult:
     """The outputs of a run whose optimisation finished, from its last checkpoint: its best design, history
-    and status, with the objective as the run left it (`restore_objective`: the final beta)."""
-    problem = _problem(config, out_dir)
+    and status, with the objective as the run left it (`restore_objective`: the final beta). ``problem``: the
+    run's, when already prepared."""
+    problem = problem or _problem(config, out_dir)
     _check_size(saved, problem, out_dir)
     objective = build_objective(problem, config)
     restore_objective(objective, saved, config)
@@ -357,13 +359,13 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     problem = _problem(config, out_dir)
     if saved is not None:
         _check_size(saved, problem, out_dir)
-    objective = build_objective(problem, config)
-    if saved is not None:
-        log.info("resuming %s at evaluation %d", out_dir, len(saved.history))
     if saved is None and start is None and config.starts > 1:  # multi-start
         start = _multistart(config, out_dir, on_iteration, should_stop)
         if isinstance(start, Checkpoint):  # the chosen start is the design
-            return _rewrite_outputs(out_dir, config, start, coarse_start)
+            return _rewrite_outputs(out_dir, config, start, coarse_start, problem)
+    objective = build_objective(problem, config)
+    if saved is not None:
+        log.info("resuming %s at evaluation %d", out_dir, len(saved.history))
     if config.starts > 1:
         on_iteration = with_phase(on_iteration, refinement_phase(config.resolution))
     outcome, objective = optimise_physical(objective, problem, config, CheckpointFile(ckpt), RoundFile(out_dir / ROUNDS),

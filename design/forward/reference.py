@@ -680,6 +680,12 @@ def _check_mesh(mesh: object) -> trimesh.Trimesh:
     return mesh
 
 
+def metric_mesh(mesh: trimesh.Trimesh, anisotropy: float) -> trimesh.Trimesh:
+    """``mesh`` in the metric where a front moving at ``anisotropy`` along z (the build direction) and at 1 in
+    the plane is isotropic: z scaled by 1 / anisotropy (a copy; the mesh itself for 1)."""
+    return mesh if anisotropy == 1.0 else mesh.copy().apply_scale([1.0, 1.0, 1.0 / anisotropy])
+
+
 def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray, *, cells: int = DEFAULT_CELLS,
                       anisotropy: float = 1.0) -> ReferenceRelease:
     """Release of a closed solid by exact surface distances, with its error estimate.
@@ -721,11 +727,8 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray, *, cells: int =
         raise DesignError(f"tau_mm must be a 1D array of finite depths, got shape {tau.shape}")
     if int(cells) != cells or cells < MIN_CELLS:
         raise DesignError(f"cells must be an integer >= {MIN_CELLS}, got {cells!r}")
-    mesh = _check_mesh(mesh)
     a = check_positive("anisotropy", anisotropy)
-    if a != 1.0:
-        mesh = mesh.copy()
-        mesh.apply_scale([1.0, 1.0, 1.0 / a])
+    mesh = metric_mesh(_check_mesh(mesh), a)
     volume = float(mesh.volume) * a  # mm^3 of the print: the scaled mesh's volume times a
     surface = _Surface(mesh)
     wet, n_voids = _wetting(mesh)

@@ -597,7 +597,7 @@ def start_regions(space: DesignSpace, target: Target, half_extent_mm: np.ndarray
     alternatives: tuple[np.ndarray | None, ...] = ()
     if half_extent_mm is None:
         area = target.final_mm3 / (height_mm * START_FILL)
-        if late and 0.5 * np.sqrt(area * START_FILL) > end_mm:  # a solid square's core releases after D
+        if late and 0.5 * np.sqrt(target.final_mm3 / height_mm) > end_mm:  # a solid square's core releases after D
             cross = cross_region(space, area, end_mm)
             alternatives = () if cross is None else (cross,)
         half = np.full(2, 0.5 * np.sqrt(area))

@@ -339,11 +339,11 @@ def _reference(mesh, resolution: int, anisotropy: float) -> tuple[np.ndarray, np
     scaled by 1 / a (``design.forward.reference.reference_release`` on ``design_lattice(resolution)``), on
     `BIAS_SAMPLES` depths from 0 to half the scaled mesh's largest extent (no point lies deeper). Returns
     ``(tau_mm, released_mm3, scaled_mesh)``, volumes in the scaled space. Cached per mesh, resolution and a."""
-    from design.forward.reference import design_lattice, reference_release
+    from design.forward.reference import design_lattice, metric_mesh, reference_release
 
     key = (_mesh_digest(mesh), int(resolution), round(float(anisotropy), 9), BIAS_SAMPLES)
     if key not in _REFERENCE_CACHE:
-        scaled = mesh if anisotropy == 1.0 else mesh.copy().apply_scale([1.0, 1.0, 1.0 / anisotropy])
+        scaled = metric_mesh(mesh, anisotropy)
         tau = np.linspace(0.0, 0.5 * float(np.max(scaled.extents)), BIAS_SAMPLES)
         ref = reference_release(scaled, tau, cells=design_lattice(resolution))
         _remember(_REFERENCE_CACHE, key, (tau, np.asarray(ref.released_mm3, float), scaled))
