@@ -81,9 +81,9 @@ MULTISTART_SPACES = ("nfc", "extruded")
 """Default multi-start (`DesignConfig.starts`): 4 seeded starts at half the resolution, then the best
 refined, for nfc and extruded designs of a source shape at resolution 128 or finer; ICO designs and curve
 targets in nfc keep one start. Why: docs/design.md#multi-start."""
-CURVE_EXTRUDED_STARTS = 2
-"""Default starts of an extruded design of a curve target (`DesignConfig.starts`): its two start outlines, a
-square and a cross (`start_regions`; a noisy square for a target with the square alone), each a whole run
+CURVE_EXTRUDED_STARTS = 3
+"""Default starts of an extruded design of a curve target (`DesignConfig.starts`): its three start outlines, a
+square, a cross and a ring (`start_regions`; noisy squares in place of those that do not fit), each a whole run
 below `MULTISTART_MIN_RESOLUTION`, the one whose print fits best kept (docs/design.md#multi-start)."""
 OPTIMIZERS = ("lbfgs", "LD_LBFGS", "LD_MMA", "LD_CCSAQ")
 """`DesignConfig.optimizer` choices: `design.inverse.lbfgs` (default) and three nlopt algorithms."""
@@ -580,8 +580,9 @@ def start_regions(space: DesignSpace, target: Target, half_extent_mm: np.ndarray
     that the printed solid opens). A target without a source starts in the square that holds its
     volume at `START_FILL` throughout, so it has no room for a hole (a square ring start with the
     core's connectivity penalty closes up). When a solid square of its volume would release its core
-    after D, a second outline is a cross of arms about 2 D wide (`cross_region`): which of the two the
-    optimisation makes the better design of depends on the target, so its multi-start tries both.
+    after D, two more outlines hold its volume within about D of an edge: a cross of arms about 2 D wide
+    (`cross_region`) and a ring of that width (`ring_region`); which of the three the optimisation makes the
+    best design of depends on the target, so its multi-start tries each.
 
     Returns
     -------
@@ -598,8 +599,8 @@ def start_regions(space: DesignSpace, target: Target, half_extent_mm: np.ndarray
     if half_extent_mm is None:
         area = target.final_mm3 / (height_mm * START_FILL)
         if late and 0.5 * np.sqrt(target.final_mm3 / height_mm) > end_mm:  # a solid square's core releases after D
-            cross = cross_region(space, area, end_mm)
-            alternatives = () if cross is None else (cross,)
+            outlines = (cross_region(space, area, end_mm), ring_region(space, area, end_mm, radius_mm))
+            alternatives = tuple(outline for outline in outlines if outline is not None)
         half = np.full(2, 0.5 * np.sqrt(area))
     else:
         half = np.array([half_extent_mm[ax] for ax in range(3) if ax != BUILD_AXIS]) + dx
@@ -638,6 +639,27 @@ def cross_region(space: DesignSpace, area_mm2: float, end_mm: float) -> np.ndarr
     region = np.logical_and.outer(cells[0] < length, cells[1] < width) | \
         np.logical_and.outer(cells[0] < width, cells[1] < length)
     return region if region.any() and not region.all() else None
+
+
+def ring_region(space: DesignSpace, area_mm2: float, end_mm: float, radius_mm: float) -> np.ndarray | None:
+    """A ring about 2 ``end_mm`` wide around the symmetry axis whose footprint is ``area_mm2`` (mm^2, all quadrants).
+
+    A wall of even thickness releases at a rate that changes little (its inner face grows as its outer face
+    shrinks) and its material ends at once, about when the target ends: the outline of a curve that rises
+    steadily and stops, a flat print's. Returns the region in the variable's quadrant, or None when the hole
+    would be narrower than the smoothing radius ``radius_mm`` (the filter would keep it a grey pin-hole) or the
+    ring does not fit the domain with a cell to spare.
+    """
+    dx = space.dx_mm
+    width = 2.0 * end_mm + 0.5 * dx  # the band of `start_regions`
+    mean_radius = area_mm2 / (2.0 * np.pi * width)
+    inner, outer = mean_radius - 0.5 * width, mean_radius + 0.5 * width
+    if inner < radius_mm or outer > (min(space.var_shape) - 1) * dx:
+        return None
+    centres = [(np.arange(n) + 0.5) * dx for n in space.var_shape]
+    radius = np.hypot.outer(centres[0], centres[1])
+    region = (radius >= inner) & (radius <= outer)
+    return region if region.any() else None
 
 
 def _radius_vox(config: DesignConfig, dx_mm: float) -> float:

@@ -59,8 +59,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--starts", type=positive_int,
                         help="seeded starts: from resolution 128 on at half the resolution, the best then refined "
                              "at full resolution; below it each a whole run, the best print kept (default 4 for nfc "
-                             "and extruded designs of a source shape at resolution 128 or finer, 2 for extruded "
-                             "designs of a curve target, one from each start outline; else 1: a single run)")
+                             "and extruded designs of a source shape at resolution 128 or finer, 3 for extruded "
+                             "designs of a curve target, one from each start outline: square, cross, ring; else 1: "
+                             "a single run)")
     parser.add_argument("--beta", type=positive_float, help="projection steepness (default 3)")
     parser.add_argument("--beta-final", type=positive_float,
                         help="beta continuation: raise beta to this over the run in 4 stages (default 12 for nfc "

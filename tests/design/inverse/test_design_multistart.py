@@ -94,25 +94,25 @@ def test_multistart_is_the_default_at_fine_resolutions_only():
     assert DesignConfig(target="sphere", space="extruded", resolution=64).starts == 1
     assert DesignConfig(target="sphere", space="ico", resolution=128).starts == 1
     assert DesignConfig(target="sphere", space="nfc", resolution=128, starts=1).starts == 1
-    # curve targets (analytic, CSV, measured) keep one start in nfc, and try both start outlines extruded
+    # curve targets (analytic, CSV, measured) keep one start in nfc, and try each start outline extruded
     assert DesignConfig(target="zero-order", space="nfc", resolution=128).starts == 1
     assert DesignConfig(target="mesh.stl", space="nfc", resolution=128).starts == 4
     assert DesignConfig(target="curve.csv", space="nfc", resolution=128).starts == 1
-    assert DesignConfig(target="curve.csv", space="extruded", resolution=40).starts == CURVE_EXTRUDED_STARTS == 2
-    assert DesignConfig(target="zero-order", space="extruded", resolution=200).starts == 2
+    assert DesignConfig(target="curve.csv", space="extruded", resolution=40).starts == CURVE_EXTRUDED_STARTS == 3
+    assert DesignConfig(target="zero-order", space="extruded", resolution=200).starts == 3
 
 
-def test_whole_starts_from_both_outlines_keep_the_best_print(tmp_path):
-    # a curve target whose solid square would release its core late: a square start and a cross start, each a
+def test_whole_starts_from_every_outline_keep_the_best_print(tmp_path):
+    # a curve target whose solid square would release its core late: a square, a cross and a ring start, each a
     # whole run with its print corrected; the design is the start whose print fits best, as it is
     config = DesignConfig(target="zero-order:final=0.15,duration=0.2", space="extruded", resolution=24, max_iter=12,
                           w_rate=0.0, robust_eta=0.0)
-    assert config.starts == 2 and len(prepare(config).start_regions) == 2
+    assert config.starts == 3 and len(prepare(config).start_regions) == 3
     out = tmp_path / "run"
     result = run_design(config, out)
     record = json.loads((out / "multistart.json").read_text())
     fits = record["print_fit"]
-    assert record["resolution"] == 24 and set(fits) == {"00", "01"} and record["chosen"] == min(fits, key=fits.get)
+    assert record["resolution"] == 24 and set(fits) == {"00", "01", "02"} and record["chosen"] == min(fits, key=fits.get)
     chosen = out / "starts" / record["chosen"]
     start_summary = json.loads((chosen / "summary.json").read_text())
     assert start_summary["config"]["resolution"] == 24 and start_summary["config"]["starts"] == 1
@@ -120,13 +120,12 @@ def test_whole_starts_from_both_outlines_keep_the_best_print(tmp_path):
     # the run's outputs are the chosen start's: its print, its evaluations, its solid
     summary = result.outputs.summary
     assert summary["rel_rmse_print"] == pytest.approx(fits[record["chosen"]], rel=1e-9)
-    assert summary["config"]["starts"] == 2 and result.iterations == start_summary["iterations"]
+    assert summary["config"]["starts"] == 3 and result.iterations == start_summary["iterations"]
     np.testing.assert_array_equal(load_checkpoint(out / "checkpoint.npz").best_x,
                                   load_checkpoint(chosen / "checkpoint.npz").best_x)
     assert (out / "design.stl").read_bytes() == (chosen / "design.stl").read_bytes()
-    # the two starts began from their own outlines: different designs
-    other = out / "starts" / ("01" if record["chosen"] == "00" else "00")
-    assert not np.allclose(load_checkpoint(other / "checkpoint.npz").best_x,
-                           load_checkpoint(chosen / "checkpoint.npz").best_x)
+    # the starts began from their own outlines: different designs
+    designs = [load_checkpoint(out / "starts" / name / "checkpoint.npz").best_x for name in sorted(fits)]
+    assert all(not np.allclose(designs[i], designs[j]) for i in range(3) for j in range(i))
     # a resume has nothing left to do
     assert run_design(None, out, resume=True).unchanged

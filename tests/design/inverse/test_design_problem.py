@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 import trimesh
+from scipy import ndimage
 
 from design.errors import DesignError
 from design.files.targets_io import load_problem, target_from_csv
@@ -150,3 +151,42 @@ def test_a_file_target_needs_its_contents(tmp_path):
         prepare(DesignConfig(target=str(tmp_path / "curve.csv"), resolution=16))
     with pytest.raises(DesignError, match="target mesh .*part.stl does not exist"):
         load_problem(DesignConfig(target=str(tmp_path / "part.stl"), resolution=16))
+
+
+def _wafer_curve(path, end_mm, final_mm3):
+    """A flat print's release: steady, then stopping at ``end_mm`` (a disc 18 mm across, both faces)."""
+    tau = np.linspace(0.0, 4.0, 81)
+    remaining = np.pi * np.clip(9.0 - tau, 0.0, None) ** 2 * np.clip(2.0 * end_mm - 2.0 * tau, 0.0, None)
+    released = final_mm3 * (1.0 - remaining / remaining[0])
+    path.write_text("tau_mm,released_mm3\n" + "".join(f"{t},{c}\n" for t, c in zip(tau, released)))
+    return str(path)
+
+
+def test_a_fast_curve_starts_from_a_square_a_cross_and_a_ring_that_hold_its_volume(tmp_path):
+    # a wafer's curve (850 mm^3, release ending at 2 mm) through a prism 10 mm tall: a solid square of its
+    # volume keeps a core 4.6 mm from its edge; the cross and the ring hold the volume within about the end of
+    # an edge, each in one piece (docs/design.md#extruded-start)
+    end_mm, final_mm3 = 2.0, 850.0
+    config = DesignConfig(target=_wafer_curve(tmp_path / "wafer.csv", end_mm, final_mm3), space="extruded",
+                          resolution=40, domain_mm=(24.0, 24.0, 12.0), height_mm=10.0)
+    problem = load_problem(config)
+    assert config.starts == len(problem.start_regions) == 3
+    dx, space = problem.dx_mm, problem.space
+    height_mm = space.grid_shape[2] * dx
+    square, cross, ring = (np.block([[np.flip(r, (0, 1)), np.flip(r, 0)], [np.flip(r, 1), r]])
+                           for r in problem.start_regions)  # the whole footprint from its quadrant
+    for outline in (square, cross, ring):
+        held = np.count_nonzero(outline) * dx ** 2 * height_mm * START_FILL
+        assert held == pytest.approx(problem.target.final_mm3, rel=0.15)  # whole cells of 0.6 mm
+        assert ndimage.label(outline)[1] == 1
+    depth = [ndimage.distance_transform_edt(np.pad(o, 1)) * dx for o in (square, cross, ring)]
+    assert depth[0].max() > 2.0 * end_mm  # the square's core releases late
+    assert depth[1].max() <= np.sqrt(2.0) * (end_mm + dx)  # the cross's crossing, its deepest point
+    assert depth[2].max() <= end_mm + dx
+    hole = ~ring & (ndimage.binary_fill_holes(ring))
+    assert hole[ring.shape[0] // 2 - 1:ring.shape[0] // 2 + 1, ring.shape[1] // 2 - 1:ring.shape[1] // 2 + 1].all()
+    assert 2.0 * np.sqrt(np.count_nonzero(hole) / np.pi) * dx >= 2.0 * 1.0  # at least the smoothing radius across
+    # a smaller volume leaves a solid square's core within the end: the square alone
+    small = DesignConfig(target=_wafer_curve(tmp_path / "small.csv", end_mm, 150.0), space="extruded",
+                         resolution=40, domain_mm=(24.0, 24.0, 12.0), height_mm=10.0)
+    assert len(load_problem(small).start_regions) == 1
