@@ -595,11 +595,12 @@ def start_regions(space: DesignSpace, target: Target, half_extent_mm: np.ndarray
     end_mm = curve_end_mm(target.tau_mm, target.released_mm3)
     need_cells = target.final_mm3 / (START_FILL * height_mm * dx * dx * space.multiplicity)
     late = end_mm < 0.5 * height_mm - 0.5 * dx  # the faces alone do not dissolve the core in time
+    band_mm = 2.0 * end_mm + 0.5 * dx  # a band this wide releases by D from its two edges (half a voxel's ramp)
     alternatives: tuple[np.ndarray | None, ...] = ()
     if half_extent_mm is None:
         area = target.final_mm3 / (height_mm * START_FILL)
         if late and 0.5 * np.sqrt(target.final_mm3 / height_mm) > end_mm:  # a solid square's core releases after D
-            outlines = (cross_region(space, area, end_mm), ring_region(space, area, end_mm, radius_mm))
+            outlines = (cross_region(space, area, end_mm), ring_region(space, area, band_mm, radius_mm))
             alternatives = tuple(outline for outline in outlines if outline is not None)
         half = np.full(2, 0.5 * np.sqrt(area))
     else:
@@ -610,7 +611,7 @@ def start_regions(space: DesignSpace, target: Target, half_extent_mm: np.ndarray
     region = depth > 0
     if late:
         inside = np.sort(depth[region])
-        width = 2.0 * end_mm + 0.5 * dx
+        width = band_mm
         if np.count_nonzero(inside <= width) < need_cells:
             width = inside[min(int(np.ceil(need_cells)), inside.size - 1)]
         if inside[-1] - width >= radius_mm:
@@ -641,19 +642,18 @@ def cross_region(space: DesignSpace, area_mm2: float, end_mm: float) -> np.ndarr
     return region if region.any() and not region.all() else None
 
 
-def ring_region(space: DesignSpace, area_mm2: float, end_mm: float, radius_mm: float) -> np.ndarray | None:
-    """A ring about 2 ``end_mm`` wide around the symmetry axis whose footprint is ``area_mm2`` (mm^2, all quadrants).
+def ring_region(space: DesignSpace, area_mm2: float, width_mm: float, radius_mm: float) -> np.ndarray | None:
+    """A ring ``width_mm`` wide around the symmetry axis whose footprint is ``area_mm2`` (mm^2, all quadrants).
 
     A wall of even thickness releases at a rate that changes little (its inner face grows as its outer face
-    shrinks) and its material ends at once, about when the target ends: the outline of a curve that rises
-    steadily and stops, a flat print's. Returns the region in the variable's quadrant, or None when the hole
-    would be narrower than the smoothing radius ``radius_mm`` (the filter would keep it a grey pin-hole) or the
-    ring does not fit the domain with a cell to spare.
+    shrinks) and its material ends at once, when the target ends for a width of twice its end (the band of
+    `start_regions`): the outline of a curve that rises steadily and stops, a flat print's. Returns the region
+    in the variable's quadrant, or None when the hole would be narrower than the smoothing radius ``radius_mm``
+    (the filter would keep it a grey pin-hole) or the ring does not fit the domain with a cell to spare.
     """
     dx = space.dx_mm
-    width = 2.0 * end_mm + 0.5 * dx  # the band of `start_regions`
-    mean_radius = area_mm2 / (2.0 * np.pi * width)
-    inner, outer = mean_radius - 0.5 * width, mean_radius + 0.5 * width
+    mean_radius = area_mm2 / (2.0 * np.pi * width_mm)
+    inner, outer = mean_radius - 0.5 * width_mm, mean_radius + 0.5 * width_mm
     if inner < radius_mm or outer > (min(space.var_shape) - 1) * dx:
         return None
     centres = [(np.arange(n) + 0.5) * dx for n in space.var_shape]

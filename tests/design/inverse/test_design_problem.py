@@ -9,7 +9,7 @@ from design.files.targets_io import load_problem, target_from_csv
 from design.forward.reference import design_lattice, reference_release
 from design.forward.simulator import simulate
 from design.geometry.shapes import sample_shape
-from design.inverse.problem import START_FILL, DesignConfig, prepare
+from design.inverse.problem import DEFAULT_RADIUS_MM, START_FILL, DesignConfig, prepare
 
 
 def _long_curve(path, end_mm=15.0, final_mm3=900.0):
@@ -173,8 +173,7 @@ def test_a_fast_curve_starts_from_a_square_a_cross_and_a_ring_that_hold_its_volu
     assert config.starts == len(problem.start_regions) == 3
     dx, space = problem.dx_mm, problem.space
     height_mm = space.grid_shape[2] * dx
-    square, cross, ring = (np.block([[np.flip(r, (0, 1)), np.flip(r, 0)], [np.flip(r, 1), r]])
-                           for r in problem.start_regions)  # the whole footprint from its quadrant
+    square, cross, ring = (space.unfold(r) for r in problem.start_regions)  # the whole footprint
     for outline in (square, cross, ring):
         held = np.count_nonzero(outline) * dx ** 2 * height_mm * START_FILL
         assert held == pytest.approx(problem.target.final_mm3, rel=0.15)  # whole cells of 0.6 mm
@@ -185,7 +184,7 @@ def test_a_fast_curve_starts_from_a_square_a_cross_and_a_ring_that_hold_its_volu
     assert depth[2].max() <= end_mm + dx
     hole = ~ring & (ndimage.binary_fill_holes(ring))
     assert hole[ring.shape[0] // 2 - 1:ring.shape[0] // 2 + 1, ring.shape[1] // 2 - 1:ring.shape[1] // 2 + 1].all()
-    assert 2.0 * np.sqrt(np.count_nonzero(hole) / np.pi) * dx >= 2.0 * 1.0  # at least the smoothing radius across
+    assert np.sqrt(np.count_nonzero(hole) / np.pi) * dx >= DEFAULT_RADIUS_MM  # at least the smoothing radius
     # a smaller volume leaves a solid square's core within the end: the square alone
     small = DesignConfig(target=_wafer_curve(tmp_path / "small.csv", end_mm, 150.0), space="extruded",
                          resolution=40, domain_mm=(24.0, 24.0, 12.0), height_mm=10.0)
