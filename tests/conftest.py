@@ -1,35 +1,77 @@
-"""Shared test set-up: headless Qt everywhere, numba kernels compiled once before the workers start."""
+"""Shared test set-up: a hermetic environment, headless Qt everywhere, numba kernels compiled once before the
+workers start."""
+import atexit
 import gc
 import os
+import shutil
 import tempfile
+from pathlib import Path
 
 import pytest
 
-os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-os.environ.setdefault("MPLBACKEND", "Agg")
-# the simulated bench's print releases (`labapp.acquisition.worldcache`) are cached for this test session only,
-# never in the user's own cache; set here, in the controlling process, so that the workers and every `sfr`
-# they start share it
-os.environ.setdefault("SFR_CACHE", tempfile.mkdtemp(prefix="sfr-cache-"))
+HOME_VARIABLES = ("HOME", "XDG_CONFIG_HOME", "XDG_CACHE_HOME", "XDG_DATA_HOME", "XDG_STATE_HOME", "XDG_RUNTIME_DIR")
+"""The user's home and its XDG folders: every test, and every `sfr` it starts, gets the session's own."""
+FOREIGN_PREFIXES = ("SFR_", "DASK_")
+"""The product's variables and Dask's configuration: none of the shell's values reach a test."""
+SUITE_SWITCHES = ("SFR_FIGURES",)
+"""Variables of the test suite itself, kept from the shell (``SFR_FIGURES=1`` refreshes the docs' pictures)."""
+FOREIGN_VARIABLES = ("VCAMERADIR",)
+"""Other variables the drivers read (the virtual camera's folder): set only by the tests that use them."""
+TEST_OPERATOR, TEST_PASSWORD = "tester", "tester-password"
 
 
-def _test_operator() -> None:
-    """Every test (and every `sfr` subprocess it starts) acts as the operator "tester" of a users file of its
-    own: recording needs a named operator. Tests of the operator checks set their own."""
-    import tempfile
+def _hermetic_environment() -> None:
+    """Replace the shell's home, XDG folders and product variables by a temporary home made for this test
+    session, in the controlling process (an xdist worker inherits the controller's environment). Every test,
+    and every `sfr` subprocess it starts, acts as the operator "tester" of the session's users file (recording
+    needs a named operator; tests of the operator checks set their own) and caches the simulated bench's print
+    releases (`labapp.acquisition.worldcache`) in the session's cache."""
+    os.environ["QT_QPA_PLATFORM"] = "offscreen"
+    os.environ["MPLBACKEND"] = "Agg"
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    for name in list(os.environ):
+        if (name.startswith(FOREIGN_PREFIXES) and name not in SUITE_SWITCHES) or name in FOREIGN_VARIABLES:
+            del os.environ[name]
+    root = Path(tempfile.mkdtemp(prefix="sfr-tests-"))
+    home = root / "home"
+    folders = {"HOME": home, "XDG_CONFIG_HOME": home / ".config", "XDG_CACHE_HOME": home / ".cache",
+               "XDG_DATA_HOME": home / ".local" / "share", "XDG_STATE_HOME": home / ".local" / "state",
+               "XDG_RUNTIME_DIR": root / "runtime"}
+    for name, folder in folders.items():
+        folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+        os.environ[name] = str(folder)
+    os.environ["SFR_CACHE"] = str(root / "sfr-cache")
+    os.environ["SFR_USERS"] = str(root / "users.json")
+    os.environ["SFR_OPERATOR"] = TEST_OPERATOR
 
-    from labapp.records.operators import OperatorError, add_user, load_users
+    from labapp.records.operators import add_user
 
-    users = os.environ.setdefault("SFR_USERS", os.path.join(tempfile.mkdtemp(prefix="sfr-users-"), "users.json"))
-    os.environ.setdefault("SFR_OPERATOR", "tester")
-    try:
-        if "tester" not in load_users():
-            add_user("tester", "tester-password", users)
-    except OperatorError:
-        pass
+    add_user(TEST_OPERATOR, TEST_PASSWORD)
+    atexit.register(_remove_session_home, root, os.getpid())
 
 
-_test_operator()
+def _remove_session_home(root: Path, pid: int) -> None:
+    """At the controlling process's exit (after every worker's), remove the session's home."""
+    if os.getpid() == pid:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+_hermetic_environment()
+SESSION_ENVIRONMENT = {name: value for name, value in os.environ.items()
+                       if name in HOME_VARIABLES or name.startswith(FOREIGN_PREFIXES)}
+"""The environment every test starts from (restored before each test: a test or the code it runs may set
+`SFR_OPERATOR` and the like)."""
+
+
+@pytest.fixture(autouse=True)
+def _session_environment(monkeypatch):
+    """Each test starts from the session's environment, whatever an earlier test left in `os.environ`."""
+    for name in list(os.environ):
+        if (name.startswith(FOREIGN_PREFIXES) or name in FOREIGN_VARIABLES) and name not in SESSION_ENVIRONMENT:
+            monkeypatch.delenv(name)
+    for name, value in SESSION_ENVIRONMENT.items():
+        monkeypatch.setenv(name, value)
 
 
 def pytest_configure(config):
