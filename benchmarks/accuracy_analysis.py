@@ -1,6 +1,6 @@
 """Accuracy of the bench analysis against the fixtures' ground truth, with and without mirror normalisation.
 
-    /work/venv/bin/python benchmarks/accuracy_analysis.py [--quick] [--figures docs/figures]
+    .venv/bin/python -m benchmarks.accuracy_analysis [--quick] [--figures docs/figures]
 
 Calibrates on fixtures/bench/calibration, analyses fixtures/bench/run (another "day": 5 % dimmer light,
 other drift phase, intrusions in ~15 % of the frames) and compares every frame's concentration with the

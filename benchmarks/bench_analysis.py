@@ -1,6 +1,6 @@
 """Per-frame analysis time of a D750-size JPEG against a plain full decode, and offline throughput.
 
-    /work/venv/bin/python benchmarks/bench_analysis.py [--quick] [--reduce 4]
+    .venv/bin/python -m benchmarks.bench_analysis [--quick] [--reduce 4]
 
 Renders a 6016 x 4016 bench frame (the Nikon D750's size, JPEG quality 95) with drivers.sim, then in
 the same process times

@@ -6,7 +6,7 @@ mm around the empty centre) with small noise: median of three
 `DesignObjective.evaluate` calls each way, and of J_conn alone, with its tail (the default) and without
 (``conn_tail=0``).
 
-    python benchmarks/bench_connectivity.py [--resolution 256]
+    python -m benchmarks.bench_connectivity [--resolution 256]
 
 Last line: ``conn_share_default: <extra seconds / seconds without J_conn>``.
 """

@@ -20,7 +20,7 @@ writes it while the next evaluation runs); "bookkeeping" what remains (cosine ma
 is that thread's own time, overlapped with the evaluations, not part of the sum. Peak memory
 is the process's maximum resident set size, the run's output stage at full resolution included.
 
-    python benchmarks/bench_design.py [--quick] [--rounds R] [--optimizer NAME]
+    python -m benchmarks.bench_design [--quick] [--rounds R] [--optimizer NAME]
 
 Last line: ``iter_over_skfmm_128: <median ratio>`` (``iter_over_skfmm_64`` with --quick).
 """

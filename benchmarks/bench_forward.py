@@ -7,7 +7,7 @@ Field: a Gaussian-blurred random field through a sigmoid, so about a fifth of th
   fwd+grad design.simulate + design.release_gradient of a least-squares fit to a target curve
 and measures the peak resident memory of a separate process that runs forward + gradient at 128^3.
 
-Usage: python benchmarks/bench_forward.py [--quick]
+Usage: python -m benchmarks.bench_forward [--quick]
 The last line is the headline: fwd_grad_over_skfmm_128: <ratio>.
 """
 from __future__ import annotations
@@ -17,9 +17,13 @@ import resource
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import gaussian_filter
+
+ROOT = Path(__file__).resolve().parents[1]
+"""The checkout, where ``python -m benchmarks.NAME`` runs the peak-memory child."""
 
 
 def void_field(n: int, seed: int = 0) -> np.ndarray:
@@ -82,8 +86,8 @@ def main() -> None:
         ratio[n] = t_grad / t_sk
         print(f"{n:>5} {100 * np.mean(rho < 1e-3):>7.1f} {t_sk:>8.3f} {t_fwd:>9.3f} {t_grad:>10.3f} "
               f"{t_fwd / t_sk:>9.2f} {ratio[n]:>14.2f}")
-    out = subprocess.run([sys.executable, __file__, "--peak-memory-child", "128"], capture_output=True,
-                         text=True, check=True)
+    out = subprocess.run([sys.executable, "-m", "benchmarks.bench_forward", "--peak-memory-child", "128"], capture_output=True,
+                         text=True, check=True, cwd=ROOT)
     print(f"peak resident memory, forward + gradient at 128^3 (separate process): {float(out.stdout):.0f} MB")
     print(f"fwd_grad_over_skfmm_128: {ratio[128]:.2f}")
 

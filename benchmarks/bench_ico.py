@@ -20,7 +20,7 @@ island deflation, the default), and the peak resident memory of a separate proce
 direction, at 2 and 4 voxels per element against the uncoarsened grid; so is the PCG tolerance's:
 J_fab and its gradient of a warm-started evaluation against a 1e-10 solve.
 
-Usage: python benchmarks/bench_ico.py [--quick] [--skip-coarsening] [--skip-solvers]
+Usage: python -m benchmarks.bench_ico [--quick] [--skip-coarsening] [--skip-solvers]
 The last line is the headline: ico_over_skfmm_128 = <warm ICO time / skfmm time at 128^3, void field>.
 """
 from __future__ import annotations
@@ -31,10 +31,15 @@ import subprocess
 import sys
 import time
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
-from bench_forward import void_field
 from scipy.ndimage import gaussian_filter
+
+from benchmarks.bench_forward import void_field
+
+ROOT = Path(__file__).resolve().parents[1]
+"""The checkout, where ``python -m benchmarks.NAME`` runs the peak-memory child."""
 
 
 def _quadrant(rho_full: np.ndarray) -> np.ndarray:
@@ -190,8 +195,8 @@ def main() -> None:
             ratio[field, n] = t_warm / t_sk
             print(f"{field:>6} {n:>5} {t_sk:>8.3f} {t_cold:>10.3f} {t_warm:>10.3f} {t_cold / t_sk:>10.2f} "
                   f"{ratio[field, n]:>10.2f}  {' '.join(map(str, it_cold))} | {' '.join(map(str, it_warm))}")
-    out = subprocess.run([sys.executable, __file__, "--peak-memory-child", "128"], capture_output=True,
-                         text=True, check=True)
+    out = subprocess.run([sys.executable, "-m", "benchmarks.bench_ico", "--peak-memory-child", "128"], capture_output=True,
+                         text=True, check=True, cwd=ROOT)
     print(f"peak resident memory, ICO cold + warm evaluation at 128^3 (separate process): {float(out.stdout):.0f} MB")
     print(f"ico_over_skfmm_128 = {ratio['void', 128]:.2f}")
 

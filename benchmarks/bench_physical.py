@@ -1,6 +1,6 @@
 """Design time with the physical correction against the named baseline without it, same resolution and evaluations.
 
-For each source (benchmarks/untuned_shapes.py) and design space this runs the optimisation of `sfr design`
+For each source (`benchmarks.untuned_shapes`) and design space this runs the optimisation of `sfr design`
 (`design.inverse.defect.optimise_physical`, the function `design.files.rundir.run_design` calls) twice with
 `DesignConfig`'s defaults: ``physical_correction="none"`` (the baseline: ``max_iter`` evaluations on the design
 grid) and the default ``"defect"`` (the first optimisation, then the correction rounds within the same
@@ -11,7 +11,7 @@ machine that other jobs share, the wall time of one run depends on what else run
 the baseline ends early (stalled) and the corrected run makes more evaluations, the ratio that compares the same
 evaluations is the one per evaluation.
 
-    python benchmarks/bench_physical.py [--resolution 64] [--shapes a,b] [--spaces nfc,extruded] [--quick]
+    python -m benchmarks.bench_physical [--resolution 64] [--shapes a,b] [--spaces nfc,extruded] [--quick]
         [--reference-per-voxel CELLS]
 
 ``--quick``: resolution 32 and one shape. ``--reference-per-voxel``: the rounds' lattice cells per design voxel in
@@ -21,15 +21,12 @@ every space timed, instead of `design.inverse.defect.REFERENCE_PER_VOXEL`. Last 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import physical_study  # noqa: E402
-import untuned_shapes  # noqa: E402
+from benchmarks import untuned_shapes
+from benchmarks.designs import MemoryRounds, NoStore, source_problem, warm_up
 
 
 def seconds(name: str, space: str, resolution: int, correction: str) -> tuple[float, float, int]:
@@ -39,11 +36,11 @@ def seconds(name: str, space: str, resolution: int, correction: str) -> tuple[fl
     from design.inverse.problem import DesignConfig
 
     config = DesignConfig(target=f"{name}.stl", space=space, resolution=resolution, physical_correction=correction)
-    problem = physical_study._problem(name, untuned_shapes.source(name), config)
+    problem = source_problem(name, untuned_shapes.source(name), config)
     t0, c0 = time.perf_counter(), time.process_time()
     objective = build_objective(problem, config)
-    outcome, _ = optimise_physical(objective, problem, config, physical_study._NoStore(),
-                                   physical_study._Rounds())
+    outcome, _ = optimise_physical(objective, problem, config, NoStore(),
+                                   MemoryRounds())
     return time.perf_counter() - t0, time.process_time() - c0, len(outcome.history)
 
 
@@ -62,7 +59,7 @@ def main() -> None:
             defect.REFERENCE_PER_VOXEL[space] = args.reference_per_voxel
     resolution = 32 if args.quick else args.resolution
     shapes = args.shapes.split(",")[:1] if args.quick else args.shapes.split(",")
-    physical_study._warm_up()
+    warm_up()
     ratios = []
     print(f"{'shape':<20} {'space':<9} {'wall s, none/defect':>20} {'cpu s, none/defect':>19} {'evals':>11} "
           f"{'wall':>5} {'cpu':>5} {'cpu/eval':>8}")

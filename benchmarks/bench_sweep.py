@@ -17,7 +17,7 @@ cluster less the designs' task seconds, per task: scheduling, the imbalance at t
 own slowdown on the cluster (task seconds on the cluster over the same in the serial run) and the
 load average before each round are printed beside them.
 
-    python benchmarks/bench_sweep.py [--quick] [--workers N] [--resolution R] [--rounds K]
+    python -m benchmarks.bench_sweep [--quick] [--workers N] [--resolution R] [--rounds K]
 
 Last line: ``sweep_speedup = X``, the median over rounds of serial wall / wall on the running,
 warmed-up cluster (both sides with their kernels loaded; a cluster serves many sweeps). The first

@@ -5,7 +5,7 @@ sample object in the bench's hidden material, a frame a minute), writes its ``ca
 runs ``sfr evaluate``'s job on it. The table and picture go into ``docs/science.md`` and
 ``docs/figures/``.
 
-    flock /tmp/sfr-heavy.lock .venv/bin/python benchmarks/fig8_simbench.py --out /tmp/fig8 [--resolution 48]
+    flock /tmp/sfr-heavy.lock .venv/bin/python -m benchmarks.fig8_simbench --out /tmp/fig8 [--resolution 48]
 """
 from __future__ import annotations
 

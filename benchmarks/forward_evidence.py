@@ -1,13 +1,12 @@
 """Evidence for docs/forward.md: convergence against analytic curves, eq. (5) residuals, FD gradient checks.
 
 Writes docs/figures/forward_convergence.png, forward_nested.png, forward_fd_check.png and prints the
-tables quoted in docs/forward.md. Usage: python benchmarks/forward_evidence.py [--quick]
+tables quoted in docs/forward.md. Usage: python -m benchmarks.forward_evidence [--quick]
 The last line is the headline: sphere_error_at_96: <relative max error>.
 """
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import matplotlib
@@ -18,9 +17,7 @@ import numpy as np  # noqa: E402
 from scipy.ndimage import gaussian_filter  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "design" / "forward"))
-from test_forward_analytic import SHAPES, _centres, release_error  # noqa: E402
-
+from benchmarks.analytic import SHAPES, centres, release_error  # noqa: E402
 from design import release_gradient, simulate  # noqa: E402
 from design.forward.fmm import eikonal_residual, march  # noqa: E402
 from design.forward.simulator import slowness  # noqa: E402
@@ -50,7 +47,7 @@ def convergence(sizes: list[int]) -> dict[str, list[float]]:
 
 def nested_curve(n: int) -> None:
     inside, exact, half_width, t_end = SHAPES["nested"]
-    dx, (x, y, z) = _centres(n, half_width)
+    dx, (x, y, z) = centres(n, half_width)
     rel = simulate(inside(x, y, z).astype(float), dx, total_time_mm=t_end)
     fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.8), constrained_layout=True)
     left.plot(rel.tau_mm, exact(rel.tau_mm), "k--", label="analytic")

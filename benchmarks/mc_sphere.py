@@ -6,7 +6,7 @@ on that curve by the 16-point (A, E_a) grid search (A refined), re-run with fres
 difference reported; the picture shows the curves and the difference at 48 voxels, with the spread of the
 seeds. Also prints the convergence of the mean curve with the number of seeds.
 
-    .venv/bin/python benchmarks/mc_sphere.py [--docs docs/figures]
+    .venv/bin/python -m benchmarks.mc_sphere [--docs docs/figures]
 """
 from __future__ import annotations
 

@@ -22,7 +22,7 @@ noise on the simulated bench is of that order; the pipeline itself is exercised 
 5. The plan's Cramer-Rao standard error of the anisotropy for these calibration prints, against the jackknife over
    the leave-one-out refits (without the discretisation term the stated uncertainty adds).
 
-    nice -n 10 .venv/bin/python benchmarks/physics_loop.py --out /tmp/physics_loop --seed 11 [--design]
+    nice -n 10 .venv/bin/python -m benchmarks.physics_loop --out /tmp/physics_loop --seed 11 [--design]
 
 Prints a markdown table and writes ``physics_loop_SEED.png`` (and ``physics_loop_design_SEED.png``) into
 ``--docs`` (default ``docs/figures``) and ``results.json`` into ``--out`` (with a design other than the pill's nfc one,
@@ -153,7 +153,7 @@ def run_loop(args) -> dict:
     from analysis.bands import inside
     from labapp.acquisition.simbench import Material
     from labapp.jobs.bands import prediction_band, source_simulator
-    from labapp.jobs.calibrate_sim import load_simcal
+    from labapp.records.simcal import load_simcal
 
     start = time.perf_counter()
     if args.out.exists() and not args.reuse:
@@ -265,14 +265,16 @@ def unseen_errors(runs_dir: Path, name: str, simcal) -> dict:
 
 def floor_errors(runs_dir: Path, name: str, mesh, material, resolution: int) -> dict:
     """The error floor of an unseen print's prediction: the calibration's release with the bench's hidden physics
-    (``labapp.jobs.calibrate_sim``'s, at ``resolution``) mapped by the material's mean rate and density and its
+    (``print_release``'s, at ``resolution``) mapped by the material's mean rate and density and its
     wetting lag. What is left is each print's own rate and density draw and the bench's noise, which no calibration
     can know."""
-    from labapp.jobs.calibrate_sim import _simulate
+    from design.files.pipeline import mesh_grid
+    from labapp.jobs.printrelease import print_release
 
     hidden = material.physics
     physics = {"anisotropy": hidden.anisotropy, "offset_mm": hidden.offset_mm, "swelling_mm": hidden.swelling_mm}
-    tau, vol, _ = _simulate(mesh, name, resolution, physics)
+    grid = mesh_grid(mesh, resolution=resolution, offset_mm=physics["offset_mm"])
+    tau, vol = print_release(mesh, grid, resolution, physics)
     curve = _curve(runs_dir, name)
     depth = np.clip((curve["t_s"] - hidden.wetting_lag_s) / material.seconds_per_mm, 0.0, None)
     released = np.interp(depth, tau, vol)
@@ -305,8 +307,8 @@ def design_check(args, runs_dir: Path, material, results: dict) -> dict:
     from design.inverse.problem import DesignConfig
     from labapp.acquisition.printworld import world_release
     from labapp.acquisition.simbench import SampleRelease
-    from labapp.jobs.calibrate_sim import load_simcal
     from labapp.jobs.physical import design_from_target
+    from labapp.records.simcal import load_simcal
 
     target_csv = runs_dir / f"{args.design_for}.csv"
     if not target_csv.is_file():

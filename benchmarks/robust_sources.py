@@ -24,7 +24,7 @@ Held-out sources with a void centre or without mirror symmetry (`FRESH`):
 - ``l_bracket``: an L-shaped prism, an extrusion without mirror symmetry;
 - ``asterisk``: a six-armed star prism turned by 15 degrees, an extrusion without mirror symmetry.
 
-    python benchmarks/robust_sources.py OUT_DIR
+    python -m benchmarks.robust_sources OUT_DIR
 
 Last line: ``sources: <count>``.
 """

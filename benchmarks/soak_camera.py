@@ -4,7 +4,7 @@ Feeds a distinct equal-size JPEG into the virtual camera's folder before each ca
 download byte for byte, and reports per-capture time and process memory (this process plus the
 libgphoto2 worker, resident set) for the first and the last hundred captures.
 
-    python benchmarks/soak_camera.py [--quick] [--captures N] [--no-configure]
+    python -m benchmarks.soak_camera [--quick] [--captures N] [--no-configure]
 
 Last line: ``soak_camera_drift_pct: <relative change of the median capture time, last vs first 100>``.
 """

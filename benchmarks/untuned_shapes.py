@@ -18,21 +18,17 @@ so a name always builds the same mesh.
 - ``rounded_box_bore``: a box with rounded vertical edges and a central round bore (an extrusion);
 - ``cross_prism``: a plus-sign prism with unequal arms (an extrusion).
 
-    python benchmarks/untuned_shapes.py OUT_DIR
+    python -m benchmarks.untuned_shapes OUT_DIR
 
 Last line: ``sources: <count>``.
 """
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import manifold3d
 import numpy as np
 import trimesh
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import robust_sources  # noqa: E402
+from benchmarks import robust_sources
 
 SEED = 20261203
 """Seed of the shapes drawn at random (``rock``)."""

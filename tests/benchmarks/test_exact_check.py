@@ -1,14 +1,11 @@
-"""benchmarks/exact_check.py: the independent check of a design's print fit, against analytic answers."""
+"""studies/exact_check.py: the independent check of a design's print fit, against analytic answers."""
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-import exact_check  # noqa: E402
+from studies import exact_check
 
 
 def _box_release(tau: np.ndarray, sides: tuple[float, float, float]) -> np.ndarray:

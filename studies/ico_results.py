@@ -1,6 +1,6 @@
 """Tabulate ICO and NFC design runs of the same targets and draw their overhangs (docs/design.md#ico-weight-w_f).
 
-    python benchmarks/ico_results.py --pairs ICO_DIR NFC_DIR [ICO_DIR NFC_DIR ...] --figure PNG
+    python -m studies.ico_results --pairs ICO_DIR NFC_DIR [ICO_DIR NFC_DIR ...] --figure PNG
 
 Prints one markdown table row per run from its summary.json (binary fit, overhang fraction and
 longest run, J_fab, time per evaluation and the ICO share of it), then the figure: for every

@@ -8,24 +8,20 @@ default 20 mm domain at RESOLUTION voxels, aligned with the grid and turned by 1
 grid's origin and at two random sub-voxel offsets, and prints the metric of the simulated and of the
 exact curve. Their difference is the simulator's error in the metric for that placement.
 
-    python benchmarks/rate_metric_grid.py [--resolution 128 256] [--thickness 2.0]
+    python -m studies.rate_metric_grid [--resolution 128 256] [--thickness 2.0]
 
 Last line: ``largest error: <points> at <resolution>, ...``.
 """
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
 import trimesh
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from design.forward.simulator import simulate  # noqa: E402
-from design.geometry.voxelize import voxelize  # noqa: E402
-from design.inverse.rate import rate_deviation  # noqa: E402
+from design.forward.simulator import simulate
+from design.geometry.voxelize import voxelize
+from design.inverse.rate import rate_deviation
 
 DOMAIN_MM = 20.0
 """Edge of the zero-order runs' cubic domain, mm (its voxel at a given resolution)."""

@@ -1,6 +1,6 @@
 """How well can any extruded design fit a source's release? A bound from the cross-section's offset areas.
 
-    python benchmarks/robust_extruded_bound.py --target sphere --resolution 128
+    python -m studies.robust_extruded_bound --target sphere --resolution 128
 
 A design of the extruded space is a prism: a cross-section Omega extruded over the height h, dissolving
 from its sides and from its two end faces at unit speed (eq. 5 with rho binary). A point (p, z) of the

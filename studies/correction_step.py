@@ -12,20 +12,18 @@ of its first correction round (`design.inverse.defect.RoundState`): the design x
   (`design.inverse.defect.aimed_bias`), as the rounds run it: the print's fit, the change of the design's mass and
   of the bias b = G - P (RMS), and how far the grid misses its aim (RMS), in % of the target's final release.
 
-    python benchmarks/correction_step.py RUNS SHAPE:SPACE [SHAPE:SPACE ...] [--resolution 128]
+    python -m studies.correction_step RUNS SHAPE:SPACE [SHAPE:SPACE ...] [--resolution 128]
 """
 from __future__ import annotations
 
 import argparse
 import copy
-import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import untuned_shapes  # noqa: E402
+from benchmarks import untuned_shapes
 
 STEPS = (1.0, 0.5, 0.25)
 LEVELS = (0.4, 0.45, 0.5, 0.55, 0.6)

@@ -6,9 +6,9 @@ the resolution (resumed when its folder already holds a run). A row: the print's
 evaluator (`design.forward.reference`, its default lattice), the design grid's fit, pieces, seconds, evaluations and
 the print's fit after each correction round (``rounds.npz``), and the physical correction it ran with.
 
-    python benchmarks/physical_default.py OUT_CSV RUNS_DIR SHAPE:SPACE [SHAPE:SPACE ...] [--resolution 128]
+    python -m studies.physical_default OUT_CSV RUNS_DIR SHAPE:SPACE [SHAPE:SPACE ...] [--resolution 128]
         [--correction none]
-    python benchmarks/physical_default.py OUT_CSV --table
+    python -m studies.physical_default OUT_CSV --table
 
 ``--correction none``: the same designs without the physical correction (``--physical-correction none``, the
 "before"), in folders named ``<shape>_<space>_<resolution>_none``. Last line: ``rows: <count>``. ``--table``
@@ -19,15 +19,13 @@ from __future__ import annotations
 
 import argparse
 import csv
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import untuned_shapes  # noqa: E402
+from benchmarks import untuned_shapes
 
 
 def design_row(name: str, space: str, resolution: int, runs: Path, correction: str | None = None) -> dict:

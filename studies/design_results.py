@@ -1,6 +1,6 @@
 """Tabulate design run folders as markdown and copy their report pictures to docs/figures.
 
-    python benchmarks/design_results.py RUN_DIR [RUN_DIR ...] [--figures docs/figures]
+    python -m studies.design_results RUN_DIR [RUN_DIR ...] [--figures docs/figures]
 
 For each run folder (written by `sfr design`) prints one markdown table row from summary.json; for
 analytic zero-order targets it also prints `design.inverse.rate.rate_deviation` of the achieved release

@@ -2,29 +2,26 @@
 
 With the cosine bound map a variable at exactly 0 or 1 has a zero gradient in z, so a design binary in rho_hat
 stalls every later optimiser session (`design.inverse.optimize.SESSION_FLOOR`). For each source of
-benchmarks/untuned_shapes.py this runs the default design (`design.inverse.defect.optimise_physical`, the
+`benchmarks.untuned_shapes` this runs the default design (`design.inverse.defect.optimise_physical`, the
 source's reference release as the target) twice, with the floor (``floor``; 1e-3 where the space has none) and
 with it set to 0 (``none``),
 and prints the print's true fit (reference evaluator, default lattice), the design grid's fit, the pieces, the
 evaluations the run made, its seconds, and the rho_hat variables within 1e-12 of a bound at the end (how many,
 and how many of them have dJ/d rho_hat pointing inside: trapped by the map).
 
-    python benchmarks/session_floor_study.py [--shapes a,b] [--space extruded] [--resolution 64]
+    python -m studies.session_floor_study [--shapes a,b] [--space extruded] [--resolution 64]
 
 Last line: ``cases: <count>``.
 """
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import physical_study  # noqa: E402
-import untuned_shapes  # noqa: E402
+from benchmarks import untuned_shapes
+from benchmarks.designs import MemoryRounds, NoStore, judge, source_problem, warm_up
 
 SATURATED = 1e-12
 """A variable this close to 0 or 1 counts as at the bound."""
@@ -45,17 +42,17 @@ def run_case(name: str, space: str, resolution: int, floor: float) -> str:
 
     mesh = untuned_shapes.source(name)
     config = DesignConfig(target=f"{name}.stl", space=space, resolution=resolution)
-    problem = physical_study._problem(name, mesh, config)
+    problem = source_problem(name, mesh, config)
     default = optimize.SESSION_FLOOR
     optimize.SESSION_FLOOR = {space: floor}
     try:
         t0 = time.perf_counter()
         outcome, objective = optimise_physical(optimize.build_objective(problem, config), problem, config,
-                                               physical_study._NoStore(), physical_study._Rounds())
+                                               NoStore(), MemoryRounds())
         seconds = time.perf_counter() - t0
     finally:
         optimize.SESSION_FLOOR = default
-    fit, grid_fit, pieces = physical_study._judge(objective, problem, outcome.best_x)
+    fit, grid_fit, pieces = judge(objective, problem, outcome.best_x)
     at_bound, inside = trapped(objective, outcome.best_x)
     return (f"| {name} | {space} | {'floor' if floor > 0 else 'none'} | {100 * fit:.2f}% | {100 * grid_fit:.2f}% | "
             f"{pieces} | {len(outcome.history)} | {seconds:.0f} | {at_bound} / {inside} |")
@@ -70,7 +67,7 @@ def main() -> None:
     from design.inverse.optimize import SESSION_FLOOR
 
     floor = SESSION_FLOOR.get(args.space, 1e-3)  # the floor an nfc design would get
-    physical_study._warm_up()
+    warm_up()
     print("| shape | space | session floor | print's true fit | design grid's fit | pieces | evaluations | seconds | "
           "at a bound / trapped |")
     print("|---|---|---|---|---|---|---|---|---|")

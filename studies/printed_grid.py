@@ -8,7 +8,7 @@ against the run's target at each factor. Factor 1 reproduces the run's own binar
 is against the run's ``target_mm3``: a source's physical release (runs of summary format 2), or its
 release on the design grid (format 1).
 
-    python benchmarks/printed_grid.py RUN_FOLDER [RUN_FOLDER ...] [--factors 1 2 3] [--figure PNG]
+    python -m studies.printed_grid RUN_FOLDER [RUN_FOLDER ...] [--factors 1 2 3] [--figure PNG]
 
 ``--figure`` also draws each run's rate deviation against the voxel size (runs named DESIGN/SETTING,
 e.g. ``runs128/C05w8``, are grouped by DESIGN).

@@ -8,7 +8,7 @@ thresholds the full density at 1/2 (the paper's cut) and at `design.fabrication.
 markdown row per run: binary rel. RMSE, pieces and, for a target with a zero-order middle, the rate
 deviation over the solid's middle 80% (`design.inverse.rate.rate_deviation`).
 
-    python benchmarks/recut_runs.py RUN_FOLDER [RUN_FOLDER ...]
+    python -m studies.recut_runs RUN_FOLDER [RUN_FOLDER ...]
 
 Thresholding equals re-voxelising the contour mesh at the same level
 (tests/design/fabrication/test_design_extract.py), so the 1/2 column reproduces a run's own ``rel_rmse_binary``

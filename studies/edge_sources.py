@@ -12,7 +12,7 @@ they test:
 - ``sphere_cm``: a sphere of radius 0.6 written in cm (run with ``--units cm``);
 - ``open_sphere``: a sphere with four faces removed, not watertight (refused).
 
-    python benchmarks/edge_sources.py OUT_DIR
+    python -m studies.edge_sources OUT_DIR
 
 Last line: ``sources: <count>``.
 """

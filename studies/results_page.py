@@ -1,6 +1,6 @@
-"""Write docs/results_samples.md: what `sfr design` achieves today on the shipped samples, with its current defaults.
+"""Write docs/results_samples.md: what `sfr design` achieves on the shipped samples with its defaults.
 
-    .venv/bin/python benchmarks/results_page.py [--quick] [--out PAGE] [--keep DIR]
+    .venv/bin/python -m studies.results_page [--quick] [--out PAGE] [--keep DIR]
 
 Runs every case of `CASES` through `labapp.jobs.design.design`, the job `sfr design` calls, with
 `design.inverse.problem.DesignConfig`'s defaults for everything but the target, the design space and
@@ -238,6 +238,44 @@ def _before_after(rows: list[dict], before: dict) -> list[str]:
     return lines + [""]
 
 
+COLUMN_NOTES = [
+    "How to read the columns (all in `summary.json` of the run folder; formats: [formats.md](formats.md)):",
+    "",
+    "- **rel. RMSE** is the RMS difference of two release curves over the target's tau grid, divided by",
+    "  the target's final release.",
+    "- **density (design grid)**: the optimised grey density's simulated release against the target on",
+    "  the grid the optimiser worked on (`rel_rmse_density`). A diagnostic of the optimisation only: the",
+    "  density is not what is printed.",
+    "- **printed solid (design grid)**: the printed mesh (`design.stl`, the contour that keeps the",
+    "  density's mass) re-voxelised on the design grid and simulated (`rel_rmse_design_grid_binary`, the figure the",
+    "  paper plots). A diagnostic too: on the design grid the voxelisation error of the grid itself, which",
+    "  the optimiser has learnt to use, is part of both curves.",
+    "- **printed solid (true)**: `design.stl`'s release by the reference evaluator (exact surface distances,",
+    "  `design.forward.reference`) against the target's physical release (a sample shape's by the same",
+    "  evaluator, an analytic target's curve as it is; `rel_rmse_print`, with its stated error): what the",
+    "  print does, and the figure to judge a design by.",
+    "- **rate deviation** (zero-order targets): the largest deviation of the printed solid's release rate",
+    "  from the target's constant rate over the target's middle 80% (10% to 90% released), in 20 equal",
+    "  windows, of the printed solid's reference release (`rate_dev_mid80_vs_target`, `design.inverse.rate`).",
+    "- **pieces**: separate solid parts of the printed solid (1 = one printable piece). **enclosed voids**:",
+    "  voids the bath cannot reach until a wall dissolves. **seconds**: wall time of the whole job,",
+    "  output writing included (the kernels are compiled before the first case).",
+]
+"""The page's notes on its results table."""
+
+
+def _result_row(r: dict) -> str:
+    """One case's row of the results table (a case that failed: its status and error)."""
+    if "folder" not in r:
+        return (f"| {r['case'].label} | {r['case'].space} | - | {r['status']}: "
+                f"{r['error']} | - | - | - | - | - | - | - | {r['wall']:.0f} |")
+    return (f"| {r['case'].label} | {r['case'].space} | {r['iterations']} | "
+            f"{r['status']} | {percent_text(r['density'])} | {percent_text(r['binary'])} | "
+            f"**{percent_text(r['true'])}** (± {percent_text(r['true_error'])}) | "
+            f"{percent_text(r['rate_dev']) if _zero_order(r['case']) else '-'} | "
+            f"{r['pieces']} | {r['mass_g']:.3f} | {r['voids']} | {r['wall']:.0f} |")
+
+
 def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | None, quick: bool,
          before: dict | None = None) -> str:
     """The Markdown of the page (``before``: the runs without the physical correction, by (target, space))."""
@@ -248,12 +286,12 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
     lines = [
         "# Inverse design: what `sfr design` achieves with its defaults",
         "",
-        "Written by `benchmarks/results_page.py`; do not edit by hand. Regenerate after any change to the",
+        "Written by `studies/results_page.py`; do not edit by hand. Regenerate after any change to the",
         "design code or its defaults:",
         "",
         "```bash",
-        ".venv/bin/python benchmarks/results_page.py            # writes this page and its figure",
-        ".venv/bin/python benchmarks/results_page.py --quick    # the same cases at resolution "
+        ".venv/bin/python -m studies.results_page            # writes this page and its figure",
+        ".venv/bin/python -m studies.results_page --quick    # the same cases at resolution "
         f"{QUICK_RESOLUTION}, printed",
         "```",
         "",
@@ -278,40 +316,10 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
         "| enclosed voids | seconds |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for r in rows:
-        if "folder" not in r:
-            lines.append(f"| {r['case'].label} | {r['case'].space} | - | {r['status']}: "
-                         f"{r['error']} | - | - | - | - | - | - | - | {r['wall']:.0f} |")
-            continue
-        lines.append(f"| {r['case'].label} | {r['case'].space} | {r['iterations']} | "
-                     f"{r['status']} | {percent_text(r['density'])} | {percent_text(r['binary'])} | "
-                     f"**{percent_text(r['true'])}** (± {percent_text(r['true_error'])}) | "
-                     f"{percent_text(r['rate_dev']) if _zero_order(r['case']) else '-'} | "
-                     f"{r['pieces']} | {r['mass_g']:.3f} | {r['voids']} | {r['wall']:.0f} |")
-
+    lines += [_result_row(r) for r in rows]
     lines += [
         "",
-        "How to read the columns (all in `summary.json` of the run folder; formats: [formats.md](formats.md)):",
-        "",
-        "- **rel. RMSE** is the RMS difference of two release curves over the target's tau grid, divided by",
-        "  the target's final release.",
-        "- **density (design grid)**: the optimised grey density's simulated release against the target on",
-        "  the grid the optimiser worked on (`rel_rmse_density`). A diagnostic of the optimisation only: the",
-        "  density is not what is printed.",
-        "- **printed solid (design grid)**: the printed mesh (`design.stl`, the contour that keeps the",
-        "  density's mass) re-voxelised on the design grid and simulated (`rel_rmse_design_grid_binary`, the figure the",
-        "  paper plots). A diagnostic too: on the design grid the voxelisation error of the grid itself, which",
-        "  the optimiser has learnt to use, is part of both curves.",
-        "- **printed solid (true)**: `design.stl`'s release by the reference evaluator (exact surface distances,",
-        "  `design.forward.reference`) against the target's physical release (a sample shape's by the same",
-        "  evaluator, an analytic target's curve as it is; `rel_rmse_print`, with its stated error): what the",
-        "  print does, and the figure to judge a design by.",
-        "- **rate deviation** (zero-order targets): the largest deviation of the printed solid's release rate",
-        "  from the target's constant rate over the target's middle 80% (10% to 90% released), in 20 equal",
-        "  windows, of the printed solid's reference release (`rate_dev_mid80_vs_target`, `design.inverse.rate`).",
-        "- **pieces**: separate solid parts of the printed solid (1 = one printable piece). **enclosed voids**:",
-        "  voids the bath cannot reach until a wall dissolves. **seconds**: wall time of the whole job,",
-        "  output writing included (the kernels are compiled before the first case).",
+        *COLUMN_NOTES,
         "",
     ]
     if before:

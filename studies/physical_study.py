@@ -1,6 +1,6 @@
 """Side by side: ways to make the printed solid's true release meet the physical target (docs/design.md#physical-correction).
 
-For every source of benchmarks/untuned_shapes.py and design space, design runs with the defaults
+For every source of `benchmarks.untuned_shapes` and design space, design runs with the defaults
 (`design.inverse.problem.DesignConfig`) and the source's reference release as the target are judged by the reference
 evaluator (`design.forward.reference`); the methods:
 
@@ -17,8 +17,8 @@ release of the source, % of the target's final release), the design grid's fit (
 design grid against the same target), pieces, and seconds (the optimisation, and each method's addition).
 Rows are appended to the CSV as they finish; a row already in it is not run again.
 
-    python benchmarks/physical_study.py CSV [--resolution 64] [--spaces nfc,extruded] [--shapes a,b] [--methods ...]
-    python benchmarks/physical_study.py CSV --table      # the CSV as the Markdown table of docs/design.md
+    python -m studies.physical_study CSV [--resolution 64] [--spaces nfc,extruded] [--shapes a,b] [--methods ...]
+    python -m studies.physical_study CSV --table      # the CSV as the Markdown table of docs/design.md
 
 Last line: ``rows: <count>``.
 """
@@ -26,38 +26,15 @@ from __future__ import annotations
 
 import argparse
 import csv
-import sys
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import untuned_shapes  # noqa: E402
+from benchmarks import untuned_shapes
+from benchmarks.designs import MemoryRounds, NoStore, judge, source_problem, warm_up
 
 COLUMNS = ("shape", "space", "resolution", "method", "true_fit", "grid_fit", "pieces", "seconds", "extra_seconds",
            "evaluations")
-
-
-class _NoStore:
-    def save(self, checkpoint, *, wait=True):
-        pass
-
-    def wait(self):
-        pass
-
-
-class _Rounds:
-    def __init__(self):
-        self.states = []
-
-    def load(self):
-        return self.states[-1] if self.states else None
-
-    def save(self, state):
-        self.states.append(state)
 
 
 def _done(path: Path) -> set[tuple[str, str, str, str]]:
@@ -77,45 +54,6 @@ def _append(path: Path, row: dict) -> None:
         handle.flush()
 
 
-def _physical(problem, mesh):
-    """The problem with the source's reference release as its target (what a mesh target is by default)."""
-    from design.forward.reference import reference_release
-    from design.inverse.targets import Target
-
-    target = problem.target
-    curve = reference_release(mesh, target.tau_mm).released_mm3
-    return replace(problem, target=Target(target.tau_mm, curve, target.source))
-
-
-def _judge(objective, problem, x) -> tuple[float, float, int]:
-    """(true fit, design-grid fit, pieces) of design variables ``x``: the print by the reference evaluator at its
-    default lattice, the density's release on the design grid, both against the problem's (physical) target."""
-    from design.fabrication.extract import count_pieces, revoxelize
-    from design.forward.reference import reference_release
-    from design.forward.simulator import simulate
-    from design.inverse.defect import printed_mesh
-    from design.inverse.objective import rel_rmse
-
-    target, space = problem.target, objective.space
-    grid = simulate(objective.density(x), space.dx_mm, mirror=space.mirror, total_time_mm=target.total_time_mm,
-                    dtau_mm=target.total_time_mm / (target.tau_mm.size - 1)).released_mm3
-    mesh = printed_mesh(objective, problem, x)
-    if mesh is None:
-        return np.inf, rel_rmse(grid, target.released_mm3), 0
-    printed = reference_release(mesh, target.tau_mm).released_mm3
-    pieces = count_pieces(revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape))
-    return rel_rmse(printed, target.released_mm3), rel_rmse(grid, target.released_mm3), pieces
-
-
-def _problem(name: str, mesh, config):
-    from design.files.targets_io import load_problem
-
-    with tempfile.TemporaryDirectory() as tmp:
-        stl = Path(tmp) / f"{name}.stl"
-        mesh.export(stl)
-        return _physical(load_problem(replace(config, target=str(stl))), mesh)
-
-
 def study_case(name: str, space: str, resolution: int, methods: tuple[str, ...], path: Path, done: set,
                max_iter: int) -> None:
     from design.inverse.defect import correction_plan, final_beta, optimise_physical
@@ -128,7 +66,7 @@ def study_case(name: str, space: str, resolution: int, methods: tuple[str, ...],
         return
     mesh = untuned_shapes.source(name)
     config = DesignConfig(target=f"{name}.stl", space=space, resolution=resolution, max_iter=max_iter)
-    problem = _problem(name, mesh, config)
+    problem = source_problem(name, mesh, config)
 
     def row(method, judged, seconds, extra, evaluations):
         fit, grid_fit, pieces = judged
@@ -142,19 +80,19 @@ def study_case(name: str, space: str, resolution: int, methods: tuple[str, ...],
         plain = replace(config, physical_correction="none")
         objective = build_objective(problem, plain)
         t0 = time.perf_counter()
-        outcome = optimise(objective, problem, plain, _NoStore())
-        row("none", _judge(objective, problem, outcome.best_x), time.perf_counter() - t0, 0.0, len(outcome.history))
+        outcome = optimise(objective, problem, plain, NoStore())
+        row("none", judge(objective, problem, outcome.best_x), time.perf_counter() - t0, 0.0, len(outcome.history))
     if "defect" not in todo and "fine" not in todo:
         return
     objective = build_objective(problem, config)
-    rounds = _Rounds()
+    rounds = MemoryRounds()
     t0 = time.perf_counter()
-    outcome, objective = optimise_physical(objective, problem, config, _NoStore(), rounds)
+    outcome, objective = optimise_physical(objective, problem, config, NoStore(), rounds)
     seconds = time.perf_counter() - t0
     first = rounds.states[0]
     first_seconds = float(outcome.history[first.start - 1][-1])
     if "defect" in todo:
-        row("defect", _judge(objective, problem, outcome.best_x), seconds, seconds - first_seconds,
+        row("defect", judge(objective, problem, outcome.best_x), seconds, seconds - first_seconds,
             len(outcome.history))
     if "fine" in todo:  # a last stage on a grid twice as fine, from the first optimisation's design
         n_rounds, _ = correction_plan(config)
@@ -163,26 +101,14 @@ def study_case(name: str, space: str, resolution: int, methods: tuple[str, ...],
         beta = final_beta(config)
         stage = replace(config, resolution=2 * resolution, beta=beta, beta_final=beta, max_iter=evals,
                         physical_correction="none")
-        fine_problem = _problem(name, mesh, stage)
+        fine_problem = source_problem(name, mesh, stage)
         fine_objective = build_objective(fine_problem, stage)
         x_main = first.x_start.reshape(objective.space.var_shape)
         x_fine = upsample(x_main, problem.dx_mm, fine_objective.space.var_shape, fine_problem.dx_mm)
-        fine = optimise(fine_objective, fine_problem, stage, _NoStore(), start=lambda o, p: x_fine)
+        fine = optimise(fine_objective, fine_problem, stage, NoStore(), start=lambda o, p: x_fine)
         extra = time.perf_counter() - t1
-        row("fine", _judge(fine_objective, fine_problem, fine.best_x), first_seconds + extra, extra,
+        row("fine", judge(fine_objective, fine_problem, fine.best_x), first_seconds + extra, extra,
             first.start + len(fine.history))
-
-
-def _warm_up() -> None:
-    """A tiny design and reference release, so that no row's seconds include compiling the kernels."""
-    from design.forward.reference import reference_release
-    from design.inverse.optimize import build_objective, optimise
-    from design.inverse.problem import DesignConfig, prepare
-
-    config = DesignConfig(target="sphere", resolution=16, max_iter=3)
-    problem = prepare(config)
-    optimise(build_objective(problem, config), problem, config, _NoStore())
-    reference_release(untuned_shapes.source("rock"), problem.target.tau_mm, cells=16)
 
 
 def table(path: Path) -> str:
@@ -226,7 +152,7 @@ def main() -> None:
         print(table(args.csv))
         return
     args.csv.parent.mkdir(parents=True, exist_ok=True)
-    _warm_up()
+    warm_up()
     methods = tuple(args.methods.split(","))
     for name in args.shapes.split(","):
         for space in args.spaces.split(","):

@@ -9,7 +9,7 @@ error, which sets most of the binary fit's differences), the binary solid's rate
 zero-order target, seconds per evaluation, and the first evaluation at which the two optimisers'
 J histories differ ("none": identical through the shorter history).
 
-    python benchmarks/optimizer_quality.py --out runs/quality [--resolution 64] [--max-iter 300]
+    python -m studies.optimizer_quality --out runs/quality [--resolution 64] [--max-iter 300]
         [--optimizers LD_LBFGS lbfgs] [--seeds 0] [--targets ...] [--spaces nfc extruded]
         [--product-defaults]
 

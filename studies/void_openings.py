@@ -1,6 +1,6 @@
 """When the enclosed voids of designed solids open, against the rate over the middle 80% of the release.
 
-    python benchmarks/void_openings.py RUN_DIR [RUN_DIR ...] [--figure docs/figures/NAME.png]
+    python -m studies.void_openings RUN_DIR [RUN_DIR ...] [--figure docs/figures/NAME.png]
 
 For each run folder (written by `sfr design`): the printed solid of ``density.npz`` is simulated
 (eqs. 5-7); each enclosed void (`design.fabrication.printability.enclosed_voids`) opens at the smallest

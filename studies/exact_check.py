@@ -19,8 +19,8 @@ script counts each mesh's shells and those enclosed by another (`enclosed_shells
 design with an enclosed shell is reported but left out of the comparison. The fit is the rel. RMSE over the run's
 tau grid (``curves.csv``) divided by the target's final release, as `design.inverse.objective.rel_rmse` defines it.
 
-    python benchmarks/exact_check.py FOLDER [FOLDER ...] [--points-log2 18] [--csv OUT]
-    python benchmarks/exact_check.py --table CSV
+    python -m studies.exact_check FOLDER [FOLDER ...] [--points-log2 18] [--csv OUT]
+    python -m studies.exact_check --table CSV
 
 A line per folder: the reported fit, the independent one and their difference in points; each curve's largest
 deviation from ``curves.csv`` (``target_mm3``, ``print_mm3``) in % of the target's final release; the Monte Carlo
@@ -44,8 +44,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 from scipy.stats import qmc
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import physical_default  # noqa: E402
+from studies import physical_default
 
 POINTS_LOG2 = 18
 """Sobol points per mesh, as a power of two (2^18 = 262,144)."""
