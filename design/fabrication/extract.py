@@ -35,8 +35,8 @@ surface moves by at most this fraction of a voxel per unit density step."""
 
 LEVEL_RANGE = (0.4, 0.6)
 """Bounds of the extraction level. An optimised design's mass-preserving level lies within a few
-hundredths of 1/2 (``extraction_level`` in a run's ``summary.json``; benchmarks/recut_runs.py compares
-the cuts, docs/benchmarks.md#tools-for-design-experiments); a density grey enough to need a level
+hundredths of 1/2 (``extraction_level`` in a run's ``summary.json``; studies/recut_runs.py compares
+the cuts, docs/benchmarks.md#studies); a density grey enough to need a level
 outside this range is not a design any single cut stands for."""
 
 

@@ -57,8 +57,8 @@ LINE_SEARCHES = ("luksan", "strong-wolfe")
 """`LbfgsSettings.line_search` rules (module doc); the first is the default."""
 CURVATURE_C2 = {"luksan": 0.8, "strong-wolfe": 0.5}
 """Default curvature constant c2 of each rule: PLIS's ``tolp``; for the strong rule, of 0.5, 0.8 and 0.9
-the one with the better designs on the sample shapes (benchmarks/optimizer_quality.py,
-docs/benchmarks.md#tools-for-design-experiments)."""
+the one with the better designs on the sample shapes (studies/optimizer_quality.py,
+docs/benchmarks.md#studies)."""
 MODEL_STEPS = 10
 """Extrapolations or interpolations a "luksan" search may make before it fails (PLIS's ``mred``)."""
 SEARCH, STEP, CONVERGED, STALLED = "search", "step", "converged", "stalled"
@@ -83,7 +83,7 @@ class LbfgsSettings:
         "strong-wolfe" only: largest change of any variable on a step without curvature pairs (the
         first, and after a reset), in the variables' units (rad of the cosine map, default 2; with
         beta continuation every stage starts afresh, so this step recurs; compared with
-        benchmarks/optimizer_quality.py, docs/benchmarks.md#tools-for-design-experiments).
+        studies/optimizer_quality.py, docs/benchmarks.md#studies).
     ftol_rel, xtol_rel : float
         Convergence when an accepted step changes f by at most ``ftol_rel |f|`` or x by at most
         ``xtol_rel |x|`` (Euclidean norms); 0 disables.

@@ -31,7 +31,7 @@ MID_INTERVALS = 20
 RATE_SPAN_MIN_VOX = 10.0
 """Voxels of tau the middle 80% of a release should span for `rate_deviation` to be measured to
 about a percentage point; below it `sfr design` warns. The grid's error against the span, on a plate
-with an exact release: benchmarks/rate_metric_grid.py (docs/benchmarks.md#tools-for-design-experiments)."""
+with an exact release: studies/rate_metric_grid.py (docs/benchmarks.md#studies)."""
 
 
 def release_duration(tau_mm: np.ndarray, curve_mm3: np.ndarray, fraction: float = 0.999) -> float:
