@@ -31,7 +31,8 @@ from analysis.regulatory import RULE_NAMES, RuleCheck, check_rule
 from analysis.release_models import ModelFit, best_fit, fit_release_models
 from analysis.replicates import ReplicateSet
 from analysis.runfolder import RunCurve, analyze_run, write_cells_csv, write_curve_csv
-from analysis.simcal import LooShape, ShapeRun, SimCal, SimCalFit, fit_simcal, leave_one_out
+from analysis.simcal import LooShape, ShapeRun, SimCal, SimCalFit
+from analysis.simcal_fit import fit_simcal, leave_one_out
 
 __all__ = [
     "AnalysisError", "BenchCalibration", "BootstrapF2", "ConcentrationEstimate", "CropGeometry", "FrameList",

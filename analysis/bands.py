@@ -7,7 +7,7 @@ and the calibrated parameters themselves are uncertain. The band at each time is
     nominal +- q * sqrt(max(s_model(f), s_par(t))^2 + s_mass(t)^2)
 
 - ``s_model(f)``: the leave-one-out residuals (each calibration run predicted by a calibration fitted without
-  it, :func:`analysis.simcal.leave_one_out`), as a root mean square per bin of the predicted released
+  it, :func:`analysis.simcal_fit.leave_one_out`), as a root mean square per bin of the predicted released
   fraction f = predicted grams / mass (each run weighted equally in a bin), interpolated between bin
   centres, times the prediction's mass. They already hold the error of parameters fitted on one run fewer,
   so the parameter spread of the time scale and the print physics, ``s_par(t)``, is a floor, not an addend:
@@ -38,7 +38,8 @@ import numpy as np
 from scipy import stats
 
 from analysis.errors import AnalysisError
-from analysis.simcal import LAG, PHYSICS_IDENTITY, PHYSICS_PARAMETERS, LooShape, ShapeRun, SimCal
+from analysis.physics_grid import LAG, PHYSICS_IDENTITY, PHYSICS_PARAMETERS
+from analysis.simcal import LooShape, ShapeRun, SimCal
 
 BAND_LEVEL = 0.90
 """Nominal coverage of the bands: the central 90% (the 5th and 95th percentiles)."""

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from analysis.simcal import LAG, PHYSICS_IDENTITY, PHYSICS_PARAMETERS, PHYSICS_SETS
+from analysis.physics_grid import LAG, PHYSICS_IDENTITY, PHYSICS_PARAMETERS, PHYSICS_SETS
 from labapp.errors import UsageError
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.storage import atomic_write
@@ -134,7 +134,7 @@ def sensitivity(mesh: trimesh.Trimesh, parameters: Sequence[str], *, points: int
     ----------
     mesh : trimesh.Trimesh
     parameters : sequence of str
-        ``log_seconds``, names of `PHYSICS_PARAMETERS` and `analysis.simcal.LAG` (``wetting_lag_s``).
+        ``log_seconds``, names of `PHYSICS_PARAMETERS` and `analysis.physics_grid.LAG` (``wetting_lag_s``).
     points : int
         Sample times, uniform over (0, 1.1 x the nominal dissolution time].
     resolution : int

@@ -20,7 +20,8 @@ from analysis.bands import (
     residual_model,
 )
 from analysis.errors import AnalysisError
-from analysis.simcal import ShapeRun, leave_one_out
+from analysis.simcal import ShapeRun
+from analysis.simcal_fit import leave_one_out
 
 RATE_SPREAD, NOISE = 0.06, 0.003
 

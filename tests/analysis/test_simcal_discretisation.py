@@ -1,4 +1,4 @@
-"""The discretisation term of the print physics' uncertainty (analysis.simcal.refit_physics, with_discretisation).
+"""The discretisation term of the print physics' uncertainty (analysis.physics_fit.refit_physics, with_discretisation).
 
 Known answers: an anisotropic box erodes as V(tau) = (W - 2 tau)^2 (L - 2 a tau), so the "measured" runs of two
 boxes (flat, tall) made with a hidden anisotropy are refitted to it from any nearby start; a simulator whose
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from analysis import AnalysisError, ShapeRun
-from analysis.simcal import refit_physics, with_discretisation
+from analysis.physics_fit import refit_physics, with_discretisation
 
 SECONDS_PER_MM, DENSITY, WATER_G = 1500.0, 1.3e-3, 500.0
 BOXES = {"flat": (16.0, 4.0), "tall": (6.0, 18.0)}   # (width W, height L), mm

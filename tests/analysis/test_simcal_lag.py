@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from analysis import ShapeRun, SimCal, fit_simcal
-from analysis.simcal import LAG, PHYSICS_SETS, choose_physics, fit_physics
+from analysis.physics_fit import choose_physics, fit_physics
+from analysis.physics_grid import LAG, PHYSICS_SETS
 from tests.analysis.test_analysis_simcal import SHAPES, TRUTH
 
 

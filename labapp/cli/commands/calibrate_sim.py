@@ -15,8 +15,10 @@ RECORDS = True
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr calibrate-sim`."""
-    from analysis.simcal import DEFAULT_MAX_OFFSET_S, DISCRETISATION_FACTOR, PHYSICS_CHOICES
-    from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION
+    from analysis.physics_fit import DISCRETISATION_FACTOR
+    from analysis.physics_grid import PHYSICS_CHOICES
+    from analysis.simcal_fit import DEFAULT_MAX_OFFSET_S
+    from design.geometry.voxelize import DEFAULT_RESOLUTION
 
     parser.add_argument("set_csv", metavar="SET.csv", nargs="?",
                         help="columns run,mesh,object_mass_g; run = run folder or curve CSV, paths relative to "

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from analysis.simcal import LAG
+from analysis.physics_grid import LAG
 from labapp.jobs.plan import PLAN_SECONDS_PER_MM, expected_std, sensitivity
 
 

@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 import trimesh
 
-from analysis.simcal import FIT_IDENTITY, LAG, PHYSICS_SETS
+from analysis.physics_grid import FIT_IDENTITY, LAG, PHYSICS_SETS
 from labapp.acquisition.printworld import PrintPhysics, world_release
 from labapp.acquisition.simbench import Material, SampleRelease
 from labapp.cli.main import main
-from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal, print_volume_mm3
+from labapp.jobs.calibrate_sim import calibrate_sim
+from labapp.jobs.printrelease import print_volume_mm3
+from labapp.records.simcal import load_simcal
 from tests.labapp.jobs.simcal_sets import write_run, write_set
 
 MESHES = {"slab": lambda: trimesh.creation.box((16, 16, 5)),
@@ -129,7 +131,8 @@ def test_predictions_simulate_with_the_calibrated_physics(tmp_path):
 
 
 def test_a_parameter_is_kept_only_where_it_earns_it():
-    from analysis.simcal import LooShape, PhysicsFit, choose_physics
+    from analysis.physics_fit import PhysicsFit, choose_physics
+    from analysis.simcal import LooShape
 
     def fit(fitted, values, sigma, loo):
         shapes = tuple(LooShape("s", None, np.zeros(1), np.zeros(1), np.zeros(1), loo) for _ in range(3))
