@@ -23,14 +23,18 @@ import numpy as np
 import skfmm
 import trimesh
 
+import design.forward.distance
+import design.forward.quadrature
 import design.forward.reference
+import design.forward.wetting
 import design.geometry.voxelize
 from labapp.acquisition import printworld
 from labapp.acquisition.printworld import WORLD_RESOLUTION, PrintPhysics, WorldRelease, world_release
 
 log = logging.getLogger(__name__)
 
-_METHOD_MODULES = (printworld, design.forward.reference, design.geometry.voxelize)
+_METHOD_MODULES = (printworld, design.forward.reference, design.forward.distance, design.forward.quadrature,
+                   design.forward.wetting, design.geometry.voxelize)
 """The modules whose source the release depends on: part of every key."""
 
 

@@ -26,7 +26,8 @@ from design.files.meshio import MESH_SUFFIXES
 from labapp.acquisition.settings import ADDED_MASS, parse_masses
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.fields import SettingBox, narrow_form
-from labapp.jobs.calibrate_sim import SET_COLUMNS, calibrate_sim
+from labapp.jobs.calibrate_sim import calibrate_sim
+from labapp.records.simcalset import SET_COLUMNS
 from labapp.records.storage import timestamp_name
 
 
@@ -176,7 +177,7 @@ class SimulationStep(QWidget):
 
     def load_set(self, path: Path) -> None:
         """Fill the table from a ``run,mesh,object_mass_g`` file (paths made absolute)."""
-        from labapp.jobs.calibrate_sim import read_set
+        from labapp.records.simcalset import read_set
 
         for row in read_set(path):
             self.add_row(row.run.resolve(), row.mesh.resolve(), row.object_mass_g)

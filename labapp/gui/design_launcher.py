@@ -44,10 +44,10 @@ from labapp.gui.bridge import BackgroundTask
 from labapp.gui.plots import hmm, time_plot
 from labapp.gui.sweep_panel import SweepPanel
 from labapp.jobs.bands import quantile_columns
-from labapp.jobs.calibrate_sim import SimCalFile, curve_of, load_simcal
 from labapp.jobs.design import DESIGN_DEFAULTS, design_folder
 from labapp.jobs.design import design as design_job
 from labapp.jobs.physical import adjustment_line, is_physical, write_target_csv
+from labapp.records.simcal import SimCalFile, curve_of, load_simcal
 
 NO_SIMCAL = ("no active simulation calibration: a measured run cannot become a target until one is made "
              "(calibration wizard, simulation step) and made active")

@@ -9,9 +9,9 @@ from PySide6.QtGui import QColor
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from labapp.gui.plots import time_plot
-from labapp.jobs.calibrate_sim import SimCalFile
 from labapp.jobs.physical import predict_mesh_band
 from labapp.records.curvefiles import PhysicalCurve, read_physical_curve
+from labapp.records.simcal import SimCalFile
 
 
 def physical_curve(run: Path) -> PhysicalCurve:

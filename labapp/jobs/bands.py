@@ -22,8 +22,8 @@ import numpy as np
 
 from analysis.bands import BAND_LEVEL, ResidualModel, SimulateAt, spread_g
 from analysis.bands import band as _band
-from analysis.simcal import PHYSICS_IDENTITY, PHYSICS_PARAMETERS
-from labapp.jobs.calibrate_sim import SimCalError, SimCalFile
+from analysis.physics_grid import PHYSICS_IDENTITY, PHYSICS_PARAMETERS
+from labapp.records.simcal import SimCalError, SimCalFile
 
 log = logging.getLogger(__name__)
 
@@ -84,14 +84,15 @@ def source_simulator(source: str, resolution: int, *, symmetry: str = "", units:
                      method: str | None = None) -> SimulateAt:
     """``simulate_at(physics)`` for a mesh, ``sample:NAME`` or density array at a calibration's resolution
     (``labapp.jobs.simulate.simulation_grid``; grids cached per surface offset), made as the calibration made its
-    meshes' releases: with ``method`` ``calibrate_sim.RELEASE_METHOD`` (the default; give the calibration's
-    ``release_method``) a mesh's :func:`labapp.jobs.calibrate_sim.print_release`, otherwise (and for a density
+    meshes' releases: with ``method`` ``simcal.RELEASE_METHOD`` (the default; give the calibration's
+    ``release_method``) a mesh's :func:`labapp.jobs.printrelease.print_release`, otherwise (and for a density
     array, which has no mesh) the grid's release at the print's exact volume
-    (:func:`labapp.jobs.calibrate_sim.exact_volume_release`)."""
+    (:func:`labapp.jobs.printrelease.exact_volume_release`)."""
     from design.errors import DesignError
     from design.forward.simulator import simulate
-    from labapp.jobs.calibrate_sim import RELEASE_METHOD, exact_volume_release, print_release
+    from labapp.jobs.printrelease import exact_volume_release, print_release
     from labapp.jobs.simulate import simulation_grid
+    from labapp.records.simcal import RELEASE_METHOD
 
     method = RELEASE_METHOD if method is None else method
     grids: dict[float, tuple] = {}
@@ -122,11 +123,12 @@ def source_release_exact(source: str, release, physics: dict, units: str = "mm",
                          symmetry: str = "", method: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A ``Release`` already simulated from ``source`` (mesh, ``sample:NAME`` or density array) at ``resolution``
     with print ``physics``, made as :func:`source_simulator` makes it (a mesh's
-    :func:`labapp.jobs.calibrate_sim.print_release` with ``method`` ``calibrate_sim.RELEASE_METHOD``, the default;
+    :func:`labapp.jobs.printrelease.print_release` with ``method`` ``simcal.RELEASE_METHOD``, the default;
     else at the print's exact volume). Returns ``(tau_mm, released_mm3)``."""
     from design.errors import DesignError
-    from labapp.jobs.calibrate_sim import RELEASE_METHOD, exact_volume_release, print_release
+    from labapp.jobs.printrelease import exact_volume_release, print_release
     from labapp.jobs.simulate import simulation_grid
+    from labapp.records.simcal import RELEASE_METHOD
 
     physics = {**PHYSICS_IDENTITY, **physics}
     try:

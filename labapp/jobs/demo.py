@@ -39,10 +39,11 @@ from labapp.errors import UsageError
 from labapp.jobs.bands import prediction_band, quantile_columns, source_simulator
 from labapp.jobs.calibrate_sim import MAX_RESOLUTION as MAX_SIMCAL_RESOLUTION
 from labapp.jobs.calibrate_sim import MIN_RESOLUTION as MIN_SIMCAL_RESOLUTION
-from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
+from labapp.jobs.calibrate_sim import calibrate_sim
 from labapp.jobs.physical import design_from_target
 from labapp.records.curvefiles import read_physical_curve
 from labapp.records.lock import folder_lock
+from labapp.records.simcal import load_simcal
 from labapp.records.storage import read_run, verify_run
 
 CAL_MASSES_G = (0.25, 0.5, 0.875, 1.25, 1.75, 2.25)

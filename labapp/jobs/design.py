@@ -14,11 +14,11 @@ from design.files.meshio import MESH_SUFFIXES
 from design.files.records import load_config, stored_form
 from design.inverse.problem import DesignConfig
 from labapp.errors import UsageError
-from labapp.jobs.calibrate_sim import load_simcal
 from labapp.jobs.meshunits import design_memory_bytes, load_mesh_mm, require_memory, size_warnings
 from labapp.jobs.physical import design_from_target, is_physical
 from labapp.records.lock import folder_lock
 from labapp.records.outpaths import FolderKind, check_out
+from labapp.records.simcal import load_simcal
 from labapp.records.storage import timestamp_name
 
 log = logging.getLogger(__name__)

@@ -30,9 +30,11 @@ from design.files.meshio import load_mesh
 from design.files.pipeline import mesh_grid
 from design.montecarlo.erosion import DEFAULT_SEEDS
 from design.montecarlo.tuning import DEFAULT_EA_J_PER_MOL, tune_mc, unit_runs
-from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION, SimCalError, calibrate_sim, read_set
+from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION, calibrate_sim
 from labapp.jobs.simulate_mc import calibration_doc
 from labapp.records.outpaths import FolderKind, check_out
+from labapp.records.simcal import SimCalError
+from labapp.records.simcalset import read_set
 from labapp.records.storage import atomic_write
 
 MODEL_NAMES = ("forward", "mc")
@@ -95,7 +97,7 @@ def evaluate_models(set_csv: str | Path, bench_calibration: str | Path | None, o
     Parameters
     ----------
     set_csv : str or Path
-        ``run,mesh,object_mass_g`` (see :func:`labapp.jobs.calibrate_sim.read_set`); at least 3 objects for a
+        ``run,mesh,object_mass_g`` (see :func:`labapp.records.simcalset.read_set`); at least 3 objects for a
         meaningful leave-one-out.
     bench_calibration : str or Path or None
         Bench calibration for run folders (None: each run's own ``calibration.json``).

@@ -23,12 +23,12 @@ from design.files.records import load_summary
 from design.files.rundir import finished_run, run_design
 from design.inverse.targets import ISO_TOLERANCE, isotonic_fit, project_isoperimetric, resample_monotone
 from labapp.jobs import bands
-from labapp.jobs.calibrate_sim import SimCalError, SimCalFile, curve_of
 from labapp.jobs.compare import prediction_metrics
 from labapp.records import operators
 from labapp.records.audit import Action
 from labapp.records.audit import append as audit
 from labapp.records.curvefiles import CURVE_FILES, PhysicalCurve
+from labapp.records.simcal import SimCalError, SimCalFile, curve_of
 from labapp.records.storage import atomic_write
 
 log = logging.getLogger(__name__)

@@ -39,9 +39,9 @@ from design.files.records import load_summary
 from design.inverse.status import FINISHED, DesignStatus
 from labapp.errors import UsageError
 from labapp.figures.contact_sheet import draw_contact_sheet, rank, summary_row
-from labapp.jobs.calibrate_sim import load_simcal
 from labapp.jobs.design import design
 from labapp.records.outpaths import FolderKind, check_out
+from labapp.records.simcal import load_simcal
 from labapp.scaleout.cluster import dashboard_link, dask_client, design_memory_gb
 from labapp.scaleout.sweepspec import Combination, SweepSpec, config_matches
 

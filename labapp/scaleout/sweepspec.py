@@ -34,8 +34,8 @@ from pathlib import Path
 from design.errors import DesignError
 from design.inverse.problem import DesignConfig
 from labapp.errors import UsageError
-from labapp.jobs.calibrate_sim import SimCalError, load_simcal
 from labapp.jobs.physical import is_physical
+from labapp.records.simcal import SimCalError, load_simcal
 
 PRESET_KEY = "preset"
 SPEC_ONLY_KEYS = ("target", "simcal", "grid", "points")

@@ -142,11 +142,11 @@ def run(args: argparse.Namespace) -> int:
     from design.files.outputs import summary_lines
     from design.inverse.problem import DesignConfig
     from design.inverse.status import DesignStatus
-    from labapp.jobs.calibrate_sim import SimCalError, load_simcal
     from labapp.jobs.design import design as design_job
     from labapp.jobs.design import failed_design
     from labapp.jobs.physical import TARGET_CSV, adjustment_line, read_measured_target
     from labapp.records.lock import folder_lock
+    from labapp.records.simcal import SimCalError, load_simcal
 
     try:
         options = _given_options(args)

@@ -96,10 +96,10 @@ def _run(args: argparse.Namespace) -> int:
     if args.model == "mc":
         return _run_mc(args)
 
-    from labapp.jobs.calibrate_sim import check_resolution, load_simcal
     from labapp.jobs.compare import release_summary
     from labapp.jobs.physical import write_release_physical
     from labapp.jobs.simulate import simulate as simulate_job
+    from labapp.records.simcal import check_resolution, load_simcal
 
     simcal = None
     if args.simcal:

@@ -144,7 +144,8 @@ def _set_file(tmp_path: Path, runs: list[str]) -> Path:
 
 
 def test_calibrate_sim_refuses_a_run_listed_twice(tmp_path):
-    from labapp.jobs.calibrate_sim import SimCalError, read_set
+    from labapp.records.simcal import SimCalError
+    from labapp.records.simcalset import read_set
 
     (tmp_path / "a.csv").write_text("t_s,released_g\n0,0\n100,1\n")
     shutil.copyfile(tmp_path / "a.csv", tmp_path / "copy_of_a.csv")
@@ -234,7 +235,8 @@ def test_a_calibration_file_written_meanwhile_is_not_overwritten(tmp_path):
 
 
 def test_calibrate_sim_checks_every_mesh_before_the_first_simulation(tmp_path):
-    from labapp.jobs.calibrate_sim import SimCalError, calibrate_sim
+    from labapp.jobs.calibrate_sim import calibrate_sim
+    from labapp.records.simcal import SimCalError
 
     for name, top in (("a.csv", 1.0), ("b.csv", 1.2), ("c.csv", 0.9)):
         (tmp_path / name).write_text(f"t_s,released_g\n0,0\n100,{top}\n")

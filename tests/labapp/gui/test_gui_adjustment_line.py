@@ -7,8 +7,8 @@ import pytest
 
 pytest.importorskip("pytestqt")
 
-from labapp.jobs.calibrate_sim import SimCalError, curve_of, load_simcal
 from labapp.jobs.physical import adjustment_line, read_measured_target, write_target_csv
+from labapp.records.simcal import SimCalError, curve_of, load_simcal
 from tests.labapp.gui.test_gui_design_targets import _checked, _measured_run, _simcal, launcher  # noqa: F401
 
 

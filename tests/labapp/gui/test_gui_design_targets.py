@@ -55,7 +55,7 @@ def _measured_run(folder: Path, seed: int = 4) -> Path:
 
 
 def _simcal(path: Path) -> Path:
-    from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL
+    from labapp.records.simcal import FORMAT, FORWARD_MODEL
 
     path.write_text(json.dumps({"format": FORMAT, "forward_model": FORWARD_MODEL, "model": "constant",
                                 "physics": {"anisotropy": 1.0, "offset_mm": 0.0}, "seconds_per_mm": 1850.0,

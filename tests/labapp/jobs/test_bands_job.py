@@ -9,8 +9,8 @@ import trimesh
 from labapp.acquisition.printworld import PrintPhysics, world_release
 from labapp.acquisition.simbench import Material, SampleRelease
 from labapp.cli.main import main
-from labapp.jobs.calibrate_sim import load_simcal
 from labapp.jobs.physical import write_design_physical
+from labapp.records.simcal import load_simcal
 
 MESHES = {"slab": lambda: trimesh.creation.box((16, 16, 5)),
           "column": lambda: trimesh.creation.cylinder(radius=3.5, height=18, sections=32),

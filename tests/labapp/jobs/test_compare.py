@@ -81,8 +81,8 @@ def test_a_designs_physical_prediction_carries_the_release_metrics(tmp_path):
     from pathlib import Path
 
     from analysis import SimCal
-    from labapp.jobs.calibrate_sim import SimCalFile
     from labapp.jobs.physical import write_design_physical
+    from labapp.records.simcal import SimCalFile
 
     tau = np.linspace(0, 2.0, 201)
     target = 1000 * (1 - (1 - tau / 2.0) ** 3)       # a sphere-like target, mm^3

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from labapp.cli.main import main
-from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL
+from labapp.records.simcal import FORMAT, FORWARD_MODEL
 
 TINY = ["--space", "extruded", "--resolution", "16", "--radius", "2"]
 G_PER_MM3 = 2.0e-3

@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 from labapp.cli.main import main
-from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL
+from labapp.records.simcal import FORMAT, FORWARD_MODEL
 
 TINY = ["--space", "extruded", "--resolution", "16", "--radius", "2"]
 PHYSICS = {"anisotropy": 1.3, "offset_mm": 0.2, "swelling_mm": 0.6}

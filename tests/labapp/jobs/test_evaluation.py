@@ -92,7 +92,7 @@ def test_sfr_simulate_model_mc_takes_a_calibration_and_refuses_the_forward_ones(
 
 
 def test_sfr_simulate_simcal_summary_carries_the_release_metrics(tmp_path):
-    from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL
+    from labapp.records.simcal import FORMAT, FORWARD_MODEL
 
     simcal = tmp_path / "simcal.json"
     simcal.write_text(json.dumps({"format": FORMAT, "forward_model": FORWARD_MODEL,

@@ -17,9 +17,9 @@ from design.files.targets_io import load_problem
 from design.inverse.problem import DesignConfig
 from design.inverse.targets import Target, isoperimetric_bound, isotonic_fit, project_isoperimetric
 from labapp.acquisition.simbench import Material, sample_release
-from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL, SimCalFile
 from labapp.jobs.physical import TARGET_CSV, TARGET_SLACK, adjustment_line, read_measured_target, write_target_csv
 from labapp.records.curvefiles import PhysicalCurve
+from labapp.records.simcal import FORMAT, FORWARD_MODEL, SimCalFile
 
 MATERIAL = Material(1850.0, 1.24)
 SIMCAL = SimCalFile(SimCal("constant", 1850.0, 1.24e-3), 32, 0.5, 500.0, Path("simcal.json"))

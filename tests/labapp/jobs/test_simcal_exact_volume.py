@@ -1,5 +1,5 @@
 """Mass from exact volumes: a mesh's simulated release is its voxel fraction released times the print's exact
-volume (labapp.jobs.calibrate_sim.exact_volume_release), in calibration and in every physical prediction alike.
+volume (labapp.jobs.printrelease.exact_volume_release), in calibration and in every physical prediction alike.
 
 The synthetic runs are the forward model's own release at 64 voxels, scaled to the mesh's exact volume and a
 known density, so the calibration at 40 voxels must recover that density whatever its voxels hold: a 22 x 6 x 6 mm
@@ -14,8 +14,10 @@ import trimesh
 
 from design.files.pipeline import mesh_grid
 from design.forward.simulator import simulate
-from labapp.jobs.calibrate_sim import calibrate_sim, exact_volume_release, load_simcal, print_volume_mm3
+from labapp.jobs.calibrate_sim import calibrate_sim
 from labapp.jobs.physical import predict_mesh
+from labapp.jobs.printrelease import exact_volume_release, print_volume_mm3
+from labapp.records.simcal import load_simcal
 from tests.labapp.jobs.simcal_sets import write_run, write_set
 
 DENSITY, SECONDS_PER_MM, RESOLUTION = 1.3e-3, 1200.0, 40

@@ -1,5 +1,5 @@
 """Each mesh's simulated release corrected for the fast marching's shape-dependent bias
-(labapp.jobs.calibrate_sim.grid_bias, bias_corrected_release): with identity physics it is the reference
+(labapp.jobs.printrelease.grid_bias, bias_corrected_release): with identity physics it is the reference
 evaluator's exact release, so a calibration on runs whose truth is the exact release recovers its time scale, and
 predicts an unseen curved shape, to within the reference's quadrature error instead of the grid's bias.
 
@@ -16,12 +16,15 @@ import numpy as np
 import pytest
 import trimesh
 
+from analysis.physics_grid import PHYSICS_IDENTITY
 from design.files.pipeline import mesh_grid
 from design.forward.simulator import simulate
-from labapp.jobs import calibrate_sim as cs
+from labapp.jobs import printrelease as pr
 from labapp.jobs.bands import source_release_exact, source_simulator
-from labapp.jobs.calibrate_sim import calibrate_sim, load_simcal
+from labapp.jobs.calibrate_sim import calibrate_sim
 from labapp.jobs.physical import predict_mesh
+from labapp.records import simcal as sc
+from labapp.records.simcal import load_simcal
 from tests.labapp.jobs.simcal_sets import write_run, write_set
 
 DENSITY, SECONDS_PER_MM, RESOLUTION, WATER_G = 1.3e-3, 1200.0, 24, 5000.0
@@ -80,15 +83,15 @@ def test_identity_physics_release_is_the_reference_release():
     from design.forward.reference import design_lattice, reference_release
 
     mesh, _ = _sphere()
-    tau, vol, _ = cs._simulate(mesh, "sphere.stl", RESOLUTION)
-    depths = np.linspace(0.0, 0.5 * max(mesh.extents), cs.BIAS_SAMPLES)   # the depths the reference is made at
+    tau, vol, _ = pr.mesh_release(mesh, "sphere.stl", RESOLUTION)
+    depths = np.linspace(0.0, 0.5 * max(mesh.extents), pr.BIAS_SAMPLES)   # the depths the reference is made at
     ref = reference_release(mesh, depths, cells=design_lattice(RESOLUTION))
     np.testing.assert_allclose(np.interp(depths, tau, vol), ref.released_mm3, rtol=0, atol=1e-9 * mesh.volume)
     # with print physics: still monotone and ending at the print's exact volume (the offset's Steiner volume)
-    physics = dict(cs.PHYSICS_IDENTITY, anisotropy=1.3, offset_mm=0.1)
-    tau, vol, _ = cs._simulate(mesh, "sphere.stl", RESOLUTION, physics)
+    physics = dict(PHYSICS_IDENTITY, anisotropy=1.3, offset_mm=0.1)
+    tau, vol, _ = pr.mesh_release(mesh, "sphere.stl", RESOLUTION, physics)
     assert np.all(np.diff(vol) >= 0) and vol[0] == 0.0
-    assert vol[-1] == pytest.approx(cs.print_volume_mm3(mesh, 0.1), rel=1e-12)
+    assert vol[-1] == pytest.approx(pr.print_volume_mm3(mesh, 0.1), rel=1e-12)
 
 
 def test_bias_is_computed_once_per_mesh_resolution_and_anisotropy(monkeypatch):
@@ -99,13 +102,13 @@ def test_bias_is_computed_once_per_mesh_resolution_and_anisotropy(monkeypatch):
     monkeypatch.setattr(reference, "reference_release", lambda *a, **k: calls.append(1) or real(*a, **k))
     mesh = trimesh.creation.box((7.0, 5.0, 3.0))
     grid = mesh_grid(mesh, resolution=RESOLUTION)
-    first = cs.grid_bias(mesh, grid, RESOLUTION)
+    first = pr.grid_bias(mesh, grid, RESOLUTION)
     for _ in range(2):
         for anisotropy in (0.8, 1.0, 1.25):   # each anisotropy its own bias, once
-            cs._simulate(mesh, "box.stl", RESOLUTION, dict(cs.PHYSICS_IDENTITY, anisotropy=anisotropy))
-    assert cs.grid_bias(mesh, mesh_grid(mesh, resolution=RESOLUTION), RESOLUTION) is first
+            pr.mesh_release(mesh, "box.stl", RESOLUTION, dict(PHYSICS_IDENTITY, anisotropy=anisotropy))
+    assert pr.grid_bias(mesh, mesh_grid(mesh, resolution=RESOLUTION), RESOLUTION) is first
     assert len(calls) == 3
-    cs.grid_bias(mesh, mesh_grid(mesh, resolution=RESOLUTION + 2), RESOLUTION + 2)   # another grid: its own bias
+    pr.grid_bias(mesh, mesh_grid(mesh, resolution=RESOLUTION + 2), RESOLUTION + 2)   # another grid: its own bias
     assert len(calls) == 4
 
 
@@ -121,16 +124,16 @@ def test_anisotropic_release_is_corrected_at_its_own_anisotropy(anisotropy):
     mesh = trimesh.creation.icosphere(4, radius=4.0)
     mesh.apply_scale([1.0, 1.0, anisotropy])
     r = (mesh.volume / anisotropy / (4 / 3 * math.pi)) ** (1 / 3)
-    physics = dict(cs.PHYSICS_IDENTITY, anisotropy=anisotropy)
-    tau, vol, _ = cs._simulate(mesh, "ellipsoid.stl", RESOLUTION, physics)
+    physics = dict(PHYSICS_IDENTITY, anisotropy=anisotropy)
+    tau, vol, _ = pr.mesh_release(mesh, "ellipsoid.stl", RESOLUTION, physics)
     exact = mesh.volume * (1 - np.clip(1 - tau / r, 0, None) ** 3)
     corrected = float(np.max(np.abs(vol - exact))) / mesh.volume
     grid = mesh_grid(mesh, resolution=RESOLUTION)
     plain = simulate(*grid[:2], mirror=grid[2], anisotropy=anisotropy)
-    plain_vol = cs.exact_volume_release(plain.released_mm3, mesh)
+    plain_vol = pr.exact_volume_release(plain.released_mm3, mesh)
     alone = float(np.max(np.abs(plain_vol - mesh.volume * (1 - np.clip(1 - plain.tau_mm / r, 0, None) ** 3))))
-    iso_tau, iso_vol = cs.bias_corrected_release(plain.tau_mm, plain.released_mm3, mesh, 0.0,
-                                                 cs.grid_bias(mesh, grid, RESOLUTION, 1.0))
+    iso_tau, iso_vol = pr.bias_corrected_release(plain.tau_mm, plain.released_mm3, mesh, 0.0,
+                                                 pr.grid_bias(mesh, grid, RESOLUTION, 1.0))
     isotropic = float(np.max(np.abs(iso_vol - mesh.volume * (1 - np.clip(1 - iso_tau / r, 0, None) ** 3))))
     print(f"a={anisotropy}: corrected {100 * corrected:.2f}%, grid alone {100 * alone / mesh.volume:.2f}%, "
           f"isotropic bias {100 * isotropic / mesh.volume:.2f}%")
@@ -141,9 +144,9 @@ def test_anisotropic_release_is_corrected_at_its_own_anisotropy(anisotropy):
 
 def test_calibration_recovers_time_scale_and_predicts_unseen_curved_shape(tmp_path, monkeypatch):
     run = _calibrate(tmp_path, "cal")
-    assert run.doc["release_method"] == cs.RELEASE_METHOD
+    assert run.doc["release_method"] == sc.RELEASE_METHOD
     simcal = load_simcal(run.path)
-    assert simcal.release_method == cs.RELEASE_METHOD
+    assert simcal.release_method == sc.RELEASE_METHOD
     # the corrected release is the exact one to the reference's quadrature error (< 0.2 % of the volume at
     # 96 cells, docs/forward.md) and the truth is exact, so what remains is that error and the fit's tolerance:
     # the shared time scale within 0.5 %, the unseen capsule within 0.5 % of its mass (measured: 0.03 %, 0.02 %)
@@ -156,9 +159,9 @@ def test_calibration_recovers_time_scale_and_predicts_unseen_curved_shape(tmp_pa
     # capsule comes out right (measured: the time scale 6.8 % off, the capsule 3.2 % of its mass)
     def grid_alone(mesh, grid, resolution, physics, release=None):
         plain = simulate(*grid[:2], mirror=grid[2], anisotropy=physics["anisotropy"])
-        return plain.tau_mm, cs.exact_volume_release(plain.released_mm3, mesh, physics["offset_mm"])
+        return plain.tau_mm, pr.exact_volume_release(plain.released_mm3, mesh, physics["offset_mm"])
 
-    monkeypatch.setattr(cs, "print_release", grid_alone)
+    monkeypatch.setattr(pr, "print_release", grid_alone)
     old = _calibrate(tmp_path, "grid")
     assert abs(old.doc["seconds_per_mm"] / SECONDS_PER_MM - 1) > 5 * abs(run.doc["seconds_per_mm"] / SECONDS_PER_MM - 1)
     assert abs(old.doc["seconds_per_mm"] / SECONDS_PER_MM - 1) > 0.015
@@ -172,18 +175,18 @@ def test_older_file_reads_as_grid_method_and_predicts_with_it(tmp_path):
     older = tmp_path / "older.json"
     older.write_text(json.dumps(doc))
     simcal = load_simcal(older)
-    assert simcal.release_method == cs.OLD_RELEASE_METHOD
+    assert simcal.release_method == sc.OLD_RELEASE_METHOD
     mesh, _ = _sphere()
     mesh.export(tmp_path / "ball.stl")
     tau, vol = source_simulator(str(tmp_path / "ball.stl"), RESOLUTION, method=simcal.release_method)(simcal.physics)
     grid = mesh_grid(mesh, resolution=RESOLUTION)
 
     plain = simulate(*grid[:2], mirror=grid[2])
-    np.testing.assert_allclose(vol, cs.exact_volume_release(plain.released_mm3, mesh))
+    np.testing.assert_allclose(vol, pr.exact_volume_release(plain.released_mm3, mesh))
     np.testing.assert_array_equal(tau, plain.tau_mm)
     doc["release_method"] = "magic"
     older.write_text(json.dumps(doc))
-    with pytest.raises(cs.SimCalError, match="release_method 'magic'"):
+    with pytest.raises(sc.SimCalError, match="release_method 'magic'"):
         load_simcal(older)
 
 
@@ -193,7 +196,7 @@ def test_density_array_keeps_its_release(tmp_path):
     np.save(tmp_path / "block.npy", rho)
     tau, released = np.linspace(0, 3, 7), np.linspace(0, 144, 7)
     release = SimpleNamespace(tau_mm=tau, released_mm3=released)
-    out_tau, out = source_release_exact(str(tmp_path / "block.npy"), release, dict(cs.PHYSICS_IDENTITY),
+    out_tau, out = source_release_exact(str(tmp_path / "block.npy"), release, dict(PHYSICS_IDENTITY),
                                         resolution=RESOLUTION)
     np.testing.assert_array_equal(out_tau, tau)
     np.testing.assert_array_equal(out, released)
@@ -208,11 +211,11 @@ def test_offset_print_is_the_grown_or_shrunk_solid(offset):
     a surface moved by under a voxel only to within its voxels (measured: 4.3 %, 4.9 %)."""
     mesh, _ = _sphere()
     r = (mesh.volume / (4 / 3 * math.pi)) ** (1 / 3) + offset
-    physics = dict(cs.PHYSICS_IDENTITY, offset_mm=offset)
-    tau, vol, _ = cs._simulate(mesh, "sphere.stl", RESOLUTION, physics)
-    total = cs.print_volume_mm3(mesh, offset)
+    physics = dict(PHYSICS_IDENTITY, offset_mm=offset)
+    tau, vol, _ = pr.mesh_release(mesh, "sphere.stl", RESOLUTION, physics)
+    total = pr.print_volume_mm3(mesh, offset)
     exact = total * (1 - np.clip(1 - tau / r, 0, None) ** 3)
-    grid_tau, grid_vol, _ = cs._simulate(mesh, "sphere.stl", RESOLUTION, physics, method=cs.OLD_RELEASE_METHOD)
+    grid_tau, grid_vol, _ = pr.mesh_release(mesh, "sphere.stl", RESOLUTION, physics, method=sc.OLD_RELEASE_METHOD)
     grid_exact = total * (1 - np.clip(1 - grid_tau / r, 0, None) ** 3)
     corrected = float(np.max(np.abs(vol - exact))) / total
     alone = float(np.max(np.abs(grid_vol - grid_exact))) / total
@@ -224,7 +227,7 @@ def test_offset_in_the_anisotropic_metric():
     """A face across the build direction moves offset / a in the metric of anisotropy a, a face along it the offset
     itself; a thin slab's mean is near the first, a tall column's near the second."""
     slab, column = trimesh.creation.box((40.0, 40.0, 1.0)), trimesh.creation.box((1.0, 1.0, 40.0))
-    assert cs.metric_offset_mm(slab, 1.0, 0.1) == 0.1
-    assert cs.metric_offset_mm(slab, 1.6, 0.1) == pytest.approx(0.1 / 1.6, rel=0.06)
-    assert cs.metric_offset_mm(column, 1.6, 0.1) == pytest.approx(0.1, rel=0.03)
-    assert cs.metric_offset_mm(slab, 0.6, -0.1) == pytest.approx(-0.1 / 0.6, rel=0.06)
+    assert pr.metric_offset_mm(slab, 1.0, 0.1) == 0.1
+    assert pr.metric_offset_mm(slab, 1.6, 0.1) == pytest.approx(0.1 / 1.6, rel=0.06)
+    assert pr.metric_offset_mm(column, 1.6, 0.1) == pytest.approx(0.1, rel=0.03)
+    assert pr.metric_offset_mm(slab, 0.6, -0.1) == pytest.approx(-0.1 / 0.6, rel=0.06)

@@ -15,7 +15,8 @@ from design.geometry.shapes import sample_shape
 from labapp.acquisition.simbench import Material, sample_release
 from labapp.cli.main import main
 from labapp.errors import UsageError
-from labapp.jobs.calibrate_sim import SimCalError, calibrate_sim, load_simcal
+from labapp.jobs.calibrate_sim import calibrate_sim
+from labapp.records.simcal import SimCalError, load_simcal
 
 SHAPES = ("sphere", "pill", "spinner_top", "csg")
 MATERIAL = Material(1850.0, 1.24)

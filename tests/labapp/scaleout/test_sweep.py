@@ -77,7 +77,7 @@ def test_spec_text_round_trips():
 
 
 def test_a_measured_target_goes_through_the_simulation_calibration(tmp_path):
-    from labapp.jobs.calibrate_sim import FORMAT, FORWARD_MODEL
+    from labapp.records.simcal import FORMAT, FORWARD_MODEL
 
     (tmp_path / "simcal.json").write_text(json.dumps({
         "format": FORMAT, "forward_model": FORWARD_MODEL,
