@@ -22,7 +22,7 @@ from analysis.calibration import BenchCalibration, estimate_concentration, refer
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S, smooth_curve
 from analysis.decode import check_reduce
 from analysis.errors import AnalysisError
-from analysis.frames import read_frame_list
+from analysis.frames import FrameList, read_frame_list
 from analysis.geometry import read_cells
 
 log = logging.getLogger(__name__)
@@ -141,6 +141,40 @@ def analyze_run(folder: str | Path, calibration: BenchCalibration, *, interval_s
     """
     frames = read_frame_list(folder, interval_s=interval_s)
     reduce = check_reduce(calibration.reduce if reduce is None else reduce)
+    water, warnings = _water_and_warnings(frames, calibration, water_g)
+    key = _cache_key(calibration, reduce)
+    cache_path = None if cache_dir is None else Path(cache_dir)
+    cache = _load_cache(cache_path, key)
+    try:
+        results = _decode_frames(frames, calibration, reduce, cache, workers, progress)
+    except KeyboardInterrupt:
+        if cache_path is not None and cache:
+            _save_cache(cache_path, key, cache)
+        raise
+    keep = _kept_frames(frames, results, cache, warnings)
+    if cache_path is not None:
+        _save_cache(cache_path, key, cache)
+    reference_cells = _reference_cells(frames, calibration, reduce, warnings)
+    cells = np.array([results[i][1] for i in keep])
+    estimates = [estimate_concentration(c, calibration, reference_cells=reference_cells) for c in cells]
+    t_s = frames.t_s[keep]
+    conc = np.array([e.conc_g_per_kg for e in estimates])
+    smooth = smooth_curve(t_s, conc, window_s=window_s, order=order)
+    return RunCurve([str(frames.files[i].relative_to(frames.folder)) for i in keep], t_s, conc,
+                    np.array([e.uncertainty_g_per_kg for e in estimates]), smooth, smooth * water / 1000.0,
+                    cells, np.array([len(e.rejected_cells) for e in estimates]), water, warnings,
+                    _positive_or_none(frames.run.get("object_mass_g")))
+
+
+def _water_and_warnings(frames: FrameList, calibration: BenchCalibration, water_g: float | None) -> tuple[float, list[str]]:
+    """The run's water mass, g (``water_g``, else run.json's, else the calibration's), and the warnings so far: the
+    manifest's, and a run.json crop that differs from the calibration's.
+
+    Raises
+    ------
+    AnalysisError
+        If the water mass is not positive.
+    """
     warnings = list(frames.warnings)
     water = float(water_g or frames.run.get("water_g") or calibration.water_g)
     if not water > 0:
@@ -149,11 +183,21 @@ def analyze_run(folder: str | Path, calibration: BenchCalibration, *, interval_s
     if isinstance(crop, dict) and any(crop.get(k) != v for k, v in calibration.geometry.to_dict().items()
                                       if k in ("x", "y", "size")):
         warnings.append(f"run.json crop {crop} differs from the calibration's; the calibration's is used")
-    key = _cache_key(calibration, reduce)
-    cache_path = None if cache_dir is None else Path(cache_dir)
-    cache = _load_cache(cache_path, key)
+    return water, warnings
 
-    def work(path: Path) -> tuple[str, np.ndarray | None, str | None]:
+
+_Decoded = tuple[str, np.ndarray | None, str | None]
+"""A frame's cache id, its cells (None when it could not be read) and the reason it could not."""
+
+
+def _decode_frames(frames: FrameList, calibration: BenchCalibration, reduce: int, cache: dict[str, np.ndarray],
+                   workers: int | None, progress: Callable[[int, int], None] | None) -> list[_Decoded]:
+    """Every frame's cells, from ``cache`` or decoded on a thread pool, in the order of ``frames.files``.
+
+    A ``KeyboardInterrupt`` from ``progress`` lets the frames being decoded finish, starts no others, adds the
+    ones done to ``cache`` and propagates.
+    """
+    def work(path: Path) -> _Decoded:
         ident = _file_id(path)
         if ident in cache:
             return ident, cache[ident], None
@@ -164,7 +208,7 @@ def analyze_run(folder: str | Path, calibration: BenchCalibration, *, interval_s
             return ident, None, str(exc)
 
     n = len(frames.files)
-    results: list[tuple[str, np.ndarray | None, str | None]] = []
+    results: list[_Decoded] = []
     with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
         try:
             for done, result in enumerate(pool.map(work, frames.files), start=1):
@@ -175,9 +219,19 @@ def analyze_run(folder: str | Path, calibration: BenchCalibration, *, interval_s
             # the frames being decoded finish, the others are not started; the ones done stay in the cache
             pool.shutdown(wait=True, cancel_futures=True)
             cache.update((ident, cells) for ident, cells, _ in results if cells is not None)
-            if cache_path is not None and cache:
-                _save_cache(cache_path, key, cache)
             raise
+    return results
+
+
+def _kept_frames(frames: FrameList, results: list[_Decoded], cache: dict[str, np.ndarray],
+                 warnings: list[str]) -> list[int]:
+    """Indices of the frames whose cells were read (added to ``cache``); a warning for each skipped one.
+
+    Raises
+    ------
+    AnalysisError
+        If no frame could be read.
+    """
     keep = []
     for i, (ident, cells, error) in enumerate(results):
         if cells is None:
@@ -187,33 +241,27 @@ def analyze_run(folder: str | Path, calibration: BenchCalibration, *, interval_s
             cache[ident] = cells
             keep.append(i)
     if not keep:
-        raise AnalysisError(f"none of the {n} frames in {frames.folder} could be analysed; first problem: "
+        raise AnalysisError(f"none of the {len(results)} frames in {frames.folder} could be analysed; first problem: "
                             f"{results[0][2]}")
-    if cache_path is not None:
-        _save_cache(cache_path, key, cache)
+    return keep
 
-    reference_cells = None
-    if frames.reference is not None:
-        try:
-            reference_cells = read_cells(frames.reference, calibration.geometry, reduce=reduce,
-                                         expect_shape=calibration.image_shape)
-        except AnalysisError as exc:
-            warnings.append(f"reference frame unusable, calibration zero level used: {exc}")
-        else:
-            _, message = reference_offset(reference_cells, calibration)
-            if message:
-                warnings.append(message)
-                log.warning("%s", message)
 
-    cells = np.array([results[i][1] for i in keep])
-    estimates = [estimate_concentration(c, calibration, reference_cells=reference_cells) for c in cells]
-    t_s = frames.t_s[keep]
-    conc = np.array([e.conc_g_per_kg for e in estimates])
-    smooth = smooth_curve(t_s, conc, window_s=window_s, order=order)
-    return RunCurve([str(frames.files[i].relative_to(frames.folder)) for i in keep], t_s, conc,
-                    np.array([e.uncertainty_g_per_kg for e in estimates]), smooth, smooth * water / 1000.0,
-                    cells, np.array([len(e.rejected_cells) for e in estimates]), water, warnings,
-                    _positive_or_none(frames.run.get("object_mass_g")))
+def _reference_cells(frames: FrameList, calibration: BenchCalibration, reduce: int,
+                     warnings: list[str]) -> np.ndarray | None:
+    """The cells of the run's clear-water reference frame, None when it has none or it is unusable (a warning)."""
+    if frames.reference is None:
+        return None
+    try:
+        reference_cells = read_cells(frames.reference, calibration.geometry, reduce=reduce,
+                                     expect_shape=calibration.image_shape)
+    except AnalysisError as exc:
+        warnings.append(f"reference frame unusable, calibration zero level used: {exc}")
+        return None
+    _, message = reference_offset(reference_cells, calibration)
+    if message:
+        warnings.append(message)
+        log.warning("%s", message)
+    return reference_cells
 
 
 def _positive_or_none(value: object) -> float | None:

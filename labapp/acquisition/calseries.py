@@ -38,7 +38,9 @@ from labapp.acquisition.settings import (
 from labapp.errors import UsageError
 from labapp.records.audit import Action
 from labapp.records.audit import append as audit
-from labapp.records.storage import MASSES_CSV, RunFolder, atomic_write, create_run
+from labapp.records.fileio import atomic_write
+from labapp.records.manifests import MASSES_CSV
+from labapp.records.storage import RunFolder, create_run
 
 CALIBRATION_FILE = "bench_calibration.json"
 MASS_COLUMNS = ("file", "added_mass_g")

@@ -32,7 +32,8 @@ from labapp.acquisition.settings import (
 )
 from labapp.errors import UsageError
 from labapp.records import operators
-from labapp.records.storage import atomic_write, read_record, sha256_file
+from labapp.records.fileio import atomic_write, sha256_file
+from labapp.records.manifests import read_record
 
 __all__ = ["METHOD_FORMAT", "METHOD_SETTINGS", "Criterion", "Method", "MethodError", "load_method", "make_method",
            "method_from_config", "method_from_run", "save_method"]

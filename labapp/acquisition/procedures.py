@@ -39,8 +39,10 @@ from labapp.errors import UsageError
 from labapp.records import requests
 from labapp.records.audit import Action
 from labapp.records.audit import append as audit
+from labapp.records.fileio import check_disk_space, free_bytes
+from labapp.records.manifests import read_run
 from labapp.records.runrecord import RecordStatus
-from labapp.records.storage import RunFolder, check_disk_space, create_run, free_bytes, open_run, read_run
+from labapp.records.storage import RunFolder, create_run, open_run
 
 _STATUS = {outcome: RecordStatus(outcome) for outcome in Outcome}
 

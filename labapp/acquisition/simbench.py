@@ -37,7 +37,7 @@ from labapp.acquisition.clock import Clock, ScaledClock, SteppedClock, WallClock
 from labapp.acquisition.printworld import WORLD_RESOLUTION, PrintPhysics
 from labapp.acquisition.settings import WATER
 from labapp.acquisition.worldcache import cached_world_release
-from labapp.records.storage import FRAMES_CSV, read_run
+from labapp.records.manifests import FRAMES_CSV, read_run
 
 log = logging.getLogger(__name__)
 

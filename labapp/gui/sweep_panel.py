@@ -30,7 +30,7 @@ from PySide6.QtWidgets import (
 from design.inverse.presets import PRESET_NAMES
 from labapp.figures.contact_sheet import rank
 from labapp.gui.bridge import BackgroundTask
-from labapp.records.storage import sanitize_name
+from labapp.records.fileio import sanitize_name
 from labapp.scaleout.cluster import local_worker_count
 from labapp.scaleout.sweep import Progress, SweepResult, sweep_on_cluster
 from labapp.scaleout.sweepspec import SweepSpec, parse_spec, spec_text

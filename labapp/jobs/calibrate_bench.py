@@ -16,8 +16,8 @@ from labapp.errors import UsageError
 from labapp.records import operators
 from labapp.records.audit import AUDIT_FILE, Action
 from labapp.records.audit import append as audit
+from labapp.records.manifests import MASSES_CSV, RUN_JSON, RecordReadError, read_record
 from labapp.records.outpaths import OutPathError, check_out
-from labapp.records.storage import MASSES_CSV, RUN_JSON, RecordReadError, read_record
 
 log = logging.getLogger(__name__)
 

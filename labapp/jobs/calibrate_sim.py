@@ -46,11 +46,11 @@ from labapp.records import operators
 from labapp.records.audit import Action
 from labapp.records.audit import append as audit
 from labapp.records.curvefiles import CurveFileError, read_physical_curve
+from labapp.records.fileio import atomic_write, sha256_file
 from labapp.records.lock import folder_lock
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.simcal import FORMAT, FORWARD_MODEL, RELEASE_METHOD, SimCalError
 from labapp.records.simcalset import SetRow, read_set
-from labapp.records.storage import atomic_write, sha256_file
 
 DEFAULT_RESOLUTION = 64
 """Voxels along each mesh's longest side when calibrating (``sfr simulate``'s default)."""

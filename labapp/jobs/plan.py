@@ -31,8 +31,8 @@ import trimesh
 
 from analysis.physics_grid import LAG, PHYSICS_IDENTITY, PHYSICS_PARAMETERS, PHYSICS_SETS
 from labapp.errors import UsageError
+from labapp.records.fileio import atomic_write
 from labapp.records.outpaths import FolderKind, check_out
-from labapp.records.storage import atomic_write
 
 PLAN_PRINTS = 4
 """Prints proposed by default."""

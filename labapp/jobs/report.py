@@ -29,10 +29,11 @@ from labapp.jobs.verify import verify
 from labapp.records import operators
 from labapp.records.audit import check_trail
 from labapp.records.curvefiles import read_physical_curve
+from labapp.records.fileio import StorageError, sha256_file
+from labapp.records.manifests import EVENTS_LOG, read_run
 from labapp.records.outpaths import check_out
 from labapp.records.runrecord import RecordKind
 from labapp.records.signatures import check_signatures, record_hash
-from labapp.records.storage import EVENTS_LOG, StorageError, read_run, sha256_file
 
 __all__ = ["DEFAULT_RULE", "ReportData", "collect", "write_report"]
 

@@ -11,9 +11,11 @@ from labapp.acquisition.procedures import RunConfig, RunProcedure, check_change
 from labapp.acquisition.settings import INTERVAL
 from labapp.errors import UsageError
 from labapp.records import operators, requests
+from labapp.records.fileio import StorageError
+from labapp.records.manifests import RunSnapshot, read_run
 from labapp.records.outpaths import FolderKind, check_data_dir, folder_kind
 from labapp.records.runrecord import RecordKind, RecordStatus
-from labapp.records.storage import RunSnapshot, StorageError, finalise_run, read_run
+from labapp.records.storage import finalise_run
 
 
 def new_run(config: RunConfig, bench: Bench, data_dir: str | Path,

@@ -35,9 +35,9 @@ from labapp.jobs.simulate import (
     SimulationOutputs,  # labapp.jobs imports this module
     simulation_grid,
 )
+from labapp.records.fileio import atomic_write
 from labapp.records.jsonfile import read_format
 from labapp.records.outpaths import FolderKind, check_out
-from labapp.records.storage import atomic_write
 
 if TYPE_CHECKING:
     from labapp.jobs.simulate import SimulationOutputs

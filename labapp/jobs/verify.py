@@ -6,11 +6,11 @@ from pathlib import Path
 
 from labapp.records.audit import AUDIT_FILE
 from labapp.records.signatures import record_checks
-from labapp.records.storage import VerifyReport, verify_run
+from labapp.records.verification import VerifyReport, verify_run
 
 
 def verify(folder: str | Path) -> VerifyReport:
-    """Check a folder against its manifests; returns a :class:`labapp.records.storage.VerifyReport` (never raises
+    """Check a folder against its manifests; returns a :class:`labapp.records.verification.VerifyReport` (never raises
     for a bad folder: what is wrong is in the report), with its audit trail and signatures
     (:func:`labapp.records.signatures.record_checks`)."""
     folder = Path(folder)

@@ -26,8 +26,8 @@ import numpy as np
 
 from analysis import AnalysisError, BenchCalibration, analyze_run
 from labapp.errors import UsageError
+from labapp.records.manifests import RUN_JSON, RecordReadError, read_record
 from labapp.records.runrecord import RunRecord
-from labapp.records.storage import RUN_JSON, RecordReadError, read_record
 
 CURVE_FILES = ("curve.csv", "release_physical.csv", "curves_physical.csv")
 """The physical curve files the project writes, looked for in that order inside a folder."""

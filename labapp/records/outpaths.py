@@ -30,8 +30,9 @@ from pathlib import Path
 
 from analysis.decode import IMAGE_SUFFIXES
 from labapp.errors import UsageError
+from labapp.records.fileio import StorageError
+from labapp.records.manifests import RUN_JSON, read_record
 from labapp.records.runrecord import RecordKind
-from labapp.records.storage import RUN_JSON, StorageError, read_record
 
 __all__ = ["KINDS", "FolderKind", "OutPathError", "check_data_dir", "check_out", "folder_kind"]
 

@@ -16,7 +16,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from labapp.records.storage import atomic_write
+from labapp.records.fileio import atomic_write
 
 __all__ = ["REQUESTS_DIR", "answer", "claim", "post", "wait_answer", "withdraw"]
 

@@ -4,7 +4,7 @@
 records carried their format, or by hand (the bench fixtures). Reading never rewrites a record:
 :func:`migrate` turns any layout this version knows into the current one in memory, and
 :meth:`RunRecord.from_stored` makes the typed record the application reads. The file itself is read by
-:func:`labapp.records.storage.read_record` (no I/O here). Field by field in ``docs/formats.md``.
+:func:`labapp.records.manifests.read_record` (no I/O here). Field by field in ``docs/formats.md``.
 """
 from __future__ import annotations
 

@@ -21,7 +21,9 @@ from typing import Any
 from labapp.errors import UsageError
 from labapp.records import operators
 from labapp.records.audit import AUDIT_FILE, FINISH_ACTIONS, SIGNATURES_FILE, Action, append, check_trail, entry_hash
-from labapp.records.storage import RUN_JSON, sha256_file, verify_run
+from labapp.records.fileio import sha256_file
+from labapp.records.manifests import RUN_JSON
+from labapp.records.verification import verify_run
 
 __all__ = ["Meaning", "SignatureError", "SignatureState", "check_signatures", "read_signatures", "record_checks",
            "record_hash", "sign", "signed_heads"]

@@ -12,8 +12,9 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from labapp.records.fileio import sha256_file
+from labapp.records.manifests import FRAMES_CSV
 from labapp.records.simcal import SimCalError
-from labapp.records.storage import FRAMES_CSV, sha256_file
 
 SET_COLUMNS = ("run", "mesh", "object_mass_g")
 """The columns a set file must have (``water_g`` is optional)."""

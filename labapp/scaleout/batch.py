@@ -23,8 +23,8 @@ from analysis import BenchCalibration, ReleaseProfile, similarity
 from labapp.jobs.analyse import analyse_run
 from labapp.jobs.compare import profile_of
 from labapp.records.curvefiles import read_physical_curve
+from labapp.records.fileio import sanitize_name
 from labapp.records.outpaths import FolderKind, check_out
-from labapp.records.storage import sanitize_name
 from labapp.scaleout.sweep import Progress
 
 log = logging.getLogger(__name__)

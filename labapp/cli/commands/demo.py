@@ -29,8 +29,8 @@ def run(args: argparse.Namespace) -> int:
 
     from labapp.cli import interrupt
     from labapp.jobs.demo import check_demo, run_demo
+    from labapp.records.fileio import timestamp_name
     from labapp.records.outpaths import check_data_dir
-    from labapp.records.storage import timestamp_name
 
     check_demo(args.sample, args.interval)   # every input before the first line of work
     out = check_data_dir(args.out) / timestamp_name(args.sample)

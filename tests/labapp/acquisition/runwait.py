@@ -1,7 +1,7 @@
 """Waiting for a recording `sfr run` process's frames, for the tests that act on a run while it records."""
 import time
 
-from labapp.records.storage import read_run
+from labapp.records.manifests import read_run
 
 
 def wait_frames(root, n, proc, timeout_s=120):

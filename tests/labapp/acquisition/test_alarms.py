@@ -14,7 +14,8 @@ from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.acquisition.settings import BathSettings
 from labapp.acquisition.simbench import SimulatedBench
 from labapp.jobs.run import resumable
-from labapp.records.storage import read_run, verify_run
+from labapp.records.manifests import read_run
+from labapp.records.verification import verify_run
 from tests.labapp.acquisition.test_lab_procedures import FAST_BATH, _bench, _truth, calibration  # noqa: F401, F811
 from tests.labapp.lab_fakes import SCENE, ModelHotplate, RenderCamera
 

@@ -4,8 +4,9 @@ import signal
 import subprocess
 import sys
 
+from labapp.records.manifests import read_run, unrecorded_frames
 from labapp.records.runrecord import RecordStatus
-from labapp.records.storage import read_run, unrecorded_frames, verify_run
+from labapp.records.verification import verify_run
 from tests.labapp.acquisition.runwait import wait_frames
 
 

@@ -16,7 +16,8 @@ from labapp.acquisition.events import FrameStored, Prompt, StateChanged
 from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.acquisition.settings import WATER, BathSettings
 from labapp.acquisition.simbench import SimulatedBench
-from labapp.records.storage import read_run, verify_run
+from labapp.records.manifests import read_run
+from labapp.records.verification import verify_run
 from tests.labapp.lab_fakes import SCENE, ModelHotplate, RenderCamera
 
 WATER_G = WATER.default
@@ -118,7 +119,7 @@ def test_config_guards():
 
 
 def test_the_disk_check_before_a_run_uses_the_benchs_frame_size(tmp_path, calibration, monkeypatch):
-    monkeypatch.setattr("labapp.records.storage.free_bytes", lambda folder: 10**9)  # 1 GB free
+    monkeypatch.setattr("labapp.records.fileio.free_bytes", lambda folder: 10**9)  # 1 GB free
     config = RunConfig(max_duration_s=3600, bath=FAST_BATH)  # 328 frames at 11 s
     clock = SteppedClock(start_s=4e9)
     dslr = _bench(clock, _truth([None]))  # 15 MB a frame: 328 x 15 MB x 1.5 = 7.4 GB do not fit

@@ -8,7 +8,8 @@ from labapp.acquisition.events import FrameStored
 from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.acquisition.settings import BathSettings
 from labapp.acquisition.simbench import Material, SampleRelease, SimulatedBench, sample_release
-from labapp.records.storage import read_run, verify_run
+from labapp.records.manifests import read_run
+from labapp.records.verification import verify_run
 
 
 def _sphere(radius_mm=6.82):

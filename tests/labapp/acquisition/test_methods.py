@@ -7,7 +7,8 @@ import pytest
 from labapp.acquisition.methods import Criterion, MethodError, load_method, make_method, method_from_run, save_method
 from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.acquisition.settings import BathSettings
-from labapp.records.storage import create_run, read_record
+from labapp.records.manifests import read_record
+from labapp.records.storage import create_run
 
 SETTINGS = {"water_g": 500.0, "setpoint_c": 37.0, "speed_rpm": 100.0, "tolerance_c": 0.5, "hold_s": 120.0,
             "heat_timeout_s": 7200.0, "interval_s": 30.0, "max_duration_s": 7200.0, "min_duration_s": 1800.0}

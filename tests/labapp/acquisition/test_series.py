@@ -14,7 +14,8 @@ from labapp.acquisition.settings import INSTANT_STABLE_STEP_S, SERIES_REDUCE, SE
 from labapp.cli.main import main
 from labapp.errors import UsageError
 from labapp.jobs.series import new_series, simulated_series_bench
-from labapp.records.storage import read_run, verify_run
+from labapp.records.manifests import read_run
+from labapp.records.verification import verify_run
 from tests.labapp.lab_fakes import SCENE, ModelHotplate, RenderCamera
 
 QUICK_BATH = ("--setpoint", "25", "--tolerance", "1", "--hold", "30")

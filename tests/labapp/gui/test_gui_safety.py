@@ -132,7 +132,8 @@ def test_closing_mid_run_asks_and_interrupts_the_run_resumably(qtbot, tmp_path, 
 
 
 def test_finalise_asks_first(qtbot, tmp_path, monkeypatch):
-    from labapp.records.storage import create_run, read_run
+    from labapp.records.manifests import read_run
+    from labapp.records.storage import create_run
 
     run = create_run(tmp_path / "runs", "pill", {"kind": "run", "config": {}})
     run.update(writer_pid=None, writer_started=None)         # the writer is gone: interrupted

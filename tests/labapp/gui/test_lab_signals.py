@@ -13,7 +13,8 @@ import pytest
 pytest.importorskip("pytestqt")
 
 from labapp.jobs.run import resumable
-from labapp.records.storage import read_run, verify_run
+from labapp.records.manifests import read_run
+from labapp.records.verification import verify_run
 
 ROOT = Path(__file__).resolve().parents[3]
 

@@ -6,10 +6,11 @@ import pytest
 from labapp.jobs.verify import verify
 from labapp.records import operators
 from labapp.records.audit import AUDIT_FILE, Action, append, check_trail
+from labapp.records.manifests import read_record
 from labapp.records.operators import OperatorError
 from labapp.records.runrecord import RecordStatus
 from labapp.records.signatures import SignatureError, check_signatures, sign
-from labapp.records.storage import create_run, finalise_run, open_run, read_record
+from labapp.records.storage import create_run, finalise_run, open_run
 
 PASSWORD = "correct horse battery"
 
@@ -222,7 +223,7 @@ def test_sign_and_audit_from_the_command_line(users, tmp_path, monkeypatch, caps
 def test_a_setting_changes_during_a_run_only_audited_with_a_reason(users, tmp_path):
     from labapp.acquisition.procedures import RunConfig, RunProcedure
     from labapp.errors import UsageError
-    from labapp.records.storage import read_run
+    from labapp.records.manifests import read_run
 
     proc = RunProcedure(RunConfig(max_duration_s=3600.0), bench=None, data_dir=tmp_path / "data")
     with pytest.raises(UsageError, match="no run is recording"):

@@ -6,8 +6,11 @@ import os
 import psutil
 import pytest
 
+from labapp.records.fileio import StorageError, check_disk_space, sanitize_name
+from labapp.records.manifests import read_run
 from labapp.records.runrecord import RecordStatus
-from labapp.records.storage import StorageError, check_disk_space, create_run, open_run, read_run, sanitize_name, verify_run
+from labapp.records.storage import create_run, open_run
+from labapp.records.verification import verify_run
 
 
 def _run_with_frames(tmp_path, n=3):

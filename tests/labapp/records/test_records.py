@@ -12,7 +12,8 @@ from labapp.cli.main import main
 from labapp.errors import UsageError
 from labapp.jobs.run import resumable
 from labapp.records.runrecord import RecordKind, RecordStatus
-from labapp.records.storage import create_run, verify_run
+from labapp.records.storage import create_run
+from labapp.records.verification import verify_run
 
 FIXTURES = Path(__file__).resolve().parents[3] / "fixtures" / "bench"
 DEAD_PID = 2 ** 22 + 12345          # above the default pid_max: no live process has it
@@ -172,7 +173,8 @@ def test_a_rejected_design_start_leaves_nothing_behind(tmp_path, capsys):
 
 def test_a_frame_written_but_not_recorded_before_a_crash_is_kept_aside_on_reopen(tmp_path):
     # the crash window between a frame's atomic rename and its frames.csv row leaves one unlisted frame
-    from labapp.records.storage import UNRECORDED_DIR, open_run
+    from labapp.records.manifests import UNRECORDED_DIR
+    from labapp.records.storage import open_run
     folder = _run(tmp_path, frames=3)
     (folder / "frame_000003.jpg").write_bytes(b"x" * 50)
     report = verify_run(folder)

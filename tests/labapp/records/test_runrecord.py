@@ -7,9 +7,12 @@ from pathlib import Path
 import pytest
 
 from labapp.jobs.run import resumable
+from labapp.records.fileio import StorageError
+from labapp.records.manifests import read_record, read_run
 from labapp.records.outpaths import folder_kind
 from labapp.records.runrecord import FORMAT, RecordFormatError, RecordKind, RecordStatus, RunRecord, migrate
-from labapp.records.storage import StorageError, create_run, open_run, read_record, read_run, verify_run
+from labapp.records.storage import create_run, open_run
+from labapp.records.verification import verify_run
 
 FIXTURES = Path(__file__).resolve().parents[3] / "fixtures" / "bench"
 DEAD_PID = 2 ** 22 + 12345          # above the default pid_max: no live process has it
