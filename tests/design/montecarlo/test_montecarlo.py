@@ -108,7 +108,7 @@ def test_tuned_on_the_analytic_sphere_it_stays_within_5_percent_rms():
     # The analytic release of a sphere whose surface recedes at a constant speed (the forward model's
     # assumption): fraction 1 - (1 - v t / R)^3, here dissolved in 3000 s. The lattice model is tuned
     # on it and must come within 5 % RMS (how close it comes:
-    # docs/science.md#evidence-testsdesigntest_montecarlopy-benchmarksmc_spherepy).
+    # docs/evidence/science.md#the-monte-carlo-baseline).
     rho, dx, mirror = input_grid("sample:sphere", resolution=24)
     radius = (3 * (rho >= 0.5).sum() * dx ** 3 / (4 * math.pi)) ** (1 / 3)
     t = np.linspace(0, 3000.0, 301)
