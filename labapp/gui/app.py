@@ -104,7 +104,7 @@ def launch(data_dir: Path, simulate: bool, speed: float | None, sample: str, cal
     window = MainWindow(Path(data_dir), simulate=simulate, speed=speed, sample=sample)
     window.setWindowTitle(f"{window.windowTitle()} - operator: {operator}")
     if calibration:
-        window.controls.calibration.setText(calibration)
+        window.controls.set_calibration_path(calibration)
     window.show()
     if autostart:
         window.controls.auto_drop.setChecked(simulate)

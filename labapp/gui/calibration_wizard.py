@@ -36,16 +36,19 @@ class CalibrationWizard(QWidget):
     enters it and presses "Capture" (``mass_entered(value)``), "Redo last level" (``redo_requested``: the
     last level is captured again and replaces its frame) or "Finish and fit" (``finish_requested``). A mass
     not above the last one is refused by the series, which asks again without capturing. The bath (water,
-    temperature, stirring) is set in the device panel."""
+    temperature, stirring) is set in the device panel. ``simcal_activated(path)`` passes on the simulation
+    step's."""
 
     start_requested = Signal()
     mass_entered = Signal(float)
     redo_requested = Signal()
     finish_requested = Signal()
+    simcal_activated = Signal(str)
 
     def __init__(self, simulate: bool, data_dir: Path | None = None, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.simulation = SimulationStep(Path(data_dir) if data_dir is not None else Path.cwd())
+        self.simulation.simcal_activated.connect(self.simcal_activated)
         self.masses = QLineEdit("0.25, 0.5, 0.875, 1.25, 1.75" if simulate else "")
         self.masses.setToolTip("cumulative masses added by the simulated bench by itself; empty: ask each time")
         self.masses.setEnabled(simulate)
@@ -90,6 +93,11 @@ class CalibrationWizard(QWidget):
             For an entry that is not a number.
         """
         return parse_masses(self.masses.text()) if self.masses.isEnabled() else ()
+
+    def use_bench_calibration(self, path: Callable[[], str | None]) -> None:
+        """Give the simulation step the active bench calibration: ``path()`` is its path (None: each run's
+        own)."""
+        self.simulation.bench_calibration = path
 
     def _capture(self) -> None:
         self.mass_entered.emit(self.mass.stored())

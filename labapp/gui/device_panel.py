@@ -64,6 +64,7 @@ class DevicePanel(QWidget):
         self.image_format = QLineEdit(defaults.image_format or "")
         self.connect_button = QPushButton("Connect / preview")
         self.connect_button.setToolTip("connect both devices, take one preview frame and one reading")
+        self._connect_text = self.connect_button.text()
         self.readouts = {key: QLabel("-") for key in ("plate_c", "probe_c", "speed_rpm", "setpoint_c", "state")}
         self.heater = QLabel("hotplate: no reading yet (Connect)")
         self.heater.setWordWrap(True)
@@ -124,6 +125,30 @@ class DevicePanel(QWidget):
     def bath(self) -> BathSettings:
         """The bath settings of the fields (the others: their defaults; UsageError for a bad value)."""
         return BathSettings(**{name: box.stored() for name, box in self.bath_fields.items()})
+
+    def apply_bath(self, bath: BathSettings) -> None:
+        """Show ``bath``'s settings in the fields."""
+        for name, box in self.bath_fields.items():
+            box.set_stored(getattr(bath, name))
+
+    def set_locked(self, locked: bool) -> None:
+        """Make the bath read-only and the device choice and Connect unavailable while a procedure records."""
+        for box in self.bath_fields.values():
+            box.setReadOnly(locked)
+        for widget in (self.camera, self.hotplate, self.connect_button):
+            widget.setEnabled(not locked)
+        tip = "locked while a procedure records" if locked else ""
+        for box in self.bath_fields.values():
+            box.setStatusTip(tip)
+
+    def set_connecting(self, busy: bool, doing: str = "connecting") -> None:
+        """While ``busy``, Connect says what is being done (``doing...``) and is unavailable; then it is back."""
+        if busy:
+            self._connect_text = self.connect_button.text()
+            self.connect_button.setText(f"{doing}...")
+        else:
+            self.connect_button.setText(self._connect_text)
+        self.connect_button.setEnabled(not busy)
 
     def settings(self) -> CameraSettings:
         """Camera settings from the fields (empty: leave the camera's own)."""

@@ -5,6 +5,9 @@ coordinates: x = column, y = row (pyqtgraph row-major), pixels.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
+import cv2
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Signal
@@ -19,6 +22,15 @@ def grid_segments(x: float, y: float, size: float, grid: int) -> tuple[np.ndarra
         xs += [x + t, x + t, x, x + size]
         ys += [y, y + size, y + t, y + t]
     return np.array(xs), np.array(ys)
+
+
+def decode_image(data: bytes | None = None, path: str | None = None) -> np.ndarray | None:
+    """An RGB (H, W, 3) uint8 image from JPEG bytes or a file (None if undecodable)."""
+    if path is not None:
+        bgr = cv2.imread(path, cv2.IMREAD_COLOR)
+    else:
+        bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    return None if bgr is None else np.ascontiguousarray(bgr[..., ::-1])
 
 
 def mirrored_x(x: float, size: float, mirror_col: float) -> float:
@@ -68,6 +80,18 @@ class LiveView(QWidget):
             self.fit()
         self.caption.setText(caption)
         self._update_overlay()
+
+    def show_file(self, path: str) -> None:
+        """Show the image file ``path`` captioned with its name (nothing if it does not decode)."""
+        rgb = decode_image(path=path)
+        if rgb is not None:
+            self.set_frame(rgb, Path(path).name)
+
+    def show_jpeg(self, data: bytes, caption: str) -> None:
+        """Show a JPEG given as bytes (nothing if it does not decode)."""
+        rgb = decode_image(data=data)
+        if rgb is not None:
+            self.set_frame(rgb, caption)
 
     def fit(self) -> None:
         """Show the whole frame as large as the view allows (aspect kept): the range follows the image alone,

@@ -16,6 +16,7 @@ from PySide6.QtWidgets import (
     QHeaderView,
     QLabel,
     QLineEdit,
+    QMessageBox,
     QPushButton,
     QSpinBox,
     QSplitter,
@@ -61,6 +62,20 @@ def interrupted_runs(data_dir: Path) -> list[RunSnapshot]:
     """The acquisition runs under ``data_dir`` that stopped without finishing and can be resumed, newest first."""
     return [snap for snap in list_runs(data_dir) if snap.status == RecordStatus.INTERRUPTED
             and snap.record.kind == RecordKind.RUN and not snap.live]
+
+
+def resume_offer(parent: QWidget, data_dir: Path, runs: list[RunSnapshot]) -> QMessageBox:
+    """A question (not yet shown) naming the interrupted ``runs`` in ``data_dir``, newest first, and offering to
+    resume the newest: its buttons' roles are accept (resume the newest), action (show it in the Runs tab) and
+    reject (not now)."""
+    names = "\n".join(f"  {snap.path.name} ({len(snap.frames)} frames)" for snap in runs[:8])
+    box = QMessageBox(QMessageBox.Icon.Question, "interrupted runs",
+                      f"{len(runs)} run(s) in {data_dir} stopped without finishing:\n{names}\n\n"
+                      f"Resume {runs[0].path.name} now? (Later: Runs tab, Resume acquisition.)", parent=parent)
+    box.addButton("Resume newest", QMessageBox.ButtonRole.AcceptRole)
+    box.addButton("Show in Runs", QMessageBox.ButtonRole.ActionRole)
+    box.addButton("Not now", QMessageBox.ButtonRole.RejectRole)
+    return box
 
 
 def frame_files(folder: Path) -> list[str]:

@@ -60,6 +60,7 @@ class RunControls(QWidget):
         self.stop_on_steady.setChecked(d.stop_on_steady)
         self.auto_drop = QCheckBox("drop by itself once stable (simulation)")
         self.auto_drop.setEnabled(simulate)
+        self.simulate = simulate
         self.calibration = QLineEdit("")
         self.calibration.setPlaceholderText("bench calibration JSON (live concentration)")
         browse = QPushButton("...")
@@ -128,6 +129,37 @@ class RunControls(QWidget):
         if path:
             self.calibration.setText(path)
 
+    def apply(self, config: RunConfig, calibration: str, name: bool = True) -> None:
+        """Show ``config``'s run settings (not the object's; its name if ``name``) and ``calibration`` (kept out
+        when the file does not exist)."""
+        if name:
+            self.name.setText(config.name)
+        self.interval.set_stored(config.interval_s)
+        self.max_hours.set_stored(config.max_duration_s)
+        self.stop_on_steady.setChecked(config.stop_on_steady)
+        if not calibration or Path(calibration).is_file():
+            self.calibration.setText(calibration)
+
+    def calibration_path(self) -> str | None:
+        """The active bench calibration's path as typed (None: none)."""
+        return self.calibration.text().strip() or None
+
+    def set_calibration_path(self, path: str | Path) -> None:
+        """Make ``path`` the active bench calibration."""
+        self.calibration.setText(str(path))
+
+    def set_locked(self, locked: bool) -> None:
+        """Make the run's settings read-only while a procedure records (auto drop: only ever on a simulated
+        bench)."""
+        for widget in (self.name, self.object_name, self.object_mass, self.interval, self.max_hours, self.notes,
+                       self.calibration):
+            widget.setReadOnly(locked)
+        self.stop_on_steady.setEnabled(not locked)
+        self.auto_drop.setEnabled(not locked and self.simulate)
+        tip = "locked while a procedure records" if locked else ""
+        for widget in (self.name, self.interval, self.max_hours):
+            widget.setStatusTip(tip)
+
     def config(self, bath: BathSettings) -> RunConfig:
         """The run settings with ``bath`` as a :class:`RunConfig` (UsageError on a bad value)."""
         return RunConfig(name=self.name.text() or RunConfig.name, interval_s=self.interval.stored(),
@@ -166,6 +198,13 @@ class RunControls(QWidget):
         if self.stop_on_steady.isChecked() and not cal:
             found.append(NO_CALIBRATION_STEADY)
         return found
+
+    def hold_start(self, held: bool) -> None:
+        """Keep Start disabled while ``held`` (a bench being built); when released it shows what it can again."""
+        if held:
+            self.start_button.setEnabled(False)
+        else:
+            self.update_start()
 
     def update_start(self, *_args) -> None:
         """Enable Start when nothing runs and nothing is wrong; say why not under it."""

@@ -29,7 +29,7 @@ def recording(qtbot, tmp_path, monkeypatch):
     monkeypatch.setattr(dialogs, "confirm", lambda parent, question: False)
     win = MainWindow(tmp_path / "runs", simulate=True, speed=100.0)
     qtbot.addWidget(win)
-    win._release = SampleRelease("none", np.array([0.0, 1.0]), np.zeros(2))   # no object: the bench builds at once
+    win.simulated.release = SampleRelease("none", np.array([0.0, 1.0]), np.zeros(2))   # no object: the bench builds at once
     c = win.controls
     c.interval.set_stored(INTERVAL_S)
     c.max_hours.set_stored(FIRST_MAX_S)

@@ -22,14 +22,14 @@ def _within(qtbot, condition, timeout_s: float) -> float:
 def test_the_plate_is_polled_while_connected_and_idle(qtbot, tmp_path):
     win = MainWindow(tmp_path / "runs", simulate=True, speed=20.0)   # slow enough that the bath keeps a jump
     qtbot.addWidget(win)
-    win._release = SampleRelease("none", np.array([0.0, 1.0]), np.zeros(2))   # no object: the bench builds at once
+    win.simulated.release = SampleRelease("none", np.array([0.0, 1.0]), np.zeros(2))   # no object: the bench builds at once
     panel = win.devices
     panel.stale_after_s = 2.0                  # the test's threshold: the panel greys after 2 s without a reading
     try:
         win.connect_devices()                  # preview: connect, one frame, one reading, close the devices
         qtbot.waitUntil(lambda: win.engine.outcome == "complete" and not win.engine.running
                         and win.plate_poller.polling, timeout=120_000)
-        poller, emulator, hotplate = win.plate_poller, win.sim.emulator, win.sim.hotplate
+        poller, emulator, hotplate = win.plate_poller, win.simulated.bench.emulator, win.simulated.bench.hotplate
         assert poller.monitor.poll_s == pytest.approx(0.1)    # 2 s of the engine's clock at 20x
         arrived = []
         win.bridge.reading.connect(lambda reading: arrived.append(time.monotonic()))

@@ -6,7 +6,8 @@ pytest.importorskip("pytestqt")
 
 from PySide6.QtCore import QPoint, QRect
 
-from labapp.gui.main_window import BENCH_DOCK_MAX_SHARE, PREFERRED_SIZE, MainWindow
+from labapp.gui.main_window import MainWindow
+from labapp.gui.window_layout import BENCH_DOCK_MAX_SHARE, PREFERRED_SIZE
 
 SCREEN = QRect(0, 0, 1280, 800)
 READABLE_PX = 250

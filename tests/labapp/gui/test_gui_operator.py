@@ -128,18 +128,18 @@ def test_run_progress_and_marks_from_engine_events(qtbot, tmp_path, monkeypatch)
     try:
         config = RunConfig(max_duration_s=4 * 3600.0, interval_s=10.0, bath=BathSettings(setpoint_c=70.0,
                                                                                           tolerance_c=0.5))
-        win._prepare_plots(config)
+        win.display.prepare(config)
         win.status.phase, win.status.t_s = Phase.ACQUIRING, 3600.0
-        win.on_event(StateChanged(Phase.ACQUIRING))
-        win.on_event(Message("info", "steady state reached at t=3600 s", topic="steady"))
+        win.display.on_event(StateChanged(Phase.ACQUIRING))
+        win.display.on_event(Message("info", "steady state reached at t=3600 s", topic="steady"))
         from labapp.acquisition.events import FrameStored
         for t in (0.0, 10.0, 20.0, 30.0, 500.0, 510.0):             # one gap of 470 s in 10 s frames
-            win.on_frame(FrameStored(0, "f.jpg", str(tmp_path / "f.jpg"), t, 1, conc_g_per_kg=0.1))
+            win.display.on_frame(FrameStored(0, "f.jpg", str(tmp_path / "f.jpg"), t, 1, conc_g_per_kg=0.1))
         assert [m[0] for m in win.plots.marks] == ["drop", "steady", "gap"]
         assert win.plots.marks[-1][1] == 30.0
         assert win.plots.band.isVisible()
         monkeypatch.setattr(type(win.engine), "running", property(lambda self: True))
-        win._show_progress()
+        win.display.show_progress(win.engine.running, win.procedure)
         monkeypatch.undo()
         assert win.progress.isVisibleTo(win) and win.progress.value() == 3600
         assert win.progress.format().startswith("1:00 of 4:00, 3:00 left")
@@ -154,9 +154,9 @@ def test_settings_persist_methods_load_and_lock(qtbot, tmp_path, monkeypatch):
     win.controls.name.setText("pill-A")
     win.controls.interval.set_stored(30.0)
     win.devices.bath_fields["setpoint_c"].set_stored(37.0)
-    config = win.current_run_settings()
+    config = win.forms.current()
     persist.remember_run(win.settings, config, "")
-    method = win.save_method(str(tmp_path / "dissolution"))
+    method = win.forms.save_method(str(tmp_path / "dissolution"))
     assert method.name == "dissolution.json"
     assert json.loads(method.read_text())["settings"]["setpoint_c"] == 37.0
     win.shutdown()
@@ -166,15 +166,15 @@ def test_settings_persist_methods_load_and_lock(qtbot, tmp_path, monkeypatch):
     assert again.controls.interval.stored() == 30.0 and again.devices.bath_fields["setpoint_c"].stored() == 37.0
     again.controls.name.setText("other")
     again.devices.bath_fields["setpoint_c"].set_stored(50.0)
-    assert again.load_method(str(method))
+    assert again.forms.load_method(str(method))
     assert again.controls.name.text() == "other" and again.devices.bath_fields["setpoint_c"].stored() == 37.0
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "something else"}')
-    assert not again.load_method(str(bad)) and str(bad) in again.messages.toPlainText()
-    again.lock_settings(True)
+    assert not again.forms.load_method(str(bad)) and str(bad) in again.messages.toPlainText()
+    again.forms.set_locked(True)
     assert again.controls.interval.isReadOnly() and again.devices.bath_fields["setpoint_c"].isReadOnly()
     assert not again.devices.connect_button.isEnabled()
-    again.lock_settings(False)
+    again.forms.set_locked(False)
     assert not again.controls.interval.isReadOnly()
     again.shutdown()
 

@@ -130,7 +130,7 @@ def test_each_stored_frame_updates_the_runs_list(qtbot, tmp_path):
     try:
         item = win.browser.tree.topLevelItem(0)
         assert item.text(FRAMES_COLUMN) == "0"
-        win.on_frame(FrameStored(41, "frame_0041.jpg", str(run.path / "frame_0041.jpg"), 451.0, 42))
+        win.display.on_frame(FrameStored(41, "frame_0041.jpg", str(run.path / "frame_0041.jpg"), 451.0, 42))
         assert item.text(FRAMES_COLUMN) == "42"
     finally:
         win.shutdown()

@@ -102,7 +102,7 @@ def test_calibration_wizard_reanalysis_and_design_launcher(qtbot, tmp_path, monk
         win.wizard.masses.setText("")                         # the operator enters every mass
         win.wizard.start_button.click()
         # the first start builds the simulated bench: its object's dissolution is computed in a child process
-        qtbot.waitUntil(lambda: win.sim is not None, timeout=120_000)
+        qtbot.waitUntil(lambda: win.simulated.bench is not None, timeout=120_000)
         for mass in (0.25, 0.75, 1.5):
             qtbot.waitUntil(win.wizard.capture_button.isEnabled, timeout=60_000)
             win.wizard.mass.setValue(mass)

@@ -29,17 +29,17 @@ def test_four_hours_with_faults_through_the_gui(qtbot, tmp_path, sim_calibration
         if not isinstance(event, FrameStored):
             return
         if INJECT[60] in injected and event.index < 60 + COLD_FRAMES:
-            win.sim.cool_bath(6.0)                # more cold water: the bath stays below the band
+            win.simulated.bench.cool_bath(6.0)    # more cold water: the bath stays below the band
         if event.index not in INJECT:
             return
         what = INJECT[event.index]
         injected.append(what)
         if what == "camera":
-            win.sim.camera_busy(2)
+            win.simulated.bench.camera_busy(2)
         elif what == "link":
-            win.sim.drop_hotplate_link(900.0)     # s on the emulator's clock (the engine's here)
+            win.simulated.bench.drop_hotplate_link(900.0)     # s on the emulator's clock (the engine's here)
         else:
-            win.sim.cool_bath(6.0)                # cold water: 6 C below the setpoint, the plate heats it back
+            win.simulated.bench.cool_bath(6.0)    # cold water: 6 C below the setpoint, the plate heats it back
     win.engine.subscribe(inject)
     try:
         c = win.controls
@@ -78,7 +78,7 @@ def test_four_hours_with_faults_through_the_gui(qtbot, tmp_path, sim_calibration
         # the heater ends off: the last reading says so in the panel and the status bar, and the plate agrees
         qtbot.waitUntil(lambda: win.devices.heater.text().startswith("HEATING OFF"), timeout=5_000)
         assert "heating OFF" in win.status.line()
-        assert not win.sim.emulator.state.heating
+        assert not win.simulated.bench.emulator.state.heating
         win.alarms.acknowledge()
         assert win.alarms.isHidden()
     finally:
