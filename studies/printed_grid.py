@@ -2,7 +2,7 @@
 
 Reads each run folder's ``design.stl``, ``density.npz`` and ``curves.csv`` (nothing is written into
 the folders), re-voxelises the mesh over the run's design domain on voxels 1, 2, ... times smaller
-than the design grid's (`design.files.outputs.fine_release`) and prints one markdown row per run: the
+than the design grid's (`design.files.printed.fine_release`) and prints one markdown row per run: the
 rate deviation over the solid's own middle 80% (`design.inverse.rate.rate_deviation`) and the rel. RMSE
 against the run's target at each factor. Factor 1 reproduces the run's own binary solid. The rel. RMSE
 is against the run's ``target_mm3``: a source's physical release (runs of summary format 2), or its
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from design.files.outputs import fine_release
+from design.files.printed import fine_release
 from design.inverse.objective import rel_rmse
 from design.inverse.rate import rate_deviation
 

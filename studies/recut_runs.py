@@ -4,7 +4,7 @@ Listed in docs/benchmarks.md#tools-for-design-experiments.
 
 Reads each run folder's ``density.npz`` and ``curves.csv`` (nothing is written into the folders),
 thresholds the full density at 1/2 (the paper's cut) and at `design.fabrication.extract.mass_preserving_level`
-(the level `sfr design` extracts at), simulates both solids with `design.files.outputs.solid_release`, and prints one
+(the level `sfr design` extracts at), simulates both solids with `design.files.printed.solid_release`, and prints one
 markdown row per run: binary rel. RMSE, pieces and, for a target with a zero-order middle, the rate
 deviation over the solid's middle 80% (`design.inverse.rate.rate_deviation`).
 
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from design.fabrication.extract import count_pieces, mass_preserving_level
-from design.files.outputs import solid_release
+from design.files.printed import solid_release
 from design.inverse.objective import rel_rmse
 from design.inverse.rate import rate_deviation
 

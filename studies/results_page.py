@@ -29,7 +29,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from design.files.outputs import percent_text
+from design.files.summary_text import percent_text
 
 ROOT = Path(__file__).resolve().parents[1]
 RESOLUTION = 64

@@ -4,7 +4,7 @@ A water-soluble print swells on wetting, and a channel narrower than the swellin
 (`design.forward.swelling`); a design meant to print with open channels keeps every channel at least w wide.
 This term measures, smoothly, the void that a morphological closing fills, so that the optimiser itself avoids
 narrow channels. It is a term of the objective beyond the paper's eq. (4) (`design.inverse.objective`); the
-outputs still fill any channel narrower than w that is left (`design.files.outputs.close_narrow_channels`).
+outputs still fill any channel narrower than w that is left (`design.files.printed.close_narrow_channels`).
 
 Structuring elements. The forward model and the fill call a void voxel part of a narrow channel when, along
 one of the grid's axes, its run of void from solid to solid is shorter than w (`design.forward.swelling`).

@@ -34,8 +34,8 @@ from PySide6.QtWidgets import (
 )
 
 from design.files.meshio import MESH_SUFFIXES
-from design.files.outputs import summary_lines
 from design.files.records import load_config
+from design.files.summary_text import summary_lines
 from design.files.targets_io import load_problem
 from design.geometry.shapes import SAMPLE_SHAPES
 from design.inverse.problem import DesignConfig

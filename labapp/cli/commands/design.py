@@ -139,7 +139,7 @@ def _stored_max_iter(out: str) -> int:
 def run(args: argparse.Namespace) -> int:
     # the design and analysis packages load here, not with the module: `sfr --help` stays instant
     from analysis import BenchCalibration
-    from design.files.outputs import summary_lines
+    from design.files.summary_text import summary_lines
     from design.inverse.problem import DesignConfig
     from design.inverse.status import DesignStatus
     from labapp.jobs.design import design as design_job

@@ -12,7 +12,7 @@ from design.fabrication.printability import (
     print_mass_g,
     prusa_profile,
 )
-from design.files.outputs import enclosed_voids_text
+from design.files.summary_text import enclosed_voids_text
 
 
 def _hollow_ball(hole_vox: int, n: int = 40) -> np.ndarray:

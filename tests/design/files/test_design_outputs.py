@@ -3,7 +3,8 @@ import numpy as np
 import trimesh
 
 from design.fabrication.extract import revoxelize
-from design.files.outputs import fine_release, percent_text, print_fit_text, solid_release, summary_lines
+from design.files.printed import fine_release, solid_release
+from design.files.summary_text import percent_text, print_fit_text, summary_lines
 from design.inverse.objective import rel_rmse
 
 
