@@ -26,8 +26,9 @@ def test_sfr_change_extends_a_recording_run_audited_and_kept(tmp_path, sim_calib
     recording = _sfr("run", "--simulate", "--speed", "300", "--sample", "sphere", "--out", str(runs), "--calibration",
                      str(cal_path), "--max-hours", "0.5", "--no-steady-stop", "--interval", "60")
     folder = wait_frames(runs, 3, recording)
-    with pytest.raises(SystemExit):                     # a change without a reason: refused by argparse
+    with pytest.raises(SystemExit) as refused:          # a change without a reason: refused by argparse
         main(["change", str(folder), "--max-hours", "0.75"])
+    assert refused.value.code == 2
     assert "--reason" in capsys.readouterr().err
     assert main(["change", str(folder), "--max-hours", "0.75", "--reason", "the sample dissolves slower than planned"]) == 0
     assert "changed max_duration_s: 0.5 -> 0.75 h" in capsys.readouterr().out

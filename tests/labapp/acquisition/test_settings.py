@@ -102,8 +102,9 @@ def test_an_option_is_made_from_its_declaration(capsys):
     for argv, says in ((["--setpoint", "150"], "--setpoint: '150': expected a number in [25, 100] C"),
                        (["--rpm", "700"], "--rpm: '700': expected a number in [0, 600] rpm"),
                        (["--max-hours", "0"], "--max-hours: '0': expected a number > 0 h")):
-        with pytest.raises(SystemExit):
+        with pytest.raises(SystemExit) as refused:
             parser.parse_args(argv)
+        assert refused.value.code == 2
         assert says in capsys.readouterr().err
 
 

@@ -186,12 +186,13 @@ def _twenty_moments(sfr: WarmSfr, command, tmp_path: Path) -> int:
                 continue
             err = moment.err.read_text()
             if moment.following_up:
-                assert code in (0, 1) and not any(sign in err for sign in BAD_SIGNS), f"{moment.where}, then:\n{err}"
+                assert code == 0 and not any(sign in err for sign in BAD_SIGNS), f"{moment.where}, then:\n{err}"
                 _assert_completed(moment, reference_curve, reference_k)
                 running.remove(moment)
-            elif not moment.signalled or (code in (0, 1) and "Ctrl-C" not in err):   # the moment fell after the
-                running.remove(moment)                                               # end (a design may find no
-                if moment.tries:                                                     # solid: exit 1)
+            elif not moment.signalled or (code == 0 and "Ctrl-C" not in err):   # the moment fell after the end
+                assert code == 0, f"{moment.where}: exit {code}\n{err}"
+                running.remove(moment)
+                if moment.tries:
                     pending.append(Moment(moment.kind, moment.out.with_name(moment.out.name + "_again"),
                                           moment.delay / 2, moment.tries - 1))
             else:

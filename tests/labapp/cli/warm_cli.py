@@ -59,7 +59,7 @@ def _warm(commands: list[list[str]], cwd: str) -> None:
     for args in commands:
         with contextlib.redirect_stdout(sys.stderr):
             code = main(args)
-        if code not in (0, 1):
+        if code != 0:
             raise RuntimeError(f"warm-up of {args} ended with exit code {code}")
     if threading.active_count() != 1:   # forking with a live thread could copy a held lock into every child
         raise RuntimeError(f"threads still running after the warm-up: {threading.enumerate()}")
