@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -128,6 +129,88 @@ def _blocks(a: np.ndarray, c: int) -> np.ndarray:
     return a.reshape(z // c, c, y // c, c, x // c, c).mean(axis=(1, 3, 5))
 
 
+@dataclass(frozen=True)
+class _Elements:
+    """The elasticity grid of a density: blocks of ``coarsen``^3 voxels, (z, y, x) order.
+
+    Attributes
+    ----------
+    e_mod : (Z, Y, X) ndarray of float
+        Element moduli, the mean of their voxels' E(rho).
+    load : (Z, Y, X) ndarray of float
+        Element loads, the mean of their voxels' rho.
+    de_vox : (cZ, cY, cX) ndarray of float
+        dE/drho per voxel of the padded grid.
+    h : (float, float, float)
+        Element edges, mm.
+    coarsen : int
+    """
+
+    e_mod: np.ndarray
+    load: np.ndarray
+    de_vox: np.ndarray
+    h: tuple[float, float, float]
+    coarsen: int
+
+    @property
+    def volume(self) -> float:
+        """Element volume, mm^3."""
+        return self.h[0] ** 3
+
+
+def _elements(rho: np.ndarray, dx_mm: float, config: IcoConfig) -> _Elements:
+    """The elasticity grid of an (X, Y, Z) density, padded with void up to a multiple of ``config.coarsen``."""
+    c = config.coarsen
+    zyx = np.ascontiguousarray(np.asarray(rho, dtype=float).transpose(2, 1, 0))
+    pad = [(0, -n % c) for n in zyx.shape]
+    zyx = np.pad(zyx, pad)  # void beyond the far faces and above the top
+    e_vox, de_vox = modulus(zyx, config.law, config.e_min)
+    return _Elements(_blocks(e_vox, c), _blocks(zyx, c), de_vox, (c * dx_mm,) * 3, c)
+
+
+_Solved = tuple[np.ndarray, int, np.ndarray]
+"""One partial design's displacements, PCG iterations and element energies at unit modulus."""
+
+
+def _solve_layer(grid: _Elements, top: int, force: np.ndarray, u0: np.ndarray | None, config: IcoConfig,
+                 mirror: tuple[bool, bool], scratch: Scratch) -> _Solved:
+    """The partial design of the element rows below ``top`` under its own weight ``force``, from ``u0``."""
+    levels = hierarchy(grid.e_mod[:top], grid.h, config.poisson, *mirror, scratch=scratch)
+    fine = levels[0]
+    deflation = island_deflation(fine.e_mod, grid.h, fine.s, fine.free) if config.deflate else None
+    u, its = pcg(levels, force, u0, config.tol, deflation=deflation)
+    energy = np.empty((top,) + grid.e_mod.shape[1:])
+    element_energy(levels[0].ke, u, energy)
+    return u, its, energy
+
+
+def _solve_concurrently(solve: Callable[[int, np.ndarray | None, Scratch], _Solved], tops: list[int],
+                        warm: list[np.ndarray], memories: list[Scratch]) -> list[_Solved]:
+    """Every layer from its warm start, independently: one thread per core, each with its share of the layers,
+    largest first (the kernels release the GIL)."""
+    queues: list[list[int]] = [[] for _ in range(min(len(tops), os.cpu_count() or 1))]
+    for l in np.argsort(tops, kind="stable")[::-1]:
+        min(queues, key=lambda q: sum(tops[i] for i in q)).append(int(l))
+
+    def run(queue: list[int], memory: Scratch) -> list[tuple[int, _Solved]]:
+        return [(l, solve(l, warm[l], memory)) for l in queue]
+
+    with ThreadPoolExecutor(len(queues)) as pool:
+        done = dict(pair for part in pool.map(run, queues, memories[:len(queues)]) for pair in part)
+    return [done[l] for l in range(len(tops))]
+
+
+def _solve_in_sequence(solve: Callable[[int, np.ndarray | None, Scratch], _Solved], tops: list[int],
+                       memory: Scratch) -> list[_Solved]:
+    """Every layer in turn, each from the solution of the layer below, its top row continued upward."""
+    results: list[_Solved] = []
+    for l, top in enumerate(tops):
+        prev = results[-1][0] if results else None
+        u0 = None if prev is None else np.concatenate([prev, np.repeat(prev[-1:], top + 1 - prev.shape[0], axis=0)])
+        results.append(solve(l, u0, memory))
+    return results
+
+
 def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = IcoConfig(), *,
                            mirror: tuple[bool, bool] = (True, True),
                            warm: list[np.ndarray] | None = None,
@@ -157,61 +240,36 @@ def incremental_compliance(rho: np.ndarray, dx_mm: float, config: IcoConfig = Ic
         Per-layer displacements (z, y, x order), for the next call's ``warm``.
     """
     t0 = time.perf_counter()
-    c = config.coarsen
-    zyx = np.ascontiguousarray(np.asarray(rho, dtype=float).transpose(2, 1, 0))
-    pad = [(0, -n % c) for n in zyx.shape]
-    zyx = np.pad(zyx, pad)  # void beyond the far faces and above the top
-    e_vox, de_vox = modulus(zyx, config.law, config.e_min)
-    e_mod, load = _blocks(e_vox, c), _blocks(zyx, c)
-    h = (c * dx_mm,) * 3
-    volume = h[0] ** 3
-    tops = layer_tops(e_mod.shape[0], config.layers)
-    forces = [self_weight(load[:top], volume) for top in tops]
+    grid = _elements(rho, dx_mm, config)
+    tops = layer_tops(grid.e_mod.shape[0], config.layers)
+    forces = [self_weight(grid.load[:top], grid.volume) for top in tops]
     memories = list(scratch or []) + [Scratch() for _ in range(len(tops) - len(scratch or []))]
 
-    def solve(l: int, u0: np.ndarray | None, scratch: Scratch) -> tuple[np.ndarray, int, np.ndarray]:
-        """Partial design l: displacements, PCG iterations, element energies at unit modulus."""
-        levels = hierarchy(e_mod[:tops[l]], h, config.poisson, *mirror, scratch=scratch)
-        fine = levels[0]
-        deflation = island_deflation(fine.e_mod, h, fine.s, fine.free) if config.deflate else None
-        u, its = pcg(levels, forces[l], u0, config.tol, deflation=deflation)
-        energy = np.empty((tops[l],) + e_mod.shape[1:])
-        element_energy(levels[0].ke, u, energy)
-        return u, its, energy
+    def solve(l: int, u0: np.ndarray | None, memory: Scratch) -> _Solved:
+        return _solve_layer(grid, tops[l], forces[l], u0, config, mirror, memory)
 
-    results = []
     if warm is not None and [w.shape for w in warm] == [f.shape for f in forces]:
-        # independent solves: one thread per core, each with its share of the layers, largest first
-        # (the kernels release the GIL)
-        queues: list[list[int]] = [[] for _ in range(min(len(tops), os.cpu_count() or 1))]
-        for l in np.argsort(tops, kind="stable")[::-1]:
-            min(queues, key=lambda q: sum(tops[i] for i in q)).append(int(l))
-
-        def run(queue: list[int], memory: Scratch) -> list[tuple[int, tuple]]:
-            return [(l, solve(l, warm[l], memory)) for l in queue]
-
-        with ThreadPoolExecutor(len(queues)) as pool:
-            done = dict(pair for part in pool.map(run, queues, memories[:len(queues)]) for pair in part)
-        results = [done[l] for l in range(len(tops))]
+        results = _solve_concurrently(solve, tops, warm, memories)
     else:
-        for l, top in enumerate(tops):
-            prev = results[-1][0] if results else None  # the layer below, its top row continued upward
-            u0 = None if prev is None else np.concatenate([prev, np.repeat(prev[-1:], top + 1 - prev.shape[0], axis=0)])
-            results.append(solve(l, u0, memories[0]))
-    g_load, g_e = np.zeros_like(load), np.zeros_like(e_mod)
-    compliances, iterations = np.zeros(len(tops)), np.zeros(len(tops), dtype=int)
-    for l, (top, (u, its, energy)) in enumerate(zip(tops, results)):  # summed in layer order: deterministic
-        compliances[l], iterations[l] = float(np.vdot(forces[l], u)), its
-        g_load[:top] += self_weight_adjoint(u, load[:top].shape, volume)
+        results = _solve_in_sequence(solve, tops, memories[0])
+    compliances = np.array([float(np.vdot(f, u)) for f, (u, _, _) in zip(forces, results)])
+    iterations = np.array([its for _, its, _ in results], dtype=int)
+    value = compliances.sum() / (2.0 * len(tops))
+    grad = _gradient(grid, tops, results, rho.shape)
+    return IcoResult(value, grad, compliances, iterations, time.perf_counter() - t0), [u for u, _, _ in results]
+
+
+def _gradient(grid: _Elements, tops: list[int], results: list[_Solved], shape: tuple[int, int, int]) -> np.ndarray:
+    """dJ_fab/drho on the (X, Y, Z) voxels of a density of ``shape``, from each partial design's solution."""
+    g_load, g_e = np.zeros_like(grid.load), np.zeros_like(grid.e_mod)
+    for top, (u, _, energy) in zip(tops, results):  # summed in layer order: deterministic
+        g_load[:top] += self_weight_adjoint(u, grid.load[:top].shape, grid.volume)
         g_e[:top] -= 0.5 * energy
-    solutions = [u for u, _, _ in results]
-    L = len(tops)
-    value = compliances.sum() / (2.0 * L)
+    L, c = len(tops), grid.coarsen
     # chain to voxels: d(block mean)/d voxel = 1/c^3
     up = np.ones((c, c, c)) / c ** 3
-    g_vox = np.kron(g_load / L, up) + np.kron(g_e / L, up) * de_vox
-    grad = g_vox[:rho.shape[2], :rho.shape[1], :rho.shape[0]].transpose(2, 1, 0)
-    return IcoResult(value, np.ascontiguousarray(grad), compliances, iterations, time.perf_counter() - t0), solutions
+    g_vox = np.kron(g_load / L, up) + np.kron(g_e / L, up) * grid.de_vox
+    return np.ascontiguousarray(g_vox[:shape[2], :shape[1], :shape[0]].transpose(2, 1, 0))
 
 
 class IcoTerm:
