@@ -18,8 +18,9 @@ import time
 import numpy as np
 
 from design.fabrication.connectivity import TAIL_SLOPE
+from design.inverse.config import DesignConfig
 from design.inverse.objective import DesignObjective
-from design.inverse.problem import DesignConfig, Problem, prepare
+from design.inverse.problem import Problem, prepare
 
 
 def seconds(objective: DesignObjective, x: np.ndarray, repeats: int = 3) -> float:

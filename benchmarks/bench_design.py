@@ -42,10 +42,10 @@ import design.files.rundir
 import design.inverse.objective
 import design.inverse.optimize
 from design.files.rundir import run_design
+from design.inverse.config import DesignConfig
 from design.inverse.filters import SmoothingFilter
 from design.inverse.lbfgs import Lbfgs
 from design.inverse.objective import DesignObjective
-from design.inverse.problem import DesignConfig
 
 PARTS = ("evaluate", "gradient", "optimiser", "checkpoint", "writer")
 

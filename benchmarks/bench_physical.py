@@ -31,9 +31,9 @@ from benchmarks.designs import MemoryRounds, NoStore, source_problem, warm_up
 
 def seconds(name: str, space: str, resolution: int, correction: str) -> tuple[float, float, int]:
     """Wall time and CPU time of one design's optimisation (with its correction rounds), s, and its evaluations."""
+    from design.inverse.config import DesignConfig
     from design.inverse.defect import optimise_physical
     from design.inverse.optimize import build_objective
-    from design.inverse.problem import DesignConfig
 
     config = DesignConfig(target=f"{name}.stl", space=space, resolution=resolution, physical_correction=correction)
     problem = source_problem(name, untuned_shapes.source(name), config)

@@ -83,8 +83,9 @@ def source_problem(name: str, mesh, config):
 def warm_up() -> None:
     """A tiny design and reference release, so that no timing includes compiling the kernels."""
     from design.forward.reference import reference_release
+    from design.inverse.config import DesignConfig
     from design.inverse.optimize import build_objective, optimise
-    from design.inverse.problem import DesignConfig, prepare
+    from design.inverse.problem import prepare
 
     config = DesignConfig(target="sphere", resolution=16, max_iter=3)
     problem = prepare(config)

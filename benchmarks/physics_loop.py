@@ -304,7 +304,7 @@ def design_check(args, runs_dir: Path, material, results: dict) -> dict:
     physics), printed on the bench."""
     import trimesh
 
-    from design.inverse.problem import DesignConfig
+    from design.inverse.config import DesignConfig
     from labapp.acquisition.printworld import world_release
     from labapp.acquisition.simbench import SampleRelease
     from labapp.jobs.physical import design_from_target

@@ -11,10 +11,10 @@ from design.forward.concentration import Saturation, release_at_times, release_a
 from design.forward.simulator import N_MIN, Release, release_gradient, simulate, total_time
 from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.geometry.voxelize import voxelize
+from design.inverse.config import DesignConfig
 from design.inverse.filters import SmoothingFilter, project
 from design.inverse.objective import DesignObjective
 from design.inverse.presets import PRESET_NAMES, preset_values
-from design.inverse.problem import DesignConfig
 from design.inverse.rate import rate_deviation
 from design.inverse.spaces import SPACE_CHOICES, build_space
 from design.inverse.targets import Target, check_feasibility, constant_acceleration, target_from_mesh

@@ -41,7 +41,7 @@ def first_round_start(name: str, space: str, resolution: int, runs: Path) -> tup
     """The run folder of the default design and the design its first correction round started from (flat)."""
     import design.files.rounds as rounds_file
     from design.files.rundir import run_design
-    from design.inverse.problem import DesignConfig
+    from design.inverse.config import DesignConfig
 
     folder = runs / f"{name}_{space}_{resolution}"
     start = folder / "first_round_start.npy"

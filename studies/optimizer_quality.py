@@ -35,7 +35,7 @@ from design.errors import DesignError
 from design.files.records import load_summary
 from design.files.rundir import run_design
 from design.geometry.shapes import SAMPLE_SHAPES
-from design.inverse.problem import DesignConfig
+from design.inverse.config import DesignConfig
 
 ZERO_ORDER = "zero-order:final=0.3,duration=0.1"
 """A zero-order target: 30% of the domain volume released at a constant rate, ending at a tenth of T."""

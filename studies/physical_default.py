@@ -31,8 +31,8 @@ from benchmarks import untuned_shapes
 def design_row(name: str, space: str, resolution: int, runs: Path, correction: str | None = None) -> dict:
     from design.files.rundir import run_design
     from design.forward.reference import reference_release
+    from design.inverse.config import DesignConfig
     from design.inverse.objective import rel_rmse
-    from design.inverse.problem import DesignConfig
 
     folder = runs / (f"{name}_{space}_{resolution}" + ("" if correction is None else f"_{correction}"))
     stl = runs / f"{name}.stl"

@@ -1,7 +1,7 @@
 """Side by side: ways to make the printed solid's true release meet the physical target (docs/design.md#physical-correction).
 
 For every source of `benchmarks.untuned_shapes` and design space, design runs with the defaults
-(`design.inverse.problem.DesignConfig`) and the source's reference release as the target are judged by the reference
+(`design.inverse.config.DesignConfig`) and the source's reference release as the target are judged by the reference
 evaluator (`design.forward.reference`); the methods:
 
 - ``none``: a run without correction (``physical_correction="none"``, ``max_iter`` evaluations);
@@ -56,10 +56,10 @@ def _append(path: Path, row: dict) -> None:
 
 def study_case(name: str, space: str, resolution: int, methods: tuple[str, ...], path: Path, done: set,
                max_iter: int) -> None:
+    from design.inverse.config import DesignConfig
     from design.inverse.defect import correction_plan, final_beta, optimise_physical
     from design.inverse.multistart import upsample
     from design.inverse.optimize import build_objective, optimise
-    from design.inverse.problem import DesignConfig
 
     todo = [m for m in methods if (name, space, str(resolution), m) not in done]
     if not todo:

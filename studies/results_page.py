@@ -3,7 +3,7 @@
     .venv/bin/python -m studies.results_page [--quick] [--out PAGE] [--keep DIR]
 
 Runs every case of `CASES` through `labapp.jobs.design.design`, the job `sfr design` calls, with
-`design.inverse.problem.DesignConfig`'s defaults for everything but the target, the design space and
+`design.inverse.config.DesignConfig`'s defaults for everything but the target, the design space and
 the resolution, and once more without the physical correction (``physical_correction="none"``), and writes a
 Markdown page: the software versions, the defaults used (read from `DesignConfig` and from each case's resolved
 configuration, never restated here), one table row per case, the print's true fit (``rel_rmse_print``, by the
@@ -65,14 +65,14 @@ RESOLVED_FIELDS = ("w_binary", "radius", "beta", "beta_final", "w_rate", "robust
 
 
 def _config(case: Case, resolution: int):
-    from design.inverse.problem import DesignConfig
+    from design.inverse.config import DesignConfig
 
     return DesignConfig(target=case.target, space=case.space, resolution=resolution)
 
 
 def _resolved(config) -> dict[str, str]:
     """The space- and target-dependent settings a case ran with, as text."""
-    from design.inverse.problem import DEFAULT_RADIUS_MM
+    from design.inverse.settings import DEFAULT_RADIUS_MM
 
     radius = (f"{config.radius_vox:g} vox" if config.radius_vox is not None
               else f"{config.radius_mm if config.radius_mm is not None else DEFAULT_RADIUS_MM:g} mm")
@@ -83,7 +83,7 @@ def _resolved(config) -> dict[str, str]:
 
 def _shared_defaults() -> list[tuple[str, str]]:
     """`DesignConfig` fields with a fixed default: (name, value); per-case ones are marked."""
-    from design.inverse.problem import DesignConfig
+    from design.inverse.config import DesignConfig
 
     rows = []
     for f in dataclasses.fields(DesignConfig):
@@ -297,7 +297,7 @@ def page(rows: list[dict], resolution: int, minutes: float, figure_name: str | N
         "",
         f"Every case is `sfr design --target TARGET --space SPACE --resolution {resolution}` with nothing else",
         "set: the job `sfr design` calls (`labapp.jobs.design.design`), with the defaults of",
-        "`design.inverse.problem.DesignConfig`. What each flag means: [guide.md](guide.md#design-a-shape-from-a-"
+        "`design.inverse.config.DesignConfig`. What each flag means: [guide.md](guide.md#design-a-shape-from-a-"
         "target-release).",
         "",
         "## Software and machine",

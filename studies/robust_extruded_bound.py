@@ -28,8 +28,8 @@ from scipy.optimize import minimize
 from design.files.targets_io import load_problem
 from design.forward.simulator import simulate
 from design.geometry.shapes import sample_shape
+from design.inverse.config import DesignConfig
 from design.inverse.objective import rel_rmse
-from design.inverse.problem import DesignConfig
 from design.inverse.spaces import BUILD_AXIS
 
 PIECES = 100

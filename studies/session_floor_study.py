@@ -37,8 +37,8 @@ def trapped(objective, x: np.ndarray) -> tuple[int, int]:
 def run_case(name: str, space: str, resolution: int, floor: float) -> str:
     """One default design of source ``name`` with `SESSION_FLOOR` = ``floor``; its table row."""
     from design.inverse import optimize
+    from design.inverse.config import DesignConfig
     from design.inverse.defect import optimise_physical
-    from design.inverse.problem import DesignConfig
 
     mesh = untuned_shapes.source(name)
     config = DesignConfig(target=f"{name}.stl", space=space, resolution=resolution)

@@ -13,12 +13,10 @@ from design.files.meshio import DENSITY_SUFFIXES, checked_mesh, load_density, lo
 from design.forward.simulator import Release, simulate
 from design.geometry.bodies import mirror_mismatch
 from design.geometry.shapes import sample_shape
-from design.geometry.voxelize import grid_for, voxelize
+from design.geometry.voxelize import DEFAULT_RESOLUTION, grid_for, voxelize
 
 log = logging.getLogger(__name__)
 
-DEFAULT_RESOLUTION = 64
-"""Voxels along the longest bounding-box side when neither resolution nor voxel size is given."""
 SAMPLE_PREFIX = "sample:"
 _AXES = "xyz"
 SYMMETRY_TOLERANCE = 0.005

@@ -19,8 +19,8 @@ from typing import Any, TypedDict
 import numpy as np
 
 from design.errors import DesignError
+from design.inverse.config import DesignConfig
 from design.inverse.optimize import HISTORY_COLUMNS, Checkpoint
-from design.inverse.problem import DesignConfig
 from design.inverse.status import DesignStatus
 
 CONFIG = "config.json"

@@ -37,6 +37,7 @@ from design.files.records import (
 )
 from design.files.rounds import ROUNDS, RoundFile
 from design.files.targets_io import load_problem
+from design.inverse.config import DesignConfig
 from design.inverse.defect import optimise_physical
 from design.inverse.multistart import coarse_start, refine_start, refinement_phase, start_name
 from design.inverse.optimize import (
@@ -47,7 +48,7 @@ from design.inverse.optimize import (
     restore_objective,
     with_phase,
 )
-from design.inverse.problem import DesignConfig, Problem
+from design.inverse.problem import Problem
 from design.inverse.status import FINISHED, DesignStatus
 
 log = logging.getLogger(__name__)

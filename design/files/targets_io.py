@@ -12,8 +12,10 @@ import numpy as np
 
 from design.errors import DesignError
 from design.files.meshio import load_mesh
-from design.inverse.problem import DesignConfig, Problem, prepare, target_file
-from design.inverse.targets import Target, target_from_curve
+from design.inverse.config import DesignConfig
+from design.inverse.problem import Problem, prepare
+from design.inverse.target_spec import target_file
+from design.inverse.targets import TAU_SAMPLES, Target, target_from_curve
 
 
 def read_curve_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -52,7 +54,7 @@ def read_curve_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return tau, c
 
 
-def target_from_csv(path: str | Path, total_time_mm: float, samples: int = 1001) -> Target:
+def target_from_csv(path: str | Path, total_time_mm: float, samples: int = TAU_SAMPLES) -> Target:
     """Read a ``tau_mm,released_mm3`` CSV and resample it onto the design grid
     (`design.inverse.targets.target_from_curve`).
 

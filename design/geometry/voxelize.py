@@ -27,6 +27,9 @@ from design.errors import DesignError
 
 log = logging.getLogger(__name__)
 
+DEFAULT_RESOLUTION = 64
+"""Voxels along a body's longest side when neither a resolution nor a voxel size is given: a design's domain
+(`design.inverse.config.DesignConfig.resolution`), ``sfr simulate``'s mesh and a simulation calibration's meshes."""
 RAY_OFFSET = (1e-7, 0.7e-7)
 """Offset of every ray from its voxel centre, voxel edges. The side tests are evaluated in floating
 point: a mesh vertex within round-off (~1e-16 dx) of a ray, as marching-cubes vertices on the voxel

@@ -50,6 +50,7 @@ import numpy as np
 from design.fabrication.extract import count_pieces, density_mesh, mass_preserving_level, revoxelize
 from design.forward.reference import DEFAULT_CELLS, MIN_CELLS, reference_release
 from design.forward.simulator import simulate
+from design.inverse.config import DesignConfig
 from design.inverse.objective import DesignObjective, rel_rmse
 from design.inverse.optimize import (
     HISTORY_COLUMNS,
@@ -63,7 +64,7 @@ from design.inverse.optimize import (
     optimise,
     with_phase,
 )
-from design.inverse.problem import DesignConfig, Problem
+from design.inverse.problem import Problem
 from design.inverse.status import DesignStatus
 from design.inverse.targets import Target
 

@@ -14,6 +14,9 @@ from scipy import fft as sfft
 
 from design.errors import DesignError
 
+MAX_RADIUS_VOX = 64.0
+"""The largest smoothing radius the filter takes, voxels (a cone kernel of up to 127 voxels a side)."""
+
 
 def fft_workers() -> int:
     """Threads for the smoothing FFTs: ``OMP_NUM_THREADS`` when the process is granted a count (a Dask
@@ -101,8 +104,8 @@ class SmoothingFilter:
     def __post_init__(self) -> None:
         if len(self.shape) not in (2, 3) or min(self.shape) < 1:
             raise DesignError(f"filter shape must be 2D or 3D with positive sizes, got {self.shape}")
-        if not 1.0 <= self.radius_vox <= 64.0:
-            raise DesignError(f"smoothing radius must be in [1, 64] voxels, got {self.radius_vox}")
+        if not 1.0 <= self.radius_vox <= MAX_RADIUS_VOX:
+            raise DesignError(f"smoothing radius must be in [1, {MAX_RADIUS_VOX:g}] voxels, got {self.radius_vox}")
         if len(self.mirror) != len(self.shape):
             raise DesignError(f"mirror needs one flag per axis of {self.shape}, got {self.mirror}")
         half = int(np.ceil(self.radius_vox)) - 1

@@ -22,9 +22,11 @@ from typing import Protocol
 import numpy as np
 from scipy import ndimage
 
+from design.inverse.config import DesignConfig
 from design.inverse.objective import DesignObjective
 from design.inverse.optimize import IterationCallback, StartDesign, with_phase
-from design.inverse.problem import MULTISTART_MIN_RESOLUTION, DesignConfig, Problem
+from design.inverse.problem import Problem
+from design.inverse.settings import MULTISTART_MIN_RESOLUTION
 from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)

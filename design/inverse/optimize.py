@@ -52,9 +52,11 @@ from typing import Callable, Protocol
 import nlopt
 import numpy as np
 
+from design.inverse.config import DesignConfig
 from design.inverse.lbfgs import CONVERGED, STALLED, Lbfgs, LbfgsSettings
 from design.inverse.objective import DesignObjective
-from design.inverse.problem import DesignConfig, Problem
+from design.inverse.problem import Problem
+from design.inverse.settings import BETA_STAGES
 from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)
@@ -80,8 +82,6 @@ SESSION_FLOOR = {"extruded": 1e-3}
 """With the cosine map, how far inside the bounds 0 and 1 every new session (a beta stage, a restart, a defect
 correction round) starts each variable of rho_hat, per design space (0 for the spaces it does not name; module
 doc)."""
-BETA_STAGES = 4
-"""Stages of the beta continuation (`DesignConfig.beta_final`)."""
 _ERROR = "error"
 """The stop reason of an evaluation that raised (the error is re-raised; never a run's status)."""
 HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "fab_seconds", "grad_norm", "seconds")

@@ -41,7 +41,7 @@ PRESET_NAMES: tuple[str, ...] = tuple(PREFIX + name for name in PRESETS)
 
 
 def preset_values(preset: str, space: str) -> dict[str, float]:
-    """`design.inverse.problem.DesignConfig` fields set by a preset for one design space.
+    """`design.inverse.config.DesignConfig` fields set by a preset for one design space.
 
     Parameters
     ----------

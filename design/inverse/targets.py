@@ -14,6 +14,8 @@ from design.errors import DesignError
 from design.forward.simulator import simulate
 from design.geometry.voxelize import voxelize
 
+TAU_SAMPLES = 1001
+"""Points of a design's tau grid by default: ``dtau = T / 1000`` (section 3.4)."""
 SPHERE_AREA_COEF = (36.0 * np.pi) ** (1.0 / 3.0)
 """Surface area of a sphere of volume V is ``SPHERE_AREA_COEF * V**(2/3)``."""
 ISO_TOLERANCE = 0.15
@@ -53,8 +55,8 @@ class Target:
         return float(self.released_mm3[-1])
 
 
-def tau_grid(total_time_mm: float, samples: int = 1001) -> np.ndarray:
-    """The design's tau grid, ``dtau = T / (samples - 1)`` (T/1000 by default, section 3.4)."""
+def tau_grid(total_time_mm: float, samples: int = TAU_SAMPLES) -> np.ndarray:
+    """The design's tau grid, ``dtau = T / (samples - 1)`` (`TAU_SAMPLES` by default)."""
     if not total_time_mm > 0 or samples < 3:
         raise DesignError(f"need T > 0 mm and >= 3 samples, got T = {total_time_mm}, samples = {samples}")
     return np.linspace(0.0, total_time_mm, samples)
@@ -94,7 +96,7 @@ def curve_end_mm(tau_mm: np.ndarray, released_mm3: np.ndarray) -> float:
     return float(tau_mm[min(rising[-1] + 1, c.size - 1)]) if rising.size else float(tau_mm[0])
 
 
-def target_from_curve(tau_mm: np.ndarray, released_mm3: np.ndarray, total_time_mm: float, samples: int = 1001, *,
+def target_from_curve(tau_mm: np.ndarray, released_mm3: np.ndarray, total_time_mm: float, samples: int = TAU_SAMPLES, *,
                       source: str) -> Target:
     """A measured or tabulated ``tau_mm,released_mm3`` curve resampled onto the design grid.
 
@@ -127,7 +129,7 @@ def target_from_curve(tau_mm: np.ndarray, released_mm3: np.ndarray, total_time_m
 
 
 def constant_acceleration(total_time_mm: float, final_mm3: float, duration_mm: float,
-                          rate_ratio: float = 1.0, samples: int = 1001) -> Target:
+                          rate_ratio: float = 1.0, samples: int = TAU_SAMPLES) -> Target:
     """Analytic target with C'' constant until the release ends (Fig. 7).
 
     Parameters
@@ -153,14 +155,14 @@ def constant_acceleration(total_time_mm: float, final_mm3: float, duration_mm: f
 
 
 def target_from_density(rho: np.ndarray, dx_mm: float, total_time_mm: float, source: str,
-                        samples: int = 1001) -> Target:
+                        samples: int = TAU_SAMPLES) -> Target:
     """Simulate a full (unmirrored) density grid on the design's tau grid (Fig. 6 targets)."""
     release = simulate(np.asarray(rho, dtype=float), dx_mm, total_time_mm=total_time_mm,
                        dtau_mm=total_time_mm / (samples - 1))
     return Target(np.asarray(release.tau_mm), np.asarray(release.released_mm3), source)
 
 
-def target_from_mesh(mesh, dx_mm: float, total_time_mm: float, source: str, samples: int = 1001, *,
+def target_from_mesh(mesh, dx_mm: float, total_time_mm: float, source: str, samples: int = TAU_SAMPLES, *,
                      origin_mm: np.ndarray | None = None, shape: tuple[int, int, int] | None = None) -> Target:
     """Voxelise a source mesh (mm) and simulate its release.
 

@@ -38,7 +38,7 @@ from design.files.records import load_config
 from design.files.summary_text import summary_lines
 from design.files.targets_io import load_problem
 from design.geometry.shapes import SAMPLE_SHAPES
-from design.inverse.problem import DesignConfig
+from design.inverse.config import DesignConfig
 from design.inverse.status import DesignStatus
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.plots import hmm, time_plot

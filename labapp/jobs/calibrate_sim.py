@@ -40,6 +40,7 @@ from analysis.physics_grid import (
 )
 from analysis.simcal import MODELS
 from analysis.simcal_fit import DEFAULT_MAX_OFFSET_S
+from design.geometry.voxelize import DEFAULT_RESOLUTION
 from labapp.figures.loo_plot import plot_loo
 from labapp.jobs.printrelease import mesh_release
 from labapp.records import operators
@@ -52,8 +53,6 @@ from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.simcal import FORMAT, FORWARD_MODEL, RELEASE_METHOD, SimCalError
 from labapp.records.simcalset import SetRow, read_set
 
-DEFAULT_RESOLUTION = 64
-"""Voxels along each mesh's longest side when calibrating (``sfr simulate``'s default)."""
 MIN_RESOLUTION, MAX_RESOLUTION = 8, 512
 """The resolutions a calibration accepts, voxels along each mesh's longest side."""
 Progress = Callable[[float, str], None]

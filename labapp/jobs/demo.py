@@ -26,7 +26,7 @@ import numpy as np
 from analysis import BenchCalibration, analyze_run, write_cells_csv, write_curve_csv
 from design.errors import DesignError
 from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
-from design.inverse.problem import DesignConfig
+from design.inverse.config import DesignConfig
 from drivers.sim import BenchScene
 from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
 from labapp.acquisition.clock import SteppedClock

@@ -12,7 +12,7 @@ from typing import Any
 
 from design.files.meshio import MESH_SUFFIXES
 from design.files.records import load_config, stored_form
-from design.inverse.problem import DesignConfig
+from design.inverse.config import DesignConfig
 from labapp.errors import UsageError
 from labapp.jobs.meshunits import design_memory_bytes, load_mesh_mm, require_memory, size_warnings
 from labapp.jobs.physical import design_from_target, is_physical
@@ -28,7 +28,7 @@ def _design_defaults() -> dict[str, Any]:
     return {f.name: f.default for f in dataclasses.fields(DesignConfig) if f.default is not dataclasses.MISSING}
 
 
-#: The design settings every face starts from (``design.inverse.problem.DesignConfig``'s own defaults).
+#: The design settings every face starts from (``design.inverse.config.DesignConfig``'s own defaults).
 DESIGN_DEFAULTS: dict[str, Any] = _design_defaults()
 TARGET_SOURCE = "target_source.json"
 SIMCAL_COPY = "simcal_input.json"
@@ -219,7 +219,7 @@ def design(config, out: str | Path, *, resume: bool = False, units: str | None =
            bench_calibration=None, on_iteration: Callable | None = None,
            should_stop: Callable[[], bool] | None = None, on_warning: Callable[[str], None] | None = None,
            options: dict[str, Any] | None = None):
-    """Start (``config``: a ``design.inverse.problem.DesignConfig``) or resume (``resume=True``) a design run in ``out``.
+    """Start (``config``: a ``design.inverse.config.DesignConfig``) or resume (``resume=True``) a design run in ``out``.
 
     A new run records a file target's path and SHA-256 in ``target_source.json`` and optimises a copy in
     the run folder (a mesh scaled from ``units`` to mm), so ``--resume`` uses the target the run started

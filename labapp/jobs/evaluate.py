@@ -28,9 +28,10 @@ from analysis.profile import ReleaseProfile, similarity
 from design.errors import DesignError
 from design.files.meshio import load_mesh
 from design.files.pipeline import mesh_grid
+from design.geometry.voxelize import DEFAULT_RESOLUTION
 from design.montecarlo.erosion import DEFAULT_SEEDS
 from design.montecarlo.tuning import DEFAULT_EA_J_PER_MOL, tune_mc, unit_runs
-from labapp.jobs.calibrate_sim import DEFAULT_RESOLUTION, calibrate_sim
+from labapp.jobs.calibrate_sim import calibrate_sim
 from labapp.jobs.simulate_mc import calibration_doc
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.simcal import SimCalError

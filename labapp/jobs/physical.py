@@ -337,7 +337,7 @@ def with_print_physics(config, simcal: SimCalFile):
     swelling width (its shut channels, and the print's minimum open channel width) and the print offset
     (``design.stl`` is the designed solid shrunk by it). The physical correction takes its default again: on at
     the print's anisotropy, off with swelling, which its reference evaluator does not model
-    (``design.inverse.problem.DesignConfig``)."""
+    (``design.inverse.config.DesignConfig``)."""
     physics = simcal.physics
     correction = None if config.physical_correction == "defect" else config.physical_correction
     return dataclasses.replace(config, anisotropy=physics["anisotropy"], print_offset_mm=physics["offset_mm"],
@@ -351,7 +351,7 @@ def design_from_target(config, out_dir: str | Path, *, simcal: SimCalFile | None
 
     Parameters
     ----------
-    config : design.inverse.problem.DesignConfig or None
+    config : design.inverse.config.DesignConfig or None
         Its ``target`` may be a measured curve (a run folder, ``curve.csv`` or any ``t_s,released_g`` CSV):
         it then becomes ``target_from_measurement.csv`` in ``out_dir`` through ``simcal``. None to resume.
     out_dir : str or Path

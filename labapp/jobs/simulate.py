@@ -11,9 +11,10 @@ from typing import Any
 from design import simulate as forward
 from design.errors import DesignError
 from design.files.meshio import DENSITY_SUFFIXES
-from design.files.pipeline import DEFAULT_RESOLUTION, SAMPLE_PREFIX, input_grid, mesh_grid
+from design.files.pipeline import SAMPLE_PREFIX, input_grid, mesh_grid
 from design.forward.reference import design_lattice, reference_release
 from design.geometry.shapes import sample_shape
+from design.geometry.voxelize import DEFAULT_RESOLUTION
 from labapp.errors import UsageError
 from labapp.jobs.meshunits import SIMULATE_BYTES_PER_VOXEL, check_memory, grid_shape, load_mesh_mm, size_warnings
 from labapp.records.outpaths import FolderKind, check_out

@@ -14,7 +14,7 @@ radius_vox = [3, 4]
 preset = "paper:pill"
 ```
 
-Setting names are `design.inverse.problem.DesignConfig`'s fields. Each combination's settings are the top-level
+Setting names are `design.inverse.config.DesignConfig`'s fields. Each combination's settings are the top-level
 ones overridden by its own; a preset (``preset = "paper:NAME"``, `design.inverse.presets`) fills the
 hyperparameters neither gives, as `sfr design --preset` does.
 ``simcal`` (a simulation-to-bench calibration, as `sfr design --simcal` takes) is passed through with the
@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 from design.errors import DesignError
-from design.inverse.problem import DesignConfig
+from design.inverse.config import DesignConfig
 from labapp.errors import UsageError
 from labapp.jobs.physical import is_physical
 from labapp.records.simcal import SimCalError, load_simcal

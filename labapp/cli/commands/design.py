@@ -140,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
     # the design and analysis packages load here, not with the module: `sfr --help` stays instant
     from analysis import BenchCalibration
     from design.files.summary_text import summary_lines
-    from design.inverse.problem import DesignConfig
+    from design.inverse.config import DesignConfig
     from design.inverse.status import DesignStatus
     from labapp.jobs.design import design as design_job
     from labapp.jobs.design import failed_design

@@ -10,8 +10,9 @@ from design.errors import DesignError
 from design.fabrication.channels import NarrowVoids, narrow_voids, segment_voxels
 from design.forward.simulator import simulate, total_time
 from design.forward.swelling import shut_channels
+from design.inverse.config import DesignConfig
 from design.inverse.objective import DesignObjective
-from design.inverse.problem import W_CHANNEL, DesignConfig
+from design.inverse.settings import W_CHANNEL
 from design.inverse.spaces import SpaceRequest, build_space
 from tests.design.gradcheck import assert_gradient_matches_fd
 

@@ -5,9 +5,10 @@ import pytest
 from design.errors import DesignError
 from design.fabrication.ico import IcoConfig, IcoTerm, incremental_compliance, layer_tops
 from design.forward.simulator import simulate, total_time
+from design.inverse.config import DesignConfig
 from design.inverse.objective import DesignObjective
 from design.inverse.presets import PRESET_NAMES, preset_values
-from design.inverse.problem import DesignConfig, prepare
+from design.inverse.problem import prepare
 from design.inverse.spaces import SpaceRequest, build_space
 from tests.design.gradcheck import assert_gradient_matches_fd
 

@@ -18,8 +18,8 @@ from design.files.records import (
     save_checkpoint,
 )
 from design.files.rundir import run_design
+from design.inverse.config import DesignConfig
 from design.inverse.optimize import HISTORY_COLUMNS, Checkpoint
-from design.inverse.problem import DesignConfig
 from design.inverse.status import DesignStatus
 
 SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)

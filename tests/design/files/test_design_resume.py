@@ -13,8 +13,8 @@ import pytest
 from design.errors import DesignError
 from design.files.records import CHECKPOINT, load_checkpoint, save_checkpoint
 from design.files.rundir import run_design
+from design.inverse.config import DesignConfig
 from design.inverse.defect import ROUND_BETA_FACTOR
-from design.inverse.problem import DesignConfig
 
 SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)
 

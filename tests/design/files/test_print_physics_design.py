@@ -9,9 +9,10 @@ from design.errors import DesignError
 from design.files.outputs import write_outputs
 from design.files.pipeline import offset_mesh
 from design.forward.reference import design_lattice, reference_release
+from design.inverse.config import DesignConfig
 from design.inverse.objective import rel_rmse
 from design.inverse.optimize import build_objective
-from design.inverse.problem import DesignConfig, prepare
+from design.inverse.problem import prepare
 from design.inverse.status import DesignStatus
 from tests.design.gradcheck import assert_gradient_matches_fd
 

@@ -9,9 +9,10 @@ import pytest
 import design.inverse.defect as defect
 from design.errors import DesignError
 from design.forward.simulator import simulate
+from design.inverse.config import DesignConfig
 from design.inverse.defect import RoundState, check_print, correction_plan, optimise_physical
 from design.inverse.optimize import build_objective
-from design.inverse.problem import DesignConfig, prepare
+from design.inverse.problem import prepare
 from design.inverse.targets import target_from_mesh
 
 SMALL = dict(target="sphere", space="nfc", resolution=16, radius_vox=2.0, checkpoint_every=3)

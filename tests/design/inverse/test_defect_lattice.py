@@ -7,9 +7,10 @@ import trimesh
 
 import design.inverse.defect as defect
 from design.forward.reference import DEFAULT_CELLS, MIN_CELLS, reference_release
+from design.inverse.config import DesignConfig
 from design.inverse.defect import check_print
 from design.inverse.optimize import build_objective
-from design.inverse.problem import DesignConfig, prepare
+from design.inverse.problem import prepare
 
 
 @pytest.mark.parametrize("space, per_voxel", [("extruded", 1.0), ("nfc", 2.0)])

@@ -10,8 +10,10 @@ import design.inverse.multistart
 from design.errors import DesignError
 from design.files.records import load_checkpoint
 from design.files.rundir import run_design
+from design.inverse.config import DesignConfig
 from design.inverse.multistart import coarse_resolution, perturbed_start, upsample
-from design.inverse.problem import CURVE_EXTRUDED_STARTS, MULTISTART_STARTS, DesignConfig, prepare
+from design.inverse.problem import prepare
+from design.inverse.settings import CURVE_EXTRUDED_STARTS, MULTISTART_STARTS
 
 
 def test_upsample_keeps_a_linear_field_and_the_mirror_face():

@@ -11,8 +11,9 @@ from design.files.outputs import _rate_dev
 from design.files.rundir import run_design
 from design.forward.reference import reference_release
 from design.geometry.shapes import sample_shape
+from design.inverse.config import DesignConfig
 from design.inverse.objective import rel_rmse
-from design.inverse.problem import DesignConfig, prepare
+from design.inverse.problem import prepare
 from design.inverse.status import FINISHED, DesignStatus
 from design.material import PRINT_DENSITY_G_PER_CM3
 

@@ -9,7 +9,10 @@ from design.files.targets_io import load_problem, target_from_csv
 from design.forward.reference import design_lattice, reference_release
 from design.forward.simulator import simulate
 from design.geometry.shapes import sample_shape
-from design.inverse.problem import DEFAULT_RADIUS_MM, START_FILL, DesignConfig, prepare
+from design.inverse.config import DesignConfig
+from design.inverse.problem import prepare
+from design.inverse.settings import DEFAULT_RADIUS_MM
+from design.inverse.starts import START_FILL
 
 
 def _long_curve(path, end_mm=15.0, final_mm3=900.0):

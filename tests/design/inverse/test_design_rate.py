@@ -4,8 +4,8 @@ import pytest
 
 from design.errors import DesignError
 from design.files.rundir import run_design
+from design.inverse.config import DesignConfig
 from design.inverse.objective import DesignObjective
-from design.inverse.problem import ANALYTIC_DEFAULTS, ANALYTIC_W_RATE, SPACE_DEFAULTS, W_CONNECT, DesignConfig
 from design.inverse.rate import (
     lag_rate,
     lag_rate_adjoint,
@@ -15,6 +15,7 @@ from design.inverse.rate import (
     rate_shape_fit,
     release_duration,
 )
+from design.inverse.settings import ANALYTIC_DEFAULTS, ANALYTIC_W_RATE, SPACE_DEFAULTS, W_CONNECT
 from design.inverse.spaces import SpaceRequest, build_space
 
 

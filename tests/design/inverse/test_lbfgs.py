@@ -13,6 +13,7 @@ from scipy.optimize import rosen, rosen_der
 
 from design.errors import DesignError
 from design.files.rundir import run_design
+from design.inverse.config import DesignConfig
 from design.inverse.lbfgs import (
     CONVERGED,
     CURVATURE_C2,
@@ -25,7 +26,6 @@ from design.inverse.lbfgs import (
     _model_step,
     minimize,
 )
-from design.inverse.problem import DesignConfig
 
 
 def _rosenbrock(x, grad):

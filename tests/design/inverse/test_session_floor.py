@@ -12,9 +12,9 @@ import pytest
 
 from design.forward.simulator import simulate
 from design.inverse import optimize
+from design.inverse.config import DesignConfig
 from design.inverse.objective import DesignObjective
 from design.inverse.optimize import optimise
-from design.inverse.problem import DesignConfig
 from design.inverse.spaces import SpaceRequest, extruded_space
 from design.inverse.status import DesignStatus
 

@@ -251,7 +251,7 @@ def test_calibrate_sim_checks_every_mesh_before_the_first_simulation(tmp_path):
 
 def test_the_design_job_refuses_a_second_resume_of_one_folder(tmp_path):
     """The job takes the lock itself, so the GUI's launcher and sfr design never resume one run together."""
-    from design.inverse.problem import DesignConfig
+    from design.inverse.config import DesignConfig
     from labapp.jobs.design import design
 
     out = tmp_path / "design"

@@ -5,7 +5,7 @@ import argparse
 import pytest
 
 from design.errors import DesignError
-from design.inverse.problem import DesignConfig
+from design.inverse.config import DesignConfig
 from labapp.cli.commands import design as command
 
 
@@ -30,7 +30,7 @@ def test_an_unknown_correction_is_refused_by_the_design_configuration():
 
 
 def test_the_channel_weight_becomes_a_design_setting():
-    from design.inverse.problem import W_CHANNEL
+    from design.inverse.settings import W_CHANNEL
 
     options = _options("--w-channel", "40")
     assert options["w_channel"] == 40.0

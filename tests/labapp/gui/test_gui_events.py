@@ -49,7 +49,7 @@ def test_live_plot_smooths_with_the_analysis_window(qtbot):
 
 
 def test_design_launcher_starts_from_the_cli_defaults_and_layout(qtbot, tmp_path):
-    from design.inverse.problem import DesignConfig
+    from design.inverse.config import DesignConfig
     from labapp.gui.design_launcher import DesignLauncher
     from labapp.jobs.design import design_folder
 

@@ -14,7 +14,7 @@ import pytest
 
 from analysis.simcal import SimCal
 from design.files.targets_io import load_problem
-from design.inverse.problem import DesignConfig
+from design.inverse.config import DesignConfig
 from design.inverse.targets import Target, isoperimetric_bound, isotonic_fit, project_isoperimetric
 from labapp.acquisition.simbench import Material, sample_release
 from labapp.jobs.physical import TARGET_CSV, TARGET_SLACK, adjustment_line, read_measured_target, write_target_csv
