@@ -27,8 +27,8 @@ from labapp.acquisition.settings import ADDED_MASS, parse_masses
 from labapp.gui.bridge import BackgroundTask
 from labapp.gui.fields import SettingBox, narrow_form
 from labapp.jobs.calibrate_sim import calibrate_sim
+from labapp.records.fileio import timestamp_name
 from labapp.records.simcalset import SET_COLUMNS
-from labapp.records.storage import timestamp_name
 
 
 class CalibrationWizard(QWidget):

@@ -39,9 +39,10 @@ from labapp.jobs.analyse import analyse_run, writes_into_record
 from labapp.jobs.compare import Comparison, compare_curves
 from labapp.jobs.run import finalise, resumable
 from labapp.jobs.verify import verify as verify_folder
+from labapp.records.fileio import StorageError
+from labapp.records.manifests import RunSnapshot, read_run
 from labapp.records.outpaths import ANALYSIS_SUBFOLDER, folder_kind
 from labapp.records.runrecord import RecordKind, RecordStatus
-from labapp.records.storage import RunSnapshot, StorageError, read_run
 
 log = logging.getLogger(__name__)
 FRAMES_COLUMN = 3

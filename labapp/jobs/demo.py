@@ -43,8 +43,9 @@ from labapp.jobs.calibrate_sim import calibrate_sim
 from labapp.jobs.physical import design_from_target
 from labapp.records.curvefiles import read_physical_curve
 from labapp.records.lock import folder_lock
+from labapp.records.manifests import read_run
 from labapp.records.simcal import load_simcal
-from labapp.records.storage import read_run, verify_run
+from labapp.records.verification import verify_run
 
 CAL_MASSES_G = (0.25, 0.5, 0.875, 1.25, 1.75, 2.25)
 """Cumulative filament masses of the simulated calibration series, g (up to above a sample's ~1.8 g)."""

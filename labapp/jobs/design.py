@@ -16,10 +16,10 @@ from design.inverse.config import DesignConfig
 from labapp.errors import UsageError
 from labapp.jobs.meshunits import design_memory_bytes, load_mesh_mm, require_memory, size_warnings
 from labapp.jobs.physical import design_from_target, is_physical
+from labapp.records.fileio import timestamp_name
 from labapp.records.lock import folder_lock
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.simcal import load_simcal
-from labapp.records.storage import timestamp_name
 
 log = logging.getLogger(__name__)
 

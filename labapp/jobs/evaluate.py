@@ -33,10 +33,10 @@ from design.montecarlo.erosion import DEFAULT_SEEDS
 from design.montecarlo.tuning import DEFAULT_EA_J_PER_MOL, tune_mc, unit_runs
 from labapp.jobs.calibrate_sim import calibrate_sim
 from labapp.jobs.simulate_mc import calibration_doc
+from labapp.records.fileio import atomic_write
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.simcal import SimCalError
 from labapp.records.simcalset import read_set
-from labapp.records.storage import atomic_write
 
 MODEL_NAMES = ("forward", "mc")
 """The two predictions of each object: the forward model (leave-one-out) and the Monte Carlo model."""

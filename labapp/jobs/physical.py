@@ -28,8 +28,8 @@ from labapp.records import operators
 from labapp.records.audit import Action
 from labapp.records.audit import append as audit
 from labapp.records.curvefiles import CURVE_FILES, PhysicalCurve
+from labapp.records.fileio import atomic_write
 from labapp.records.simcal import SimCalError, SimCalFile, curve_of
-from labapp.records.storage import atomic_write
 
 log = logging.getLogger(__name__)
 

@@ -7,8 +7,9 @@ import sys
 import pytest
 
 from labapp.records.audit import check_trail
+from labapp.records.manifests import read_run
 from labapp.records.requests import REQUESTS_DIR
-from labapp.records.storage import read_run, verify_run
+from labapp.records.verification import verify_run
 from tests.labapp.acquisition.runwait import wait_frames
 
 

@@ -15,7 +15,7 @@ from labapp.acquisition.simbench import SampleRelease
 from labapp.gui import dialogs
 from labapp.gui.main_window import MainWindow
 from labapp.records.audit import check_trail
-from labapp.records.storage import read_run
+from labapp.records.manifests import read_run
 
 INTERVAL_S = 30.0
 FIRST_MAX_S, NEW_MAX_S = 360.0, 720.0          # 0.1 h, then 0.2 h: 12 frames, then 24 (3.6 s, then 7.2 s at 100x)

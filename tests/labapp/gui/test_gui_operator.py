@@ -195,14 +195,14 @@ def test_open_any_run_folder_and_load_a_simcal(qtbot, tmp_path):
 
 
 def test_startup_offers_to_resume_interrupted_runs(qtbot, tmp_path):
-    from labapp.records.storage import read_run
+    from labapp.records.manifests import read_run
     data = tmp_path / "runs"
     folder = data / "20261203-090000_run"
     folder.mkdir(parents=True)
     doc = {"format": 1, "kind": "run", "name": "run", "status": "interrupted", "simulated": True,
            "created_unix_s": 1.0, "files": {}, "gaps": [], "resumed": 0, "config": {}}
     (folder / "run.json").write_text(json.dumps(doc))
-    from labapp.records.storage import FRAME_COLUMNS
+    from labapp.records.manifests import FRAME_COLUMNS
     (folder / "frames.csv").write_text(",".join(FRAME_COLUMNS) + "\n")
     try:
         snap = read_run(folder)

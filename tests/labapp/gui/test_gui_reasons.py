@@ -16,7 +16,8 @@ from labapp.gui import dialogs
 from labapp.gui.run_browser import FRAMES_COLUMN, RunBrowser
 from labapp.jobs.run import finalise
 from labapp.records.audit import check_trail
-from labapp.records.storage import create_run, read_run
+from labapp.records.manifests import read_run
+from labapp.records.storage import create_run
 
 
 def _interrupted(data_dir: Path) -> Path:

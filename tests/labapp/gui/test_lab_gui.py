@@ -8,7 +8,8 @@ import numpy as np
 from labapp.gui import dialogs
 from labapp.gui.live_view import grid_segments, mirrored_x
 from labapp.gui.main_window import MainWindow
-from labapp.records.storage import read_run, verify_run
+from labapp.records.manifests import read_run
+from labapp.records.verification import verify_run
 
 FIGURES = Path(__file__).resolve().parents[3] / "docs" / "figures"
 

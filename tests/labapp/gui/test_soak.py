@@ -7,7 +7,8 @@ pytest.importorskip("pytestqt")
 
 from labapp.acquisition.events import AlarmKind, FrameStored
 from labapp.gui.main_window import MainWindow
-from labapp.records.storage import read_run, verify_run
+from labapp.records.manifests import read_run
+from labapp.records.verification import verify_run
 
 HOURS = 4
 INTERVAL_S = 120.0         # 120 frames
