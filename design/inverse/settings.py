@@ -191,21 +191,20 @@ class DesignSetting:
         return self._allows_one(value)
 
     def range_text(self, shown: bool = False) -> str:
-        """The allowed values in words: ``an even number >= 8``, ``in (0, 64]``, ``one of nfc, extruded, ico``.
+        """The allowed values in words: ``>= 8 voxels (even)``, ``in (0, 64]``, ``one of nfc, extruded, ico``.
 
         ``shown`` is accepted for the bench's form fields (`labapp.gui.fields.SettingBox`): the command line and
         the GUI show a design setting in its stored unit.
         """
         if self.choices:
             return "one of " + ", ".join(map(str, self.choices))
-        tail = f" {self.unit}" if self.unit else ""
-        even = "even, " if self.even else ""
+        tail = (f" {self.unit}" if self.unit else "") + (" (even)" if self.even else "")
         if self.low is not None and self.high is not None:
-            return f"{even}in {'(' if self.low_open else '['}{self.low:g}, {self.high:g}{')' if self.high_open else ']'}{tail}"
+            return f"in {'(' if self.low_open else '['}{self.low:g}, {self.high:g}{')' if self.high_open else ']'}{tail}"
         if self.low is not None:
-            return f"{even}{'>' if self.low_open else '>='} {self.low:g}{tail}"
+            return f"{'>' if self.low_open else '>='} {self.low:g}{tail}"
         if self.high is not None:
-            return f"{even}{'<' if self.high_open else '<='} {self.high:g}{tail}"
+            return f"{'<' if self.high_open else '<='} {self.high:g}{tail}"
         return "finite"
 
     def shown(self, value: Any) -> Any:

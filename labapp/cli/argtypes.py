@@ -3,18 +3,20 @@
 ``argparse`` accepts ``nan``, ``inf`` and ``-2`` for ``type=float``/``int``; these types refuse them with a
 message naming what was expected (argparse prefixes the option name and exits with code 2). A declared
 setting (:mod:`labapp.acquisition.settings`) becomes its option with :func:`add_setting`; other numbers use
-the types directly, as ``parser.add_argument("--window-s", type=positive_float)``.
+the types directly, as ``parser.add_argument("--window-s", type=positive_float)``. A declared design setting
+(:mod:`design.inverse.settings`) becomes its ``sfr design`` option with :func:`add_design_option`.
 """
 from __future__ import annotations
 
 import argparse
 import math
 from collections.abc import Callable
+from typing import Any
 
 from labapp.acquisition.settings import Setting
 
-__all__ = ["add_setting", "add_settings", "finite_float", "nonnegative_float", "nonnegative_int", "positive_float",
-           "positive_int", "setting_type", "setting_values"]
+__all__ = ["add_design_option", "add_setting", "add_settings", "finite_float", "nonnegative_float", "nonnegative_int",
+           "positive_float", "positive_int", "setting_type", "setting_values"]
 
 
 def setting_type(setting: Setting) -> Callable[[str], float | int]:
@@ -50,6 +52,39 @@ def add_settings(parser: argparse.ArgumentParser, settings: tuple[Setting, ...],
 def setting_values(args: argparse.Namespace, settings: tuple[Setting, ...]) -> dict[str, float | int | None]:
     """``{name: value}`` of the ``settings`` the parsed ``args`` hold (keyword arguments of a config)."""
     return {s.name: getattr(args, s.name) for s in settings if hasattr(args, s.name)}
+
+
+def add_design_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, setting: Any) -> argparse.Action:
+    """Add the ``sfr design`` option of a declared design setting (:class:`design.inverse.settings.DesignSetting`).
+
+    The option has no default (a setting left out takes the design configuration's, resolved from the others);
+    the command line checks a number's sign (``setting.sign``, else the range's lower end) and the choices it is
+    told to, the configuration the rest. The value lands in ``args.<setting.name>``.
+    """
+    kwargs: dict[str, Any] = {"dest": setting.name, "help": setting.help()}
+    if setting.kind == "switch":
+        return parser.add_argument(setting.flag, action="store_true", **kwargs)
+    if setting.choices_checked:
+        kwargs["choices"] = setting.choices
+    else:
+        kwargs["metavar"] = setting.metavar or setting.flag[2:].upper().replace("-", "_")
+    if setting.kind == "number":
+        kwargs["type"] = _sign_type(setting)
+    if setting.count is not None:
+        kwargs["nargs"] = setting.count
+    elif setting.many:
+        kwargs.update(nargs="*", default=[])
+    return parser.add_argument(setting.flag, **kwargs)
+
+
+def _sign_type(setting: Any) -> Callable[[str], float | int]:
+    """The argparse type that checks what the command line checks of a declared number: its sign."""
+    sign = setting.sign
+    if sign is None and setting.low is not None:
+        sign = "positive" if setting.low > 0 or setting.low_open else "nonnegative" if setting.low == 0 else None
+    if setting.integer:
+        return {"positive": positive_int, "nonnegative": nonnegative_int}.get(sign, _int)
+    return {"positive": positive_float, "nonnegative": nonnegative_float}.get(sign, finite_float)
 
 
 def finite_float(text: str) -> float:

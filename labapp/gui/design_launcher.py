@@ -16,7 +16,6 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
-    QCheckBox,
     QComboBox,
     QFileDialog,
     QGridLayout,
@@ -26,7 +25,6 @@ from PySide6.QtWidgets import (
     QProgressBar,
     QPushButton,
     QScrollArea,
-    QSpinBox,
     QSplitter,
     QTabWidget,
     QVBoxLayout,
@@ -39,13 +37,15 @@ from design.files.summary_text import summary_lines
 from design.files.targets_io import load_problem
 from design.geometry.shapes import SAMPLE_SHAPES
 from design.inverse.config import DesignConfig
+from design.inverse.settings import ALLOW_INFEASIBLE, MAX_ITER, RESOLUTION, SPACE
 from design.inverse.status import DesignStatus
 from labapp.gui.bridge import BackgroundTask
+from labapp.gui.fields import problems, setting_field
 from labapp.gui.plots import hmm, time_plot
 from labapp.gui.sweep_panel import SweepPanel
 from labapp.jobs.bands import quantile_columns
-from labapp.jobs.design import DESIGN_DEFAULTS, design_folder
 from labapp.jobs.design import design as design_job
+from labapp.jobs.design import design_folder
 from labapp.jobs.physical import adjustment_line, is_physical, write_target_csv
 from labapp.records.simcal import SimCalFile, curve_of, load_simcal
 
@@ -185,16 +185,46 @@ class DesignLauncher(QWidget):
     def __init__(self, data_dir: Path, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.data_dir = Path(data_dir)
+        self.simcal: SimCalFile | None = None
+        self.task: BackgroundTask | None = None
+        self.check_task: BackgroundTask | None = None
+        self._stop = threading.Event()
+        self.out_dir: Path | None = None
+        self._max_iter = 0
         self.source = QLineEdit("")
         self.source.setPlaceholderText("run folder, curve CSV, mesh, sample name, zero-order or accel:q=Q")
         self.source.setToolTip("what sfr design --target takes: a measured run or t_s,released_g CSV (through the "
                                "active simulation calibration), a tau_mm,released_mm3 CSV, a mesh "
                                f"({', '.join(MESH_SUFFIXES)}), a sample shape ({', '.join(SAMPLE_SHAPES)}), "
                                "zero-order[:final=F,duration=D] or accel:q=Q[,final=F,duration=D]")
-        run_button, csv_button, mesh_button = QPushButton("Run..."), QPushButton("CSV..."), QPushButton("Mesh...")
-        run_button.clicked.connect(self._pick_run)
-        csv_button.clicked.connect(self._pick_csv)
-        mesh_button.clicked.connect(self._pick_mesh)
+        self.space, self.resolution, self.max_iter, self.allow_infeasible = (
+            setting_field(s) for s in (SPACE, RESOLUTION, MAX_ITER, ALLOW_INFEASIBLE))
+        self.allow_infeasible.setToolTip("the check's report is kept as feasibility.txt in the design folder; "
+                                         "a measured target is optimised whatever its report says, since its "
+                                         "noise alone can put short stretches under the isoperimetric bound")
+        self.status = QLabel(NO_SIMCAL)
+        self.status.setWordWrap(True)
+        self.status.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
+        self.status.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.progress = QProgressBar()
+        self.progress.setFormat("no design running")
+        self.progress.setValue(0)
+        self._make_buttons()
+        self._make_plots()
+        self.sweep = SweepPanel(self.data_dir, self.sweep_settings, self)
+        self.pages = QTabWidget()
+        self.pages.addTab(self._result_view(), "design")
+        self.pages.addTab(self.sweep, "sweep")
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(4, 4, 4, 4)
+        layout.addLayout(self._top_row())
+        layout.addWidget(self.pages, 1)
+
+    def _make_buttons(self) -> None:
+        """The target pickers and the action buttons, connected to their slots."""
+        self.target_buttons = (QPushButton("Run..."), QPushButton("CSV..."), QPushButton("Mesh..."))
+        for button, slot in zip(self.target_buttons, (self._pick_run, self._pick_csv, self._pick_mesh)):
+            button.clicked.connect(slot)
         self.sample = QComboBox()
         self.sample.addItems(["sample shape...", *SAMPLE_SHAPES])
         self.sample.activated.connect(lambda i: i and self.use_target(self.sample.itemText(i)))
@@ -203,22 +233,6 @@ class DesignLauncher(QWidget):
         self.analytic.setToolTip("zero-order: constant rate; accel:q=Q: rate growing as t^(q-1); edit the text "
                                  "to add final=F (mm^3) or duration=D (mm)")
         self.analytic.activated.connect(lambda i: i and self.use_target(self.analytic.itemText(i)))
-        self.space = QComboBox()
-        self.space.addItems(["extruded", "nfc", "ico"])
-        self.space.setCurrentText(DESIGN_DEFAULTS["space"])
-        self.space.setToolTip("ico: free 3D design printable without supports along +z (incremental compliance)")
-        self.resolution = QSpinBox()
-        self.resolution.setRange(8, 256)
-        self.resolution.setSingleStep(2)
-        self.resolution.setValue(DESIGN_DEFAULTS["resolution"])
-        self.max_iter = QSpinBox()
-        self.max_iter.setRange(1, 5000)
-        self.max_iter.setValue(DESIGN_DEFAULTS["max_iter"])
-        self.allow_infeasible = QCheckBox("optimise even if the feasibility check fails")
-        self.allow_infeasible.setToolTip("the check's report is kept as feasibility.txt in the design folder; "
-                                         "a measured target is optimised whatever its report says, since its "
-                                         "noise alone can put short stretches under the isoperimetric bound")
-        self.allow_infeasible.setChecked(DESIGN_DEFAULTS["allow_infeasible"])
         self.check_button, self.start_button, self.stop_button = (QPushButton("Check target"), QPushButton("Design"),
                                                                   QPushButton("Stop"))
         self.resume_button, self.simcal_button = QPushButton("Resume..."), QPushButton("Load simcal...")
@@ -229,14 +243,11 @@ class DesignLauncher(QWidget):
                              (self.stop_button, self.stop), (self.resume_button, self.resume),
                              (self.simcal_button, self._pick_simcal), (self.save_button, self._save)):
             button.clicked.connect(slot)
-        self.simcal: SimCalFile | None = None
-        self.status = QLabel(NO_SIMCAL)
-        self.status.setWordWrap(True)
-        self.status.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
-        self.status.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
-        self.progress = QProgressBar()
-        self.progress.setFormat("no design running")
-        self.progress.setValue(0)
+        self.stop_button.setEnabled(False)
+        self.save_button.setEnabled(False)
+
+    def _make_plots(self) -> None:
+        """The release plots (simulation units; grams over time) and the printed solid's slices."""
         self.plot = pg.PlotWidget(title="release: target vs achieved (simulation units)")
         self.plot.setLabel("bottom", "tau (mm)")
         self.plot.setLabel("left", "released (mm\u00b3)")
@@ -255,17 +266,18 @@ class DesignLauncher(QWidget):
         self.physical_band = [self.physical_plot.plot([], [], pen=pg.mkPen(None)) for _ in range(2)]
         self.physical_plot.addItem(pg.FillBetweenItem(*self.physical_band, brush=pg.mkBrush(255, 0, 255, 50)))
 
+    def _top_row(self) -> QHBoxLayout:
+        """The form (target, settings, buttons, progress) beside the scrollable report."""
         form = QGridLayout()
         form.addWidget(QLabel("target"), 0, 0)
         form.addWidget(self.source, 0, 1, 1, 3)
         picks = QHBoxLayout()
-        for w in (run_button, csv_button, mesh_button, self.sample, self.analytic):
+        for w in (*self.target_buttons, self.sample, self.analytic):
             picks.addWidget(w)
         form.addLayout(picks, 1, 1, 1, 3)
         settings = QHBoxLayout()
-        for label, w in (("space", self.space), ("resolution (voxels)", self.resolution),
-                         ("max iterations", self.max_iter)):
-            settings.addWidget(QLabel(label))
+        for setting, w in ((SPACE, self.space), (RESOLUTION, self.resolution), (MAX_ITER, self.max_iter)):
+            settings.addWidget(QLabel(setting.label))
             settings.addWidget(w)
         settings.addStretch(1)
         form.addLayout(settings, 2, 1, 1, 3)
@@ -282,6 +294,10 @@ class DesignLauncher(QWidget):
         top = QHBoxLayout()
         top.addLayout(form, 3)
         top.addWidget(report, 2)
+        return top
+
+    def _result_view(self) -> QSplitter:
+        """The release curves (two tabs) beside the printed solid."""
         self.curves = QTabWidget()
         self.curves.addTab(self.plot, "simulation units")
         self.curves.addTab(self.physical_plot, "grams over time")
@@ -291,21 +307,12 @@ class DesignLauncher(QWidget):
         result.setStretchFactor(0, 3)
         result.setStretchFactor(1, 2)
         result.setChildrenCollapsible(False)
-        self.sweep = SweepPanel(self.data_dir, self.sweep_settings, self)
-        self.pages = QTabWidget()
-        self.pages.addTab(result, "design")
-        self.pages.addTab(self.sweep, "sweep")
-        layout = QVBoxLayout(self)
-        layout.setContentsMargins(4, 4, 4, 4)
-        layout.addLayout(top)
-        layout.addWidget(self.pages, 1)
-        self.task: BackgroundTask | None = None
-        self.check_task: BackgroundTask | None = None
-        self._stop = threading.Event()
-        self.out_dir: Path | None = None
-        self._max_iter = 0
-        self.stop_button.setEnabled(False)
-        self.save_button.setEnabled(False)
+        return result
+
+    def settings(self) -> dict:
+        """The design settings of the form, as `DesignConfig` fields (not checked; see :func:`problems`)."""
+        return {"space": self.space.currentText(), "resolution": self.resolution.stored(),
+                "max_iter": self.max_iter.stored(), "allow_infeasible": self.allow_infeasible.isChecked()}
 
     @property
     def busy(self) -> bool:
@@ -325,9 +332,7 @@ class DesignLauncher(QWidget):
 
     def sweep_settings(self) -> tuple[str, dict, str | None]:
         """The target, fixed design settings and simulation calibration a sweep starts from: this form's."""
-        fixed = {"space": self.space.currentText(), "resolution": self.resolution.value(),
-                 "max_iter": self.max_iter.value(), "allow_infeasible": self.allow_infeasible.isChecked()}
-        return self.source.text().strip(), fixed, None if self.simcal is None else str(self.simcal.path)
+        return self.source.text().strip(), self.settings(), None if self.simcal is None else str(self.simcal.path)
 
     def _pick_run(self) -> None:
         path = QFileDialog.getExistingDirectory(self, "measured run", str(self.data_dir))
@@ -356,7 +361,7 @@ class DesignLauncher(QWidget):
         target = self.source.text().strip()
         if not target or (self.check_task is not None and self.check_task.running):
             return
-        space, resolution, simcal = self.space.currentText(), self.resolution.value(), self.simcal
+        space, resolution, simcal = self.space.currentText(), self.resolution.stored(), self.simcal
         self.check_task = BackgroundTask(lambda progress: preview_target(target, space, resolution, simcal), self)
         self.check_task.finished.connect(self._checked)
         self.check_task.failed.connect(self._check_failed)
@@ -392,11 +397,13 @@ class DesignLauncher(QWidget):
             self.status.setText(f"{text or 'the target'} does not exist: choose a run, a CSV, a mesh, a sample "
                                 "shape or an analytic target")
             return
+        wrong = problems([self.resolution, self.max_iter])
+        if wrong:
+            self.status.setText("\n".join(wrong))
+            return
         name = source.stem if source.exists() else text.replace(":", "_").replace("=", "").replace(",", "_")
         self.out_dir = design_folder(self.data_dir, name)
-        config = DesignConfig(target=str(source) if source.exists() else text, space=self.space.currentText(),
-                              resolution=self.resolution.value(), max_iter=self.max_iter.value(),
-                              allow_infeasible=self.allow_infeasible.isChecked())
+        config = DesignConfig(target=str(source) if source.exists() else text, **self.settings())
         self._run(config, self.out_dir, resume=False)
 
     def resume(self, folder: str | Path | None = None) -> None:

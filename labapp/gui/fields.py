@@ -1,5 +1,7 @@
-"""Form fields made from declared settings (:mod:`labapp.acquisition.settings`): a spin box with the setting's unit
-suffix, decimals, default and help text, read and written in the setting's stored unit.
+"""Form fields made from declared settings (:mod:`labapp.acquisition.settings`, and the design settings of
+:mod:`design.inverse.settings`): a spin box with the setting's unit suffix, decimals, default and help text, read and
+written in the setting's stored unit; for a design setting with choices a combo box, for a switch a check box
+(:func:`setting_field`).
 
 A box accepts any number as typed and says in the field when it is outside the setting's range (never
 clamping it silently: ``-20`` stays ``-20`` and is refused, ``3000`` is not cut to ``30``); forms keep
@@ -7,8 +9,10 @@ their action disabled while :meth:`SettingBox.problem` names what is wrong.
 """
 from __future__ import annotations
 
+from typing import Any
+
 from PySide6.QtCore import Signal
-from PySide6.QtWidgets import QDoubleSpinBox, QFormLayout, QLabel, QWidget
+from PySide6.QtWidgets import QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout, QLabel, QWidget
 
 from labapp.acquisition.settings import Setting
 
@@ -25,7 +29,7 @@ class SettingBox(QDoubleSpinBox):
 
     Parameters
     ----------
-    setting : Setting
+    setting : Setting or design.inverse.settings.DesignSetting
     none_text : str, optional
         For an optional setting: the text shown at the box's lowest value, which means None ("not
         weighed", "no heating"); stepping down from the range's low end reaches it.
@@ -33,11 +37,13 @@ class SettingBox(QDoubleSpinBox):
 
     problem_changed = Signal(str)
 
-    def __init__(self, setting: Setting, none_text: str | None = None, parent: QWidget | None = None) -> None:
+    def __init__(self, setting: Setting | Any, none_text: str | None = None, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setting, self.none_text = setting, none_text
         self.setDecimals(setting.decimals)
         self.setRange(-_UNBOUNDED, _UNBOUNDED)
+        if getattr(setting, "even", False):
+            self.setSingleStep(2)
         if none_text is not None:
             self.setSpecialValueText(none_text)
         if setting.display_unit:
@@ -141,6 +147,23 @@ def add_rows(form: QFormLayout, settings: tuple[Setting, ...], none_text: dict[s
         boxes[setting.name] = box
         box.add_to(form, setting.label)
     return boxes
+
+
+def setting_field(setting: Any, parent: QWidget | None = None) -> QWidget:
+    """The form field of a declared design setting (:class:`design.inverse.settings.DesignSetting`) at its default,
+    with its help text as tooltip: a :class:`SettingBox` for a number, a combo box of its choices for a text, a check
+    box labelled with the setting for a switch."""
+    if setting.kind == "number":
+        return SettingBox(setting, parent=parent)
+    if setting.kind == "switch":
+        field = QCheckBox(setting.label, parent)
+        field.setChecked(bool(setting.default))
+    else:
+        field = QComboBox(parent)
+        field.addItems([str(c) for c in setting.choices])
+        field.setCurrentText(str(setting.default))
+    field.setToolTip(setting.help())
+    return field
 
 
 def problems(boxes: dict[str, SettingBox] | list[SettingBox]) -> list[str]:

@@ -12,7 +12,7 @@ from typing import Any
 
 from design.files.meshio import MESH_SUFFIXES
 from design.files.records import load_config, stored_form
-from design.inverse.config import DesignConfig
+from design.inverse.settings import option_flag
 from labapp.errors import UsageError
 from labapp.jobs.meshunits import design_memory_bytes, load_mesh_mm, require_memory, size_warnings
 from labapp.jobs.physical import design_from_target, is_physical
@@ -24,25 +24,11 @@ from labapp.records.simcal import load_simcal
 log = logging.getLogger(__name__)
 
 
-def _design_defaults() -> dict[str, Any]:
-    return {f.name: f.default for f in dataclasses.fields(DesignConfig) if f.default is not dataclasses.MISSING}
-
-
-#: The design settings every face starts from (``design.inverse.config.DesignConfig``'s own defaults).
-DESIGN_DEFAULTS: dict[str, Any] = _design_defaults()
 TARGET_SOURCE = "target_source.json"
 SIMCAL_COPY = "simcal_input.json"
 """The run's copy of the simulation calibration it started with (``--simcal``), which a resume uses."""
 SIMCAL_SOURCE = "simcal_source.json"
 """Where that copy came from: ``source`` (absolute path), ``sha256`` (of the copy, as of the source then)."""
-_FLAGS = {"radius_vox": "--radius", "rate_window_vox": "--rate-window", "height_mm": "--height"}
-"""`sfr design` options whose name is not the `DesignConfig` field's with dashes."""
-
-
-def option_flag(name: str) -> str:
-    """The `sfr design` option of a `DesignConfig` field (``resolution`` -> ``--resolution``)."""
-    return _FLAGS.get(name, "--" + name.replace("_", "-"))
-
 
 def design_folder(data_dir: str | Path, name: str) -> Path:
     """The folder of a new design run started from the GUI: ``DATA/designs/<YYYYmmdd-HHMMSS>_<name>``."""

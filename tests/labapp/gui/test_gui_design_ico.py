@@ -27,7 +27,7 @@ def test_launcher_runs_an_ico_design_and_shows_overhangs(qtbot, tmp_path):
     target = tmp_path / "target.csv"
     np.savetxt(target, np.column_stack([tau, released]), delimiter=",", header="tau_mm,released_mm3", comments="")
     launcher = _design(qtbot, tmp_path, target, "ico", 3)
-    assert [launcher.space.itemText(i) for i in range(launcher.space.count())] == ["extruded", "nfc", "ico"]
+    assert [launcher.space.itemText(i) for i in range(launcher.space.count())] == ["nfc", "extruded", "ico"]
     assert "Overhangs along +z" in launcher.status.text() and "longest run" in launcher.status.text()
 
 
