@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis import BenchCalibration, analyze_run, write_cells_csv, write_curve_csv
+from analysis import BenchCalibration, RunCurve, analyze_run, write_cells_csv, write_curve_csv
 from design.errors import DesignError
 from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.inverse.config import DesignConfig
@@ -39,12 +39,12 @@ from labapp.errors import UsageError
 from labapp.jobs.bands import prediction_band, quantile_columns, source_simulator
 from labapp.jobs.calibrate_sim import MAX_RESOLUTION as MAX_SIMCAL_RESOLUTION
 from labapp.jobs.calibrate_sim import MIN_RESOLUTION as MIN_SIMCAL_RESOLUTION
-from labapp.jobs.calibrate_sim import calibrate_sim
+from labapp.jobs.calibrate_sim import SimCalRun, calibrate_sim
 from labapp.jobs.physical import design_from_target
-from labapp.records.curvefiles import read_physical_curve
+from labapp.records.curvefiles import PhysicalCurve, read_physical_curve
 from labapp.records.lock import folder_lock
 from labapp.records.manifests import read_run
-from labapp.records.simcal import load_simcal
+from labapp.records.simcal import SimCalFile, load_simcal
 from labapp.records.verification import verify_run
 
 CAL_MASSES_G = (0.25, 0.5, 0.875, 1.25, 1.75, 2.25)
@@ -220,21 +220,49 @@ def check_demo(sample: str, interval_s: float, calibration_interval_s: float = C
 
 def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interval_s: float, resolution: int,
               design: DesignConfig, material: Material, progress: Callable[[str], None]) -> DemoResult:
-    """The loop of :func:`run_demo` on checked inputs, in a locked ``out_dir``."""
+    """The loop of :func:`run_demo` on checked inputs, in a locked ``out_dir``: the steps of the module's list."""
     start = time.monotonic()
     clock = SteppedClock()
     progress("1. calibration series: clear water + 6 filament additions at 70 C ...")
     calibration, cal_path = simulated_calibration(out_dir / "calibration", clock)
     progress(f"   {cal_path}")
+    truths: dict[str, dict] = {}
+    set_csv = _calibration_runs(out_dir, clock, calibration, calibration_interval_s, material, truths, progress)
+    cal_run, simcal, loo = _calibrate_simulation(set_csv, cal_path, out_dir / "simcal", resolution, progress)
+    run_dir, curve, faults = _further_run(out_dir, clock, calibration, sample, interval_s, material, truths, progress)
+    curve_csv = out_dir / "analysis" / "curve.csv"
 
+    progress(f"5. design from the measured curve (nfc, {design.resolution}^3, {design.max_iter} evaluations) ...")
+    design_dir = out_dir / "design"
+    result, physical = design_from_target(dataclasses.replace(design, target=str(curve_csv)), design_dir, simcal=simcal)
+    prediction = _predict_further(curve_csv, sample, simcal, cal_run, progress)
+    figure = out_dir / "demo.png"
+    designed = np.genfromtxt(design_dir / "curves_physical.csv", delimiter=",", names=True)
+    _plot(cal_run, prediction.measured, prediction.predicted, designed, sample, figure, prediction.band)
+
+    _write_truth(out_dir / "truth.json", material, truths)
+    true_rate = float(np.mean([t["seconds_per_mm"] for t in truths.values()]))
+    true_density = float(np.mean([t["g_per_mm3"] for t in truths.values()])) * 1000.0
+    result_ = DemoResult(out_dir, cal_path, simcal.path, run_dir, curve_csv, design_dir, figure,
+                         out_dir / "summary.json", loo, simcal.cal.seconds_per_mm, true_rate,
+                         simcal.cal.g_per_mm3 * 1000.0, true_density, prediction.rel_rmse, physical["rel_rmse_physical"],
+                         len(curve.t_s), float(curve.t_s[-1]), faults, time.monotonic() - start)
+    _write_summary(result_, result.status, physical, cal_run, prediction)
+    return result_
+
+
+def _calibration_runs(out_dir: Path, clock: SteppedClock, calibration: BenchCalibration, interval_s: float,
+                      material: Material, truths: dict[str, dict], progress: Callable[[str], None]) -> Path:
+    """Step 2: a short run of each of `CALIBRATION_SHAPES`, its mesh in ``meshes/`` and its truth in ``truths``;
+    returns the calibration set's CSV (run, mesh, object mass) that lists them."""
     meshes = out_dir / "meshes"
     meshes.mkdir(exist_ok=True)
-    truths, set_rows = {}, ["run,mesh,object_mass_g"]
-    progress(f"2. short runs of {len(CALIBRATION_SHAPES)} sample objects ({calibration_interval_s:g} s per frame) ...")
+    set_rows = ["run,mesh,object_mass_g"]
+    progress(f"2. short runs of {len(CALIBRATION_SHAPES)} sample objects ({interval_s:g} s per frame) ...")
     for index, (shape, water) in enumerate(zip(CALIBRATION_SHAPES, CALIBRATION_WATER_G)):
         release = sample_release(shape, index=index, resolution=TRUTH_RESOLUTION, material=material)
         sample_shape(shape).export(meshes / f"{shape}.stl")
-        run_dir = simulated_run(clock, calibration, release, out_dir / "runs", interval_s=calibration_interval_s,
+        run_dir = simulated_run(clock, calibration, release, out_dir / "runs", interval_s=interval_s,
                                 water_g=water, hotplate=False)
         truths[shape] = release.truth
         set_rows.append(f"{run_dir.relative_to(out_dir)},meshes/{shape}.stl,")
@@ -242,20 +270,33 @@ def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interva
                  f"-> {run_dir.name}")
     set_csv = out_dir / "calibration_set.csv"
     set_csv.write_text("\n".join(set_rows) + "\n")
+    return set_csv
 
+
+def _calibrate_simulation(set_csv: Path, cal_path: Path, simcal_dir: Path, resolution: int,
+                   progress: Callable[[str], None]) -> tuple[SimCalRun, SimCalFile, tuple[tuple[str, float], ...]]:
+    """Step 3: ``calibrate-sim`` on the calibration set; returns its run, its file and the leave-one-out errors
+    (mesh name, rel. RMSE of the weighed mass)."""
     progress(f"3. calibrate-sim {set_csv.name} (resolution {resolution}, leave-one-out) ...")
-    cal_run = calibrate_sim(set_csv, cal_path, out_dir / "simcal", resolution=resolution,
+    cal_run = calibrate_sim(set_csv, cal_path, simcal_dir, resolution=resolution,
                             progress=lambda f, m: progress(f"   {m}"))
     simcal = load_simcal(cal_run.path)
     loo = tuple((Path(row["mesh"]).stem, row["rel_rmse"]) for row in cal_run.doc["loo"])
     for name, error in loo:
         progress(f"   leave-one-out {name:12s} rel. RMSE {100 * error:.2f}% of the weighed mass")
+    return cal_run, simcal, loo
 
+
+def _further_run(out_dir: Path, clock: SteppedClock, calibration: BenchCalibration, sample: str, interval_s: float,
+                 material: Material, truths: dict[str, dict], progress: Callable[[str], None]
+                 ) -> tuple[Path, RunCurve, int]:
+    """Step 4: the further object's run with faults injected and its analysis (``analysis/curve.csv`` and
+    ``cells.csv``); returns the run folder, the measured curve and the warnings in its event log."""
     progress(f"4. release run of a further object, '{sample}' ({interval_s:g} s per frame; faults injected: "
              "camera busy, corrupt frame, hotplate link drop) ...")
     release = sample_release(sample, index=len(CALIBRATION_SHAPES), resolution=TRUTH_RESOLUTION, material=material)
     truths[sample] = release.truth
-    sample_shape(sample).export(meshes / f"{sample}.stl")
+    sample_shape(sample).export(out_dir / "meshes" / f"{sample}.stl")
     run_dir = simulated_run(clock, calibration, release, out_dir / "runs", interval_s=interval_s, faults=True,
                             progress=progress)
     curve = analyze_run(run_dir, calibration, cache_dir=run_dir / "analysis")
@@ -266,13 +307,29 @@ def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interva
     snap = read_run(run_dir)
     faults = sum(1 for line in snap.events() if "\tWARNING\t" in line)
     progress(f"   {len(curve.t_s)} frames over {curve.t_s[-1] / 3600:.2f} h, {faults} warnings in the event log")
+    return run_dir, curve, faults
 
-    progress(f"5. design from the measured curve (nfc, {design.resolution}^3, {design.max_iter} evaluations) ...")
-    config = dataclasses.replace(design, target=str(analysis_dir / "curve.csv"))
-    design_dir = out_dir / "design"
-    result, physical = design_from_target(config, design_dir, simcal=simcal)
 
-    measured = read_physical_curve(analysis_dir / "curve.csv")
+@dataclass(frozen=True)
+class _Prediction:
+    """The further object's measured curve, its release predicted from its mesh and its error band."""
+
+    measured: PhysicalCurve
+    predicted: np.ndarray
+    """Predicted release at the measured times, g."""
+    rel_rmse: float
+    """RMSE of the prediction as a fraction of the measured final grams."""
+    band: tuple[np.ndarray, np.ndarray] | None
+    """The prediction's band (low, high), g; None without a band in the calibration."""
+    inside: float | None
+    """Fraction of the measured points inside the band."""
+
+
+def _predict_further(curve_csv: Path, sample: str, simcal: SimCalFile, cal_run: SimCalRun,
+                     progress: Callable[[str], None]) -> _Prediction:
+    """The further object's release predicted from its mesh by the simulation calibration, against its measured
+    curve."""
+    measured = read_physical_curve(curve_csv)
     simulate_at = source_simulator(f"sample:{sample}", simcal.resolution, method=simcal.release_method)
     tau, vol = simulate_at(simcal.physics)
     predicted = simcal.cal.to_physical(tau, vol, measured.t_s, measured.water_g or WATER_G)
@@ -282,29 +339,29 @@ def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interva
     if band is not None:
         progress(f"   {100 * inside:.0f}% of the further object's measured points lie inside its predicted "
                  f"{100 * cal_run.doc['band']['level']:.0f}% band")
-    figure = out_dir / "demo.png"
-    designed = np.genfromtxt(design_dir / "curves_physical.csv", delimiter=",", names=True)
-    _plot(cal_run, measured, predicted, designed, sample, figure, band)
+    return _Prediction(measured, predicted, rel_pred, band, inside)
 
+
+def _write_truth(path: Path, material: Material, truths: dict[str, dict]) -> None:
+    """Write ``truth.json``: the bench's hidden material and each object's own rate and density."""
     truth = {"material": dataclasses.asdict(material), "objects": truths,
              "note": "hidden ground truth of the simulated bench; no step of the loop reads this file"}
-    (out_dir / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
-    true_rate = float(np.mean([t["seconds_per_mm"] for t in truths.values()]))
-    true_density = float(np.mean([t["g_per_mm3"] for t in truths.values()])) * 1000.0
-    result_ = DemoResult(out_dir, cal_path, simcal.path, run_dir, analysis_dir / "curve.csv", design_dir, figure,
-                         out_dir / "summary.json", loo, simcal.cal.seconds_per_mm, true_rate,
-                         simcal.cal.g_per_mm3 * 1000.0, true_density, rel_pred, physical["rel_rmse_physical"],
-                         len(curve.t_s), float(curve.t_s[-1]), faults, time.monotonic() - start)
-    summary = {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(result_).items()}
-    summary["verify_ok"] = verify_run(run_dir).ok
-    summary["design_status"] = result.status
+    path.write_text(json.dumps(truth, indent=2) + "\n")
+
+
+def _write_summary(result: DemoResult, design_status: str, physical: dict, cal_run: SimCalRun,
+                   prediction: _Prediction) -> None:
+    """Write the demo's ``summary.json``: the `DemoResult`, the run's verification, the design's status, print
+    mass and narrowest channel, and the band's coverage."""
+    summary = {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(result).items()}
+    summary["verify_ok"] = verify_run(result.run_dir).ok
+    summary["design_status"] = design_status
     summary["print_mass_g"] = physical["print_mass_g"]
     summary["min_channel_mm"] = physical["min_channel_mm"]
-    if band is not None:
+    if prediction.band is not None:
         summary["band"] = {"level": cal_run.doc["band"]["level"], "loo_coverage": cal_run.doc["band"]["loo_coverage"],
-                           "prediction_points_inside": inside}
-    result_.summary_path.write_text(json.dumps(summary, indent=2) + "\n")
-    return result_
+                           "prediction_points_inside": prediction.inside}
+    result.summary_path.write_text(json.dumps(summary, indent=2) + "\n")
 
 
 def _plot(run, measured, predicted: np.ndarray, designed, sample: str, path: Path,
