@@ -71,6 +71,7 @@ from design.inverse.settings import (
     W_RATE,
     WARN_CHANNEL,
     XTOL,
+    DesignSetting,
 )
 from design.inverse.target_spec import is_shape_target, parse_analytic
 
@@ -331,28 +332,38 @@ def _bad_formats(config: DesignConfig) -> str:
     return f"extra mesh formats must be among {', '.join(MESH_FORMATS)}; got {sorted(bad)}"
 
 
-CHECKS: tuple[Any, ...] = (
-    SPACE, W_FAB, Rule(lambda c: not (c.w_fab > 0 and c.space != "ico"), W_FAB.message), HEIGHT_FRACTION,
-    Rule(_ico_settings_hold, ""), W_RATE, RATE_WINDOW, RATE_SPAN, Rule(lambda c: c.rate_span[0] < c.rate_span[1],
-                                                                      RATE_SPAN.message),
-    ROBUST_ETA, Rule(lambda c: not (c.robust_eta > 0 and not c.w_rate > 0),
-                     "the robust formulation compares release rates: it needs w_rate > 0"),
+CHECKS: tuple[DesignSetting | Rule, ...] = (
+    SPACE,
+    W_FAB,
+    Rule(lambda c: not (c.w_fab > 0 and c.space != "ico"), W_FAB.message),
+    HEIGHT_FRACTION,
+    Rule(_ico_settings_hold, ""),
+    W_RATE, RATE_WINDOW,
+    RATE_SPAN,
+    Rule(lambda c: c.rate_span[0] < c.rate_span[1], RATE_SPAN.message),
+    ROBUST_ETA,
+    Rule(lambda c: not (c.robust_eta > 0 and not c.w_rate > 0),
+         "the robust formulation compares release rates: it needs w_rate > 0"),
     RESOLUTION, DOMAIN, HEIGHT, W_BINARY, RADIUS,
     Rule(lambda c: c.radius_vox is None or c.radius_mm is None,
          "give the smoothing radius in voxels ({radius_vox}) or in mm ({radius_mm}), not both"),
     RADIUS_MM, W_CONNECT_SETTING, CONNECT_TAIL, STARTS, BETA,
     Rule(lambda c: c.beta_final is None or c.beta <= c.beta_final <= MAX_BETA, BETA_FINAL.message),
-    MAX_ITER, CHECKPOINT_EVERY, LBFGS_MEMORY, MARGIN, WARN_CHANNEL, SAMPLES, BOUNDS, OPTIMIZER, LINE_SEARCH,
+    MAX_ITER, CHECKPOINT_EVERY, LBFGS_MEMORY,
+    MARGIN, WARN_CHANNEL, SAMPLES,
+    BOUNDS, OPTIMIZER, LINE_SEARCH,
     Rule(lambda c: not (c.optimizer == "lbfgs" and c.bounds != "cosine"),
          "the 'lbfgs' optimiser is unconstrained: it needs bounds='cosine' (box bounds: choose an nlopt optimizer)"),
-    ANISOTROPY, PRINT_OFFSET, SWELLING, W_CHANNEL_SETTING,
+    ANISOTROPY, PRINT_OFFSET, SWELLING,
+    W_CHANNEL_SETTING,
     Rule(lambda c: not (c.w_channel and not c.swelling_mm > 0),
          "w_channel = {w_channel:g} weighs the minimum open channel width, which is swelling_mm: it needs "
          "swelling_mm > 0"),
     Rule(lambda c: not (c.physical_correction == "defect" and c.swelling_mm > 0),
          "physical_correction 'defect' judges the print by the reference evaluator, which does not shut channels "
          "narrower than swelling_mm ({swelling_mm:g} mm); use 'none' with swelling"),
-    PHYSICAL_CORRECTION, CORRECTION_ROUNDS_SETTING, CORRECTION_EVALS,
+    PHYSICAL_CORRECTION,
+    CORRECTION_ROUNDS_SETTING, CORRECTION_EVALS,
     Rule(lambda c: not set(c.formats) - set(MESH_FORMATS), _bad_formats),
 )
 """What `check_config` checks, in order: each declared setting's range and the conditions between settings."""

@@ -338,7 +338,7 @@ MAX_ITER = DesignSetting(
     "max_iter", "max iterations", default=_MAX_ITER, low=1, integer=True, flag="--max-iter",
     text=f"maximum objective evaluations (default {_MAX_ITER})", message=_EVALS)
 PHYSICAL_CORRECTION = DesignSetting(
-    "physical_correction", "physical correction", kind="text", choices=PHYSICAL_CORRECTIONS, optional=True,
+    "physical_correction", "physical correction", kind="text", choices=PHYSICAL_CORRECTIONS,
     flag="--physical-correction", metavar=_choices(PHYSICAL_CORRECTIONS),
     text="how the printed solid's true release is made to meet the target: defect (default: rounds that re-aim the "
          "design grid by the bias the reference evaluator finds in the print, within --max-iter) or none (the design "
