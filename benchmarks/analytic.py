@@ -1,8 +1,8 @@
 """Solids with closed-form releases: voxel cases for the forward model, meshes for the reference evaluator.
 
-The same cases as the tests of ``tests/design/forward`` (``test_forward_analytic.py``, ``test_reference.py``), for
-the scripts that print their tables and draw their figures (`benchmarks.forward_evidence`,
-`studies.reference_evidence`). Lengths in mm, volumes in mm^3.
+The cases that the tests of ``tests/design/forward`` (``test_forward_analytic.py``, ``test_reference.py``) check
+and that the scripts printing their tables and drawing their figures (`benchmarks.forward_evidence`,
+`studies.reference_evidence`) run. Lengths in mm, volumes in mm^3.
 """
 from __future__ import annotations
 

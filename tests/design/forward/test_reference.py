@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from benchmarks.analytic import MESHES, box, hollow
 from design.errors import DesignError
 from design.forward.reference import reference_release
 
@@ -19,99 +20,7 @@ TOLERANCE = 0.002
 CELLS = 64
 
 
-def _ball(r):
-    return 4 / 3 * np.pi * np.clip(r, 0, None) ** 3
-
-
-def _lens(a, b, d):
-    """Volume of the intersection of balls of radii a and b whose centres are d apart."""
-    a = np.asarray(a, float)
-    b = np.broadcast_to(np.asarray(b, float), a.shape)
-    out = np.zeros(a.shape)
-    inner = d <= np.abs(a - b)
-    out[inner] = _ball(np.minimum(a, b)[inner])
-    cut = ~inner & (d < a + b)
-    aa, bb = a[cut], b[cut]
-    out[cut] = np.pi * (aa + bb - d) ** 2 * (d * d + 2 * d * (aa + bb) - 3 * (aa - bb) ** 2) / (12 * d)
-    return out
-
-
-def _radius_of(volume, per_r3):
-    return (volume / per_r3) ** (1 / 3)
-
-
-def sphere():
-    mesh = trimesh.creation.icosphere(subdivisions=4, radius=10.0)
-    mesh.apply_translation([0.123, 0.377, -0.2])
-    r = _radius_of(mesh.volume, 4 / 3 * np.pi)
-    return mesh, 10.0, lambda t: mesh.volume - _ball(r - t)
-
-
-def cylinder():
-    n, a, height = 128, 6.0, 15.0
-    mesh = trimesh.creation.cylinder(radius=a, height=height, sections=n)
-    mesh.apply_translation([0.31, -0.17, 0.29])
-    apothem = a * np.cos(np.pi / n)  # the regular n-gon's inradius: its offset polygons keep the shape
-
-    def exact(t):
-        return mesh.volume - n * np.tan(np.pi / n) * np.clip(apothem - t, 0, None) ** 2 * np.clip(height - 2 * t, 0, None)
-    return mesh, a, exact
-
-
-def box():
-    dims = np.array([7.3, 11.1, 4.9])
-    mesh = trimesh.creation.box(dims)
-    mesh.apply_translation([0.217, 0.093, -0.311])  # off the lattice's centring
-    return mesh, dims.min() / 2, lambda t: mesh.volume - np.prod(np.clip(dims - 2 * t[:, None], 0, None), axis=1)
-
-
-def torus():
-    major = 8.0
-    mesh = trimesh.creation.torus(major_radius=major, minor_radius=3.0, major_sections=128, minor_sections=64)
-    r = np.sqrt(mesh.volume / (2 * np.pi ** 2 * major))
-    return mesh, 3.0, lambda t: mesh.volume - 2 * np.pi ** 2 * major * np.clip(r - t, 0, None) ** 2
-
-
-def hollow():
-    """A ball of radius 10 with a sealed spherical void of radius 3 centred 4 off its centre.
-
-    The void is wetted when the outer front reaches it, at tau = w = 10 - 4 - 3; from then on the void
-    grows as a ball of radius 3 + (tau - w) around its centre. What remains at tau is the ball of
-    radius 10 - tau minus its intersection with the void's ball of radius max(3, 3 + tau - w).
-    """
-    outer = trimesh.creation.icosphere(subdivisions=4, radius=10.0)
-    void = trimesh.creation.icosphere(subdivisions=4, radius=3.0)
-    void.invert()
-    void.apply_translation([4.0, 0.0, 0.0])
-    mesh = trimesh.util.concatenate([outer, void])
-    big = _radius_of(outer.volume, 4 / 3 * np.pi)
-    small = _radius_of(-void.volume, 4 / 3 * np.pi)
-    wet = big - 4.0 - small
-
-    def exact(t):
-        rest = np.clip(big - t, 0, None)
-        return mesh.volume - (_ball(rest) - _lens(rest, small + np.clip(t - wet, 0, None), 4.0))
-    return mesh, 10.0, exact
-
-
-def nested():
-    """A shell 6 < r < 10 around a sealed void holding a ball of radius 4 (paper Fig. 2): the shell
-    dissolves as a ball until the front reaches the void at tau = 4, the ball then dissolves from 4."""
-    outer = trimesh.creation.icosphere(subdivisions=4, radius=10.0)
-    void = trimesh.creation.icosphere(subdivisions=4, radius=6.0)
-    void.invert()
-    core = trimesh.creation.icosphere(subdivisions=4, radius=4.0)
-    mesh = trimesh.util.concatenate([outer, void, core])
-    big, mid, small = (_radius_of(abs(m.volume), 4 / 3 * np.pi) for m in (outer, void, core))
-    wet = big - mid
-
-    def exact(t):
-        shell = _ball(big) - _ball(np.maximum(big - t, mid))
-        return shell + _ball(small) - _ball(small - np.clip(t - wet, 0, None))
-    return mesh, 10.0, exact
-
-
-@pytest.mark.parametrize("shape", [sphere, cylinder, box, torus, hollow, nested])
+@pytest.mark.parametrize("shape", MESHES)
 def test_release_matches_the_analytic_curve(shape):
     mesh, depth, exact = shape()
     tau = np.linspace(0.0, 1.02 * depth, 301)
