@@ -52,7 +52,7 @@ def test_limits_refuse_before_the_wire(plate):
         hp.set_speed(700)
 
 
-def _eventually(condition, within_s=2.0):
+def _eventually(condition, within_s=120.0):
     deadline = time.monotonic() + within_s
     while not condition():
         if time.monotonic() > deadline:
@@ -97,7 +97,7 @@ def test_round_trip_set_reach_read_back_and_off_on_close():
             hp.set_speed(150)
             hp.start_heating()
             hp.start_stirring()
-            deadline = time.monotonic() + 4.0
+            deadline = time.monotonic() + 120.0
             r = hp.read()
             while abs(r.probe_c - 70) > 1.0 and time.monotonic() < deadline:
                 time.sleep(0.2)

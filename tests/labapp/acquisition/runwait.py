@@ -4,7 +4,7 @@ import time
 from labapp.records.manifests import read_run
 
 
-def wait_frames(root, n, proc, timeout_s=120):
+def wait_frames(root, n, proc, timeout_s=300):
     """The run folder under ``root`` once it holds at least ``n`` frames; fails if ``proc`` ends first."""
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:

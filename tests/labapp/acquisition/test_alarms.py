@@ -3,6 +3,8 @@ series refuses a level already captured and can redo the last one; every run sta
 import csv
 import threading
 
+import pytest
+
 from drivers.camera.base import CaptureMissed
 from drivers.hotplate.base import HotplateReading
 from labapp.acquisition.bench import Bench, BenchSession
@@ -177,6 +179,7 @@ def test_a_series_ended_too_early_raises_a_fit_alarm(tmp_path):
     assert "only 2 levels captured; 3 are needed" in alarm.message
 
 
+@pytest.mark.slow
 def test_each_run_starts_in_a_fresh_beaker(tmp_path, calibration):  # noqa: F811
     sim = SimulatedBench(SteppedClock(start_s=1e9), sample="sphere", with_hotplate=False)
     bench = sim.bench()

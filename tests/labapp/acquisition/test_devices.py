@@ -64,7 +64,7 @@ def test_emulator_cleans_up_on_sigterm(tmp_path):
         path = emu.stdout.readline().strip()
         assert os.path.exists(path)
         emu.send_signal(signal.SIGTERM)
-        assert emu.wait(timeout=10) == 130
+        assert emu.wait(timeout=120) == 130
         assert not os.path.exists(path)
     finally:
         emu.kill()

@@ -79,10 +79,10 @@ def test_stop_and_abort_from_another_thread():
         engine.start(Counting(1))
     time.sleep(0.05)
     engine.stop()
-    assert engine.join(5) == Outcome.STOPPED and proc.calls[-1] == "shutdown:stopped"
+    assert engine.join(120) == Outcome.STOPPED and proc.calls[-1] == "shutdown:stopped"
     engine.start(Counting(10_000))
     engine.abort()
-    assert engine.join(5) == Outcome.ABORTED
+    assert engine.join(120) == Outcome.ABORTED
 
 
 def test_the_operator_answers_a_prompt():
@@ -91,9 +91,9 @@ def test_the_operator_answers_a_prompt():
     engine.subscribe(lambda e: prompts.set() if isinstance(e, Prompt) else None)
     proc = Counting(1, ask=True)
     engine.start(proc)
-    assert prompts.wait(5)
+    assert prompts.wait(120)
     engine.answer(PromptKind.ADDED_MASS, 0.25)
-    assert engine.join(5) == Outcome.COMPLETE and proc.answer == 0.25
+    assert engine.join(120) == Outcome.COMPLETE and proc.answer == 0.25
 
 
 def test_a_stop_releases_a_waiting_prompt():
@@ -102,7 +102,7 @@ def test_a_stop_releases_a_waiting_prompt():
     engine.start(proc)
     time.sleep(0.05)
     engine.stop()
-    assert engine.join(5) == Outcome.STOPPED and proc.answer is None
+    assert engine.join(120) == Outcome.STOPPED and proc.answer is None
 
 
 def test_clock_kinds():

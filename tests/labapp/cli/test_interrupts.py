@@ -49,7 +49,7 @@ def test_a_second_ctrl_c_quits_at_once_with_130():
             "    os.kill(os.getpid(), signal.SIGINT); time.sleep(0.05)\n"
             "    os.kill(os.getpid(), signal.SIGINT); time.sleep(5)\n"
             "print('not reached')\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 130 and "not reached" not in out.stdout
     assert "Ctrl-C again quits at once" in out.stderr and "quitting at once" in out.stderr
 
@@ -141,6 +141,7 @@ class Moment:
         return f"{self.kind} interrupted after {self.delay:.2f} s ({self.out.name})"
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_ctrl_c_at_twenty_random_moments_of_a_design_an_analysis_and_a_calibration(tmp_path):
     """Each moment: exit code 130, a clean last line, nothing internal; then the design resumes to a finished

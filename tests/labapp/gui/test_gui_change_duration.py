@@ -40,7 +40,7 @@ def recording(qtbot, tmp_path, monkeypatch):
     assert c.start_button.isEnabled(), c.start_reason.text()
     c.start_button.click()
     try:
-        qtbot.waitUntil(c.change_button.isEnabled, timeout=20_000)    # acquiring after the drop
+        qtbot.waitUntil(c.change_button.isEnabled, timeout=120_000)    # acquiring after the drop
         yield win
     finally:
         win.engine.abort()
@@ -90,11 +90,11 @@ def test_the_maximum_duration_changes_during_the_run_with_a_reason(qtbot, record
     assert no_reason == (True, "a reason is required: it is recorded in the audit trail")
     assert closed is False
 
-    qtbot.waitUntil(lambda: "changed max_duration_s: 0.1 -> 0.2 h" in win.messages.toPlainText(), timeout=15_000)
+    qtbot.waitUntil(lambda: "changed max_duration_s: 0.1 -> 0.2 h" in win.messages.toPlainText(), timeout=120_000)
     assert win.engine.running, "the run ended before the change was applied"      # applied at ~t = 1-2 min
-    qtbot.waitUntil(lambda: win.progress.maximum() == int(NEW_MAX_S), timeout=15_000)   # at the next status tick
+    qtbot.waitUntil(lambda: win.progress.maximum() == int(NEW_MAX_S), timeout=120_000)   # at the next status tick
     assert "of 0:12" in win.progress.format(), win.progress.format()
-    qtbot.waitUntil(lambda: not win.engine.running and not c.change_button.isEnabled(), timeout=30_000)
+    qtbot.waitUntil(lambda: not win.engine.running and not c.change_button.isEnabled(), timeout=120_000)
     assert win.engine.outcome == "complete" and told == []
 
     snap = read_run(folder)
@@ -124,7 +124,7 @@ def test_a_change_the_run_refuses_is_said_and_changes_nothing(qtbot, recording, 
         dialog.action_button.click()
     _drive(qtbot, act)
     c.change_button.click()
-    qtbot.waitUntil(lambda: bool(told), timeout=15_000)
+    qtbot.waitUntil(lambda: bool(told), timeout=120_000)
     ((title, text),) = told
     assert title == "change refused" and "is not being recorded (stopped)" in text, text
     assert f"not changed: {text}" in win.messages.toPlainText()

@@ -31,7 +31,7 @@ def test_f2_of_two_selected_runs_and_of_a_run_and_its_prediction(qtbot, tmp_path
         browser.tree.topLevelItem(i).setSelected(True)
     assert set(browser.selected_paths()) == {a, b}
     browser.compare()
-    qtbot.waitUntil(lambda: "f2 = " in browser.info.text(), timeout=20_000)
+    qtbot.waitUntil(lambda: "f2 = " in browser.info.text(), timeout=120_000)
     assert "MDT" in browser.info.text() and "(similar)" in browser.info.text()
     prediction = tmp_path / "release_physical.csv"
     t = np.arange(0, 3 * 3600, 60.0)
@@ -41,5 +41,5 @@ def test_f2_of_two_selected_runs_and_of_a_run_and_its_prediction(qtbot, tmp_path
     browser.select(a)
     browser.prediction.setText(str(prediction))
     browser.compare()
-    qtbot.waitUntil(lambda: "(not similar)" in browser.info.text(), timeout=20_000)
+    qtbot.waitUntil(lambda: "(not similar)" in browser.info.text(), timeout=120_000)
     assert str(prediction) in browser.info.text()

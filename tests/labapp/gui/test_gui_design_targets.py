@@ -24,7 +24,7 @@ def launcher(qtbot, tmp_path):
 
 def _checked(qtbot, launcher, target: str) -> str:
     launcher.use_target(target)
-    qtbot.waitUntil(lambda: not launcher.check_task.running, timeout=60_000)
+    qtbot.waitUntil(lambda: not launcher.check_task.running, timeout=120_000)
     qtbot.wait(20)
     return launcher.status.text()
 
@@ -86,10 +86,10 @@ def test_design_progress_solid_slices_stop_and_resume(qtbot, launcher):
     launcher.max_iter.setValue(400)
     launcher.source.setText("sphere")
     launcher.start()
-    qtbot.waitUntil(lambda: "iteration" in launcher.progress.format(), timeout=60_000)
+    qtbot.waitUntil(lambda: "iteration" in launcher.progress.format(), timeout=120_000)
     assert "of 400" in launcher.progress.format()
     launcher.stop()
-    qtbot.waitUntil(lambda: not launcher.busy and launcher.start_button.isEnabled(), timeout=60_000)
+    qtbot.waitUntil(lambda: not launcher.busy and launcher.start_button.isEnabled(), timeout=120_000)
     qtbot.wait(50)
     assert launcher.progress.format().startswith("stopped"), launcher.progress.format()
     stopped_at = launcher.progress.value()

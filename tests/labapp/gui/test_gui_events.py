@@ -19,7 +19,7 @@ def test_bridge_routes_by_type(qtbot):
     engine.emit(CalibrationLevel(0, "cal_000.jpg", "/x/cal_000.jpg", None, 0.25, 0.5, 1))
     engine.emit(FrameStored(3, "frame_000003.jpg", "/x/f.jpg", 33.0, 4))
     engine.emit(Message("warning", "camera busy", topic="camera-missed"))
-    qtbot.waitUntil(lambda: len(messages) == 1)
+    qtbot.waitUntil(lambda: len(messages) == 1, timeout=120_000)
     assert [f.index for f in frames] == [3] and [lv.added_mass_g for lv in levels] == [0.25]
     assert frames[0].t_unix_s == 10.0 and messages == [("warning", "camera busy")]
     bridge.detach()
@@ -33,7 +33,7 @@ def test_driver_warnings_reach_the_event_log(qtbot):
         logging.getLogger("drivers.hotplate.heidolph").warning("link lost on %s; reconnect 1 of 3", "/dev/ttyUSB0")
         logging.getLogger("drivers.camera.gphoto").info("not shown: below warning")
         logging.getLogger("labapp.acquisition.bench").warning("shown once, as an engine event", extra={PUBLISHED: True})
-        qtbot.waitUntil(lambda: len(seen) == 1)
+        qtbot.waitUntil(lambda: len(seen) == 1, timeout=120_000)
         assert seen == [("warning", "drivers.hotplate.heidolph: link lost on /dev/ttyUSB0; reconnect 1 of 3")]
     finally:
         bridge.detach()

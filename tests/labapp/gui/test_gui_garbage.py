@@ -30,7 +30,7 @@ def test_cycles_are_collected_on_the_gui_thread_timer(qtbot):
         worker.start()
         worker.join()
         assert _Cycle.collected_in == []  # nothing collected automatically on the worker
-        qtbot.waitUntil(lambda: len(_Cycle.collected_in) > 0, timeout=5000)
+        qtbot.waitUntil(lambda: len(_Cycle.collected_in) > 0, timeout=120_000)
         assert set(_Cycle.collected_in) == {threading.main_thread().name}
     finally:
         collector.timer.stop()

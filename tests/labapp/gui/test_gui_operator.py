@@ -56,11 +56,11 @@ def test_connect_never_blocks_the_gui_thread(qtbot, tmp_path):
         assert called_ms < MAX_BLOCK_MS, called_ms
         assert "connecting" in win.devices.connect_button.text()          # until the built bench arrives
         assert not win.devices.connect_button.isEnabled()
-        qtbot.waitUntil(lambda: not win.building, timeout=60_000)
+        qtbot.waitUntil(lambda: not win.building, timeout=120_000)
         latency.timer.stop()
         # the event loop kept turning while the bench was built (slack for a loaded test machine)
         assert latency.worst_ms < 3 * MAX_BLOCK_MS, latency.worst_ms
-        qtbot.waitUntil(lambda: win.live.image.image is not None and not win.engine.running, timeout=60_000)
+        qtbot.waitUntil(lambda: win.live.image.image is not None and not win.engine.running, timeout=120_000)
         assert win.devices.connect_button.isEnabled() and "connecting" not in win.devices.connect_button.text()
     finally:
         win.engine.abort()
@@ -95,7 +95,7 @@ def test_closing_mid_procedure_says_stopping_and_closes_when_done(qtbot, tmp_pat
     assert (time.perf_counter() - start) * 1000 < MAX_BLOCK_MS
     assert asked and "slow" in asked[0]
     assert "stopping" in win.statusBar().currentMessage()
-    qtbot.waitUntil(lambda: not win.isVisible(), timeout=10_000)
+    qtbot.waitUntil(lambda: not win.isVisible(), timeout=120_000)
     assert not win.engine.running
 
 
@@ -212,7 +212,7 @@ def test_startup_offers_to_resume_interrupted_runs(qtbot, tmp_path):
         pytest.skip(f"hand-written record reads as {snap.status}")
     win = _window(qtbot, data)
     try:
-        qtbot.waitUntil(lambda: win.resume_box is not None and win.resume_box.isVisible(), timeout=5_000)
+        qtbot.waitUntil(lambda: win.resume_box is not None and win.resume_box.isVisible(), timeout=120_000)
         assert "20261203-090000_run" in win.resume_box.text()
     finally:
         if win.resume_box is not None:

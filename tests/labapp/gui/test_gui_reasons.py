@@ -100,7 +100,7 @@ def test_reanalyse_asks_for_the_reason_as_sfr_analyze_takes_it(qtbot, browser, t
     dialog, accepted = seen
     assert not dialog.required and f"{series.name}/analysis" in dialog.consequences.text()
     assert accepted[0] is False
-    qtbot.waitUntil(lambda: "frames analysed" in browser.info.text(), timeout=60_000)
+    qtbot.waitUntil(lambda: "frames analysed" in browser.info.text(), timeout=120_000)
     trail = check_trail(series)
     assert trail.ok and len(trail.entries) == entries + 1, trail.problems
     entry = trail.entries[-1]

@@ -29,6 +29,7 @@ def calibration_set(tmp_path_factory):
     return rows
 
 
+@pytest.mark.slow
 def test_simulation_step_calibrates_shows_the_fit_and_activates(qtbot, tmp_path, calibration_set):
     step = SimulationStep(tmp_path)
     qtbot.addWidget(step)
@@ -67,7 +68,7 @@ def test_simulation_step_calibrates_shows_the_fit_and_activates(qtbot, tmp_path,
     browser.simcal = launcher.simcal
     browser.mesh.setText(str(calibration_set[0][1]))
     browser.overlay_prediction()                                # simulated off the GUI thread
-    qtbot.waitUntil(lambda: len(browser.overlay.curves) == 1, timeout=60_000)
+    qtbot.waitUntil(lambda: len(browser.overlay.curves) == 1, timeout=120_000)
     assert browser.overlay.bands == 1                          # the prediction's band, shaded
     browser.overlay.add_run(calibration_set[0][0])
     labels = [c[0] for c in browser.overlay.curves]

@@ -4,6 +4,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from labapp.gui import dialogs
 from labapp.gui.live_view import grid_segments, mirrored_x
@@ -14,6 +15,7 @@ from labapp.records.verification import verify_run
 FIGURES = Path(__file__).resolve().parents[3] / "docs" / "figures"
 
 
+@pytest.mark.slow
 def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration, monkeypatch):
     _, cal_path = sim_calibration
     monkeypatch.setattr(dialogs, "confirm", lambda parent, question: True)     # Stop: the operator confirms
@@ -47,14 +49,14 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration, mo
         qtbot.waitUntil(lambda: len(win.plots.t_s) >= 45 or not win.engine.running, timeout=300_000)
         assert len(win.plots.t_s) >= 45, _diagnosis(win)
         win.controls.stop_button.click()
-        qtbot.waitUntil(lambda: not win.engine.running, timeout=60_000)
+        qtbot.waitUntil(lambda: not win.engine.running, timeout=120_000)
         assert win.engine.outcome == "stopped"
 
         folder = win.procedure.run.path
         snap = read_run(folder)
         assert snap.status == "stopped" and len(snap.frames) >= 45 and verify_run(folder).ok
         assert (folder / "reference.jpg").is_file() and snap.meta["object_name"] == ""
-        qtbot.waitUntil(lambda: len(win.plots.t_s) == len(snap.frames), timeout=10_000)   # queued events
+        qtbot.waitUntil(lambda: len(win.plots.t_s) == len(snap.frames), timeout=120_000)   # queued events
         win.plots.redraw()
         t_plot, conc_plot = win.plots.raw_curve.getData()
         assert np.allclose(t_plot, [f.t_s for f in snap.frames], atol=1e-3), (t_plot, snap.frames)  # all plotted
@@ -65,7 +67,7 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration, mo
         assert np.allclose(plate, [f.plate_c for f in snap.frames], atol=1e-6)
         speeds = [f.speed_rpm for f in snap.frames if f.speed_rpm is not None]
         assert speeds and min(speeds) >= 0.95 * 150                     # stirred before the reference frame
-        qtbot.waitUntil(lambda: win.live.caption.text().startswith("frame_"), timeout=10_000)
+        qtbot.waitUntil(lambda: win.live.caption.text().startswith("frame_"), timeout=120_000)
         win.refresh()
         shot = tmp_path / "lab_gui_run.png"
         assert win.grab().save(str(shot))
@@ -105,12 +107,12 @@ def test_calibration_wizard_reanalysis_and_design_launcher(qtbot, tmp_path, monk
         # the first start builds the simulated bench: its object's dissolution is computed in a child process
         qtbot.waitUntil(lambda: win.simulated.bench is not None, timeout=120_000)
         for mass in (0.25, 0.75, 1.5):
-            qtbot.waitUntil(win.wizard.capture_button.isEnabled, timeout=60_000)
+            qtbot.waitUntil(win.wizard.capture_button.isEnabled, timeout=120_000)
             win.wizard.mass.setValue(mass)
             win.wizard.capture_button.click()
-        qtbot.waitUntil(win.wizard.capture_button.isEnabled, timeout=60_000)
+        qtbot.waitUntil(win.wizard.capture_button.isEnabled, timeout=120_000)
         win.wizard.finish_button.click()
-        qtbot.waitUntil(lambda: "calibration saved" in win.wizard.result_label.text(), timeout=60_000)
+        qtbot.waitUntil(lambda: "calibration saved" in win.wizard.result_label.text(), timeout=120_000)
         cal_path = Path(win.controls.calibration.text())      # now the active calibration
         series = cal_path.parent
         assert cal_path.name == "bench_calibration.json"
@@ -123,7 +125,7 @@ def test_calibration_wizard_reanalysis_and_design_launcher(qtbot, tmp_path, monk
         win.browser.window.setValue(60.0)
         monkeypatch.setattr(dialogs, "ask_reason", lambda parent, question, required: "")   # no reason, as the CLI allows
         win.browser.reanalyse()
-        qtbot.waitUntil(lambda: "frames analysed" in win.browser.info.text(), timeout=60_000)
+        qtbot.waitUntil(lambda: "frames analysed" in win.browser.info.text(), timeout=120_000)
         assert len(win.browser.plots.conc) == 4 and abs(win.browser.plots.conc[-1] - 3.0) < 0.1
         assert {"curve.csv", "cells.csv", "curve.png"} <= {p.name for p in (series / "analysis").iterdir()}
 

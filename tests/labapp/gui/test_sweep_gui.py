@@ -5,6 +5,7 @@ from labapp.gui.design_launcher import DesignLauncher
 from labapp.gui.sweep_panel import parse_values
 
 
+@pytest.mark.slow
 def test_the_launcher_runs_a_small_sweep_and_browses_its_contact_sheet(qtbot, tmp_path):
     launcher = DesignLauncher(tmp_path)
     qtbot.addWidget(launcher)
@@ -25,7 +26,7 @@ def test_the_launcher_runs_a_small_sweep_and_browses_its_contact_sheet(qtbot, tm
     panel.preset.setCurrentText("paper:sphere")
     panel.workers.setValue(2)
     panel.start()
-    qtbot.waitUntil(panel.sweep_button.isEnabled, timeout=90_000)
+    qtbot.waitUntil(panel.sweep_button.isEnabled, timeout=120_000)
     assert "3 designs, 0 failed" in panel.status.text(), panel.status.text()
     items = [panel.designs.item(i).text() for i in range(panel.designs.count())]
     assert items[0] == "contact sheet (ranked)" and len(items) == 4

@@ -82,6 +82,7 @@ def _measured(release, noise_pct, seed):
     return t, truth, truth + noise_pct / 100.0 * release.mass_g * rng.standard_normal(t.size)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("shape, noise_pct", list(itertools.product(("sphere", "polyhedron"), (0.2, 1.0))))
 def test_a_noisy_measured_curve_becomes_feasible_within_its_noise(tmp_path, releases, shape, noise_pct):
     release = releases[shape]
@@ -112,6 +113,7 @@ def test_a_noisy_measured_curve_becomes_feasible_within_its_noise(tmp_path, rele
     assert f"relaxed by {TARGET_SLACK:g}" in notes["method"] and "% of the weighed mass" in notes["text"]
 
 
+@pytest.mark.slow
 def test_sfr_design_takes_a_measured_run_without_the_override(tmp_path, releases, capsys):
     from labapp.cli.main import main
 

@@ -12,6 +12,7 @@ from labapp.cli.main import main
 from labapp.jobs.demo import simulated_run
 
 
+@pytest.mark.slow
 def test_images_to_simcal_recover_the_hidden_material(tmp_path, sim_calibration):
     calibration, cal_path = sim_calibration
     material = Material(1300.0, 1.21)

@@ -69,6 +69,7 @@ def _synthetic_set(folder):
     return write_set(folder, rows)
 
 
+@pytest.mark.slow
 def test_pooled_density_and_predicted_grams_follow_the_exact_volume(tmp_path):
     bar = MESHES["bar"]()
     assert _voxel_volume(bar) / bar.volume == pytest.approx(0.84, abs=0.01)

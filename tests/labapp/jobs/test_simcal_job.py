@@ -94,6 +94,7 @@ def test_different_water_masses_share_one_calibration(tmp_path, releases):
     assert run.doc["water_g"] == pytest.approx(500.0, rel=1e-4)
 
 
+@pytest.mark.slow
 def test_the_loop_measured_curve_to_design_within_3_percent(tmp_path, releases):
     set_csv = _write_set(tmp_path / "set", dict(list(releases.items())[:3]))
     calibrate_sim(set_csv, None, tmp_path / "cal", resolution=32, model="constant")

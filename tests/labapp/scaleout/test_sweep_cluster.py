@@ -14,18 +14,23 @@ import pytest
 
 from design.inverse.status import FINISHED
 
-MAX_ITER = 150
-SPEC = f"""target = "sphere"
+NAMES = [f"radius_vox={r},w_binary={w}" for w in (10, 20) for r in (2, 3)]
+WAIT_S = 300
+"""The ceiling of each wait: it fails a hung sweep only (the events come in seconds on a quiet machine)."""
+
+
+def _spec(resolution: int, max_iter: int) -> str:
+    """A sweep of four sphere designs (two binarisation weights by two radii), checkpointed every 3 evaluations."""
+    return f"""target = "sphere"
 space = "nfc"
-resolution = 32
-max_iter = {MAX_ITER}
+resolution = {resolution}
+max_iter = {max_iter}
 checkpoint_every = 3
 physical_correction = "none"
 [grid]
 w_binary = [10, 20]
 radius_vox = [2.0, 3.0]
 """
-NAMES = [f"radius_vox={r},w_binary={w}" for w in (10, 20) for r in (2, 3)]
 
 
 def _free_port() -> int:
@@ -69,10 +74,9 @@ def _spawn(args, **kw):
     return subprocess.Popen([sys.executable, *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, **kw)
 
 
-@pytest.mark.timeout(120)
 def test_sweep_survives_a_killed_worker(tmp_path):
     spec, out = tmp_path / "spec.toml", tmp_path / "sweep"
-    spec.write_text(SPEC)
+    spec.write_text(_spec(16, 60))     # 60 evaluations: the killed design is still running after its first checkpoint
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     procs = [_spawn(["-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", str(port),
@@ -89,12 +93,12 @@ def test_sweep_survives_a_killed_worker(tmp_path):
                         "--workers", "2"])
         procs.append(sweep)
         # kill the worker of the first design to start, once that design has checkpointed
-        first = _wait_for(lambda: _started(out / "sweep.log"), 60, "a design to start")[0]
+        first = _wait_for(lambda: _started(out / "sweep.log"), WAIT_S, "a design to start")[0]
         name, victim = first.split(" start ")[1].split(" on ")[0], first.split(" on ")[1].split(" ")[0]
-        _wait_for(lambda: (out / "runs" / name / "checkpoint.npz").exists(), 30, "a checkpoint")
+        _wait_for(lambda: (out / "runs" / name / "checkpoint.npz").exists(), WAIT_S, "a checkpoint")
         assert folder_not_done(out / "runs" / name), "the design finished before the kill; make it longer"
         workers[victim].kill()
-        _, err = sweep.communicate(timeout=90)
+        _, err = sweep.communicate(timeout=WAIT_S)
         assert sweep.returncode == 0, err.decode()[-2000:]
         starts = _started(out / "sweep.log")
         assert sum(f"start {name} " in s for s in starts) == 2  # the killed attempt, then the resume
@@ -106,24 +110,24 @@ def test_sweep_survives_a_killed_worker(tmp_path):
         for proc in procs:
             if proc.poll() is None:
                 proc.kill()
-            proc.wait(10)
+            proc.wait(WAIT_S)
 
 
 def folder_not_done(folder: Path) -> bool:
     return not (folder / "summary.json").exists()
 
 
-@pytest.mark.timeout(120)
+@pytest.mark.slow
 def test_ctrl_c_checkpoints_running_designs(tmp_path):
     spec, out = tmp_path / "spec.toml", tmp_path / "sweep"
-    spec.write_text(SPEC.replace("resolution = 32", "resolution = 48").replace(f"max_iter = {MAX_ITER}", "max_iter = 2000"))
+    spec.write_text(_spec(48, 2000))
     cmd = ["-m", "labapp.cli.main", "sweep", str(spec), "--out", str(out), "--workers", "2"]
     # a terminal's Ctrl-C: SIGINT to the whole process group (the command and its local workers)
     sweep = _spawn(cmd, start_new_session=True)
     try:
-        _wait_for(lambda: len(list(out.glob("runs/*/checkpoint.npz"))) == 2, 60, "two running designs")
+        _wait_for(lambda: len(list(out.glob("runs/*/checkpoint.npz"))) == 2, WAIT_S, "two running designs")
         os.killpg(sweep.pid, signal.SIGINT)
-        _, err = sweep.communicate(timeout=60)
+        _, err = sweep.communicate(timeout=WAIT_S)
     finally:
         if sweep.poll() is None:
             os.killpg(sweep.pid, signal.SIGKILL)
