@@ -319,6 +319,22 @@ class DesignLauncher(QWidget):
         """True while a design runs."""
         return self.task is not None and self.task.running
 
+    def busy_work(self) -> list[str]:
+        """What closing now would cut short: the running design and sweep, each as a sentence."""
+        work = []
+        if self.busy:
+            work.append(f"the design in {self.out_dir} (it stops at its next checkpoint; Design tab, "
+                        "Resume... continues it)")
+        if self.sweep.busy:
+            work.append(f"the sweep in {self.sweep.sweep_dir} (running designs checkpoint, queued ones "
+                        "do not start; Sweep again resumes it)")
+        return work
+
+    def stop_all(self) -> None:
+        """Stop the running design and sweep at their next checkpoints."""
+        self.stop()
+        self.sweep.stop()
+
     def set_simcal(self, path: Path | None) -> None:
         """Make a ``simcal.json`` the active simulation calibration (None: none)."""
         self.simcal = None if path is None else load_simcal(path)

@@ -490,12 +490,7 @@ class MainWindow(QMainWindow):
             folder = getattr(getattr(self.procedure, "run", None), "path", None)
             work.append(dialogs.interrupt_effect(getattr(self.procedure, "name", "procedure"),
                                                  Path(folder).name if folder else ""))
-        if self.design.busy:
-            work.append(f"the design in {self.design.out_dir} (it stops at its next checkpoint; Design tab, "
-                        "Resume... continues it)")
-        if self.design.sweep.busy:
-            work.append(f"the sweep in {self.design.sweep.sweep_dir} (running designs checkpoint, queued ones "
-                        "do not start; Sweep again resumes it)")
+        work += self.design.busy_work()
         if self.building:
             work.append("building the bench")
         return work
@@ -519,8 +514,7 @@ class MainWindow(QMainWindow):
         """Stop everything that runs and close the window once it has all finished."""
         if self.engine.running:
             self.engine.interrupt()           # heating off; a run stays resumable
-        self.design.stop()
-        self.design.sweep.stop()
+        self.design.stop_all()
         self.centralWidget().setEnabled(False)
         self.bench_dock.setEnabled(False)
         self.statusBar().showMessage("stopping... the window closes when the procedure, design or sweep has stopped")
