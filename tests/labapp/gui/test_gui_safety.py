@@ -131,6 +131,29 @@ def test_closing_mid_run_asks_and_interrupts_the_run_resumably(qtbot, tmp_path, 
         win.shutdown()
 
 
+def test_closing_names_a_running_design_and_sweep_and_the_launcher_stops_both(qtbot, tmp_path, monkeypatch):
+    win = MainWindow(tmp_path / "runs", simulate=True, speed=200.0)
+    qtbot.addWidget(win)
+    launcher, sweep = win.design, win.design.sweep
+    try:
+        assert win.busy_work() == []
+        with monkeypatch.context() as m:                  # undone before the window is closed at teardown
+            m.setattr(type(launcher), "busy", property(lambda self: True))
+            m.setattr(type(sweep), "busy", property(lambda self: True))
+            launcher.out_dir, sweep.sweep_dir = tmp_path / "design-a", tmp_path / "sweep-b"
+            design_work, sweep_work = win.busy_work()
+            stopped = []
+            m.setattr(type(launcher), "stop", lambda self: stopped.append("design"))
+            m.setattr(type(sweep), "stop", lambda self: stopped.append("sweep"))
+            launcher.stop_all()
+        assert "the design in" in design_work and "design-a" in design_work and "Resume..." in design_work
+        assert "the sweep in" in sweep_work and "sweep-b" in sweep_work
+        assert stopped == ["design", "sweep"]
+        assert win.busy_work() == []
+    finally:
+        win.shutdown()
+
+
 def test_finalise_asks_first(qtbot, tmp_path, monkeypatch):
     from labapp.records.manifests import read_run
     from labapp.records.storage import create_run
