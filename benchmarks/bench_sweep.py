@@ -133,6 +133,9 @@ def _round(spec, folder: Path, client) -> _Round:
     t1 = time.perf_counter()
     parallel = run_sweep(spec, folder / "cluster", client, contact_sheet=False)
     t2 = time.perf_counter()
+    failed = [r for r in serial.rows + parallel.rows if r["status"] == "failed"]
+    if failed:
+        raise SystemExit(f"bench_sweep: {len(failed)} designs failed; the first: {failed[0]['error']}")
     return _Round(t1 - t0, t2 - t1, _task_seconds(folder / "serial"), _task_seconds(folder / "cluster"),
                   {r["status"] for r in serial.rows + parallel.rows},
                   [r["iterations"] for r in serial.rows] == [r["iterations"] for r in parallel.rows], load)
