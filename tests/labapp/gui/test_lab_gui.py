@@ -60,7 +60,7 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration, mo
         win.plots.redraw()
         t_plot, conc_plot = win.plots.raw_curve.getData()
         assert np.allclose(t_plot, [f.t_s for f in snap.frames], atol=1e-3), (t_plot, snap.frames)  # all plotted
-        assert conc_plot[-1] > conc_plot[0] + 0.1                         # the object is dissolving
+        assert conc_plot[-1] > conc_plot[0] + 0.05     # dissolving, however many frames past 45
         assert len(win.plots.smooth_curve.getData()[0]) == len(t_plot)
         t_bath, plate = win.plots.plate_curve.getData()                   # the bath logged with every frame
         assert np.allclose(t_bath, t_plot, atol=1e-3)
