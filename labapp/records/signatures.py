@@ -20,13 +20,22 @@ from typing import Any
 
 from labapp.errors import UsageError
 from labapp.records import operators
-from labapp.records.audit import AUDIT_FILE, FINISH_ACTIONS, SIGNATURES_FILE, Action, append, check_trail, entry_hash
+from labapp.records.audit import (
+    AUDIT_FILE,
+    FINISH_ACTIONS,
+    SIGNATURES_FILE,
+    Action,
+    AuditCheck,
+    append,
+    check_trail,
+    entry_hash,
+)
 from labapp.records.fileio import sha256_file
 from labapp.records.manifests import RUN_JSON
 from labapp.records.verification import verify_run
 
 __all__ = ["Meaning", "SignatureError", "SignatureState", "check_signatures", "read_signatures", "record_checks",
-           "record_hash", "sign", "signed_heads"]
+           "record_hash", "sign", "signed_heads", "trail_check"]
 
 _UNHASHED = {AUDIT_FILE, SIGNATURES_FILE}
 
@@ -191,21 +200,32 @@ def signed_heads(folder: str | Path) -> dict[int, str]:
             if s.get("audit_hash") and isinstance(s.get("audit_seq"), int)}
 
 
+def _names_operator(folder: Path) -> tuple[bool, Action | None]:
+    """Whether ``folder``'s ``run.json`` names its operator, and the entry its status says came last."""
+    if (folder / RUN_JSON).is_file():
+        try:
+            stored = json.loads((folder / RUN_JSON).read_text())
+            if isinstance(stored, dict) and "operator" in stored:
+                return True, FINISH_ACTIONS.get(stored.get("status"))
+        except (OSError, ValueError):
+            pass
+    return False, None
+
+
+def trail_check(folder: str | Path) -> AuditCheck:
+    """The audit trail of ``folder`` checked as ``sfr verify`` and ``sfr audit`` both check it: its hash chain,
+    the heads its signatures recorded, and a finished run's finishing entry (a trail cut off at its end)."""
+    folder = Path(folder)
+    return check_trail(folder, expect_last=_names_operator(folder)[1], pinned=signed_heads(folder))
+
+
 def record_checks(folder: str | Path) -> tuple[list[str], list[str]]:
     """The audit-trail and signature findings on ``folder`` for ``sfr verify``: ``(problems, notes)``, one line
     each. A record that names its operator (``run.json``) or has signatures must have an intact trail; a
     finished run's trail must end with its finishing entry; every signature must still hold."""
     folder = Path(folder)
-    expect = None
-    named = False
-    if (folder / RUN_JSON).is_file():
-        try:
-            stored = json.loads((folder / RUN_JSON).read_text())
-            named = isinstance(stored, dict) and "operator" in stored
-            expect = FINISH_ACTIONS.get(stored.get("status")) if named else None
-        except (OSError, ValueError):
-            pass
-    trail = check_trail(folder, expect_last=expect, pinned=signed_heads(folder))
+    named = _names_operator(folder)[0]
+    trail = trail_check(folder)
     problems, notes = list(trail.problems), []
     if not trail.exists:
         if named or (folder / SIGNATURES_FILE).is_file():

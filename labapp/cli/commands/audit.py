@@ -13,18 +13,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """One table per record; the last line ``chain OK`` or ``chain BROKEN: ...``; exit 1 if any is broken."""
+    """One table per record; the last line ``chain OK`` or ``chain BROKEN: ...``, checked as ``sfr verify``
+    checks the trail; exit 1 (``sfr verify``'s code for a failed record) if any is broken or absent."""
     from pathlib import Path
 
-    from labapp.errors import UsageError
-    from labapp.records.audit import check_trail
-    from labapp.records.signatures import signed_heads
+    from labapp.errors import EXIT_FAILED, EXIT_OK, UsageError
+    from labapp.records.signatures import trail_check
 
     broken = 0
     for folder in map(Path, args.records):
         if not folder.is_dir():
             raise UsageError(f"{folder} is not a folder; give a run, calibration or design folder")
-        check = check_trail(folder, pinned=signed_heads(folder))
+        check = trail_check(folder)
         if not check.exists:
             print(f"{folder}: no audit trail ({check.path.name} absent)")
             broken += 1
@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
             print(line)
         print("chain OK" if check.ok else "chain BROKEN: " + "; ".join(check.problems))
         broken += not check.ok
-    return 1 if broken else 0
+    return EXIT_FAILED if broken else EXIT_OK
 
 
 def table(entries: list[dict]) -> list[str]:

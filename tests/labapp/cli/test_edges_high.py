@@ -1,0 +1,25 @@
+"""The command line at its edges (issue 45, severe and high): a full disk, curves in the wrong unit, results
+written over, checks made after the work instead of before, exit codes that disagree."""
+from labapp.cli.main import main
+from labapp.errors import EXIT_FAILED
+from labapp.records.audit import AUDIT_FILE
+from labapp.records.runrecord import RecordStatus
+from labapp.records.storage import create_run
+
+
+def _finished_run(tmp_path):
+    run = create_run(tmp_path / "data", "pill", {"simulated": True, "object_mass_g": 2.0, "water_g": 500.0,
+                                                  "interval_s": 300.0})
+    run.finish(RecordStatus.COMPLETE)
+    run.close()
+    return run.path
+
+
+def test_audit_fails_a_trail_cut_off_at_its_end_with_verifys_exit_code(tmp_path, capsys):
+    folder = _finished_run(tmp_path)
+    trail = folder / AUDIT_FILE
+    trail.write_bytes(trail.read_bytes().splitlines(keepends=True)[0])      # the 'complete' entry cut off
+    assert main(["verify", str(folder)]) == EXIT_FAILED
+    assert main(["audit", str(folder)]) == EXIT_FAILED
+    out = capsys.readouterr().out
+    assert "chain BROKEN" in out and "TRUNCATED" in out
