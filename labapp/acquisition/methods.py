@@ -70,6 +70,9 @@ class Criterion:
             raise MethodError("acceptance released_percent needs at_h > 0 (the time in hours)")
         if self.low is None and self.high is None:
             raise MethodError(f"acceptance {self.metric}: give low, high or both")
+        if self.low is not None and self.high is not None and self.low > self.high:
+            raise MethodError(f"acceptance {self.metric}: low {self.low:g} is above high {self.high:g}; expected "
+                              "low <= high")
 
     def text(self) -> str:
         """``released at 1 h in [20, 40] %`` or ``f2 >= 50``."""

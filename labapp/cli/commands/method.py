@@ -19,6 +19,11 @@ def _released(text: str) -> tuple[float, float | None, float | None]:
     hours = finite_float(parts[0])
     low = finite_float(parts[1]) if parts[1] else None
     high = finite_float(parts[2]) if parts[2] else None
+    if hours <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: HOURS = {hours:g}; expected a time after the drop, > 0 h")
+    if low is not None and high is not None and low > high:
+        raise argparse.ArgumentTypeError(f"{text!r}: LOW {low:g} % is above HIGH {high:g} %; expected HOURS:LOW:HIGH "
+                                         f"with LOW <= HIGH (e.g. {parts[0]}:{parts[2]}:{parts[1]})")
     return hours, low, high
 
 

@@ -23,3 +23,21 @@ def test_audit_fails_a_trail_cut_off_at_its_end_with_verifys_exit_code(tmp_path,
     assert main(["audit", str(folder)]) == EXIT_FAILED
     out = capsys.readouterr().out
     assert "chain BROKEN" in out and "TRUNCATED" in out
+
+
+def test_method_save_refuses_a_released_range_upside_down_naming_the_option(tmp_path, capsys):
+    import pytest
+
+    from labapp.acquisition.methods import Criterion, MethodError
+    from labapp.errors import EXIT_USAGE
+
+    folder = _finished_run(tmp_path)
+    out = tmp_path / "m.json"
+    with pytest.raises(SystemExit) as exc:
+        main(["method", "save", str(out), "--from", str(folder), "--accept-released", "1:80:40"])
+    assert exc.value.code == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert "--accept-released" in err and "LOW 80 % is above HIGH 40 %" in err
+    assert not out.exists()
+    with pytest.raises(MethodError, match="low 80 is above high 40"):
+        Criterion("released_percent", 80.0, 40.0, 1.0)
