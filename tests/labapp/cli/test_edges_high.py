@@ -41,3 +41,22 @@ def test_method_save_refuses_a_released_range_upside_down_naming_the_option(tmp_
     assert not out.exists()
     with pytest.raises(MethodError, match="low 80 is above high 40"):
         Criterion("released_percent", 80.0, 40.0, 1.0)
+
+
+def test_the_status_line_away_from_a_terminal_is_a_line_per_step_or_minute(capsys):
+    from labapp.acquisition.events import FrameStored
+    from labapp.acquisition.status import RunStatus
+    from labapp.cli.drive import LOG_EVERY_S, _status_printer
+
+    status, clock = RunStatus(), [0.0]
+    show = _status_printer(status, tty=False, now=lambda: clock[0])
+    for _ in range(100):                    # 25 s of refreshes, nothing new: one line
+        show()
+        clock[0] += 0.25
+    status.update(FrameStored(index=0, file="frame_000000.jpg", path="frame_000000.jpg", t_s=30.0, n_frames=1))
+    show()                                  # a step: a line
+    clock[0] += LOG_EVERY_S
+    show()                                  # a minute: a line
+    out = capsys.readouterr().out
+    assert "\r" not in out and out.count("\n") == 3
+    assert "frames 1" in out.splitlines()[1]
