@@ -43,6 +43,8 @@ from labapp.records.manifests import MASSES_CSV
 from labapp.records.storage import RunFolder, create_run
 
 CALIBRATION_FILE = "bench_calibration.json"
+MIN_LEVELS = 3
+"""Concentration levels a calibration is fitted from at the least (clear water is the first)."""
 MASS_COLUMNS = ("file", "added_mass_g")
 
 
@@ -162,6 +164,10 @@ class SeriesConfig:
             raise UsageError(f"SeriesConfig.crop must be (x, y, size) px with size >= grid, got {self.crop}")
         if any(b <= a for a, b in zip((0.0,) + self.masses_g, self.masses_g)):
             raise UsageError(f"SeriesConfig.masses_g must be positive and increasing (cumulative), got {self.masses_g}")
+        if self.masses_g and len(self.masses_g) + 1 < MIN_LEVELS:
+            raise UsageError(f"masses {', '.join(f'{m:g}' for m in self.masses_g)} g: clear water and "
+                             f"{len(self.masses_g)} addition(s) make {len(self.masses_g) + 1} levels; a calibration "
+                             f"needs {MIN_LEVELS}: give at least {MIN_LEVELS - 1} cumulative masses (--masses)")
 
     def to_dict(self) -> dict[str, Any]:
         """The settings as stored under ``config`` in ``run.json`` (the bath's fields alongside the series')."""
@@ -260,7 +266,7 @@ class CalibrationProcedure:
         if engine.stop_reason == ABORT:
             session.note("info", "calibration", f"aborted with {len(self.masses)} levels captured; not fitted")
             return
-        if len(self.masses) >= 3:
+        if len(self.masses) >= MIN_LEVELS:
             try:
                 self._fit()
             except Exception as exc:
@@ -268,7 +274,7 @@ class CalibrationProcedure:
                              f"{type(exc).__name__}: {exc}", AlarmKind.FIT_FAILED)
                 raise
         else:
-            session.note("warning", "calibration", f"only {len(self.masses)} levels captured; 3 are needed to fit",
+            session.note("warning", "calibration", f"only {len(self.masses)} levels captured; {MIN_LEVELS} are needed to fit",
                          AlarmKind.FIT_FAILED)
 
     def shutdown(self, engine: Engine, outcome: Outcome) -> None:

@@ -150,6 +150,7 @@ def _record(args: argparse.Namespace) -> int:
     import math
 
     from analysis import BenchCalibration
+    from labapp.acquisition.calseries import MIN_LEVELS
     from labapp.acquisition.clock import make_clock
     from labapp.acquisition.engine import Engine
     from labapp.acquisition.events import Outcome
@@ -202,7 +203,7 @@ def _record(args: argparse.Namespace) -> int:
                         + (f" ({len(proc.masses)} levels kept in {folder})" if folder else " (no folder written)"))
     if proc.calibration_path is None:
         raise JobFailed(f"calibration series {outcome} with {len(proc.masses)} level(s) in {folder}: no calibration "
-                        "(3 levels are needed to fit); see its events.log")
+                        f"({MIN_LEVELS} levels are needed to fit); see its events.log")
     _summary(BenchCalibration.load(proc.calibration_path), mirror=True)
     write_line(f"series {outcome}: {len(proc.masses)} levels in {folder}; calibration {proc.calibration_path}")
     from labapp.cli import interrupt

@@ -60,3 +60,13 @@ def test_the_status_line_away_from_a_terminal_is_a_line_per_step_or_minute(capsy
     out = capsys.readouterr().out
     assert "\r" not in out and out.count("\n") == 3
     assert "frames 1" in out.splitlines()[1]
+
+
+def test_a_series_with_too_few_masses_is_refused_before_the_bath_heats(tmp_path, capsys):
+    from labapp.errors import EXIT_USAGE
+
+    runs = tmp_path / "runs"
+    assert main(["calibrate-bench", "--record", str(runs), "--simulate", "--speed", "0", "--masses", "1"]) == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert "--masses" in err and "needs 3" in err
+    assert not runs.exists() or not any(runs.iterdir())
