@@ -35,13 +35,14 @@ from labapp.acquisition.events import EngineEvent, FrameStored, Outcome
 from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.acquisition.settings import INTERVAL, BathSettings
 from labapp.acquisition.simbench import SCENE, WATER_G, Material, SampleRelease, SimulatedBench, sample_release
-from labapp.errors import UsageError
+from labapp.errors import JobFailed, LabError, UsageError
 from labapp.jobs.bands import prediction_band, quantile_columns, source_simulator
 from labapp.jobs.calibrate_sim import MAX_RESOLUTION as MAX_SIMCAL_RESOLUTION
 from labapp.jobs.calibrate_sim import MIN_RESOLUTION as MIN_SIMCAL_RESOLUTION
 from labapp.jobs.calibrate_sim import SimCalRun, calibrate_sim
 from labapp.jobs.physical import design_from_target
 from labapp.records.curvefiles import PhysicalCurve, read_physical_curve
+from labapp.records.fileio import StorageError, free_bytes
 from labapp.records.lock import folder_lock
 from labapp.records.manifests import read_run
 from labapp.records.simcal import SimCalFile, load_simcal
@@ -61,6 +62,9 @@ SIMCAL_RESOLUTION, DESIGN_RESOLUTION, DESIGN_ITERATIONS = 48, 40, 120
 """The demo's simulation-calibration resolution, design grid and design evaluation budget."""
 DEMO_DESIGN_PLACEHOLDER = "zero-order"
 """The target the design settings are checked with before the measured curve that replaces it exists."""
+DEMO_FREE_BYTES = 200_000_000
+"""Free disk space a demo needs before it starts, bytes: a session's folder holds about 60 MB (the frames of its
+five runs), with a margin for the file system's blocks and the analysis caches."""
 
 
 @dataclass(frozen=True)
@@ -102,13 +106,43 @@ def simulated_calibration(out_dir: Path, clock: SteppedClock | None = None,
         config = SeriesConfig(crop=sim.scene.default_crop(), masses_g=CAL_MASSES_G, settle_s=600.0, reduce=2,
                               bath=BathSettings(water_g=WATER_G, stable_step_s=60.0))
         proc = CalibrationProcedure(config, sim.bench(), out_dir)
-        outcome = Engine(clock).run(proc)
+        engine = Engine(clock)
+        outcome = engine.run(proc)
     finally:
         sim.close()
+    if proc.run is None:
+        raise _not_started("the simulated calibration series", out_dir, engine.error)
     if proc.calibration_path is None:
         raise RuntimeError(f"the simulated calibration series ended '{outcome}' without a calibration; "
                            f"see {proc.run.path / 'events.log'}")
     return BenchCalibration.load(proc.calibration_path), proc.calibration_path
+
+
+def _not_started(what: str, folder: Path, error: BaseException | None) -> LabError:
+    """The error of a simulated procedure that could not create its run folder in ``folder`` (a full or read-only
+    disk): a :class:`StorageError` naming the folder, or the procedure's own :class:`LabError`."""
+    if isinstance(error, LabError):
+        return error
+    if isinstance(error, OSError):
+        return StorageError(f"{what} could not write its run folder in {folder}: "
+                            f"{error.strerror or error}; free space or choose another --out")
+    return JobFailed(f"{what} did not start in {folder}: {error}")
+
+
+def check_demo_space(out_dir: Path, need_bytes: int = DEMO_FREE_BYTES) -> None:
+    """Refuse a demo whose folder's disk has less than ``need_bytes`` free, before anything is written.
+
+    Raises
+    ------
+    StorageError
+        Naming the folder, the space needed and the space free.
+    """
+    folder = Path(out_dir).expanduser().resolve()
+    existing = next(p for p in (folder, *folder.parents) if p.exists())
+    have = free_bytes(existing)
+    if have < need_bytes:
+        raise StorageError(f"not enough disk space for the demo in {folder}: it needs about {need_bytes / 1e6:.0f} MB, "
+                           f"{have / 1e6:.0f} MB free; free space or choose another --out")
 
 
 def _inject_faults(sim: SimulatedBench) -> Callable[[EngineEvent], None]:
@@ -152,6 +186,8 @@ def simulated_run(clock: SteppedClock, calibration: BenchCalibration, release: S
         outcome = engine.run(proc)
     finally:
         sim.close()
+    if proc.run is None:
+        raise _not_started(f"the simulated run of {release.name}", data_dir, engine.error)
     if outcome not in (Outcome.COMPLETE, Outcome.STOPPED):
         raise RuntimeError(f"the simulated run ended '{outcome}': {engine.error}; see {proc.run.path / 'events.log'}")
     return proc.run.path
@@ -183,8 +219,12 @@ def run_demo(out_dir: Path, sample: str = "pill", interval_s: float = 11.0,
     UsageError
         Before anything is written, for any input the loop would refuse later (:func:`check_demo`), or an
         ``out_dir`` another command is writing.
+    StorageError
+        Before anything is written, when ``out_dir``'s disk has too little free space (:func:`check_demo_space`);
+        during the loop, when a run folder cannot be written.
     """
     config = check_demo(sample, interval_s, calibration_interval_s, resolution, design_resolution, design_iterations)
+    check_demo_space(out_dir)
     with folder_lock(out_dir):
         return _run_demo(Path(out_dir), sample, interval_s, calibration_interval_s, resolution, config,
                          material or Material.draw(), progress)
