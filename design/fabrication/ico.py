@@ -46,6 +46,8 @@ DEFAULT_LAYERS = 8
 DEFAULT_COARSEN = 2
 """Voxels per elasticity element edge; the error it causes in J_fab and its gradient:
 docs/benchmarks.md#incremental-compliance-term."""
+MAX_LAYERS, MAX_COARSEN = 256, 8
+"""The most partial designs and voxels per elasticity element edge `IcoConfig` takes."""
 
 
 @dataclass(frozen=True)
@@ -82,8 +84,9 @@ class IcoConfig:
     deflate: bool = True
 
     def __post_init__(self) -> None:
-        if not 1 <= self.layers <= 256 or not 1 <= self.coarsen <= 8:
-            raise DesignError(f"ICO needs layers in [1, 256] and coarsen in [1, 8]; got {self.layers}, {self.coarsen}")
+        if not 1 <= self.layers <= MAX_LAYERS or not 1 <= self.coarsen <= MAX_COARSEN:
+            raise DesignError(f"ICO needs layers in [1, {MAX_LAYERS}] and coarsen in [1, {MAX_COARSEN}]; got {self.layers}, "
+                              f"{self.coarsen}")
         if self.law not in LAWS:
             raise DesignError(f"stiffness law must be one of {LAWS}, got {self.law!r}")
         if not 0 < self.e_min < 1 or not 0 < self.tol < 1 or not -1 < self.poisson < 0.5:

@@ -14,7 +14,7 @@ from typing import Any
 from design.errors import DesignError
 from design.fabrication.connectivity import TAIL_SLOPE
 from design.fabrication.elasticity import LAWS
-from design.fabrication.ico import DEFAULT_COARSEN, DEFAULT_LAYERS
+from design.fabrication.ico import DEFAULT_COARSEN, DEFAULT_LAYERS, MAX_COARSEN, MAX_LAYERS
 from design.geometry.voxelize import DEFAULT_RESOLUTION
 from design.inverse.filters import MAX_RADIUS_VOX
 from design.inverse.lbfgs import LINE_SEARCHES
@@ -66,9 +66,9 @@ PHYSICAL_CORRECTIONS = ("defect", "none")
 """`DesignConfig.physical_correction` choices: "defect", the defect-correction rounds of `design.inverse.defect`
 that aim the print's release, judged by the reference evaluator, at the target; "none", the design grid's
 release alone (as in the paper). Why "defect" is the default: docs/design.md#physical-correction."""
-CORRECTION_SPACES = ("nfc", "extruded")
-"""The design spaces whose runs correct the print by default (`DesignConfig.physical_correction` None); ICO
-runs, whose evaluations carry the elasticity solves, default to "none"."""
+CORRECTION_SPACES = ("nfc", "extruded", "ico")
+"""The design spaces whose runs correct the print by default (`DesignConfig.physical_correction` None): all
+(docs/design.md#physical-correction)."""
 CORRECTION_ROUNDS = 2
 """Default defect-correction rounds (`DesignConfig.correction_rounds`)."""
 CORRECTION_EVALS_SHARE = 0.1
@@ -129,9 +129,6 @@ class DesignSetting:
         The option's help text.
     metavar : str or tuple of str, optional
         The option's placeholder (default: the flag's name in capitals).
-    sign : str, optional
-        What the command line itself checks of a number before the configuration checks its range:
-        "positive", "nonnegative" or "finite"; None: the range's lower end decides.
     choices_checked : bool
         The command line refuses a text outside ``choices`` (else the configuration does).
     message : str
@@ -158,7 +155,6 @@ class DesignSetting:
     flag: str | None = None
     text: str = ""
     metavar: str | tuple[str, ...] | None = None
-    sign: str | None = None
     choices_checked: bool = False
     message: str = ""
     decimals: int = 0
@@ -168,7 +164,8 @@ class DesignSetting:
         """The unit the command line and the GUI show."""
         return self.unit
 
-    def _allows_one(self, value: Any) -> bool:
+    def allows_item(self, value: Any) -> bool:
+        """Whether one number or name is allowed (one item of a tuple setting); the command line's check."""
         if self.choices:
             return value in self.choices
         if self.kind != "number":
@@ -187,8 +184,8 @@ class DesignSetting:
             return self.optional
         if self.count is not None or self.many:
             items = tuple(value) if isinstance(value, (tuple, list)) else None
-            return items is not None and (self.many or len(items) == self.count) and all(map(self._allows_one, items))
-        return self._allows_one(value)
+            return items is not None and (self.many or len(items) == self.count) and all(map(self.allows_item, items))
+        return self.allows_item(value)
 
     def range_text(self, shown: bool = False) -> str:
         """The allowed values in words: ``>= 8 voxels (even)``, ``in (0, 64]``, ``one of nfc, extruded, ico``.
@@ -250,11 +247,11 @@ W_FAB = DesignSetting(
     text=f"weight w_f of the ICO term (ico; default {SPACE_DEFAULTS['ico']['w_fab']:g}; J_fab is 1 at the start design)",
     message="w_fab must be >= 0, and only the ico space has a fabrication term; got {w_fab} for space {space!r}")
 LAYERS = DesignSetting(
-    "layers", "ICO partial designs L", default=DEFAULT_LAYERS, integer=True, flag="--layers", sign="positive",
+    "layers", "ICO partial designs L", default=DEFAULT_LAYERS, low=1, high=MAX_LAYERS, integer=True, flag="--layers",
     text=f"ICO partial designs L along +z (default {DEFAULT_LAYERS})")
 ICO_COARSEN = DesignSetting(
-    "ico_coarsen", "design voxels per elasticity element edge", "voxels", DEFAULT_COARSEN, integer=True,
-    flag="--ico-coarsen", metavar="VOX", sign="positive",
+    "ico_coarsen", "design voxels per elasticity element edge", "voxels", DEFAULT_COARSEN, low=1, high=MAX_COARSEN,
+    integer=True, flag="--ico-coarsen", metavar="VOX",
     text=f"design voxels per elasticity element edge of the ICO term (default {DEFAULT_COARSEN})")
 STIFFNESS_LAW = DesignSetting(
     "stiffness_law", "ICO stiffness interpolation", default=LAWS[0], kind="text", choices=LAWS,
@@ -320,7 +317,7 @@ W_RATE = DesignSetting(
     message=_RATE)
 RATE_SPAN = DesignSetting(
     "rate_span", "rate-fit span of the release", default=_RATE_SPAN, low=0.0, high=1.0, count=2, flag="--rate-span",
-    metavar=("LO", "HI"), sign="finite",
+    metavar=("LO", "HI"),
     text="J_rate compares rates between the times the target reaches these fractions of its release (default "
          f"{_RATE_SPAN[0]:g} {_RATE_SPAN[1]:g}; 0 1 = whole curve)",
     message="rate_span must be two fractions 0 <= lo < hi <= 1, got {rate_span}")
@@ -366,7 +363,7 @@ LINE_SEARCH = DesignSetting(
     message=f"line_search must be one of {LINE_SEARCHES}, got {{line_search!r}}")
 WARN_CHANNEL = DesignSetting(
     "warn_channel_mm", "narrow-channel warning", "mm", 1.0, low=0.0, low_open=True, flag="--warn-channel-mm",
-    sign="nonnegative", text="warn below this channel width, mm", message=_GRID)
+    text="warn below this channel width, mm", message=_GRID)
 FORMATS = DesignSetting(
     "formats", "extra mesh formats", default=(), kind="text", choices=MESH_FORMATS, many=True, flag="--formats",
     choices_checked=True, text="extra mesh formats")

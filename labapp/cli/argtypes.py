@@ -15,7 +15,7 @@ from typing import Any
 
 from labapp.acquisition.settings import Setting
 
-__all__ = ["add_design_option", "add_setting", "add_settings", "finite_float", "nonnegative_float", "nonnegative_int",
+__all__ = ["add_design_option", "add_setting", "add_settings", "bounded", "finite_float", "nonnegative_float", "nonnegative_int",
            "positive_float", "positive_int", "setting_type", "setting_values"]
 
 
@@ -58,8 +58,8 @@ def add_design_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
     """Add the ``sfr design`` option of a declared design setting (:class:`design.inverse.settings.DesignSetting`).
 
     The option has no default (a setting left out takes the design configuration's, resolved from the others);
-    the command line checks a number's sign (``setting.sign``, else the range's lower end) and the choices it is
-    told to, the configuration the rest. The value lands in ``args.<setting.name>``.
+    the command line checks a number's declared range (each number of a tuple's) and the choices it is told to,
+    the configuration the conditions between settings. The value lands in ``args.<setting.name>``.
     """
     kwargs: dict[str, Any] = {"dest": setting.name, "help": setting.help()}
     if setting.kind == "switch":
@@ -69,7 +69,7 @@ def add_design_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
     else:
         kwargs["metavar"] = setting.metavar or setting.flag[2:].upper().replace("-", "_")
     if setting.kind == "number":
-        kwargs["type"] = _sign_type(setting)
+        kwargs["type"] = _range_type(setting)
     if setting.count is not None:
         kwargs["nargs"] = setting.count
     elif setting.many:
@@ -77,14 +77,32 @@ def add_design_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
     return parser.add_argument(setting.flag, **kwargs)
 
 
-def _sign_type(setting: Any) -> Callable[[str], float | int]:
-    """The argparse type that checks what the command line checks of a declared number: its sign."""
-    sign = setting.sign
-    if sign is None and setting.low is not None:
-        sign = "positive" if setting.low > 0 or setting.low_open else "nonnegative" if setting.low == 0 else None
-    if setting.integer:
-        return {"positive": positive_int, "nonnegative": nonnegative_int}.get(sign, _int)
-    return {"positive": positive_float, "nonnegative": nonnegative_float}.get(sign, finite_float)
+def _range_type(setting: Any) -> Callable[[str], float | int]:
+    """The argparse type of a declared design number: a whole or finite number in the setting's range, the range
+    stated in the refusal (``--resolution 9``: "expected a whole number >= 8 voxels (even)")."""
+    def parse(text: str) -> float | int:
+        value = _int(text) if setting.integer else finite_float(text)
+        if not setting.allows_item(value):
+            what = "a whole number " if setting.integer else "a number "
+            raise argparse.ArgumentTypeError(f"{text!r}: expected {what}{setting.range_text()}")
+        return value
+    parse.__name__ = setting.name
+    return parse
+
+
+def bounded(low: float, high: float, *, integer: bool = False, low_open: bool = False,
+            unit: str = "") -> Callable[[str], float | int]:
+    """The argparse type of a number in ``[low, high]`` (``(low, high]`` with ``low_open``), the range stated in the
+    refusal: the one limit of an option whose command checks a range narrower than a sign
+    (``sfr calibrate-sim --resolution 2``: "expected a whole number in [8, 512] voxels")."""
+    def parse(text: str) -> float | int:
+        value = _int(text) if integer else finite_float(text)
+        if not ((value > low if low_open else value >= low) and value <= high):
+            what = "a whole number" if integer else "a number"
+            where = f"{'(' if low_open else '['}{low:g}, {high:g}]" + (f" {unit}" if unit else "")
+            raise argparse.ArgumentTypeError(f"{text!r}: expected {what} in {where}")
+        return value
+    return parse
 
 
 def finite_float(text: str) -> float:

@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from labapp.cli.argtypes import nonnegative_float, nonnegative_int, positive_float, positive_int
+from labapp.cli.argtypes import bounded, nonnegative_float, nonnegative_int, positive_float, positive_int
 
 NAME = "calibrate-sim"
 HELP = "fit seconds per mm and grams per mm^3 from measured runs and their meshes (simcal.json, loo.csv, simcal.png)"
@@ -19,6 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from analysis.physics_grid import PHYSICS_CHOICES
     from analysis.simcal_fit import DEFAULT_MAX_OFFSET_S
     from design.geometry.voxelize import DEFAULT_RESOLUTION
+    from labapp.jobs.calibrate_sim import MAX_RESOLUTION, MIN_RESOLUTION
 
     parser.add_argument("set_csv", metavar="SET.csv", nargs="?",
                         help="columns run,mesh,object_mass_g; run = run folder or curve CSV, paths relative to "
@@ -36,7 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "dissolve, mm), the wetting lag (s after the drop, shared by all runs: lag), sets joined by +, "
                              "all four, or auto (every subset; a parameter is kept only where "
                              "leave-one-out shows it earns it). Default none: the isotropic model of the mesh")
-    parser.add_argument("--resolution", type=positive_int, default=DEFAULT_RESOLUTION,
+    parser.add_argument("--resolution", type=bounded(MIN_RESOLUTION, MAX_RESOLUTION, integer=True, unit="voxels"),
+                        default=DEFAULT_RESOLUTION,
                         help=f"voxels along each mesh's longest side (default {DEFAULT_RESOLUTION})")
     parser.add_argument("--second-resolution", type=nonnegative_int, default=None,
                         help=f"refit the fitted print physics at this resolution too and add its discretisation bias "

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from labapp.cli.argtypes import nonnegative_int, positive_float
+from labapp.cli.argtypes import bounded, nonnegative_int, positive_float
 
 NAME = "compare"
 HELP = ("compare release curves as dissolution testing does: f1/f2 under a regulator's rule, MDT, DE, model fits; "
@@ -41,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=306,
                         help="R's set.seed value of the bootstrap (default 306, bootf2's; the same seed draws the "
                              "same samples as bootf2)")
-    parser.add_argument("--mtad", type=positive_float, default=10.0, metavar="PCT",
+    parser.add_argument("--mtad", type=bounded(0.0, 50.0, low_open=True, unit="%"), default=10.0, metavar="PCT",
                         help="replicate units: largest tolerable mean difference per point of the MSD and T^2 tests, "
                              "%% (default 10)")
     parser.add_argument("--calibration", help="bench calibration JSON for run folders without calibration.json")
@@ -96,8 +96,6 @@ def run(args: argparse.Namespace) -> int:
         inputs = [args.a, args.b]
     if args.bootstrap and args.bootstrap < 100:
         raise UsageError(f"--bootstrap {args.bootstrap}: expected a number of samples >= 100, or 0 for none")
-    if not 0 < args.mtad <= 50:
-        raise UsageError(f"--mtad {args.mtad:g}: expected a percentage in (0, 50]")
     plot = check_out(args.plot, "compare", inputs, file=True, option="--plot") if args.plot else None
     calibration = None
     if args.calibration:

@@ -208,7 +208,6 @@ def test_replicate_curves_are_set_on_common_points_with_a_seeded_bootstrap(tmp_p
      "give both products as units files, or both as curves"),
     (lambda d, a, b: ["compare", "--reference", _units_csv(d / "v.csv", [5, 10], [[1, 2]], "time"), "--test", b],
      "no column t_s"),
-    (lambda d, a, b: ["compare", "--reference", a, "--test", b, "--mtad", "60"], "--mtad 60: expected a percentage"),
     (lambda d, a, b: ["compare", f"{a},{a}", b], "not separated by commas"),
 ])
 def test_bad_replicate_input_is_named(curves, capsys, args, message):
