@@ -220,6 +220,13 @@ class HeidolphEmulator:
             self._relink_at = self._clock() + down_s
         log.info("emulator: link dropped for %.2f s", down_s)
 
+    def restore_link(self) -> None:
+        """End a :meth:`drop_link` now: the line comes back at the next turn of the serving loop."""
+        with self._lock:
+            if self._relink_at is not None:
+                self._relink_at = self._clock()
+        log.info("emulator: link restored on request")
+
     def disturb_water(self, delta_c: float) -> None:
         """Fault: the water's temperature jumps by ``delta_c`` C (cold water poured in: negative)."""
         with self._lock:

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from drivers.camera.base import DSLR_FRAME_BYTES, Camera, CameraError, CameraSettings, Capture, CaptureMissed
 from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import Alarm, AlarmKind, Message, Phase, Reading, StateChanged
+from labapp.acquisition.events import Alarm, AlarmKind, Link, Message, Phase, Reading, StateChanged
 from labapp.acquisition.monitor import HotplateMonitor
 from labapp.acquisition.settings import KEEPALIVE, BathSettings
 from labapp.errors import LabError
@@ -18,6 +18,11 @@ log = logging.getLogger(__name__)
 _LEVELS = {"info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 PUBLISHED = "published_as_event"
 """Attribute set on log records that are also published as engine events."""
+HEAT_PROGRESS_S = 60.0
+"""Seconds of the procedure's clock between two notes of the bath's progress while it heats."""
+_REPORT_ALARMS = {("warning", "hotplate-link"): AlarmKind.LINK_FAULT, ("info", "hotplate-link"): AlarmKind.LINK_RESTORED,
+                  ("warning", "hotplate-restart"): AlarmKind.HEATER_RESTARTED}
+"""The alarm each report of the hotplate monitor raises (level, kind): every change the operator must see."""
 
 
 def bath_c(reading: HotplateReading) -> float:
@@ -88,6 +93,9 @@ class BenchSession:
         self._pending: list[tuple[str, str, str]] = []
         self._band: tuple[float, float] | None = None       # (setpoint, excursion) watched after the drop
         self._outside = False
+        self.off_confirmed: bool | None = None
+        """After :meth:`close`: True when the plate confirmed heating and stirring off, False when it did not,
+        None without a hotplate."""
 
     def attach(self, run: RunFolder) -> None:
         """Log into ``run`` from now on, starting with the notes made before it existed."""
@@ -118,8 +126,15 @@ class BenchSession:
             self.engine.emit(Alarm(alarm, message, self.t_s()))
 
     def _monitor_report(self, level: str, kind: str, message: str) -> None:
-        """The monitor's report: a lost or re-established link is a link-fault alarm."""
-        self.note(level, kind, message, AlarmKind.LINK_FAULT if level != "info" else None)
+        """The monitor's report, each with its alarm: a lost link, a link back, a plate switched on again."""
+        self.note(level, kind, message, _REPORT_ALARMS.get((level, kind)))
+
+    def _link(self, ok: bool, message: str) -> None:
+        self.engine.emit(Link(ok, message))
+
+    def fresh_reading(self) -> HotplateReading | None:
+        """The hotplate's latest reading while it is fresh (:meth:`HotplateMonitor.fresh`), else None."""
+        return self.monitor.fresh() if self.monitor is not None else None
 
     def connect(self, setpoint_c: float | None, speed_rpm: float | None) -> None:
         """Connect and configure the camera; connect the hotplate, set it up and start heating."""
@@ -133,7 +148,8 @@ class BenchSession:
             return
         hp.connect()
         poll_s = monitor_poll_s(self.keepalive_s, self.engine.clock.speed)
-        self.monitor = HotplateMonitor(hp, self._monitor_report, poll_s=poll_s, on_reading=self._publish_reading)
+        self.monitor = HotplateMonitor(hp, self._monitor_report, poll_s=poll_s, on_reading=self._publish_reading,
+                                       on_link=self._link)
         if setpoint_c is not None:
             self.monitor.command(hp.set_temperature, setpoint_c)
             self.monitor.command(hp.start_heating)
@@ -146,7 +162,8 @@ class BenchSession:
 
     def _publish_reading(self, reading: HotplateReading) -> None:
         self.engine.emit(Reading(reading.plate_c, reading.probe_c, reading.speed_rpm, reading.setpoint_c,
-                                 reading.setpoint_rpm, reading.heating, reading.stirring, self.t_s()))
+                                 reading.setpoint_rpm, reading.heating, reading.stirring, self.t_s(),
+                                 fresh_s=self.monitor.fresh_s))
         if self._band is not None:
             self._check_band(bath_c(reading))
 
@@ -181,7 +198,8 @@ class BenchSession:
         self.engine.emit(StateChanged(Phase.HEATING, setpoint_c=setpoint_c))
         clock = self.engine.clock
         ok = self.monitor.wait_stable(setpoint_c, tolerance_c, hold_s, timeout_s, step_s, clock.now,
-                                      lambda dt: clock.sleep(dt, self.engine.should_stop), self.engine.should_stop)
+                                      lambda dt: clock.sleep(dt, self.engine.should_stop), self.engine.should_stop,
+                                      self._heat_progress(setpoint_c, tolerance_c, hold_s))
         if self.engine.should_stop():
             return
         if not ok:
@@ -189,6 +207,28 @@ class BenchSession:
             self.engine.emit(Alarm(AlarmKind.HEAT_TIMEOUT, message))    # the error itself ends the procedure
             raise ProcedureError(message)
         self.note("info", "stable", f"bath stable at {setpoint_c} +/- {tolerance_c} C for {hold_s:.0f} s")
+
+    def _heat_progress(self, setpoint_c: float, tolerance_c: float, hold_s: float) -> Callable[[HotplateReading], None]:
+        """A progress callback for the heating wait: notes the bath's temperature, its rate and the time to the
+        setpoint every :data:`HEAT_PROGRESS_S` of the procedure's clock."""
+        clock, last = self.engine.clock, []
+
+        def progress(reading: HotplateReading) -> None:
+            now, temp = clock.now(), bath_c(reading)
+            if last and now - last[0][0] < HEAT_PROGRESS_S:
+                return
+            rate = (temp - last[0][1]) / (now - last[0][0]) * 60.0 if last else None
+            gap = setpoint_c - temp
+            if abs(gap) <= tolerance_c:
+                left = f"within +/- {tolerance_c:g} C: holding for {hold_s:g} s"
+            elif rate is not None and rate * gap > 0:
+                left = f"about {gap / rate:.0f} min to the setpoint"
+            else:
+                left = "not approaching the setpoint yet"
+            rising = "" if rate is None else f", {rate:+.1f} C/min"
+            self.note("info", "heating", f"heating: bath {temp:.1f} C of {setpoint_c:g} C{rising}; {left}")
+            last[:] = [(now, temp)]
+        return progress
 
     def wait_bath(self, bath: BathSettings) -> None:
         """Wait until the bath holds ``bath.setpoint_c`` (:meth:`wait_stable`); no wait without a setpoint."""
@@ -246,18 +286,31 @@ class BenchSession:
             self.note("warning", "camera-error", f"camera re-initialisation failed: {exc}")
 
     def close(self) -> None:
-        """Heating and stirring off (and one last reading published, which shows it), devices closed; every
-        step best effort and logged."""
+        """Heating and stirring off, devices closed; every step best effort and logged. "Switched off" is
+        recorded only when the plate confirms it: both commands answered and a last reading (published) shows
+        heating and stirring off; otherwise an error and a :attr:`AlarmKind.NOT_CONFIRMED_OFF` alarm say that
+        they could not be confirmed off (:attr:`off_confirmed`)."""
         self._band = None
         if self.monitor is not None:
             self.monitor.stop()
+            failed = []
             for step in (self.bench.hotplate.stop_heating, self.bench.hotplate.stop_stirring):
                 try:
                     self.monitor.command(step)
                 except HotplateError as exc:
+                    failed.append(step.__name__)
                     self.note("warning", "hotplate", f"{step.__name__} failed: {exc}")
-            self.note("info", "hotplate", "heating and stirring switched off")
-            self.monitor.poll()
+            last = self.monitor.poll()
+            self.off_confirmed = not failed and last is not None and not last.heating and not last.stirring
+            if self.off_confirmed:
+                self.note("info", "hotplate", "heating and stirring switched off (the plate confirms: heating off, "
+                          "stirring off)")
+            else:
+                why = (f"{' and '.join(failed)} failed" if failed else "no reading after the commands" if last is None
+                       else f"the plate still reads heating {'on' if last.heating else 'off'}, stirring "
+                            f"{'on' if last.stirring else 'off'}")
+                self.note("error", "hotplate", f"heating and stirring could NOT be confirmed off ({why}): check the "
+                          "plate and switch it off by hand", AlarmKind.NOT_CONFIRMED_OFF)
         for device in (self.bench.hotplate, self.bench.camera):
             if device is None:
                 continue

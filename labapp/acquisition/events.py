@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
-__all__ = ["Alarm", "AlarmKind", "CalibrationLevel", "Done", "EngineEvent", "FrameStored", "Message", "Outcome", "Phase",
-           "Preview", "Prompt", "PromptKind", "Reading", "StateChanged"]
+__all__ = ["Alarm", "AlarmKind", "CalibrationLevel", "Done", "EngineEvent", "FrameStored", "Link", "Message", "Outcome",
+           "Phase", "Preview", "Prompt", "PromptKind", "Reading", "ReferenceStored", "StateChanged"]
 
 Level = Literal["info", "warning", "error"]
 
@@ -54,7 +54,8 @@ class Outcome(enum.StrEnum):
 
 
 class AlarmKind(enum.StrEnum):
-    """What went wrong (:class:`Alarm`): failures the operator must see, not only read in the log."""
+    """What the operator must see, not only read in the log (:class:`Alarm`): failures, and changes that need
+    them (the drop, a link back, a heater switched on again, the end of a run)."""
 
     HEAT_TIMEOUT = "heat-timeout"
     """The bath did not become stable within the heating timeout."""
@@ -68,6 +69,16 @@ class AlarmKind(enum.StrEnum):
     """The bath left setpoint +/- the run's excursion tolerance during acquisition."""
     REFERENCE_OFFSET = "reference-offset"
     """The reference frame does not read as clear water on the calibration's zero level."""
+    LINK_RESTORED = "link-restored"
+    """The hotplate answers again after a lost link (check what it does now)."""
+    HEATER_RESTARTED = "heater-restarted"
+    """The plate had stopped heating and stirring on its own (its connection check) and was switched on again."""
+    NOT_CONFIRMED_OFF = "not-confirmed-off"
+    """At the end of a procedure the plate did not confirm that heating and stirring are off."""
+    DROP = "drop"
+    """The bath is stable and the reference taken: drop the object now, then confirm."""
+    RUN_ENDED = "run-ended"
+    """A run or calibration series ended (its outcome)."""
 
 
 @dataclass(frozen=True)
@@ -133,6 +144,25 @@ class Reading(EngineEvent):
     heating: bool
     stirring: bool
     t_s: float | None = None
+    fresh_s: float = 6.0
+    """Wall seconds for which this reading counts as the plate's current state: its poll interval plus the time
+    one read takes (:attr:`labapp.acquisition.monitor.HotplateMonitor.fresh_s`); older, it is stale."""
+
+
+@dataclass(frozen=True)
+class Link(EngineEvent):
+    """The hotplate's link went down (``ok`` False: no reading arrives, heating and stirring are unknown; the
+    monitor keeps retrying) or answers again (``ok`` True)."""
+
+    ok: bool
+    message: str
+
+
+@dataclass(frozen=True)
+class ReferenceStored(EngineEvent):
+    """The run's reference frame (clear water, before the drop) was stored at ``path``."""
+
+    path: str
 
 
 @dataclass(frozen=True)

@@ -2,8 +2,15 @@
 
 connect -> heat and wait until stable -> stir -> reference frame -> the operator drops the object (time
 zero) -> a frame every ``interval_s`` with plate/probe temperature and stirring speed, each analysed live
--> stop on request, on steady state or at ``max_duration_s`` -> heating off. A run reopened after a crash
-(:meth:`RunProcedure.resume`) records the gap and continues into the same folder.
+-> stop on request, on steady state or at ``max_duration_s`` -> heating off. A frame's plate/probe/stirring
+values are the hotplate's reading only while it is fresh (:meth:`labapp.acquisition.monitor.HotplateMonitor.fresh`);
+with the link down or the reading older than its poll interval they are stored empty, never as the last values.
+
+A run reopened after a crash (:meth:`RunProcedure.resume`) records the gap and continues into the same folder:
+its stored frames are analysed again and published first (the window plots the whole history), and capture goes
+on at once, without waiting for the bath: the object keeps dissolving in the beaker whatever its temperature, so
+a frame not taken is release not measured. The note at the resume says so, with the bath's temperature, and the
+excursion alarm marks the time the bath spends outside its band.
 """
 from __future__ import annotations
 
@@ -15,9 +22,18 @@ from pathlib import Path
 from typing import Any
 
 from analysis import BenchCalibration, reference_offset
-from labapp.acquisition.bench import Bench, BenchSession, ProcedureError
+from labapp.acquisition.bench import Bench, BenchSession, ProcedureError, bath_c
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import AlarmKind, FrameStored, Outcome, Phase, Preview, PromptKind, StateChanged
+from labapp.acquisition.events import (
+    AlarmKind,
+    FrameStored,
+    Outcome,
+    Phase,
+    Preview,
+    PromptKind,
+    ReferenceStored,
+    StateChanged,
+)
 from labapp.acquisition.live import LiveAnalyzer, is_steady
 from labapp.acquisition.settings import (
     CHANGEABLE_DURING_RUN,
@@ -180,14 +196,15 @@ class RunProcedure:
         engine.emit(StateChanged(Phase.OPENED, folder=str(self.run.path), resumed=self.resume_path is not None))
         self.session.t0_unix_s = self.run.record.t0_unix_s
         self.session.attach(self.run)
-        self.t_s = [f.t_s for f in self.run.frames]
-        self.conc = [math.nan] * len(self.t_s)
+        self.t_s, self.conc = [], []
 
     def execute(self, engine: Engine) -> None:
         """Heat, reference, drop (unless resuming after the drop), then acquire until a stop criterion."""
         cfg, session, run = self.config, self.session, self.run
         if "reference.jpg" in run.record.files:
             self._use_reference()
+            engine.emit(ReferenceStored(str(run.path / "reference.jpg")))
+        self._replay(engine)
         if session.t0_unix_s is None:
             session.wait_bath(cfg.bath)
             if engine.should_stop():
@@ -208,6 +225,7 @@ class RunProcedure:
             session.start_stirring(cfg.bath.speed_rpm)
             last = run.frames[-1].t_s if run.frames else 0.0
             run.add_gap(last, session.t_s(), "acquisition interrupted; resumed into the same folder")
+            self._note_resumed_bath()
         if self.bench.on_drop is not None:
             self.bench.on_drop(session.t0_unix_s)
         self._acquire(engine)
@@ -221,8 +239,10 @@ class RunProcedure:
             if outcome == Outcome.FAILED and engine.error is not None:
                 self.run.event("error", "failed", f"{type(engine.error).__name__}: {engine.error}")
             if outcome == Outcome.INTERRUPTED:
+                off = self.session is None or self.session.off_confirmed is not False
                 self.run.event("warning", "interrupted", f"acquisition interrupted with {len(self.run.frames)} frames; "
-                               "heating off, the run can be resumed")
+                               + ("heating off" if off else "heating and stirring NOT confirmed off")
+                               + ", the run can be resumed")
                 self.run.update(writer_pid=None, writer_started=None)
             else:
                 self.run.finish(_STATUS[outcome])
@@ -237,6 +257,44 @@ class RunProcedure:
         self.run.update(reference_file="reference.jpg", reference_t_unix_s=cap.t_unix_s)
         self.session.note("info", "reference", "reference frame (clear water) captured")
         self._use_reference()
+        engine.emit(ReferenceStored(str(self.run.path / "reference.jpg")))
+
+    def _replay(self, engine: Engine) -> None:
+        """A resumed run's stored frames, analysed again (the live curve and the steady-state stop see the
+        whole run) and published as :class:`FrameStored` events, oldest first."""
+        water_kg = self.config.bath.water_g / 1000.0
+        for index, frame in enumerate(self.run.frames):
+            if engine.should_stop():
+                return
+            conc = unc = math.nan
+            if self.analyzer is not None:
+                try:
+                    point = self.analyzer.analyze(self.run.path / frame.file)
+                    conc, unc = point.conc_g_per_kg, point.uncertainty_g_per_kg
+                except Exception as exc:
+                    self.session.note("warning", "analysis", f"{frame.file}: could not analyse ({type(exc).__name__}: "
+                                      f"{exc}); the frame is kept")
+            self.t_s.append(frame.t_s)
+            self.conc.append(conc)
+            engine.emit(FrameStored(index, frame.file, str(self.run.path / frame.file), frame.t_s, index + 1,
+                                    capture_t_unix_s=frame.t_unix_s, conc_g_per_kg=conc, uncertainty_g_per_kg=unc,
+                                    released_g=conc * water_kg, plate_c=frame.plate_c, probe_c=frame.probe_c,
+                                    speed_rpm=frame.speed_rpm))
+
+    def _note_resumed_bath(self) -> None:
+        """Say at a resume what the bath is and why capture goes on at once."""
+        setpoint = self.config.bath.setpoint_c
+        reading = self.session.fresh_reading()
+        if setpoint is None or reading is None:
+            return
+        temp = bath_c(reading)
+        if abs(temp - setpoint) <= self.config.bath.tolerance_c:
+            self.session.note("info", "resume", f"resumed with the bath at {temp:.1f} C, within its setpoint")
+            return
+        self.session.note("warning", "resume", f"resumed with the bath at {temp:.1f} C, not at its setpoint {setpoint:g} C: "
+                          "capture goes on at once while it heats back (the object keeps dissolving, a frame not "
+                          "taken is release not measured); the excursion alarm marks the time outside the band",
+                          AlarmKind.TEMPERATURE_EXCURSION)
 
     def _use_reference(self) -> None:
         """Anchor the live analysis on the reference frame, and check it as the offline analysis does: a
@@ -322,7 +380,7 @@ class RunProcedure:
         index = len(run.frames)
         suffix = Path(cap.file_name).suffix.lower() or ".jpg"
         name = f"frame_{index:06d}{suffix}"
-        reading = session.monitor.latest if session.monitor is not None and session.monitor.link_ok else None
+        reading = session.fresh_reading()          # stale or link down: stored empty, never the last values
         t_s = cap.t_unix_s - session.t0_unix_s
         record = run.add_frame(name, cap.data, t_s, cap.t_unix_s,
                                reading.plate_c if reading else None, reading.probe_c if reading else None,

@@ -279,10 +279,16 @@ class SimulatedBench:
         """The next ``n`` frames arrive truncated."""
         self.camera.inject_corrupt(n)
 
-    def drop_hotplate_link(self, down_s: float) -> None:
-        """The hotplate's serial link goes dead for ``down_s`` s (emulator clock)."""
+    def drop_hotplate_link(self, down_s: float = math.inf) -> None:
+        """The hotplate's serial link goes dead for ``down_s`` wall seconds (default: until
+        :meth:`restore_hotplate_link`)."""
         if self.emulator is not None:
-            self.emulator.drop_link(down_s)
+            self.emulator.drop_link(down_s if math.isfinite(down_s) else 1e9)
+
+    def restore_hotplate_link(self) -> None:
+        """The hotplate's serial link answers again (ends :meth:`drop_hotplate_link` now)."""
+        if self.emulator is not None:
+            self.emulator.restore_link()
 
     def cool_bath(self, delta_c: float) -> None:
         """The water's temperature drops by ``delta_c`` C at once (cold water poured in, a draught); the

@@ -13,7 +13,7 @@ from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QApplication
 
 from labapp.errors import EXIT_USAGE, UsageError
-from labapp.gui.login import ask_operator
+from labapp.gui.login import LoginInterrupted, ask_operator
 from labapp.gui.main_window import MainWindow
 from labapp.gui.syslibs import xcb_problem
 
@@ -41,7 +41,8 @@ class SignalStop:
     closing it mid-run does, without asking: a run is interrupted (heating and stirring off, the folder left
     ``interrupted`` and resumable), a design or sweep stops at a checkpoint, and the window closes once all
     of it has stopped; :attr:`exit_code` is then 128 + the signal's number (130 for SIGINT, 143 for SIGTERM).
-    A second signal aborts the procedure at once.
+    A second signal changes nothing of that: the procedure is already stopping (heating off, devices closing), and
+    a run still ends ``interrupted`` and resumable, the safer outcome; it is said on the terminal.
 
     Qt's event loop runs in C++, where Python cannot run a signal handler; a timer hands control back to
     Python every :data:`SIGNAL_POLL_MS`. Call :meth:`restore` after the loop.
@@ -67,8 +68,8 @@ class SignalStop:
         self.received.append(signum)
         name = signal.Signals(signum).name
         if len(self.received) > 1:
-            print(f"sfr lab: {name} again: aborting at once (heating off)", file=sys.stderr, flush=True)
-            self.window.engine.abort()
+            print(f"sfr lab: {name} again: already stopping (heating and stirring off, devices closing); a run "
+                  "stays interrupted and resumable; the window closes when it has stopped", file=sys.stderr, flush=True)
             return
         print(f"sfr lab: {name}: interrupting (heating and stirring off, a run left resumable), then closing",
               file=sys.stderr, flush=True)
@@ -97,7 +98,11 @@ def launch(data_dir: Path, simulate: bool, speed: float | None, sample: str, cal
     if problem:
         raise UsageError(problem)
     app = QApplication.instance() or QApplication(sys.argv[:1])
-    operator = ask_operator(simulate)      # no operator, nothing recorded: the GUI does not start
+    try:
+        operator = ask_operator(simulate)      # no operator, nothing recorded: the GUI does not start
+    except LoginInterrupted as exc:
+        print(f"sfr lab: {exc}: closed at the login, nothing started", file=sys.stderr, flush=True)
+        return 128 + exc.signum
     if operator is None:
         return EXIT_USAGE
     collector = gui_thread_garbage_collector()

@@ -22,10 +22,12 @@ from labapp.acquisition.events import (
     Done,
     EngineEvent,
     FrameStored,
+    Link,
     Message,
     Preview,
     Prompt,
     Reading,
+    ReferenceStored,
     StateChanged,
 )
 
@@ -34,14 +36,16 @@ log = logging.getLogger(__name__)
 
 class EngineBridge(QObject):
     """Re-emits every engine event as ``event`` and by type as ``frame`` (:class:`FrameStored`), ``level``
-    (:class:`CalibrationLevel`), ``preview``, ``reading``, ``state``, ``prompt``, ``alarm``, ``done`` (each
-    carrying the typed event) and ``message(level, text)``."""
+    (:class:`CalibrationLevel`), ``preview``, ``reading``, ``link``, ``reference``, ``state``, ``prompt``, ``alarm``,
+    ``done`` (each carrying the typed event) and ``message(level, text)``."""
 
     event = Signal(object)
     frame = Signal(object)
     level = Signal(object)
     preview = Signal(object)
     reading = Signal(object)
+    link = Signal(object)
+    reference = Signal(object)
     state = Signal(object)
     message = Signal(str, str)
     prompt = Signal(object)
@@ -64,6 +68,10 @@ class EngineBridge(QObject):
                 self.preview.emit(ev)
             case Reading():
                 self.reading.emit(ev)
+            case Link():
+                self.link.emit(ev)
+            case ReferenceStored():
+                self.reference.emit(ev)
             case StateChanged():
                 self.state.emit(ev)
             case Message():

@@ -5,8 +5,10 @@ The hotplate's readouts come from polls of the plate off the GUI thread, every `
 clock, whenever a bench is connected: by the procedure's monitor while a procedure holds the bench (its last
 reading is taken after the heating was switched off), and by the window's idle poller between procedures
 (:mod:`labapp.gui.plate_poller`). The heater's state (heating ON or OFF, setpoint, bath, stirring) is shown in one
-prominent line, and every readout turns grey with "stale since hh:mm:ss" once no reading has arrived for
-:data:`STALE_AFTER_S`.
+prominent line only while the reading is current: every readout turns grey with "stale since hh:mm:ss" once the
+last reading is older than its freshness (its poll interval plus the time a read takes,
+:attr:`labapp.acquisition.events.Reading.fresh_s`), and a lost link (:class:`labapp.acquisition.events.Link`) shows
+"LINK LOST" in red, with heating and stirring unknown, until the plate answers again.
 """
 from __future__ import annotations
 
@@ -17,19 +19,20 @@ from PySide6.QtWidgets import QComboBox, QGroupBox, QHBoxLayout, QLabel, QLineEd
 
 from drivers.camera.base import CameraSettings
 from labapp.acquisition.devices import CAMERA_SPECS
-from labapp.acquisition.events import Reading
+from labapp.acquisition.events import Link, Reading
 from labapp.acquisition.settings import BATH_SETTINGS, KEEPALIVE, SETPOINT, BathSettings
 from labapp.gui.fields import add_rows, narrow_form, problems
 
 SIMULATED = "simulated"
 NO_HOTPLATE = "none"
 STALE_AFTER_S = 3 * KEEPALIVE.default
-"""Wall-clock seconds without a hotplate reading after which the readouts are shown as stale: three of the
-monitor's polls missed (it polls at least every ``keepalive_s``, 2 s by default)."""
+"""Wall-clock seconds without a hotplate reading after which the readouts are shown as stale when the reading does
+not say its own freshness."""
 STALE_CHECK_MS = 500
 HEATING_ON_STYLE = "QLabel { background-color: #ffb347; color: black; font-weight: bold; padding: 4px; }"
 HEATING_OFF_STYLE = "QLabel { background-color: #cfe3ff; color: black; font-weight: bold; padding: 4px; }"
-STALE_STYLE = "QLabel { background-color: #dddddd; color: #777777; padding: 4px; }"
+STALE_STYLE = "QLabel { background-color: #dddddd; color: #555555; font-weight: bold; padding: 4px; }"
+LINK_LOST_STYLE = "QLabel { background-color: #c00000; color: white; font-weight: bold; padding: 4px; }"
 
 
 def serial_ports() -> list[str]:
@@ -71,12 +74,16 @@ class DevicePanel(QWidget):
         self.heater.setStyleSheet(STALE_STYLE)
         self.stale_label = QLabel("")
         self.stale_label.setStyleSheet("color: #777777;")
-        self.stale_after_s = STALE_AFTER_S
+        self.stale_label.setWordWrap(True)         # never wider than the dock
+        self.stale_after_s: float | None = None
+        """Wall seconds after which a reading is stale (None: the reading's own ``fresh_s``)."""
         self.last_reading: Reading | None = None
+        self.link_ok = True
+        self._link_lost_wall: float | None = None
         self._received_s: float | None = None          # time.monotonic() of the last reading
         self._received_wall: float | None = None       # time.time() of the last reading, for "stale since"
         self.stale = True
-        self._look: tuple[bool, bool] | None = None
+        self._look: tuple | None = None
         devices = QGroupBox("devices")
         form = narrow_form(devices)
         form.addRow("camera", self.camera)
@@ -160,7 +167,7 @@ class DevicePanel(QWidget):
         """Slot: show one hotplate reading (an engine :class:`labapp.acquisition.events.Reading`)."""
         def fmt(v: float | None, spec: str) -> str:
             return "no probe" if v is None else format(v, spec)
-        self.last_reading = reading
+        self.last_reading, self.link_ok = reading, True
         self._received_s, self._received_wall = time.monotonic(), time.time()
         self.readouts["plate_c"].setText(fmt(reading.plate_c, ".1f"))
         self.readouts["probe_c"].setText(fmt(reading.probe_c, ".1f"))
@@ -175,30 +182,57 @@ class DevicePanel(QWidget):
             self.heater.setText(f"HEATING ON: setpoint {reading.setpoint_c:.1f} C, {where} {bath:.1f} C, {stirring}")
         else:
             self.heater.setText(f"HEATING OFF: {where} {bath:.1f} C, {stirring}")
+        self._current_text = self.heater.text()
         self._set_stale(False)
+
+    def show_link(self, link: Link) -> None:
+        """Slot: the hotplate's link went down (heating and stirring unknown) or answers again."""
+        self.link_ok = link.ok
+        self._link_lost_wall = None if link.ok else time.time()
+        if link.ok:
+            return                               # the reading that follows shows the plate as it is
+        self._set_stale(True)
+
+    def limit_s(self) -> float:
+        """Wall seconds a reading stays current: :attr:`stale_after_s`, else the reading's own freshness."""
+        if self.stale_after_s is not None:
+            return self.stale_after_s
+        return self.last_reading.fresh_s if self.last_reading is not None else STALE_AFTER_S
 
     def heater_text(self) -> str:
         """The heater's line as shown (with the stale note when it is)."""
         return self.heater.text() + (f" ({self.stale_label.text()})" if self.stale and self.last_reading else "")
 
     def check_stale(self) -> None:
-        """Grey the readouts once no reading arrived for :attr:`stale_after_s` (wall clock)."""
-        if self._received_s is not None and time.monotonic() - self._received_s > self.stale_after_s:
+        """Grey the readouts once the last reading is older than :meth:`limit_s` (wall clock); keep its age
+        current while it is."""
+        if self._received_s is not None and time.monotonic() - self._received_s > self.limit_s():
             self._set_stale(True)
 
     def _set_stale(self, stale: bool) -> None:
+        age = None if self._received_s is None else time.monotonic() - self._received_s
         if stale and self._received_wall is not None:
             since = time.strftime("%H:%M:%S", time.localtime(self._received_wall))
-            self.stale_label.setText(f"stale since {since}: no reading for more than {self.stale_after_s:g} s "
-                                     "(the plate is polled while the bench is connected: Connect checks the link again)")
+            self.stale_label.setText(f"stale since {since} ({age:.0f} s): no reading for more than "
+                                     f"{self.limit_s():g} s; the plate is polled while connected")
         elif not stale:
             self.stale_label.setText("")
         heating = self.last_reading is not None and self.last_reading.heating
-        look = (stale, heating)
+        look = (stale, heating, self.link_ok)
         if look == self._look:
             return
         self._look = look
         self.stale = stale
-        self.heater.setStyleSheet(STALE_STYLE if stale else HEATING_ON_STYLE if heating else HEATING_OFF_STYLE)
+        if not self.link_ok:
+            lost = time.strftime("%H:%M:%S", time.localtime(self._link_lost_wall or time.time()))
+            self.heater.setText(f"LINK LOST since {lost}: heating and stirring UNKNOWN (retrying)")
+            self.heater.setStyleSheet(LINK_LOST_STYLE)
+        elif stale:
+            last = getattr(self, "_current_text", "")
+            self.heater.setText(f"heating UNKNOWN (reading stale); last: {last.lower()}" if last else
+                                "hotplate: no current reading")
+            self.heater.setStyleSheet(STALE_STYLE)
+        else:
+            self.heater.setStyleSheet(HEATING_ON_STYLE if heating else HEATING_OFF_STYLE)
         for label in self.readouts.values():
             label.setStyleSheet("color: #999999;" if stale else "")

@@ -81,11 +81,17 @@ class LiveView(QWidget):
         self.caption.setText(caption)
         self._update_overlay()
 
-    def show_file(self, path: str) -> None:
-        """Show the image file ``path`` captioned with its name (nothing if it does not decode)."""
+    def show_file(self, path: str, caption: str | None = None) -> None:
+        """Show the image file ``path`` captioned with ``caption`` (default its name; nothing if it does not
+        decode)."""
         rgb = decode_image(path=path)
         if rgb is not None:
-            self.set_frame(rgb, Path(path).name)
+            self.set_frame(rgb, Path(path).name if caption is None else caption)
+
+    def clear(self, caption: str = "no frame yet") -> None:
+        """Show no frame (a new run before its reference), with ``caption``; the crop stays where it is."""
+        self.image.clear()
+        self.caption.setText(caption)
 
     def show_jpeg(self, data: bytes, caption: str) -> None:
         """Show a JPEG given as bytes (nothing if it does not decode)."""

@@ -4,9 +4,17 @@ Nothing is recorded without an operator (:mod:`labapp.records.operators`). An op
 (``sfr lab --operator NAME`` or ``$SFR_OPERATOR``) is used as the command line uses it; otherwise
 :func:`ask_operator` shows :class:`LoginDialog`. A machine without operators can start the simulated bench as
 the built-in demo operator, who records only on the simulated bench.
+
+Ctrl-C in the terminal (SIGINT) and SIGTERM close the dialog: :func:`ask_operator` raises :class:`LoginInterrupted`
+and nothing starts. Qt's modal loop runs in C++, where Python cannot run a signal handler, so a timer hands
+control back to Python every :data:`SIGNAL_POLL_MS` while the dialog is open.
 """
 from __future__ import annotations
 
+import signal
+import sys
+
+from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import (
     QComboBox,
     QDialog,
@@ -21,7 +29,18 @@ from PySide6.QtWidgets import (
 
 from labapp.records import operators
 
-__all__ = ["LoginDialog", "ask_operator"]
+__all__ = ["LoginDialog", "LoginInterrupted", "ask_operator"]
+
+SIGNAL_POLL_MS = 200
+"""How often the dialog's loop hands control to Python, so that a SIGINT or SIGTERM handler runs, ms."""
+
+
+class LoginInterrupted(Exception):
+    """The login dialog was closed by a signal (``signum``)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
 
 
 class LoginDialog(QDialog):
@@ -88,4 +107,22 @@ def ask_operator(simulate: bool, parent: QWidget | None = None) -> str | None:
     if given is not None:
         return operators.log_in(given)
     dialog = LoginDialog(simulate, parent)
-    return dialog.operator if dialog.exec() == QDialog.DialogCode.Accepted else None
+    received: list[int] = []
+
+    def handle(signum: int, frame) -> None:
+        received.append(signum)
+        dialog.reject()
+    previous = {sig: signal.signal(sig, handle) for sig in (signal.SIGINT, signal.SIGTERM)}
+    timer = QTimer()
+    timer.timeout.connect(lambda: None)          # back to Python: a pending signal handler runs
+    timer.start(SIGNAL_POLL_MS)
+    print("sfr lab: choose the operator in the login window (Ctrl-C here quits)", file=sys.stderr, flush=True)
+    try:
+        accepted = dialog.exec() == QDialog.DialogCode.Accepted
+    finally:
+        timer.stop()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if received:
+        raise LoginInterrupted(received[0])
+    return dialog.operator if accepted else None

@@ -16,14 +16,14 @@ from pathlib import Path
 
 from PySide6.QtCore import QRect, Qt, QTimer
 from PySide6.QtGui import QGuiApplication, QKeySequence
-from PySide6.QtWidgets import QFileDialog, QMainWindow, QMessageBox, QPlainTextEdit, QTabWidget, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QFileDialog, QMainWindow, QMessageBox, QTabWidget, QVBoxLayout, QWidget
 
 from analysis import BenchCalibration
 from labapp.acquisition.bench import Bench
 from labapp.acquisition.calseries import CalibrationProcedure, RedoLevel
 from labapp.acquisition.clock import make_clock
 from labapp.acquisition.engine import Engine
-from labapp.acquisition.events import Done, Phase, Prompt, PromptKind, StateChanged
+from labapp.acquisition.events import Alarm, AlarmKind, Done, Phase, Prompt, PromptKind, StateChanged
 from labapp.acquisition.procedures import PreviewProcedure, RunConfig
 from labapp.acquisition.simbench import SimulatedBench, resume_clock
 from labapp.acquisition.status import RunStatus
@@ -36,12 +36,14 @@ from labapp.gui.calibration_wizard import CalibrationWizard
 from labapp.gui.design_launcher import DesignLauncher
 from labapp.gui.device_panel import SIMULATED, DevicePanel
 from labapp.gui.duration_change import DurationChange
+from labapp.gui.event_log import EventLog
+from labapp.gui.fault_menu import add_fault_menu
 from labapp.gui.live_view import LiveView
 from labapp.gui.plate_poller import HeldProcedure, IdlePlatePoller
 from labapp.gui.plots import PlotsPanel
 from labapp.gui.run_browser import RunBrowser, interrupted_runs, resume_offer
 from labapp.gui.run_controls import RunControls
-from labapp.gui.run_display import RunDisplay
+from labapp.gui.run_display import RunDisplay, state_of
 from labapp.gui.run_settings import RunSettings
 from labapp.gui.simulated_session import SimulatedSession
 from labapp.gui.window_layout import (
@@ -118,9 +120,7 @@ class MainWindow(QMainWindow):
         self.design = DesignLauncher(self.data_dir)
         self.live = LiveView()
         self.plots = PlotsPanel()
-        self.messages = QPlainTextEdit()
-        self.messages.setReadOnly(True)
-        self.messages.setMaximumBlockCount(2000)
+        self.messages = EventLog()
         self.progress = RunProgress()
         self.display = RunDisplay(self.status, self.live, self.plots, self.progress, self.browser, self)
         self.benches = BenchBuilder(self.devices, self.engine, self.plate_poller, self.simulated, self)
@@ -157,6 +157,8 @@ class MainWindow(QMainWindow):
         add_menu(self, "&Bench", (("Connect / preview", self.devices.connect_button.click, "F5"),  # the panel's
                                   ("Start run", self.controls.start_button.click, "F6"),    # buttons, from the
                                   ("Object dropped", self.controls.drop_button.click, "F7")))  # keyboard too
+        if self.simulate:
+            add_fault_menu(self, lambda: self.simulated.bench, self.on_message)
         self.view_menu = add_menu(self, "&View")
         for dock in (self.bench_dock, self.log_dock):
             self.view_menu.addAction(dock.toggleViewAction())
@@ -171,6 +173,8 @@ class MainWindow(QMainWindow):
         self.log_bridge.message.connect(self.on_message)
         self.bridge.preview.connect(self.display.on_preview)
         self.bridge.reading.connect(self.devices.show_reading)
+        self.bridge.link.connect(self.devices.show_link)
+        self.bridge.reference.connect(self.display.on_reference)
         self.bridge.state.connect(self.on_state)
         self.bridge.prompt.connect(self.on_prompt)
         self.bridge.message.connect(self.on_message)
@@ -330,6 +334,7 @@ class MainWindow(QMainWindow):
 
     def confirm_drop(self) -> None:
         """The operator dropped the object: time zero."""
+        self.alarms.dismiss(AlarmKind.DROP)
         self.engine.answer(PromptKind.DROP, True)
 
     def stop(self) -> None:
@@ -435,13 +440,13 @@ class MainWindow(QMainWindow):
             return
         if prompt.prompt == PromptKind.DROP:
             self.controls.set_running(True, waiting_drop=True)
-            self.statusBar().showMessage(prompt.text)
+            self.alarms.raise_alarm(Alarm(AlarmKind.DROP, f"{prompt.text} (Object dropped, F7)"))
         elif prompt.prompt == PromptKind.ADDED_MASS:
             self.wizard.set_asking(True, prompt.text)
 
     def on_message(self, level: str, message: str) -> None:
-        """Append an event to the log pane."""
-        self.messages.appendPlainText(f"{level.upper():7s} {message}")
+        """Append an event to the log pane (a repeated warning collapses into one line)."""
+        self.messages.add(level, message)
 
     def on_done(self, done: Done) -> None:
         """A procedure ended."""
@@ -456,6 +461,11 @@ class MainWindow(QMainWindow):
             else:
                 self.wizard.show_result(f"series ended ({done.outcome}) without a calibration")
         self.on_message("info", f"{getattr(proc, 'name', 'procedure')} ended: {done.outcome}")
+        self.alarms.dismiss(AlarmKind.DROP)
+        if not isinstance(proc, PreviewProcedure) and proc is not None:
+            folder = getattr(getattr(proc, "run", None), "path", None)
+            self.alarms.raise_alarm(Alarm(AlarmKind.RUN_ENDED, f"{proc.name} {Path(folder).name if folder else ''} "
+                                          f"ended: {done.outcome}" + (f" ({done.reason})" if done.reason else "")))
         self.browser.refresh()
         self.benches.poll_idle()
 
@@ -481,6 +491,7 @@ class MainWindow(QMainWindow):
         if not self.building and not self.close_timer.isActive():
             self.statusBar().showMessage(self.status.line())
         self.display.refresh(self.engine.running, self.procedure)
+        self.controls.show_state(*state_of(self.status, self.engine.running, self.engine.should_stop()))
 
     # -- closing --------------------------------------------------------------------------------------------
     def busy_work(self) -> list[str]:

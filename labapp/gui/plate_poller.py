@@ -22,7 +22,7 @@ import time
 from drivers.hotplate.base import Hotplate, HotplateError, HotplateReading
 from labapp.acquisition.bench import monitor_poll_s
 from labapp.acquisition.engine import Engine, Procedure
-from labapp.acquisition.events import Message, Outcome, Reading
+from labapp.acquisition.events import Link, Message, Outcome, Reading
 from labapp.acquisition.monitor import HotplateMonitor
 from labapp.acquisition.settings import KEEPALIVE
 
@@ -68,7 +68,8 @@ class IdlePlatePoller:
             self.hotplate = hotplate
             self._stop = threading.Event()
             poll_s = monitor_poll_s(keepalive_s, self.engine.clock.speed)
-            self.monitor = HotplateMonitor(hotplate, self._report, poll_s=poll_s, on_reading=self._publish)
+            self.monitor = HotplateMonitor(hotplate, self._report, poll_s=poll_s, on_reading=self._publish,
+                                           on_link=self._link)
             self._opener = threading.Thread(target=self._open, args=(hotplate, self.monitor, self._stop),
                                             name="hotplate-idle", daemon=True)
             self._opener.start()
@@ -84,8 +85,13 @@ class IdlePlatePoller:
             monitor.start()
 
     def _publish(self, reading: HotplateReading) -> None:
+        monitor = self.monitor
+        fresh = {} if monitor is None else {"fresh_s": monitor.fresh_s}
         self.engine.emit(Reading(reading.plate_c, reading.probe_c, reading.speed_rpm, reading.setpoint_c,
-                                 reading.setpoint_rpm, reading.heating, reading.stirring, None))
+                                 reading.setpoint_rpm, reading.heating, reading.stirring, None, **fresh))
+
+    def _link(self, ok: bool, message: str) -> None:
+        self.engine.emit(Link(ok, f"{message} (polling while idle)"))
 
     def _report(self, level: str, kind: str, message: str) -> None:
         self.engine.emit(Message(level, f"{message} (polling while idle)", topic=kind))

@@ -3,7 +3,10 @@ and bath plots (plate, probe, stirring, the setpoint band), on a time axis in h:
 marks for the drop, steady state, gaps, resumes and faults.
 
 Data arrive by ``add_frame``/``add_reading`` (cheap appends, any rate); the plots redraw from a ~10 Hz
-timer only when something changed, so a fast simulated run never floods the event loop.
+timer only when something changed, so a fast simulated run never floods the event loop. Before the drop the bath
+plot draws the hotplate's readings as they arrive (``add_heating_reading``), at negative times: time zero is now
+until the drop, and the drop itself from then on, so the heating stays on the plot before the release begins.
+The stirring speed has its own right axis from 0 to twice its highest value, so read-out noise stays small.
 """
 from __future__ import annotations
 
@@ -21,6 +24,7 @@ from labapp.acquisition.settings import WATER
 REDRAW_MS = 100
 DEGREES_C = "\u00b0C"
 TIME_LABEL = "time since drop (h:mm)"
+HEATING_LABEL = "time (h:mm): 0 = now, the drop will be time zero"
 _STEPS_S = (1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600, 7200, 3 * 3600, 6 * 3600, 12 * 3600, 86400)
 LEGEND_BRUSH = pg.mkBrush(0, 0, 0, 170)
 """A legend's background: dark enough to read its labels over the traces it may cover."""
@@ -82,6 +86,10 @@ class PlotsPanel(QWidget):
         self.t_s: list[float] = []
         self.conc: list[float] = []
         self.bath: dict[str, list[float]] = {"t_s": [], "plate_c": [], "probe_c": [], "speed_rpm": []}
+        self.heating: dict[str, list[float]] = {"t_unix_s": [], "plate_c": [], "probe_c": [], "speed_rpm": []}
+        """Readings before the drop, on the engine's clock (drawn at ``t_unix_s - heating_zero``)."""
+        self.heating_zero: float | None = None
+        self.dropped = False
         self.marks: list[tuple[str, float, str]] = []
         self._mark_items: list[pg.GraphicsObject] = []
         self.object_mass_g: float | None = None
@@ -97,7 +105,7 @@ class PlotsPanel(QWidget):
         self.bath_widget = time_plot("bath")
         self.temps = self.bath_widget.getPlotItem()
         self.temps.setLabel("left", f"temperature ({DEGREES_C})")
-        self.temps.addLegend(offset=(10, 10), brush=LEGEND_BRUSH)
+        self.temps.addLegend(offset=(-10, -10), brush=LEGEND_BRUSH)     # bottom right: the bath runs along the top
         self.band = pg.LinearRegionItem(orientation="horizontal", movable=False, brush=pg.mkBrush(255, 140, 0, 40),
                                         pen=pg.mkPen((255, 140, 0, 120), style=Qt.PenStyle.DotLine))
         self.band.setZValue(-10)
@@ -113,6 +121,10 @@ class PlotsPanel(QWidget):
         self.speed_view.setXLink(self.temps)
         self.speed_curve = pg.PlotCurveItem(pen=pg.mkPen((150, 150, 150), width=1, style=Qt.PenStyle.DashLine))
         self.speed_view.addItem(self.speed_curve)
+        self.speed_view.setMouseEnabled(y=False)
+        self.speed_view.enableAutoRange(axis=pg.ViewBox.YAxis, enable=False)
+        self.speed_view.setYRange(0.0, 300.0, padding=0.0)
+        self.temps.legend.addItem(self.speed_curve, "stirring (rpm, right)")
         self.temps.vb.sigResized.connect(self._sync_views)
         for plot in (self.release, self.temps):
             for side in ("left", "right"):
@@ -193,11 +205,15 @@ class PlotsPanel(QWidget):
             self._mark_items.append((plot, item))
 
     def clear(self) -> None:
-        """Forget all data and marks (a new run)."""
+        """Forget all data and marks (a new run), and fit the axes to the new data again."""
         self.t_s.clear()
         self.conc.clear()
-        for values in self.bath.values():
+        for values in (*self.bath.values(), *self.heating.values()):
             values.clear()
+        self.heating_zero, self.dropped = None, False
+        self.bath_widget.setLabel("bottom", TIME_LABEL)
+        for plot in (self.release, self.temps):
+            plot.enableAutoRange()
         for plot, item in self._mark_items:
             plot.removeItem(item)
         self._mark_items.clear()
@@ -217,6 +233,26 @@ class PlotsPanel(QWidget):
             self.bath[key].append(math.nan if value is None else value)
         self._dirty = True
 
+    def add_heating_reading(self, t_unix_s: float, plate_c: float | None, probe_c: float | None,
+                            speed_rpm: float | None) -> None:
+        """Append one reading from before the drop (``t_unix_s`` on the engine's clock); until
+        :meth:`set_drop`, the newest is time zero."""
+        for key, value in (("t_unix_s", t_unix_s), ("plate_c", plate_c), ("probe_c", probe_c),
+                           ("speed_rpm", speed_rpm)):
+            self.heating[key].append(math.nan if value is None else value)
+        if not self.dropped:
+            self.heating_zero = t_unix_s
+            self.bath_widget.setLabel("bottom", HEATING_LABEL)
+        self._dirty = True
+
+    def set_drop(self, t0_unix_s: float | None) -> None:
+        """The drop happened at ``t0_unix_s`` (engine clock): the readings before it move to negative times."""
+        self.dropped = True
+        if t0_unix_s is not None:
+            self.heating_zero = t0_unix_s
+        self.bath_widget.setLabel("bottom", TIME_LABEL)
+        self._dirty = True
+
     def smoothed(self) -> np.ndarray:
         """The Savitzky-Golay smoothed concentrations (g/kg) of the current data (raw while too short)."""
         t, c = np.asarray(self.t_s), np.asarray(self.conc)
@@ -233,9 +269,16 @@ class PlotsPanel(QWidget):
         self.raw_curve.setData(self.t_s, self.conc)
         self.smooth_curve.setData(self.t_s, self.smoothed() if self.t_s else [])
         b = {k: np.asarray(v, dtype=float) for k, v in self.bath.items()}
+        if self.heating["t_unix_s"] and self.heating_zero is not None:
+            h = {k: np.asarray(v, dtype=float) for k, v in self.heating.items()}
+            h["t_s"] = h.pop("t_unix_s") - self.heating_zero
+            b = {k: np.concatenate([h[k], [math.nan], b[k]]) for k in b}     # NaN: no line across the drop
         self.plate_curve.setData(b["t_s"], b["plate_c"], connect="finite")
         self.probe_curve.setData(b["t_s"], b["probe_c"], connect="finite")
         self.speed_curve.setData(b["t_s"], b["speed_rpm"], connect="finite")
+        speeds = b["speed_rpm"][np.isfinite(b["speed_rpm"])]
+        top = 2.0 * float(speeds.max()) if speeds.size and speeds.max() > 0 else 300.0
+        self.speed_view.setYRange(0.0, top, padding=0.0)
 
     def _sync_views(self) -> None:
         self.speed_view.setGeometry(self.temps.vb.sceneBoundingRect())

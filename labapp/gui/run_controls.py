@@ -4,7 +4,8 @@ Start stays disabled, with the reason shown under it, while a field holds a valu
 settings cannot work together (a steady-state stop without a calibration); Stop and Abort ask first
 (:mod:`labapp.gui.dialogs`), naming the run and what cannot be undone. While a run records, its settings are
 locked except the ones declared changeable during a run (the maximum and minimum duration): "Change
-duration..." asks for them and a reason.
+duration..." asks for them and a reason. A large state word at the top (HEATING, WAITING FOR DROP, RECORDING,
+LINK LOST, ...) can be read from across the room.
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from PySide6.QtCore import Signal
+from PySide6.QtGui import QFont
 from PySide6.QtWidgets import (
     QCheckBox,
     QFileDialog,
@@ -32,7 +34,14 @@ from labapp.gui.fields import SettingBox, narrow_form, problems
 
 NO_CALIBRATION_STEADY = ("stop at steady state needs a bench calibration (the live concentration decides it): "
                          "choose a calibration, or untick it")
-ABORT_STYLE = "QPushButton { color: white; background-color: #a01010; font-weight: bold; padding: 4px 12px; }"
+ABORT_STYLE = ("QPushButton { color: white; background-color: #a01010; font-weight: bold; padding: 4px 12px; } "
+               "QPushButton:disabled { color: #8a8a8a; background-color: #dcdcdc; font-weight: normal; }")
+STATE_POINT_SIZE = 26
+"""Point size of the state word: about 9 mm high on a 96-dpi screen, readable from 2 m."""
+STATE_COLOURS = {"IDLE": "#e0e0e0", "CONNECTED": "#e0e0e0", "STARTING": "#cfe3ff", "HEATING": "#ffb347",
+                 "WAITING FOR DROP": "#ffe14d", "RECORDING": "#5cd65c", "LINK LOST": "#c00000", "CALIBRATING": "#cfe3ff",
+                 "STOPPING": "#cfe3ff"}
+"""The state word's background (anything else: light grey)."""
 
 
 class RunControls(QWidget):
@@ -68,6 +77,15 @@ class RunControls(QWidget):
         self.notes = QLineEdit("")
         self.band_label = QLabel("")
         self.band_label.setWordWrap(True)
+        self.state_label = QLabel("IDLE")
+        font = QFont(self.state_label.font())
+        font.setPointSize(STATE_POINT_SIZE)
+        font.setBold(True)
+        self.state_label.setFont(font)
+        self.state_label.setWordWrap(True)
+        self.state_detail = QLabel("")
+        self.state_detail.setWordWrap(True)
+        self.show_state("IDLE")
         form_box = QGroupBox("run")
         form = narrow_form(form_box)
         form.addRow("name", self.name)
@@ -108,6 +126,8 @@ class RunControls(QWidget):
         abort_row.addStretch(1)
         abort_row.addWidget(self.abort_button)
         layout = QVBoxLayout(self)
+        layout.addWidget(self.state_label)
+        layout.addWidget(self.state_detail)
         layout.addWidget(form_box)
         layout.addLayout(row)
         layout.addWidget(self.change_button)
@@ -123,6 +143,17 @@ class RunControls(QWidget):
         self.stop_on_steady.toggled.connect(self.update_start)
         self.calibration.textChanged.connect(self.update_start)
         self.set_running(False)
+
+    def show_state(self, word: str, detail: str = "") -> None:
+        """Show the state word (e.g. ``RECORDING``) in large letters, and a line of detail under it."""
+        colour = STATE_COLOURS.get(word, "#e0e0e0")
+        text_colour = "white" if word == "LINK LOST" else "black"
+        if self.state_label.text() != word or not self.state_label.styleSheet():
+            self.state_label.setText(word)
+            self.state_label.setStyleSheet(f"QLabel {{ background-color: {colour}; color: {text_colour}; "
+                                           "padding: 6px; border-radius: 4px; }")
+        if self.state_detail.text() != detail:
+            self.state_detail.setText(detail)
 
     def _browse(self) -> None:
         path, _ = QFileDialog.getOpenFileName(self, "bench calibration", "", "JSON (*.json)")

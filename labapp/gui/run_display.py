@@ -1,13 +1,29 @@
 """What the bench window shows of the procedure in progress: each stored run frame on the plots (with the drop,
-a resume, steady state and gaps marked) and counted in the Runs list, preview and calibration frames, and at the
-window's refresh the newest frame in the live view and the recording run's progress."""
+a resume, steady state, gaps and frames that could not be analysed marked) and counted in the Runs list, the
+bath's readings while it heats, preview and calibration frames, the run's reference frame with its crop before the
+drop, and at the window's refresh the newest frame in the live view, the recording run's progress and the large
+state word of the Run tab.
+
+A new run starts from a clean view (:meth:`RunDisplay.prepare`): empty plots with their axes fitted anew, an empty
+live view, and the status's previous warnings gone. A resumed run's stored frames arrive first (the procedure
+publishes them again), so its plots show the whole run with the gap marked."""
 from __future__ import annotations
 
 from pathlib import Path
 
 from PySide6.QtCore import QObject
 
-from labapp.acquisition.events import CalibrationLevel, EngineEvent, FrameStored, Message, Phase, Preview, StateChanged
+from labapp.acquisition.events import (
+    CalibrationLevel,
+    EngineEvent,
+    FrameStored,
+    Message,
+    Phase,
+    Preview,
+    Reading,
+    ReferenceStored,
+    StateChanged,
+)
 from labapp.acquisition.procedures import RunConfig, RunProcedure
 from labapp.acquisition.status import RunStatus
 from labapp.gui.live_view import LiveView
@@ -18,6 +34,32 @@ from labapp.gui.window_layout import RunProgress
 GAP_FACTOR, GAP_MIN_S = 5.0, 120.0
 """A frame arriving more than this many intervals, and at least this long, after the previous one marks a gap
 on the plots (an accelerated simulation may lag its interval a little: that is no gap)."""
+
+
+_WORDS = {Phase.STARTING: "STARTING", Phase.CONNECTING: "STARTING", Phase.OPENED: "STARTING", Phase.HEATING: "HEATING",
+          Phase.WAITING_DROP: "WAITING FOR DROP", Phase.ACQUIRING: "RECORDING", Phase.CALIBRATING: "CALIBRATING"}
+
+
+def state_of(status: RunStatus, running: bool, stopping: bool = False) -> tuple[str, str]:
+    """The Run tab's state word (``HEATING``, ``WAITING FOR DROP``, ``RECORDING``, ``LINK LOST``, ...) and a line
+    of detail, from the status and whether the engine runs (``stopping``: a stop was asked)."""
+    phase = status.phase
+    if running and not status.link_ok:
+        return "LINK LOST", status.plate_text()
+    if running and stopping:
+        return "STOPPING", "heating off, devices closing"
+    if running:
+        word = "WAITING FOR DROP" if phase.startswith("waiting: drop") else _WORDS.get(phase, phase.upper())
+        if word == "WAITING FOR DROP":
+            return word, "drop the object into the beaker, then press Object dropped (F7)"
+        if word == "HEATING" and status.setpoint_c is not None:
+            return word, f"bath to {status.setpoint_c:g} C: {status.plate_text()}"
+        return word, status.plate_text()
+    if not status.link_ok:
+        return "LINK LOST", status.plate_text()
+    if status.outcome is not None and phase.startswith("done"):
+        return f"ENDED: {str(status.outcome).upper()}", ""
+    return ("CONNECTED", status.plate_text()) if phase == "connected" else ("IDLE", "")
 
 
 class RunDisplay(QObject):
@@ -41,12 +83,16 @@ class RunDisplay(QObject):
         self.latest_frame: str | None = None
         """The newest stored frame not shown yet (shown at the next :meth:`refresh`)."""
         self._last_frame_t: float | None = None
+        self._resumed = False
 
     def prepare(self, config: RunConfig | None) -> None:
-        """Empty plots for a run with ``config``: its water, object mass and setpoint band."""
+        """A clean view for a run with ``config``: empty plots (its water, object mass and setpoint band), an empty
+        live view."""
         self.run_config = config
         self._last_frame_t = None
+        self.latest_frame = None
         self.plots.clear()
+        self.live.clear("waiting for the reference frame (clear water) ...")
         if config is not None:
             self.plots.set_water(config.bath.water_g)
             self.plots.set_object_mass(config.object_mass_g)
@@ -66,15 +112,28 @@ class RunDisplay(QObject):
         self.plots.add_reading(frame.t_s, frame.plate_c, frame.probe_c, frame.speed_rpm)
 
     def on_event(self, event: EngineEvent) -> None:
-        """Marks on the plots: the drop, a resume and steady state (faults and excursions: the alarm banner's)."""
+        """Marks on the plots: the drop, a resume, steady state and a frame that could not be analysed (faults and
+        excursions: the alarm banner's); the bath's readings before the drop."""
         t = self.status.t_s
+        if isinstance(event, StateChanged) and event.phase == Phase.OPENED:
+            self._resumed = event.resumed
         if isinstance(event, StateChanged) and event.phase == Phase.ACQUIRING:
-            if event.resumed:
+            self.plots.set_drop(event.t0_unix_s)
+            if self._resumed:
                 self.plots.mark("resume", t if t is not None else 0.0, "resumed")
             else:
                 self.plots.mark("drop", 0.0, "drop")
+        elif isinstance(event, Reading) and event.t_s is None and self.run_config is not None \
+                and not self.plots.dropped:
+            self.plots.add_heating_reading(event.t_unix_s, event.plate_c, event.probe_c, event.speed_rpm)
         elif isinstance(event, Message) and t is not None and event.topic == "steady":
             self.plots.mark("steady", t, "steady state")
+        elif isinstance(event, Message) and t is not None and event.topic == "analysis" and ": could not" in event.message:
+            self.plots.mark("fault", t, "frame not analysed")
+
+    def on_reference(self, reference: ReferenceStored) -> None:
+        """Show the run's reference frame with the crop: check it on today's beaker before the drop."""
+        self.live.show_file(reference.path, "reference frame (clear water): check the crop before the drop")
 
     def on_level(self, level: CalibrationLevel) -> None:
         """A calibration-series frame was stored: show it in the live view."""

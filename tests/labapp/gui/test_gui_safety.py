@@ -258,7 +258,7 @@ def test_the_heater_state_is_prominent_and_goes_stale(qtbot):
     assert status.line().endswith("0 rpm heating OFF")
 
 
-def test_an_alarm_stays_until_acknowledged_with_a_mark_and_an_optional_beep(qtbot, monkeypatch):
+def test_an_alarm_stays_until_acknowledged_with_a_mark_and_a_beep_by_default(qtbot, monkeypatch):
     marks = []
 
     class Plots:
@@ -268,7 +268,8 @@ def test_an_alarm_stays_until_acknowledged_with_a_mark_and_an_optional_beep(qtbo
     qtbot.addWidget(banner)
     beeps = []
     monkeypatch.setattr(QApplication, "beep", staticmethod(lambda: beeps.append(1)))
-    assert banner.isHidden() and not banner.sound.isChecked()
+    assert banner.isHidden() and banner.sound.isChecked()               # sound on by default
+    banner.sound.setChecked(False)
     banner.raise_alarm(Alarm(AlarmKind.TEMPERATURE_EXCURSION, "bath at 64.8 C, outside the setpoint 70 +/- 2 C", 600.0))
     banner.raise_alarm(Alarm(AlarmKind.HEAT_TIMEOUT, "the bath did not hold 70 +/- 0.5 C"))
     assert not banner.isHidden() and beeps == []
