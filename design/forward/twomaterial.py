@@ -96,6 +96,16 @@ class TwoMaterialRelease:
         return 2 ** sum(self.mirror)
 
     @property
+    def drug_density(self) -> np.ndarray:
+        """rho_d of the simulated grid (read-only)."""
+        return self._rho_d
+
+    @property
+    def barrier_density(self) -> np.ndarray:
+        """rho_b of the simulated grid (read-only)."""
+        return self._rho_b
+
+    @property
     def drug_volume_mm3(self) -> float:
         """Drug volume of the full object, mm^3."""
         return float(self._rho_d.sum()) * self.dx_mm ** 3 * self.multiplicity
