@@ -328,7 +328,8 @@ class Surface:
 
         A point farther than `band` from the surface (whose neighbours differ from it by less than
         `band` in distance) has the sign of its face-connected region of such points, which the
-        region's neighbours in the band tell; only the regions inside are then searched in full.
+        region's neighbours in the band tell (or, for a region with none, one of its points); only the regions
+        inside are then searched in full.
         """
         zero = np.zeros(len(self.faces))
         dist, tri = self.nearest_stored(centres, zero, band)
@@ -346,6 +347,15 @@ class Surface:
                 sg = np.moveaxis(sign3, a, 0)[other]
                 touch = (lab > 0) & (sg != 0.0)
                 region_sign[lab[touch]] = sg[touch]
+        # a region no point of the band touches (a lattice wholly inside or far outside): one point's sign
+        alone = np.flatnonzero(region_sign[1:] == 0.0) + 1
+        if alone.size:
+            flat = labels.ravel()
+            order = np.argsort(flat, kind="stable")
+            probe = order[np.searchsorted(flat[order], alone)]
+            _, probe_tri = self.nearest_stored(centres[probe], zero)
+            region_sign[alone] = sign_and_direction(centres[probe], probe_tri, self.vx, self.face_n, self.edge_n,
+                                                    self.vert_n, self.faces)[0]
         far_in = ~near & (region_sign[labels.ravel()] > 0.0)
         dist[far_in], tri[far_in] = self.nearest_stored(centres[far_in], zero)
         sign[far_in], grad[far_in] = sign_and_direction(centres[far_in], tri[far_in], self.vx, self.face_n,

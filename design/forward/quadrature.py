@@ -7,6 +7,11 @@ into `SPLIT`^3 sub-cells (see :mod:`design.forward.reference` for the error anal
 """
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit
 
@@ -20,10 +25,12 @@ SPLIT = 4
 BAND = 2.0
 """Lattice spacings from the surface within which points outside are given exact distances; farther
 out, they release nothing and are only classified."""
+BLOCK = 32
+"""Lattice cells per axis of a block, the unit of evaluation: only blocks that meet the solid are evaluated."""
 
 
 @njit(cache=True, nogil=True)
-def _subcell_ramps(cells, tri_u, tri_t, first, h, split, vx, offset, face_n, edge_n, vert_n, faces):
+def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_n, edge_n, vert_n, faces):
     """Ramps of the split^3 sub-cells of each listed lattice cell, by exact distances to the triangles
     closest to the cell and its 26 neighbours (the candidates for its sub-cells' closest triangles).
 
@@ -31,7 +38,8 @@ def _subcell_ramps(cells, tri_u, tri_t, first, h, split, vx, offset, face_n, edg
     t its closest triangle, and releases nothing before offset[t] (its fluid region's wetting time),
     unless another region's front reaches it first, at T = min_t (offset[t] + |p - t|): its solid
     fraction f / hs + 1/2 then releases around T. Deeper, it arrives at T. Returns (start, end) per
-    sub-cell (equal when the sub-cell lies outside the solid).
+    sub-cell (equal when the sub-cell lies outside the solid). `cells` index the arrays `tri_u`, `tri_t` of a
+    block whose cell (0, 0, 0) is the lattice's cell `base`.
     """
     nx, ny, nz = tri_u.shape
     hs = h / split
@@ -56,11 +64,11 @@ def _subcell_ramps(cells, tri_u, tri_t, first, h, split, vx, offset, face_n, edg
                             n_cand += 1
         s = c * per
         for a in range(split):
-            px = first[0] + ci * h + (a + 0.5) * hs - 0.5 * h
+            px = first[0] + (ci + base[0]) * h + (a + 0.5) * hs - 0.5 * h
             for b in range(split):
-                py = first[1] + cj * h + (b + 0.5) * hs - 0.5 * h
+                py = first[1] + (cj + base[1]) * h + (b + 0.5) * hs - 0.5 * h
                 for e in range(split):
-                    pz = first[2] + ck * h + (e + 0.5) * hs - 0.5 * h
+                    pz = first[2] + (ck + base[2]) * h + (e + 0.5) * hs - 0.5 * h
                     best_d = np.inf
                     best_t = np.inf
                     near = cand[0]
@@ -91,27 +99,99 @@ def _subcell_ramps(cells, tri_u, tri_t, first, h, split, vx, offset, face_n, edg
     return start, end
 
 
-def _release_at(tau: np.ndarray, start: np.ndarray, end: np.ndarray, slope: float) -> np.ndarray:
-    """sum_c slope (r(tau - start_c) - r(tau - end_c)), r(x) = max(x, 0), at each tau (prefix sums)."""
-    out = np.zeros(tau.shape)
-    for knots, sign in ((np.sort(start), 1.0), (np.sort(end), -1.0)):
-        prefix = np.concatenate([[0.0], np.cumsum(knots)])
-        k = np.searchsorted(knots, tau, side="left")  # knots below tau
-        out += sign * slope * (k * tau - prefix[k])
-    return out
+@njit(cache=True, nogil=True)
+def _accumulate(tau_sorted, knots, weight, count, moment):
+    """Bin ramp knots by the first sorted tau above them: a knot s adds weight (tau - s) to every later tau,
+    recorded as `weight` in `count` and `weight * s` in `moment` at its bin (prefix sums finish the curve)."""
+    for s in knots:
+        j = np.searchsorted(tau_sorted, s, side="right")
+        if j < tau_sorted.shape[0]:
+            count[j] += weight
+            moment[j] += weight * s
 
 
-def lattice_curve(surface: Surface, offset: np.ndarray, bounds: np.ndarray, h: float,
-                   tau: np.ndarray) -> tuple[np.ndarray, float, float]:
-    """Quadrature on a lattice of spacing h: (unnormalised curve at tau, its volume, the largest arrival).
+@dataclass
+class Ramps:
+    """Binned ramps of a lattice's cells: ``curve()`` is sum_c slope_c (r(tau - start_c) - r(tau - end_c)),
+    r(x) = max(x, 0), at the requested tau (mm^3); `volume` the ramps' total volume, `end` the latest ramp end."""
 
-    `offset` is each stored triangle's wetting time (all 0 without sealed voids).
-    """
-    n = np.ceil((bounds[1] - bounds[0]) / h).astype(int) + 2
-    first = 0.5 * (bounds[0] + bounds[1]) - 0.5 * (n - 1) * h
-    axes = [first[a] + h * np.arange(n[a]) for a in range(3)]
-    centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    f, grad, tri_u = surface.lattice_distance(centres, tuple(n), BAND * h)
+    tau: np.ndarray
+    order: np.ndarray
+    count: np.ndarray
+    moment: np.ndarray
+    volume: float = 0.0
+    end: float = 0.0
+
+    @classmethod
+    def empty(cls, tau: np.ndarray) -> Ramps:
+        order = np.argsort(tau, kind="stable")
+        return cls(np.ascontiguousarray(tau[order]), order, np.zeros(tau.size), np.zeros(tau.size))
+
+    def add(self, start: np.ndarray, end: np.ndarray, slope: float) -> None:
+        _accumulate(self.tau, np.ascontiguousarray(start), slope, self.count, self.moment)
+        _accumulate(self.tau, np.ascontiguousarray(end), -slope, self.count, self.moment)
+        self.volume += float(np.sum(end - start)) * slope
+        self.end = max(self.end, float(end.max(initial=0.0)))
+
+    def merge(self, other: Ramps) -> None:
+        self.count += other.count
+        self.moment += other.moment
+        self.volume += other.volume
+        self.end = max(self.end, other.end)
+
+    def curve(self) -> np.ndarray:
+        out = np.empty(self.tau.size)
+        out[self.order] = np.cumsum(self.count) * self.tau - np.cumsum(self.moment)
+        return out
+
+
+@dataclass(frozen=True)
+class Lattice:
+    """A cubic lattice of spacing `h` (mm) over a box: `n` cells per axis, cell (i, j, k) centred at first + h (i, j, k),
+    cut into blocks of `BLOCK` cells per axis."""
+
+    first: np.ndarray
+    n: np.ndarray
+    h: float
+
+    @classmethod
+    def over(cls, bounds: np.ndarray, h: float) -> Lattice:
+        n = np.ceil((bounds[1] - bounds[0]) / h).astype(int) + 2
+        return cls(0.5 * (bounds[0] + bounds[1]) - 0.5 * (n - 1) * h, n, float(h))
+
+    def blocks(self) -> np.ndarray:
+        """(B, 3) indices of every block's first cell."""
+        axes = [np.arange(0, int(m), BLOCK) for m in self.n]
+        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+    def centres(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        axes = [self.first[a] + self.h * np.arange(lo[a], hi[a]) for a in range(3)]
+        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def solid_blocks(surface: Surface, lattice: Lattice) -> np.ndarray:
+    """The blocks of `lattice` (their first cells) that hold a cell inside the solid or within BAND + 1 spacings
+    of its surface: a block whose centre is outside and farther than its half-diagonal plus that has none."""
+    firsts = lattice.blocks()
+    h = lattice.h
+    size = np.minimum(BLOCK, lattice.n[None, :] - firsts)
+    centre = lattice.first + h * (firsts + 0.5 * (size - 1))
+    reach = 0.5 * h * np.linalg.norm(size - 1, axis=1) + (BAND + 1.0) * h
+    dist, tri = surface.nearest_stored(centre, np.zeros(len(surface.faces)))
+    sign = sign_and_direction(centre, tri, surface.vx, surface.face_n, surface.edge_n, surface.vert_n,
+                              surface.faces)[0]
+    return firsts[(sign > 0) | (dist <= reach)]
+
+
+def block_ramps(surface: Surface, offset: np.ndarray, lattice: Lattice, block: np.ndarray, ramps: Ramps) -> None:
+    """Add the ramps of one block's cells to `ramps`. The block is evaluated with a halo of one cell so that
+    its cells' face neighbours are known (the ridge test)."""
+    h = lattice.h
+    lo = np.maximum(block - 1, 0)
+    hi = np.minimum(block + BLOCK + 1, lattice.n)
+    shape = tuple(int(v) for v in hi - lo)
+    centres = lattice.centres(lo, hi)
+    f, grad, tri_u = surface.lattice_distance(centres, shape, BAND * h)
     # near a surface (f <= h/2) the closest shell's fluid region sets the wetting time; deeper in, the
     # shortest path from any wetted region, whose wetting time is then below T - h/2
     floor = offset[tri_u]
@@ -136,26 +216,63 @@ def lattice_curve(surface: Surface, offset: np.ndarray, bounds: np.ndarray, h: f
     # a cell whose arrival-time gradient turns by more than RIDGE_ANGLE_DEG against a face neighbour
     # straddles a ridge of T (the medial axis, or where fronts meet): T is not linear there, so the
     # cell is split into SPLIT^3 sub-cells
-    grad = grad.reshape(tuple(n) + (3,))
-    ridge = np.zeros(tuple(n), dtype=bool)
+    grad = grad.reshape(shape + (3,))
+    ridge = np.zeros(shape, dtype=bool)
     cos_max = np.cos(np.radians(RIDGE_ANGLE_DEG))
     for a in range(3):
-        lo = [slice(None)] * 3
-        hi = [slice(None)] * 3
-        lo[a] = slice(0, -1)
-        hi[a] = slice(1, None)
-        bent = np.einsum("...k,...k->...", grad[tuple(lo)], grad[tuple(hi)]) < cos_max
-        ridge[tuple(lo)] |= bent
-        ridge[tuple(hi)] |= bent
-    ridge = (ridge.ravel() & (f > -h)) | meet
-    plain = ~ridge & (f > -0.5 * h)
-    start = np.maximum(arrive[plain] - 0.5 * h, floor[plain])
-    end = arrive[plain] + 0.5 * h
-    cells = np.argwhere(ridge.reshape(tuple(n)))
-    sub_start, sub_end = _subcell_ramps(cells, tri_u.reshape(tuple(n)), tri_t.reshape(tuple(n)), first, h, SPLIT,
-                                        surface.vx, offset, surface.face_n, surface.edge_n, surface.vert_n,
-                                        surface.faces)
-    hs = h / SPLIT
-    curve = _release_at(tau, start, end, h * h) + _release_at(tau, sub_start, sub_end, hs * hs)
-    volume = float(np.sum(end - start)) * h * h + float(np.sum(sub_end - sub_start)) * hs * hs
-    return curve, volume, float(max(end.max(initial=0.0), sub_end.max(initial=0.0)))
+        below = [slice(None)] * 3
+        above = [slice(None)] * 3
+        below[a] = slice(0, -1)
+        above[a] = slice(1, None)
+        bent = np.einsum("...k,...k->...", grad[tuple(below)], grad[tuple(above)]) < cos_max
+        ridge[tuple(below)] |= bent
+        ridge[tuple(above)] |= bent
+    own = np.zeros(shape, dtype=bool)  # the block's cells, without the halo
+    own[tuple(slice(int(block[a] - lo[a]), int(min(block[a] + BLOCK, lattice.n[a]) - lo[a])) for a in range(3))] = True
+    own = own.ravel()
+    ridge = own & ((ridge.ravel() & (f > -h)) | meet)
+    plain = own & ~ridge & (f > -0.5 * h)
+    ramps.add(np.maximum(arrive[plain] - 0.5 * h, floor[plain]), arrive[plain] + 0.5 * h, h * h)
+    cells = np.argwhere(ridge.reshape(shape))
+    if len(cells):
+        sub_start, sub_end = _subcell_ramps(cells, lo.astype(np.int64), tri_u.reshape(shape), tri_t.reshape(shape),
+                                            lattice.first, h, SPLIT, surface.vx, offset, surface.face_n,
+                                            surface.edge_n, surface.vert_n, surface.faces)
+        ramps.add(sub_start, sub_end, (h / SPLIT) ** 2)
+
+
+def lattice_curve(surface: Surface, offset: np.ndarray, bounds: np.ndarray, h: float, tau: np.ndarray, *,
+                  workers: int | None = None, progress: Callable[[float], None] | None = None
+                  ) -> tuple[np.ndarray, float, float]:
+    """Quadrature on a lattice of spacing h: (unnormalised curve at tau, its volume, the largest arrival).
+
+    Only the blocks of `BLOCK`^3 cells that meet the solid (:func:`solid_blocks`) are evaluated, `workers`
+    threads at a time (the kernels release the GIL), so that memory is bounded by a block and a thin part does
+    not pay for its bounding box; the blocks' binned ramps are summed in block order (deterministic).
+    `offset` is each stored triangle's wetting time (all 0 without sealed voids); `progress` is called with the
+    fraction of blocks done.
+    """
+    lattice = Lattice.over(bounds, h)
+    blocks = solid_blocks(surface, lattice)
+    tau = np.asarray(tau, dtype=np.float64)
+
+    def one(block: np.ndarray) -> Ramps:
+        ramps = Ramps.empty(tau)
+        block_ramps(surface, offset, lattice, block, ramps)
+        return ramps
+
+    total = Ramps.empty(tau)
+    workers = workers or min(len(blocks), os.cpu_count() or 1) or 1
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for k, ramps in enumerate(pool.map(one, blocks), 1):
+            total.merge(ramps)
+            if progress is not None:
+                progress(k / len(blocks))
+    return total.curve(), total.volume, total.end
+
+
+def lattice_points(bounds: np.ndarray, h: float, volume_mm3: float, area_mm2: float) -> float:
+    """About how many lattice points :func:`lattice_curve` evaluates at spacing h: the solid's cells and a shell of
+    BAND + 1 spacings outside its surface (an estimate for choosing h, not a bound), at most the box's."""
+    box = float(np.prod(np.ceil((bounds[1] - bounds[0]) / h) + 2))
+    return min(box, volume_mm3 / h ** 3 + (BAND + 2.0) * area_mm2 / h ** 2)

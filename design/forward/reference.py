@@ -15,7 +15,9 @@ a wetted surface is always a path the front can take: where it crosses a void, t
 later than the front's arrival along the segment.
 
 Quadrature. T is evaluated exactly (a bounding-volume hierarchy over the triangles with exact
-point-triangle distances) at the centres of a cubic lattice of spacing h over the mesh's bounds. Each
+point-triangle distances) at the centres of a cubic lattice of spacing h over the mesh's bounds (only its
+blocks that meet the solid; h sized by the solid's thickness and the stated error unless the caller gives
+cells along the bounding box: :mod:`design.forward.solid_lattice`). Each
 cell spreads its volume h^3 uniformly over arrival times [T_c - h/2, T_c + h/2], which has the mean
 and the variance (h^2 / 12) of the arrival times over a cube cut by planar level sets of any
 orientation; the part of that ramp before the cell's wetting time (0 at the bath, w_R at a void's
@@ -36,6 +38,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,13 +48,16 @@ from design._validate import check_positive
 from design.errors import DesignError
 from design.forward.distance import Surface
 from design.forward.quadrature import lattice_curve
+from design.forward.solid_lattice import DEFAULT_TOLERANCE, MAX_POINTS, choose
 from design.forward.wetting import wetting
 
 log = logging.getLogger(__name__)
 
 DEFAULT_CELLS = 160
-"""Lattice cells along the longest side of the mesh's bounding box (docs/forward.md#reference-evaluator:
-0.2% of the volume or better on the validation shapes at this setting)."""
+"""Lattice cells along the longest side of the mesh's bounding box where a caller sizes the lattice by its box
+(the cap of `design_lattice`; without ``cells`` the lattice is sized by the solid, `design.forward.solid_lattice`)."""
+SAMPLES = 1001
+"""Erosion depths of a release sampled without given depths: uniform from 0 to where the solid is gone."""
 MIN_CELLS = 16
 """Fewest cells along the longest side: the coarse estimate's lattice must still resolve the solid."""
 CELLS_PER_DESIGN_VOXEL = 4
@@ -90,6 +96,8 @@ class ReferenceRelease:
         The largest dissolution time: tau at which the solid is gone, mm.
     seconds : float
         Wall time of the evaluation, s.
+    lattice : str
+        How the lattice was sized (cells along the box, or the solid-sized choice and why).
     """
 
     tau_mm: np.ndarray
@@ -100,6 +108,7 @@ class ReferenceRelease:
     cell_mm: float
     total_time_mm: float
     seconds: float
+    lattice: str = ""
 
     @property
     def relative_error(self) -> float:
@@ -129,8 +138,9 @@ def metric_mesh(mesh: trimesh.Trimesh, anisotropy: float) -> trimesh.Trimesh:
     return mesh if anisotropy == 1.0 else mesh.copy().apply_scale([1.0, 1.0, 1.0 / anisotropy])
 
 
-def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray, *, cells: int = DEFAULT_CELLS,
-                      anisotropy: float = 1.0) -> ReferenceRelease:
+def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray | None = None, *, cells: int | None = None,
+                      anisotropy: float = 1.0, tolerance: float = DEFAULT_TOLERANCE, max_points: float = MAX_POINTS,
+                      source: str = "the solid", progress: Callable[[str], None] | None = None) -> ReferenceRelease:
     """Release of a closed solid by exact surface distances, with its error estimate.
 
     Parameters
@@ -138,14 +148,25 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray, *, cells: int =
     mesh : trimesh.Trimesh
         A closed (watertight), consistently wound triangle mesh in mm; an inward-wound mesh is
         taken as its outward-wound copy. Overlapping bodies are not merged: pass their union.
-    tau_mm : (K,) array_like of float, mm
-        Erosion depths to sample.
-    cells : int
-        Lattice cells along the longest side of the bounding box (cost grows as its cube).
+    tau_mm : (K,) array_like of float, mm, optional
+        Erosion depths to sample; None: uniform depths (`SAMPLES` from 0 to past the last ramp of a scout on the
+        coarse lattice), ending at the first at which the whole solid has dissolved.
+    cells : int, optional
+        Lattice cells along the longest side of the bounding box (cost grows as its cube). None (the default):
+        the lattice is sized by the solid (:mod:`design.forward.solid_lattice`): spacing from its thickness,
+        refined until the stated error is within ``tolerance`` of the volume.
     anisotropy : float
         The print's build-direction (z) erosion rate over its in-plane rate, a > 0. A front moving at a along z
         is isotropic in the metric with z scaled by 1 / a: the release is that of the scaled mesh, its volumes
         times a (``method`` then names a).
+    tolerance : float
+        Without ``cells``: the stated error aimed at, a fraction of the volume.
+    max_points : float
+        Without ``cells``: the most lattice points one evaluation may take.
+    source : str
+        Named in a refusal.
+    progress : callable, optional
+        Called with a line per lattice evaluated.
 
     Returns
     -------
@@ -156,6 +177,8 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray, *, cells: int =
     DesignError
         If the mesh is not closed or consistently wound, `tau_mm` is not a finite 1D array, or
         `cells` < `MIN_CELLS`.
+    design.forward.solid_lattice.TooThinError
+        Without ``cells``, for a solid whose features need more than ``max_points`` lattice points.
 
     Examples
     --------
@@ -165,10 +188,10 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray, *, cells: int =
     [0.0, 7.0, 8.0]
     """
     began = time.perf_counter()
-    tau = np.asarray(tau_mm, dtype=np.float64)
-    if tau.ndim != 1 or not np.all(np.isfinite(tau)):
+    tau = None if tau_mm is None else np.asarray(tau_mm, dtype=np.float64)
+    if tau is not None and (tau.ndim != 1 or not np.all(np.isfinite(tau))):
         raise DesignError(f"tau_mm must be a 1D array of finite depths, got shape {tau.shape}")
-    if int(cells) != cells or cells < MIN_CELLS:
+    if cells is not None and (int(cells) != cells or cells < MIN_CELLS):
         raise DesignError(f"cells must be an integer >= {MIN_CELLS}, got {cells!r}")
     a = check_positive("anisotropy", anisotropy)
     mesh = metric_mesh(_check_mesh(mesh), a)
@@ -177,21 +200,43 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray, *, cells: int =
     wet, n_voids = wetting(mesh)
     offset = surface.stored(wet)
     bounds = np.asarray(mesh.bounds, dtype=np.float64)
-    h = float((bounds[1] - bounds[0]).max()) / int(cells)
-    curves = []
-    for spacing in (h, 2.0 * h):
-        curve, est, t_max = lattice_curve(surface, offset, bounds, spacing, tau)
-        curves.append(curve * (volume / est))
-        if spacing == h:
-            total = t_max
-    released = curves[0]
-    error = float(np.abs(curves[0] - curves[1]).max()) if tau.size else 0.0
+    found: dict[float, tuple] = {}
+
+    def evaluate(h: float) -> float:
+        nonlocal tau
+        if tau is None:  # a scout on the coarse lattice finds where the solid is gone
+            upper = 0.5 * float((bounds[1] - bounds[0]).min()) + 4.0 * h
+            end = lattice_curve(surface, offset, bounds, 2.0 * h, np.linspace(0.0, upper, 3))[2]
+            # the fine lattice's last ramp ends within 1.25 h of the coarse one's (a coarse cell's half-diagonal
+            # sqrt(3) h, less the coarse ramp's half-width h, plus the fine one's h / 2)
+            tau = np.linspace(0.0, end + 1.25 * h, SAMPLES)
+        curves = [lattice_curve(surface, offset, bounds, s, tau) for s in (h, 2.0 * h)]
+        scaled = [c * (volume / est) for c, est, _ in curves]
+        error = float(np.abs(scaled[0] - scaled[1]).max()) if tau.size else 0.0
+        found[h] = (scaled[0], error, curves[0][2])
+        return error / volume
+
+    if cells is not None:
+        h = float((bounds[1] - bounds[0]).max()) / int(cells)
+        evaluate(h)
+        lattice = f"{int(cells)} cells along the bounding box's longest side"
+    else:
+        choice = choose(evaluate, bounds, float(mesh.volume), float(mesh.area), tolerance=tolerance,
+                        max_points=max_points, source=source, say=progress)
+        h = choice.spacing_mm
+        lattice = choice.reason
+    released, error, total = found[h]
+    if tau_mm is None:  # the samples end at the first depth where everything has dissolved
+        done = np.flatnonzero(released >= volume * (1.0 - 1e-9))
+        keep = int(done[0]) + 1 if done.size else tau.size
+        tau, released = tau[:keep], released[:keep]
     seconds = time.perf_counter() - began
     method = ("exact-distance-voids" if n_voids else "exact-distance") + (f", anisotropy {a:g}" if a != 1.0 else "")
     log.debug("reference release: %d faces, %d voids, h = %.4g mm, error %.3g mm^3 (%.3g%%), %.2f s",
               len(mesh.faces), n_voids, h, error, 100 * error / volume, seconds)
     return ReferenceRelease(tau_mm=tau, released_mm3=released, volume_mm3=volume, error_mm3=error, method=method,
-                            cell_mm=check_positive("cell_mm", h), total_time_mm=total, seconds=seconds)
+                            cell_mm=check_positive("cell_mm", h), total_time_mm=total, seconds=seconds,
+                            lattice=lattice)
 
 
 def signed_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:

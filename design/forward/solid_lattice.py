@@ -1,0 +1,123 @@
+"""The reference evaluator's lattice chosen from the solid, not its bounding box.
+
+A lattice sized by cells along the bounding box's longest side leaves a long rod or a thin plate a few cells
+thick. Here the spacing comes from the solid's own thickness and the evaluator's stated error
+(:mod:`design.forward.reference`, max_tau |C_h - C_2h|):
+
+1. The solid's mean half-thickness m = V / A (volume over surface area: t / 2 for a plate of thickness t, r / 2
+   for a rod of radius r, r / 3 for a ball) sets the first spacing, h = m / `CELLS_PER_THICKNESS`.
+2. The release and its stated error E are evaluated at h (and 2h). While E exceeds `DEFAULT_TOLERANCE` of the
+   volume, h shrinks by sqrt(`TARGET_MARGIN` tolerance V / E) (the quadrature is second order in h), at most
+   `MAX_PASSES` times.
+3. A spacing whose lattice would hold more than `MAX_POINTS` points (the solid's cells and a shell around its
+   surface: `design.forward.quadrature.lattice_points`) is not attempted: the solid is refused with
+   :class:`TooThinError`, naming its thickness and the spacing it would need.
+
+Only the blocks of the lattice that meet the solid are evaluated (`design.forward.quadrature.lattice_curve`),
+so the cost is that of the solid's volume and surface at h, not of its box.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from design.errors import DesignError
+from design.forward.quadrature import lattice_points
+
+DEFAULT_TOLERANCE = 0.0025
+"""Stated error (max over the curve of |C_h - C_2h|) a solid-sized reference release meets, as a fraction of the
+volume. The error of C_h itself is about a third of it for a second-order quadrature (docs/evidence/forward.md:
+measured RMS errors against exact releases are below 0.1% of the volume)."""
+CELLS_PER_THICKNESS = 4.0
+"""First spacing: the mean half-thickness V / A over this (a slab's half-thickness in 4 cells)."""
+TARGET_MARGIN = 0.6
+"""A refined spacing aims at this fraction of the tolerance, so that one refinement usually suffices."""
+SHRINK_RANGE = (0.3, 0.8)
+"""Least and largest factor by which one refinement shrinks the spacing."""
+MAX_PASSES = 3
+"""Lattices tried at most (the first and two refinements)."""
+MAX_POINTS = 14e6
+"""Most lattice points of one evaluation (the fine lattice; the coarse one has an eighth): about 30 s on one
+core of a 2-core machine (docs/evidence/forward.md)."""
+
+
+class TooThinError(DesignError):
+    """A solid whose features are too thin for the reference evaluator within `MAX_POINTS` lattice points.
+
+    Attributes
+    ----------
+    thickness_mm : float
+        The solid's mean thickness 2 V / A, mm.
+    spacing_mm : float
+        The lattice spacing its stated error needs, mm.
+    points : float
+        About how many lattice points that spacing takes.
+    """
+
+    def __init__(self, message: str, thickness_mm: float, spacing_mm: float, points: float) -> None:
+        super().__init__(message)
+        self.thickness_mm = thickness_mm
+        self.spacing_mm = spacing_mm
+        self.points = points
+
+
+@dataclass(frozen=True)
+class Choice:
+    """How a solid-sized lattice was chosen: its spacing h (mm), the passes tried (spacing, stated error as a
+    fraction of the volume) and a sentence saying why."""
+
+    spacing_mm: float
+    passes: tuple[tuple[float, float], ...]
+    reason: str
+
+
+def mean_half_thickness(volume_mm3: float, area_mm2: float) -> float:
+    """V / A, mm: t / 2 for a plate of thickness t, r / 2 for a long rod of radius r, r / 3 for a ball."""
+    return volume_mm3 / area_mm2
+
+
+def choose(evaluate: Callable[[float], float], bounds: np.ndarray, volume_mm3: float, area_mm2: float, *,
+           tolerance: float = DEFAULT_TOLERANCE, max_points: float = MAX_POINTS, source: str = "the solid",
+           say: Callable[[str], None] | None = None) -> Choice:
+    """Refine a lattice spacing until ``evaluate(h)`` (the stated error at spacing h, a fraction of the volume)
+    meets ``tolerance``; returns the last spacing tried with every pass.
+
+    Raises
+    ------
+    TooThinError
+        When the next spacing needed would take more than ``max_points`` lattice points.
+    """
+    m = mean_half_thickness(volume_mm3, area_mm2)
+    h = m / CELLS_PER_THICKNESS
+    passes: list[tuple[float, float]] = []
+    for k in range(MAX_PASSES):
+        points = lattice_points(bounds, h, volume_mm3, area_mm2)
+        if points > max_points:
+            raise _too_thin(source, m, h, points, max_points, passes, tolerance)
+        if say is not None:
+            say(f"lattice {k + 1}: spacing {h:.4g} mm, about {points / 1e6:.2g} million points")
+        error = evaluate(h)
+        passes.append((h, error))
+        if error <= tolerance:
+            return Choice(h, tuple(passes), f"mean half-thickness V/A = {m:.4g} mm; stated error {100 * error:.3g}% "
+                                            f"of the volume meets {100 * tolerance:.3g}% at spacing {h:.4g} mm "
+                                            f"(lattice {k + 1} of at most {MAX_PASSES})")
+        if k + 1 < MAX_PASSES:
+            h *= float(np.clip(math.sqrt(TARGET_MARGIN * tolerance / error), *SHRINK_RANGE))
+    h, error = passes[-1]
+    return Choice(h, tuple(passes), f"mean half-thickness V/A = {m:.4g} mm; stated error {100 * error:.3g}% of the "
+                                    f"volume after {MAX_PASSES} lattices, above the {100 * tolerance:.3g}% aimed at")
+
+
+def _too_thin(source: str, m: float, h: float, points: float, max_points: float, passes: list, tolerance: float
+              ) -> TooThinError:
+    done = (f" (spacing {passes[-1][0]:.3g} mm stated {100 * passes[-1][1]:.2g}% of the volume)" if passes else "")
+    return TooThinError(
+        f"{source}: its features are too thin for the exact evaluator: mean thickness 2V/A = {2 * m:.3g} mm; "
+        f"an error within {100 * tolerance:.2g}% of the volume needs a lattice spacing of about {h:.3g} mm{done}, "
+        f"about {points / 1e6:.0f} million points, over the {max_points / 1e6:.0f} million it evaluates; "
+        "simulate it with the grid model (--model grid, first order, its error stated) or check the mesh units",
+        2 * m, h, points)
