@@ -22,6 +22,11 @@ from analysis.geometry import CropGeometry
 log = logging.getLogger(__name__)
 
 FORMAT = "sfr-bench-calibration/1"
+WATER_RANGE_G = (100.0, 5000.0)
+"""The water masses a bath plausibly holds, g: from 100 g (a 150 mL beaker; less and the camera's crop is no
+longer below the surface, above a stirring magnet) to 5000 g (a 5 L beaker). The paper's bath is 500 g in a
+600 mL beaker (section 4.2). A water mass outside is a typing or unit error: 0.5 (kg typed as g) makes every
+concentration a thousand times too high, 1e9 every level 0.000 g/kg."""
 _MAD_TO_SIGMA = 1.4826
 
 
@@ -77,8 +82,8 @@ class BenchCalibration:
             if np.shape(getattr(self, name)) != (g, g):
                 raise AnalysisError(f"calibration field {name} has shape {np.shape(getattr(self, name))}, "
                                     f"expected ({g}, {g}) for grid={g}")
-        if not self.water_g > 0:
-            raise AnalysisError(f"calibration water_g={self.water_g!r} g must be positive")
+        if not WATER_RANGE_G[0] <= self.water_g <= WATER_RANGE_G[1]:
+            raise AnalysisError(f"calibration water_g={self.water_g!r} g: {water_range_text()}")
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as JSON (format in docs/formats.md)."""
@@ -106,8 +111,11 @@ class BenchCalibration:
         """
         try:
             data = json.loads(Path(path).read_text())
-        except (OSError, ValueError) as exc:
-            raise AnalysisError(f"cannot read calibration {path}: {exc}") from exc
+        except OSError as exc:
+            raise AnalysisError(f"cannot read calibration {path}: {exc.strerror or exc}") from exc
+        except ValueError:
+            raise AnalysisError(f"{path} is not a bench calibration JSON (not JSON text; a calibration is the file "
+                                f"'sfr calibrate-bench' writes)") from None
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise AnalysisError(f"{path} is not a bench calibration (expected format {FORMAT!r})")
         try:
@@ -123,12 +131,19 @@ class BenchCalibration:
             raise AnalysisError(f"calibration {path} is incomplete or malformed: {exc}") from exc
 
 
+def water_range_text() -> str:
+    """What a water mass must be, and why (`WATER_RANGE_G`)."""
+    low, high = WATER_RANGE_G
+    return (f"expected a water mass in [{low:g}, {high:g}] g, a beaker's bath (the paper's is 500 g): a mass outside "
+            f"is a typing or unit error that scales every concentration")
+
+
 def _check_finite(path: str | Path, data: dict, cells: dict[str, np.ndarray]) -> None:
     """NaN/inf is refused in ``water_g``, the levels and every field of a cell marked good (a cell that is
     not good may hold NaN from a failed fit: it is never used)."""
     water = float(data["water_g"])
-    if not (np.isfinite(water) and water > 0):
-        raise AnalysisError(f"calibration {path}: water_g is {data['water_g']!r}; expected a finite mass > 0 g")
+    if not (np.isfinite(water) and WATER_RANGE_G[0] <= water <= WATER_RANGE_G[1]):
+        raise AnalysisError(f"calibration {path}: water_g is {data['water_g']!r}; {water_range_text()}")
     levels = np.asarray(data["conc_levels_g_per_kg"], dtype=float)
     if not np.all(np.isfinite(levels)):
         i = int(np.flatnonzero(~np.isfinite(levels))[0])

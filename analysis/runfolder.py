@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.calibration import BenchCalibration, estimate_concentration, reference_offset
+from analysis.calibration import WATER_RANGE_G, BenchCalibration, estimate_concentration, reference_offset, water_range_text
 from analysis.curve import DEFAULT_ORDER, DEFAULT_WINDOW_S, smooth_curve
 from analysis.decode import check_reduce
 from analysis.errors import AnalysisError
@@ -98,8 +98,11 @@ def _save_cache(cache_dir: Path, key: str, cache: dict[str, np.ndarray]) -> None
     cache_dir.mkdir(parents=True, exist_ok=True)
     tmp = cache_dir / f".{CACHE_FILE}.part.npz"
     ids = sorted(cache)
-    np.savez(tmp, key=np.array(key), ids=np.array(ids), cells=np.array([cache[i] for i in ids]))
-    os.replace(tmp, cache_dir / CACHE_FILE)
+    try:
+        np.savez(tmp, key=np.array(key), ids=np.array(ids), cells=np.array([cache[i] for i in ids]))
+        os.replace(tmp, cache_dir / CACHE_FILE)
+    finally:
+        tmp.unlink(missing_ok=True)     # after an error (a full disk): no partial cache left
 
 
 def analyze_run(folder: str | Path, calibration: BenchCalibration, *, interval_s: float | None = None,
@@ -173,12 +176,14 @@ def _water_and_warnings(frames: FrameList, calibration: BenchCalibration, water_
     Raises
     ------
     AnalysisError
-        If the water mass is not positive.
+        If the water mass is outside `analysis.calibration.WATER_RANGE_G`, naming where it comes from.
     """
     warnings = list(frames.warnings)
+    source = "--water-g" if water_g else f"{frames.folder}/run.json water_g" if frames.run.get("water_g") else \
+        "the calibration's water_g"
     water = float(water_g or frames.run.get("water_g") or calibration.water_g)
-    if not water > 0:
-        raise AnalysisError(f"water mass {water!r} g must be positive")
+    if not WATER_RANGE_G[0] <= water <= WATER_RANGE_G[1]:
+        raise AnalysisError(f"water mass {water:g} g ({source}): {water_range_text()}")
     crop = frames.run.get("crop")
     if isinstance(crop, dict) and any(crop.get(k) != v for k, v in calibration.geometry.to_dict().items()
                                       if k in ("x", "y", "size")):

@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from analysis.calibration import WATER_RANGE_G
 from analysis.decode import REDUCE_FACTORS
 from drivers.hotplate import HEIDOLPH_HEI_TEC, HotplateConfig
 from labapp.errors import UsageError
@@ -157,8 +158,8 @@ a lower setpoint would never be reached and the procedure would wait out its hea
 at room temperature choose no setpoint (no heating)."""
 
 # -- the bath (shared by a release run and a calibration series) -----------------------------------------------
-WATER = Setting("water_g", "water in the beaker", "g", 500.0, low=0.0, low_open=True, flag="--water-g",
-                note="paper section 4.2")
+WATER = Setting("water_g", "water in the beaker", "g", 500.0, *WATER_RANGE_G, flag="--water-g",
+                note="a beaker's bath, 500 g in paper section 4.2; outside the range a typing or unit error")
 SETPOINT = Setting("setpoint_c", "bath temperature", "C", 70.0, max(_TEMP_C[0], ROOM_TEMPERATURE_C), _TEMP_C[1],
                    optional=True, flag="--setpoint",
                    note="from room temperature up to what the hotplate driver accepts (a hotplate only heats)")

@@ -48,8 +48,9 @@ def implausible_levels(masses_g: np.ndarray, water_g: float, source: str = MASSE
         return []
     return [f"{source}: the levels reach {conc:.4g} g/kg ({top:g} g added to {water_g:g} g of water), above the "
             f"0-{PLAUSIBLE_MAX_G_PER_KG:g} g/kg a dye solution on this bench plausibly has (a release run ends at a "
-            f"few g/kg: a 1-2 g object in {water_g:g} g of water). added_mass_g is the cumulative mass in grams; "
-            f"these look like milligrams (in grams the top level would be {conc / 1000.0:.4g} g/kg)"]
+            f"few g/kg: a 1-2 g object in {water_g:g} g of water). Check the water, {water_g:g} g (--water-g), and "
+            f"the masses: added_mass_g is the cumulative mass in grams, and masses typed in milligrams give "
+            f"this (in grams the top level would be {conc / 1000.0:.4g} g/kg)"]
 
 
 def calibrate_series(folder: str | Path, out: str | Path, *, water_g: float = WATER.default,

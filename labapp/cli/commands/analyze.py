@@ -6,8 +6,9 @@ import argparse
 import json
 import sys
 
+from labapp.acquisition.settings import WATER
 from labapp.cli import interrupt
-from labapp.cli.argtypes import nonnegative_int, positive_float, positive_int
+from labapp.cli.argtypes import nonnegative_int, positive_float, positive_int, setting_type
 from labapp.cli.commands.sweep import progress_printer
 from labapp.errors import UsageError
 
@@ -31,7 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scheduler", metavar="ADDRESS",
                         help="batch: tcp://HOST:PORT of a running Dask scheduler (default: a local cluster)")
     parser.add_argument("--interval", type=positive_float, help="frame interval, s, for images without EXIF times")
-    parser.add_argument("--water-g", type=positive_float, help="water mass, g (default: run.json, else the calibration's)")
+    parser.add_argument("--water-g", type=setting_type(WATER), help=f"water mass, g (default: run.json, else the "
+                        f"calibration's; {WATER.range_text()})")
     parser.add_argument("--window-s", type=positive_float, help="Savitzky-Golay window, s (default 330 = 30 frames at 11 s)")
     parser.add_argument("--order", type=nonnegative_int, help="Savitzky-Golay polynomial order (default 2)")
     parser.add_argument("--workers", type=positive_int, help="decoding threads (default: all cores; 1 per run in a "

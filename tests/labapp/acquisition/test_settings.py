@@ -55,7 +55,7 @@ def test_the_hotplate_limits_are_the_drivers():
     (lambda: RunConfig(object_mass_g=0), r"RunConfig.object_mass_g must be > 0 g, got 0"),
     (lambda: RunConfig(max_duration_s=float("nan")), r"RunConfig.max_duration_s must be > 0 s, got nan"),
     (lambda: RunConfig(frame_bytes_estimate=1.5), r"RunConfig.frame_bytes_estimate must be a whole number > 0 B"),
-    (lambda: BathSettings(water_g=-1), r"BathSettings.water_g must be > 0 g, got -1"),
+    (lambda: BathSettings(water_g=-1), r"BathSettings.water_g must be in \[100, 5000\] g, got -1"),
     (lambda: SeriesConfig(crop=(0, 0, 100), settle_s=-1), r"SeriesConfig.settle_s must be >= 0 s, got -1"),
     (lambda: SeriesConfig(crop=(0, 0, 100), grid=0), r"SeriesConfig.grid must be a whole number >= 1, got 0"),
 ])
@@ -111,7 +111,7 @@ def test_an_option_is_made_from_its_declaration(capsys):
 def test_sfr_help_shows_unit_default_and_range():
     run = build_parser()._subparsers._group_actions[0].choices["run"].format_help()
     assert "stirring speed, rpm (default 150; in [0, 600] rpm" in " ".join(run.split())
-    assert "water in the beaker, g (default 500; > 0 g" in " ".join(run.split())
+    assert "water in the beaker, g (default 500; in [100, 5000] g" in " ".join(run.split())
 
 
 def test_a_setting_refuses_a_default_outside_its_range():

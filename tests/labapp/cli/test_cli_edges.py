@@ -176,7 +176,7 @@ def test_calibrate_bench_warns_on_masses_typed_in_mg(tmp_path, capsys):
     (series / "run.json").unlink(missing_ok=True)
     assert main(["calibrate-bench", str(series), "--out", str(tmp_path / "cal.json")]) == 0
     err = capsys.readouterr().err
-    assert "warning: " in err and "look like milligrams" in err
+    assert "warning: " in err and "typed in milligrams" in err and "(--water-g)" in err
 
 
 def test_analyze_uses_the_runs_own_calibration(tmp_path, capsys, monkeypatch):

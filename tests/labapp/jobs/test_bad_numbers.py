@@ -80,7 +80,7 @@ def test_mesh_with_a_nan_vertex_is_named(tmp_path):
 
 
 @pytest.mark.parametrize("argv, says", [
-    (["run", "--water-g", "0"], "--water-g: '0': expected a number > 0"),
+    (["run", "--water-g", "0"], "--water-g: '0': expected a number in [100, 5000] g"),
     (["run", "--water-g", "nan"], "--water-g: 'nan': expected a finite number"),
     (["run", "--speed", "-5"], "--speed: '-5': expected a number >= 0"),
     (["run", "--interval", "inf"], "--interval: 'inf': expected a finite number"),
