@@ -143,7 +143,7 @@ FD_TOLERANCE = 1e-5
 """Central differences with step 1e-6: round-off ~1e-16 J / 1e-6 and truncation O(1e-12); the upwind stencil
 and the ramp's samples are locally constant, so the difference is the exact derivative to well within 1e-5
 of the sum of the |contributions| (the scale that cancellation in a directional derivative leaves).
-Observed: 2e-9 to 9e-7."""
+Observed: 2e-9 to 2e-6 (docs/evidence/materials.md)."""
 
 
 @pytest.mark.parametrize("shape, mirror, anisotropy, s", [
