@@ -14,7 +14,6 @@ module that handles signals itself (the GUI) sets ``SIGNALS = False``.
 from __future__ import annotations
 
 import argparse
-import errno
 import importlib
 import logging
 import os
@@ -25,13 +24,12 @@ import traceback
 from labapp.cli import commands, interrupt
 from labapp.cli.operator import add_operator_option
 from labapp.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, LabError
+from labapp.records.fileio import disk_error
 
 #: The commands in the order of a lab's workflow (bench set-up, measurement, simulation and design,
 #: then the tools); commands not named here are listed after them, alphabetically.
 WORKFLOW = ("devices", "calibrate-bench", "run", "change", "verify", "analyze", "calibrate-sim", "simulate", "design",
             "sweep", "compare", "lab", "demo", "emulate")
-#: Errors of the file system that an ``--out`` on a full, read-only or foreign disk raises: bad input (exit 2).
-OUT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM})
 FINISHED_WHEN_INTERRUPTED = "the command had finished its work when the signal came; its outputs are complete"
 
 
@@ -97,7 +95,8 @@ def exit_code(exc: BaseException) -> int:
 
     2 (bad input or usage): :class:`labapp.errors.UsageError`, ``design.DesignError`` and
     ``analysis.AnalysisError`` (their messages name the input at fault), ``ValueError`` from a settings
-    check, a missing input file, an output on a full, read-only or forbidden disk (:data:`OUT_ERRNOS`).
+    check, a missing input file, an output on a full, read-only or forbidden disk
+    (:data:`labapp.records.fileio.OUT_ERRNOS`, also behind another error it caused).
     130: ``KeyboardInterrupt``. 1 (the job failed): every other error, device errors included.
     """
     from analysis import AnalysisError
@@ -109,7 +108,7 @@ def exit_code(exc: BaseException) -> int:
         return exc.exit_code
     if isinstance(exc, (DesignError, AnalysisError, ValueError, FileNotFoundError, NotADirectoryError)):
         return EXIT_USAGE
-    if isinstance(exc, OSError) and exc.errno in OUT_ERRNOS:
+    if disk_error(exc) is not None:
         return EXIT_USAGE
     return EXIT_FAILED
 
@@ -122,10 +121,11 @@ def error_line(exc: BaseException, out: str | None = None) -> str:
     from drivers.errors import DriverError
 
     text = " ".join(str(exc).split()) or type(exc).__name__
-    if isinstance(exc, OSError) and exc.errno in OUT_ERRNOS:
-        where = exc.filename or (out if out else "its output")
-        return f"cannot write {where}: {exc.strerror or os.strerror(exc.errno)}" + \
-            ("" if exc.filename else "; free space or choose a writable --out")
+    disk = disk_error(exc) if not isinstance(exc, LabError) else None
+    if disk is not None:
+        where = disk.filename or (out if out else "its output")
+        return f"cannot write {where}: {disk.strerror or os.strerror(disk.errno)}" + \
+            ("" if disk.filename else "; free space or choose a writable --out")
     expected = (LabError, DesignError, AnalysisError, DriverError, ValueError, OSError)
     if not isinstance(exc, expected):
         return f"internal error ({type(exc).__name__}: {text}); rerun with --debug for the traceback"

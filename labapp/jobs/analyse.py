@@ -15,6 +15,7 @@ from labapp.jobs.compare import release_summary
 from labapp.records import operators
 from labapp.records.audit import Action
 from labapp.records.audit import append as audit
+from labapp.records.fileio import atomic_path, atomic_write
 from labapp.records.lock import folder_lock
 from labapp.records.outpaths import ANALYSIS_SUBFOLDER, FolderKind, OutPathError, check_out
 
@@ -51,7 +52,7 @@ def run_calibration(run: str | Path, calibration: str | Path | None) -> Path:
 def _check_out(out: Path, inputs: list, run: Path) -> Path:
     """`check_out` for the analysis folder of ``run``, naming a source package (``analysis/`` of a checkout) as such."""
     try:
-        return check_out(out, FolderKind.ANALYSIS, inputs, analysed=run)
+        return check_out(out, FolderKind.ANALYSIS, inputs, analysed=run, replace=True)   # its cell cache reused
     except OutPathError:
         if (Path(out) / "__init__.py").is_file():
             raise OutPathError(f"--out {Path(out).resolve()} is a Python package of the software (it holds "
@@ -115,12 +116,14 @@ def analyse_run(run: str | Path, calibration: str | Path | None = None, out: str
                             window_s=DEFAULT_WINDOW_S if window_s is None else window_s,
                             order=DEFAULT_ORDER if order is None else order)
         files = [out / "curve.csv", out / "cells.csv", out / "summary.json"]
-        write_curve_csv(curve, files[0])
-        write_cells_csv(curve, files[1])
-        files[2].write_text(json.dumps(_analysis_summary(curve, run), indent=2) + "\n")
+        for path, write in ((files[0], write_curve_csv), (files[1], write_cells_csv)):
+            with atomic_path(path) as tmp:      # a full disk leaves the file as it was, no partial one
+                write(curve, tmp)
+        atomic_write(files[2], (json.dumps(_analysis_summary(curve, run), indent=2) + "\n").encode())
         if plot:
             files.append(out / "curve.png")
-            _plot_curve(curve, files[-1])
+            with atomic_path(files[-1]) as tmp:
+                _plot_curve(curve, tmp)
     if into_record:
         audit(run, Action.REANALYSE, f"analysed {len(curve.files)} frames into {out.relative_to(run.resolve())} with "
               f"calibration {Path(calibration).name}", operator=operator, reason=reason)

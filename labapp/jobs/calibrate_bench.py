@@ -16,6 +16,7 @@ from labapp.errors import UsageError
 from labapp.records import operators
 from labapp.records.audit import AUDIT_FILE, Action
 from labapp.records.audit import append as audit
+from labapp.records.fileio import WriteError, disk_error
 from labapp.records.manifests import MASSES_CSV, RUN_JSON, RecordReadError, read_record
 from labapp.records.outpaths import OutPathError, check_out
 
@@ -103,17 +104,26 @@ def _save_new(cal, out: Path) -> None:
     """Save ``cal`` to ``out``, which must still not exist: written beside it, then linked into place, so two
     commands given the same ``--out`` never both write it (the second is refused, naming the file)."""
     tmp = out.with_name(f".{out.name}.{os.getpid()}.part")
-    cal.save(tmp)
     try:
-        os.link(tmp, out)
-    except FileExistsError:
-        raise OutPathError(f"--out {out} was written by another command meanwhile; it is never overwritten: "
-                           "choose a new file name") from None
-    except OSError:             # a file system without hard links: the check, then a rename
-        if out.exists():
+        cal.save(tmp)
+        try:
+            os.link(tmp, out)
+        except FileExistsError:
             raise OutPathError(f"--out {out} was written by another command meanwhile; it is never overwritten: "
                                "choose a new file name") from None
-        os.replace(tmp, out)
+        except OSError as exc:      # a file system without hard links: the check, then a rename
+            if disk_error(exc) is not None:
+                raise
+            if out.exists():
+                raise OutPathError(f"--out {out} was written by another command meanwhile; it is never "
+                                   "overwritten: choose a new file name") from None
+            os.replace(tmp, out)
+    except Exception as exc:        # analysis.AnalysisError from an OSError, when the calibration's save fails
+        cause = disk_error(exc)
+        if cause is None:
+            raise
+        raise WriteError(f"cannot write {out}: {cause.strerror}; nothing of it was left; free space or choose a "
+                         "writable --out") from exc
     finally:
         tmp.unlink(missing_ok=True)
 

@@ -29,7 +29,7 @@ from labapp.jobs.verify import verify
 from labapp.records import operators
 from labapp.records.audit import check_trail
 from labapp.records.curvefiles import read_physical_curve
-from labapp.records.fileio import StorageError, sha256_file
+from labapp.records.fileio import StorageError, atomic_file, sha256_file
 from labapp.records.manifests import EVENTS_LOG, read_run
 from labapp.records.outpaths import check_out
 from labapp.records.runrecord import RecordKind
@@ -423,6 +423,8 @@ def write_report(folder: str | Path, out: str | Path, *, references: tuple[str |
     ------
     UsageError
         As :func:`collect`, or an ``out`` that exists or lies inside a record.
+    labapp.records.fileio.WriteError
+        A full, read-only or forbidden disk (exit code 2); the PDF is written whole or not at all.
     """
     import matplotlib
 
@@ -436,8 +438,9 @@ def write_report(folder: str | Path, out: str | Path, *, references: tuple[str |
     footer = f"{data.folder.name} | record {data.record_hash[:16]} | generated {stamp}" + \
         (f" by {who}" if who else "") + " | sfr report"
     out.parent.mkdir(parents=True, exist_ok=True)
-    with PdfPages(out, metadata={"Title": f"Release run report: {data.folder.name}", "Creator": "sfr report",
-                                 "Subject": f"record SHA-256 {data.record_hash}"}) as pdf:
+    with atomic_file(out) as fh, PdfPages(fh, metadata={"Title": f"Release run report: {data.folder.name}",
+                                                        "Creator": "sfr report",
+                                                        "Subject": f"record SHA-256 {data.record_hash}"}) as pdf:
         for number, draw in enumerate((lambda p: _page_one(p, data), lambda p: _page_two(p, data, rule),
                                        lambda p: _page_three(p, data)), start=1):
             page = _Page(pdf, number, 3, footer)

@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from labapp.errors import UsageError
+from labapp.records.fileio import atomic_file
 
 __all__ = ["DEMO_OPERATOR", "MIN_PASSWORD_CHARS", "OPERATOR_ENV", "USERS_ENV", "OperatorError", "User", "acting_as",
            "add_user", "check_password", "current", "load_users", "log_in", "log_out", "require", "set_enabled",
@@ -106,14 +107,9 @@ def load_users(path: Path | None = None) -> dict[str, User]:
 def _save(users: dict[str, User], path: Path) -> None:
     """Write the users file atomically, readable by its owner only."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.part")
     data = json.dumps({"format": USERS_FORMAT, "users": [asdict(u) for u in users.values()]}, indent=2) + "\n"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    with atomic_file(path, mode=0o600) as fh:
+        fh.write(data.encode())
 
 
 def _check_name(name: str) -> str:
