@@ -253,7 +253,7 @@ def design(config, out: str | Path, *, resume: bool = False, units: str | None =
         with folder_lock(out):      # one writer: a second resume (sfr design, the GUI's launcher) is refused
             return design_from_target(resumed, out, resume=True, **run)
     units = units or "mm"
-    out = check_out(out, FolderKind.DESIGN, [config.target], replace=False)
+    out = check_out(out, FolderKind.DESIGN, [config.target])
     existed = out.exists()
     before = set(out.iterdir()) if existed else set()
     source = target = config.target

@@ -12,8 +12,10 @@ Both raise :class:`OutPathError` (a :class:`labapp.errors.UsageError`, exit code
 what the path is and what to do instead. The rules:
 
 - an output file must not exist yet (it is never overwritten) and must not lie inside a record;
-- an output folder must be new, empty, or a folder of the same kind written earlier by the same command
-  (whose outputs it then replaces; ``replace=False`` refuses that too, e.g. a design run, which resumes);
+- an output folder must be new or empty: a folder holding results of the same kind written earlier is
+  refused too (its results are never overwritten), unless the command resumes or redoes its own work there
+  (``replace=True``: a sweep or a batch completes the combinations or runs not done yet, an analysis reuses
+  its cell cache; a design run resumes with ``--resume``, which checks its own folder);
 - nothing is written into a record (a run or calibration-series folder: it would appear there as an
   unlisted file), except the ``analysis`` subfolder ``sfr analyze`` keeps beside a run;
 - an output never lies inside, nor contains, an input folder and is never an input file.
@@ -124,7 +126,7 @@ def _check_inputs(path: Path, inputs: Iterable[str | Path], option: str) -> None
 
 
 def check_out(path: str | Path, writes: FolderKind | str, inputs: Iterable[str | Path] = (), *, file: bool = False,
-              replace: bool = True, option: str = "--out", analysed: str | Path | None = None) -> Path:
+              replace: bool = False, option: str = "--out", analysed: str | Path | None = None) -> Path:
     """Check an output path before any work; returns it (resolved). Creates nothing.
 
     Parameters
@@ -132,15 +134,15 @@ def check_out(path: str | Path, writes: FolderKind | str, inputs: Iterable[str |
     path : str or Path
         The output folder (or file, with ``file=True``).
     writes : FolderKind or str
-        The kind of folder the command writes (:attr:`FolderKind.SIMULATION`, ``ANALYSIS``, ``DESIGN``, ...);
-        an existing folder of this kind is accepted (``replace``) and its outputs replaced. With
-        ``file=True`` only a name for the file's kind (not checked).
+        The kind of folder the command writes (:attr:`FolderKind.SIMULATION`, ``ANALYSIS``, ``DESIGN``, ...).
+        With ``file=True`` only a name for the file's kind (not checked).
     inputs : iterable of path
         The command's input files and folders (``sample:NAME`` and None are skipped).
     file : bool
         ``path`` is one output file: it must not exist yet.
     replace : bool
-        Accept an existing folder of kind ``writes`` (default True); False refuses any non-empty folder.
+        Accept an existing folder of kind ``writes``, in which the command resumes or redoes its own work
+        (a sweep, a batch, an analysis); default False: a folder holding results is refused.
     option : str
         The option's name in messages.
     analysed : path, optional
@@ -180,10 +182,19 @@ def check_out(path: str | Path, writes: FolderKind | str, inputs: Iterable[str |
     if kind is None or (kind == writes and replace):
         return path
     if kind == writes:
-        raise OutPathError(f"{option} {path} already holds {_describe(kind)}; choose a new folder"
-                           + (" or resume it with --resume" if writes == FolderKind.DESIGN else ""))
+        resume = " or resume it with --resume" if writes == FolderKind.DESIGN else ""
+        raise OutPathError(f"{option} {path} already holds {_describe(kind)}; its results are never overwritten: "
+                           f"choose a new folder, e.g. {_new_name(path)}{resume}")
     raise OutPathError(f"{option} {path} is {_describe(kind)}, not a {writes} folder; its files are not "
                        f"overwritten: choose a new or empty folder")
+
+
+def _new_name(path: Path) -> Path:
+    """The first of ``path-2``, ``path-3``, ... that does not exist."""
+    n = 2
+    while path.with_name(f"{path.name}-{n}").exists():
+        n += 1
+    return path.with_name(f"{path.name}-{n}")
 
 
 def check_data_dir(path: str | Path, option: str = "--out") -> Path:

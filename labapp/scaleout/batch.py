@@ -131,7 +131,7 @@ def analyse_many(runs: list[str | Path], calibration: str | Path, out: str | Pat
     """
     if not runs:
         raise ValueError("give at least one run folder")
-    out = check_out(out, FolderKind.BATCH_ANALYSIS, [calibration, reference, *runs])
+    out = check_out(out, FolderKind.BATCH_ANALYSIS, [calibration, reference, *runs], replace=True)   # a rerun completes it
     BenchCalibration.load(calibration)  # a bad calibration stops the batch before any work
     ref = None
     if reference is not None:

@@ -226,7 +226,7 @@ def prepare_sweep_dir(spec: SweepSpec, sweep_dir: str | Path) -> Path:
     SweepError
         A combination's run folder holds a design with other settings.
     """
-    sweep_dir = check_out(sweep_dir, FolderKind.SWEEP, [spec.target, spec.simcal])
+    sweep_dir = check_out(sweep_dir, FolderKind.SWEEP, [spec.target, spec.simcal], replace=True)   # a rerun resumes
     for combo in spec.combinations:
         stored = sweep_dir / RUNS / combo.name / "config.json"
         if stored.exists():

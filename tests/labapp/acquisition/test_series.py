@@ -81,7 +81,7 @@ def test_a_real_bench_cannot_add_masses_by_itself(tmp_path):
     assert proc.config.settle_s == 0.0 and proc.config.bath.setpoint_c == 50.0 and proc.config.bath.stable_step_s == 5.0
     assert not any(tmp_path.iterdir())                     # built and checked, nothing written
     simulated = Bench(bench.camera, bench.hotplate, simulated=True, on_add_mass=lambda m: None)
-    proc = new_series(simulated, tmp_path, SCENE.default_crop(), masses_g=(0.25,), clock_speed=float("inf"))
+    proc = new_series(simulated, tmp_path, SCENE.default_crop(), masses_g=(0.25, 0.5), clock_speed=float("inf"))
     assert proc.config.settle_s == SETTLE.default and proc.config.bath.stable_step_s == INSTANT_STABLE_STEP_S
 
 
