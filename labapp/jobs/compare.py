@@ -320,6 +320,10 @@ class SetComparison:
 
 UNIT_TIME_COLUMNS = {"t_s": "s", "t_min": "min", "t_h": "h"}
 """The first column of a units CSV and the time unit it names."""
+UNIT_PERCENT_RANGE = (-10.0, 150.0)
+"""The percent released a unit of a units CSV plausibly has, %: from a baseline's small negative error to half as
+much again as the label claim (content uniformity allows units of 75-125 % of it). A value outside is another
+unit (a fraction of 1, milligrams) or a sign error, and would make f2, MSD and T^2 meaningless."""
 
 
 def read_units_csv(path: str | Path, label: str) -> ReplicateSet:
@@ -347,15 +351,32 @@ def read_units_csv(path: str | Path, label: str) -> ReplicateSet:
     values = np.empty((len(rows) - 1, len(header)))
     for r, row in enumerate(rows[1:], start=1):
         for c, name in enumerate(header):
-            try:
-                values[r - 1, c] = float(row[c])
-            except (IndexError, ValueError):
-                cell = row[c] if c < len(row) else "<missing>"
-                raise CurveFileError(f"{path}: row {r}: {name} = {cell!r} is not a number") from None
+            values[r - 1, c] = _unit_cell(path, row, r, c, name, unit)
     try:
         return ReplicateSet(values[:, 0], values[:, 1:].T, unit, label, tuple(header[1:]))
     except AnalysisError as exc:
         raise CurveFileError(f"{path}: {exc}") from exc
+
+
+def _unit_cell(path: Path, row: list[str], r: int, c: int, name: str, unit: str) -> float:
+    """The number in data row ``r`` (1 = the line after the header), column ``c`` of a units CSV; refused, naming
+    the row, its line in the file and the column, if it is not a finite number, a negative time or a percentage
+    outside `UNIT_PERCENT_RANGE`."""
+    where = f"{path}: row {r} (line {r + 1}), column {c + 1} ({name})"
+    cell = row[c].strip() if c < len(row) else "<missing>"
+    try:
+        value = float(cell)
+    except ValueError:
+        raise CurveFileError(f"{where}: {cell!r} is not a number") from None
+    if not np.isfinite(value):
+        raise CurveFileError(f"{where}: {cell!r} is not a finite number")
+    if c == 0 and value < 0:
+        raise CurveFileError(f"{where}: {value:g} {unit}; times count from the start of the test, never negative")
+    low, high = UNIT_PERCENT_RANGE
+    if c > 0 and not low <= value <= high:
+        raise CurveFileError(f"{where}: {value:g} % released; a unit releases {low:g} to {high:g} % of its label "
+                             f"claim (a fraction of 1 or a mass is another unit; give percent released)")
+    return value
 
 
 def _is_units_csv(path: Path) -> bool:

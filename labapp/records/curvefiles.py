@@ -95,6 +95,8 @@ def check_curve(t_s: np.ndarray, released_g: np.ndarray, source: str) -> None:
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             raise CurveFileError(f"{source}: row {bad[0] + 1}: {name} = {float(values[bad[0]])} is not a finite number")
+    if t_s[0] < 0:
+        raise CurveFileError(f"{source}: row 1: t_s = {t_s[0]:g} s; times count from the drop (t = 0), never negative")
     steps = np.flatnonzero(np.diff(t_s) <= 0)
     if steps.size:
         i = steps[0] + 1

@@ -62,3 +62,36 @@ def test_a_text_file_given_as_a_calibration_is_named_as_such(tmp_path, capsys):
     assert main(["analyze", str(BENCH / "run"), "--calibration", str(text), "--out", str(tmp_path / "a")]) == 2
     err = capsys.readouterr().err
     assert "is not a bench calibration JSON" in err and "Expecting value" not in err
+
+
+def _units(path: Path, scale: float = 1.0, nan_at: tuple[int, int] | None = None) -> str:
+    """A units CSV of three units over 0-120 min, percent times ``scale``; NaN in data row and column ``nan_at``."""
+    rows = ["t_min,u1,u2,u3"]
+    for r, t in enumerate(range(0, 121, 10), start=1):
+        cells = [f"{scale * 100 * (1 - np.exp(-t / 30)) * (1 + 0.02 * k):.3f}" for k in range(3)]
+        if nan_at and nan_at[0] == r:
+            cells[nan_at[1] - 2] = "nan"
+        rows.append(f"{t}," + ",".join(cells))
+    path.write_text("\n".join(rows) + "\n")
+    return str(path)
+
+
+def _curve(path: Path, start_s: float) -> str:
+    t = np.arange(0.0, 7201.0, 600.0)
+    path.write_text("t_s,released_g\n" + "".join(f"{a + start_s:g},{1.5 * (1 - np.exp(-a / 2000)):.5f}\n" for a in t))
+    return str(path)
+
+
+@pytest.mark.parametrize("make, says", [
+    (lambda d: [_curve(d / "good.csv", 0), _curve(d / "early.csv", -600)],
+     "early.csv: row 1: t_s = -600 s; times count from the drop (t = 0), never negative"),
+    (lambda d: ["--reference", _units(d / "r.csv"), "--test", _units(d / "neg.csv", -0.4)],
+     "neg.csv: row 2 (line 3), column 2 (u1): -11.339 % released; a unit releases -10 to 150 %"),
+    (lambda d: ["--reference", _units(d / "r.csv"), "--test", _units(d / "big.csv", 40)],
+     "big.csv: row 2 (line 3), column 2 (u1): 1133.88 % released"),
+    (lambda d: ["--reference", _units(d / "r.csv"), "--test", _units(d / "nan.csv", nan_at=(11, 3))],
+     "nan.csv: row 11 (line 12), column 3 (u2): 'nan' is not a finite number"),
+])
+def test_compare_refuses_negative_times_implausible_percents_and_names_nan_cells(make, says, tmp_path, capsys):
+    assert main(["compare", *make(tmp_path)]) == 2
+    assert says in capsys.readouterr().err
