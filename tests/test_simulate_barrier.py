@@ -64,6 +64,35 @@ def test_drug_sealed_in_an_insoluble_coat_is_reported(meshes, tmp_path):
     assert any("sealed inside the insoluble barrier in 1 region" in w for w in s["warnings"])
 
 
+def test_mirror_planes_through_both_meshes_give_the_full_release(meshes, tmp_path):
+    full = simulate_barrier(meshes["drug"], meshes["coat"], tmp_path / "full", barrier_speed=0.5, resolution=16)
+    octant = simulate_barrier(meshes["drug"], meshes["coat"], tmp_path / "octant", barrier_speed=0.5, resolution=16,
+                              symmetry="xyz")
+    assert octant.summary["grid_shape"] == [8, 8, 8] and octant.summary["mirror"] == [True, True, True]
+    # the same discrete equations on the mirrored part: equal to round-off, volumes the full object's
+    np.testing.assert_allclose(_curve(octant.out), _curve(full.out), rtol=1e-9, atol=1e-9)
+    assert octant.summary["overlap_voxels"] * 8 == full.summary["overlap_voxels"]
+    # the cup is not symmetric about the z mid-plane of the box holding both meshes
+    with pytest.raises(DesignError, match="barrier mesh .* no mirror image"):
+        simulate_barrier(meshes["drug"], meshes["cup"], tmp_path / "z", barrier_speed=0.5, resolution=16, symmetry="z")
+
+
+def test_the_grid_covers_both_meshes_and_the_drug_wins():
+    from design.files.twogrid import two_material_grid
+
+    drug = trimesh.creation.box(extents=(2, 2, 2))
+    barrier = trimesh.creation.box(extents=(2, 2, 2))
+    barrier.apply_translation((1, 0, 0))             # half inside the drug, half beside it
+    grid = two_material_grid(drug, barrier, voxel_size_mm=0.5)
+    assert grid.rho_d.shape == (6, 4, 4) and grid.origin_mm.tolist() == [-1.0, -1.0, -1.0]
+    assert grid.rho_d.sum() == 64 and grid.rho_b.sum() == 32 and grid.overlap_voxels == 32
+    assert np.all(grid.rho_d + grid.rho_b <= 1.0)
+    with pytest.raises(DesignError, match="either resolution or voxel_size_mm"):
+        two_material_grid(drug, barrier, resolution=8, voxel_size_mm=0.5)
+    with pytest.raises(DesignError, match="holds no voxel centre"):
+        two_material_grid(trimesh.creation.box(extents=(0.1, 0.1, 0.1)), barrier, voxel_size_mm=0.5)
+
+
 def test_bad_inputs_are_refused_before_any_work(meshes, tmp_path):
     np.save(tmp_path / "rho.npy", np.ones((4, 4, 4)))
     with pytest.raises(UsageError, match="must be a mesh"):
@@ -74,3 +103,4 @@ def test_bad_inputs_are_refused_before_any_work(meshes, tmp_path):
         simulate_barrier(meshes["drug"], str(tmp_path / "missing.stl"), tmp_path / "c", barrier_speed=0.5)
     for name in "abc":
         assert not (tmp_path / name).exists()
+

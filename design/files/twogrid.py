@@ -10,6 +10,8 @@ import trimesh
 from design._validate import check_positive
 from design.errors import DesignError
 from design.files.meshio import checked_mesh
+from design.files.pipeline import SYMMETRY_TOLERANCE, parse_symmetry
+from design.geometry.bodies import mirror_mismatch
 from design.geometry.voxelize import DEFAULT_RESOLUTION, grid_for, voxelize
 
 log = logging.getLogger(__name__)
@@ -29,7 +31,9 @@ class TwoMaterialGrid:
     origin_mm : (3,) ndarray of float
         Corner of voxel (0, 0, 0), mm.
     overlap_voxels : int
-        Voxels inside both meshes (counted as drug).
+        Voxels inside both meshes (counted as drug), in the simulated part of the grid.
+    mirror : tuple of bool
+        Per axis, True for a mirror plane at the index-0 face (through the centre of the box holding both).
     """
 
     rho_d: np.ndarray
@@ -37,6 +41,7 @@ class TwoMaterialGrid:
     dx_mm: float
     origin_mm: np.ndarray
     overlap_voxels: int
+    mirror: tuple[bool, ...] = (False, False, False)
 
 
 def union_bounds(*meshes: trimesh.Trimesh) -> np.ndarray:
@@ -45,7 +50,7 @@ def union_bounds(*meshes: trimesh.Trimesh) -> np.ndarray:
 
 
 def two_material_grid(drug: trimesh.Trimesh, barrier: trimesh.Trimesh, *, resolution: int | None = None,
-                      voxel_size_mm: float | None = None) -> TwoMaterialGrid:
+                      voxel_size_mm: float | None = None, symmetry: str = "") -> TwoMaterialGrid:
     """Voxelise a drug mesh and a barrier mesh at the centres of one grid.
 
     Parameters
@@ -56,6 +61,10 @@ def two_material_grid(drug: trimesh.Trimesh, barrier: trimesh.Trimesh, *, resolu
         Voxels along the longest side of the box holding both meshes (default `DEFAULT_RESOLUTION`).
     voxel_size_mm : float, optional
         Voxel edge length, mm (instead of `resolution`).
+    symmetry : str
+        Axis letters of mirror planes through the centre of the box holding both meshes (e.g. ``"xy"``):
+        the grid is the half/quadrant/octant on their positive side. Each material must be symmetric
+        about them to within `SYMMETRY_TOLERANCE` of its voxelised volume.
 
     Returns
     -------
@@ -64,7 +73,8 @@ def two_material_grid(drug: trimesh.Trimesh, barrier: trimesh.Trimesh, *, resolu
     Raises
     ------
     DesignError
-        For a mesh that is not closed, both or an invalid size, or meshes with no drug voxel.
+        For a mesh that is not closed, both or an invalid size, meshes with no drug voxel, or a claimed
+        mirror plane that a material is not symmetric about.
     """
     drug, barrier = checked_mesh(drug, "drug mesh"), checked_mesh(barrier, "barrier mesh")
     if resolution is not None and voxel_size_mm is not None:
@@ -77,13 +87,28 @@ def two_material_grid(drug: trimesh.Trimesh, barrier: trimesh.Trimesh, *, resolu
         dx = float((bounds[1] - bounds[0]).max()) / n
     else:
         dx = check_positive("voxel_size_mm", voxel_size_mm)
+    mirror = parse_symmetry(symmetry)
     origin, shape = grid_for(bounds, dx)
     inside_d = voxelize(drug, dx, origin_mm=origin, shape=shape)
-    inside_b = voxelize(barrier, dx, origin_mm=origin, shape=shape)
     if not inside_d.any():
         raise DesignError(f"the drug mesh holds no voxel centre at voxels of {dx:.4g} mm; raise the resolution")
-    overlap = int(np.count_nonzero(inside_d & inside_b))
-    log.info("two materials on %s voxels of %.4g mm: %d drug, %d barrier, %d overlapping (drug)", shape, dx,
-             int(inside_d.sum()), int(inside_b.sum()) - overlap, overlap)
-    return TwoMaterialGrid(rho_d=inside_d.astype(np.float64), rho_b=(inside_b & ~inside_d).astype(np.float64),
-                           dx_mm=dx, origin_mm=origin, overlap_voxels=overlap)
+    barrier_solid = voxelize(barrier, dx, origin_mm=origin, shape=shape)
+    inside_b, overlap = barrier_solid & ~inside_d, barrier_solid & inside_d
+    if any(mirror):
+        _check_symmetric({"drug mesh": inside_d, "barrier mesh": inside_b}, mirror, symmetry)
+        # the full grid is centred on the box, so each mirrored axis's upper half is the simulated part
+        half = tuple(slice(n // 2, None) if m else slice(None) for n, m in zip(shape, mirror))
+        inside_d, inside_b, overlap = inside_d[half], inside_b[half], overlap[half]
+        origin = np.where(mirror, 0.5 * (bounds[0] + bounds[1]), origin)
+    log.info("two materials on %s voxels of %.4g mm (mirror %s): %d drug, %d barrier, %d overlapping (drug)",
+             inside_d.shape, dx, mirror, int(inside_d.sum()), int(inside_b.sum()), int(overlap.sum()))
+    return TwoMaterialGrid(rho_d=inside_d.astype(np.float64), rho_b=inside_b.astype(np.float64), dx_mm=dx,
+                           origin_mm=origin, overlap_voxels=int(np.count_nonzero(overlap)), mirror=mirror)
+
+
+def _check_symmetric(materials: dict[str, np.ndarray], mirror: tuple[bool, ...], symmetry: str) -> None:
+    off = [f"{name} ({miss:.1%} of its volume has no mirror image)" for name, inside in materials.items()
+           if (miss := mirror_mismatch(inside, mirror)) > SYMMETRY_TOLERANCE]
+    if off:
+        raise DesignError(f"--symmetry {symmetry}: not symmetric about the planes through the centre of the box "
+                          f"holding both meshes: {'; '.join(off)}; at most {SYMMETRY_TOLERANCE:.1%} may differ")

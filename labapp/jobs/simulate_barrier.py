@@ -63,7 +63,7 @@ def coarse_error(release: TwoMaterialRelease) -> dict[str, Any]:
         a = a[even]
         return a.reshape([v for n in a.shape for v in (n // 2, 2)]).mean(axis=tuple(range(1, 2 * a.ndim, 2)))
 
-    coarse = simulate_two(block(drug), block(barrier), 2.0 * release.dx_mm, release.barrier_speed,
+    coarse = simulate_two(block(drug), block(barrier), 2.0 * release.dx_mm, release.barrier_speed, mirror=release.mirror,
                           total_time_mm=release.total_time_mm, dtau_mm=release.dtau_mm)
     scale = release.drug_volume_mm3 / coarse.drug_volume_mm3 if coarse.drug_volume_mm3 > 0 else 1.0
     diff = float(np.abs(release.released_mm3 - scale * coarse.released_mm3).max())
@@ -72,12 +72,13 @@ def coarse_error(release: TwoMaterialRelease) -> dict[str, Any]:
 
 
 def simulate_barrier(source: str, barrier: str, out: str | Path, *, barrier_speed: float,
-                     resolution: int | None = None, voxel_size_mm: float | None = None, units: str = "mm",
-                     progress: Callable[[str], None] | None = None) -> BarrierSimulation:
+                     resolution: int | None = None, voxel_size_mm: float | None = None, symmetry: str = "",
+                     units: str = "mm", progress: Callable[[str], None] | None = None) -> BarrierSimulation:
     """Simulate the drug's release from ``source`` inside ``barrier`` into ``out`` (release.csv, summary.json,
     release.png).
 
-    Both meshes are voxelised on one grid (where they overlap the voxel is drug); the barrier erodes at
+    Both meshes are voxelised on one grid (where they overlap the voxel is drug; ``symmetry``: mirror planes
+    through the centre of the box holding both, as for one material); the barrier erodes at
     ``barrier_speed`` times the drug's rate (0: insoluble). Drug sealed inside an insoluble barrier never
     releases: its volume and regions are in the summary and in a warning.
 
@@ -103,10 +104,11 @@ def simulate_barrier(source: str, barrier: str, out: str | Path, *, barrier_spee
     warnings = (size_warnings(drug_mesh.extents, float(drug_mesh.volume), dx, source)
                 + size_warnings(barrier_mesh.extents, float(barrier_mesh.volume), None, barrier))
     check_memory(grid_shape(extents, dx), SIMULATE_BYTES_PER_VOXEL, f"simulating {source} with {barrier}")
-    grid = two_material_grid(drug_mesh, barrier_mesh, resolution=resolution, voxel_size_mm=voxel_size_mm)
+    grid = two_material_grid(drug_mesh, barrier_mesh, resolution=resolution, voxel_size_mm=voxel_size_mm,
+                             symmetry=symmetry)
     say(f"[2/3] fast marching {grid.rho_d.size:,} voxels of {grid.dx_mm:.4g} mm, barrier speed {s:g} "
         f"({time.perf_counter() - start:.1f} s) ...")
-    release = simulate_two(grid.rho_d, grid.rho_b, grid.dx_mm, s)
+    release = simulate_two(grid.rho_d, grid.rho_b, grid.dx_mm, s, mirror=grid.mirror)
     regions = sealed_regions(release)
     if regions:
         warnings.append(f"{release.sealed_mm3:.4g} mm^3 of drug ({release.sealed_mm3 / release.drug_volume_mm3:.1%}) is "
@@ -125,7 +127,8 @@ def simulate_barrier(source: str, barrier: str, out: str | Path, *, barrier_spee
                "volume_mm3": release.drug_volume_mm3, "barrier_volume_mm3": release.barrier_volume_mm3,
                "sealed_mm3": release.sealed_mm3, "sealed_regions_mm3": regions,
                "total_time_mm": release.total_time_mm, "voxels": int(grid.rho_d.size),
-               "grid_shape": list(grid.rho_d.shape), "voxel_size_mm": grid.dx_mm, "origin_mm": grid.origin_mm.tolist(),
+               "grid_shape": list(grid.rho_d.shape), "voxel_size_mm": grid.dx_mm, "mirror": list(grid.mirror),
+               "origin_mm": grid.origin_mm.tolist(),
                "overlap_voxels": grid.overlap_voxels, "dtau_mm": release.dtau_mm, "error": error, "seconds": seconds,
                "warnings": warnings}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
