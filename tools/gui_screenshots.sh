@@ -2,7 +2,11 @@
 # Screenshots of every tab of `sfr lab --simulate` at 1280x800 under a real X server (Xvfb + openbox), during a
 # simulated run, for docs/gui.md. Re-run from the repository root:
 #
-#   tools/gui_screenshots.sh [OUT_DIR]        (default docs/figures/gui)
+#   tools/gui_screenshots.sh [OUT_DIR] [all|tour|faults]     (default docs/figures/gui all)
+#
+# "tour" takes the tabs during one run (01-12); "faults" rehearses the faults from the window's Simulated bench
+# menu (13-19): the heating, stale readouts and a lost hotplate link, the link back, a second run before its drop,
+# and a run resumed after SIGTERM.
 #
 # Needs: xvfb openbox xdotool imagemagick and the Qt xcb libraries (the README names them), e.g.
 #   sudo apt-get install -y xvfb xdotool imagemagick openbox libxcb-cursor0 libxkbcommon-x11-0 libxcb-icccm4 \
@@ -12,6 +16,7 @@
 set -euo pipefail
 
 OUT=${1:-docs/figures/gui}
+WHAT=${2:-all}
 DISPLAY_NUM=${DISPLAY_NUM:-99}
 SPEED=${SPEED:-25}               # 4 h in under 10 min: every screenshot falls during the run
 PY=${PY:-.venv/bin/python}
@@ -67,12 +72,79 @@ shot() {   # shot NAME: the whole screen
 click() { xdotool mousemove $1 $2 click 1; sleep 0.5; }
 key() { xdotool key "$@"; sleep 0.5; }      # to the focused window, as typed
 
-"$SFR" lab --simulate --speed "$SPEED" --data "$WORK/data" --calibration "$CAL" >"$WORK/lab.log" 2>&1 &
-LAB=$!
-WIN=$(xdotool search --sync --name "Shape from Release" | head -1)
-xdotool windowactivate --sync "$WIN" 2>/dev/null || true
-sleep 3
-click 640 9                        # the title bar: the window has the keyboard focus
+start_lab() {   # start_lab LOG [OPTIONS...]: the window, focused
+    local log=$1
+    shift
+    "$SFR" lab --simulate --speed "$SPEED" --data "${DATA:-$WORK/data}" "$@" >"$log" 2>&1 &
+    LAB=$!
+    WIN=$(xdotool search --sync --name "Shape from Release" | head -1)
+    xdotool windowactivate --sync "$WIN" 2>/dev/null || true
+    sleep 3
+    click 640 9                    # the title bar: the window has the keyboard focus
+}
+
+stop_lab() {    # SIGTERM, as a service manager stops it: the run is interrupted, resumable
+    kill -TERM "$LAB"
+    for _ in $(seq 1 60); do kill -0 "$LAB" 2>/dev/null || break; sleep 1; done
+}
+
+drop_when_stable() {   # press Object dropped (F7) until the bath is stable and it is enabled
+    for _ in $(seq 1 "${1:-40}"); do
+        key F7
+        sleep 2
+    done
+}
+
+faults() {
+    DATA=$WORK/rehearsal           # a data folder of its own: nothing interrupted to offer at the start
+    # a short rehearsal run: 40 C (heats in seconds at x25), 30 s frames, 25 min
+    SFR_LAB_SETTINGS="$SFR_LAB_SETTINGS" "$PY" -c "
+from labapp.acquisition.procedures import RunConfig
+from labapp.acquisition.settings import BathSettings
+from labapp.gui import persist
+config = RunConfig(name='rehearsal', interval_s=30, max_duration_s=1500, stop_on_steady=False,
+                   bath=BathSettings(setpoint_c=40.0, tolerance_c=1.0, hold_s=60.0))
+persist.remember_run(persist.app_settings(), config, '$CAL')"
+    start_lab "$WORK/faults.log"
+    echo "faults: connect, start, the heating"
+    key F5
+    sleep 45
+    click $DOCK_RUN_TAB
+    key F6
+    shot 13_run_heating_visible 8
+    drop_when_stable 8
+    sleep 15
+    echo "faults: the hotplate link drops (Simulated bench > Drop the hotplate link)"
+    key ctrl+shift+l
+    shot 14_stale_readouts 4
+    shot 15_link_lost 25
+    echo "faults: the link comes back"
+    key ctrl+shift+r
+    shot 16_link_back 15
+    echo "faults: a second run, before its drop"
+    sleep 40                       # the first run ends at 25 min (one minute at x25)
+    click $DOCK_RUN_TAB
+    key F6
+    shot 17_second_run_before_drop 35
+    key F7
+    sleep 20
+    echo "faults: SIGTERM, then the window again: it offers to resume"
+    stop_lab
+    start_lab "$WORK/resumed.log"
+    key Return                     # "Resume newest"
+    shot 18_resumed_run 30
+    click $DOCK_RUN_TAB
+    shot 19_resumed_run_tab 2
+    stop_lab
+}
+
+if [[ $WHAT == faults ]]; then
+    faults
+    echo "done: $(ls "$OUT" | wc -l) screenshots in $OUT"
+    exit 0
+fi
+
+start_lab "$WORK/lab.log" --calibration "$CAL"
 
 echo "connect"
 key F5                            # the first Connect computes the sample's dissolution: tens of seconds
@@ -83,10 +155,7 @@ echo "start a run"
 click $DOCK_RUN_TAB
 key F6
 shot 03_run_heating 15
-for _ in $(seq 1 40); do          # the bath is stable when "Object dropped" is enabled: press it until it is
-    key F7
-    sleep 2
-done
+drop_when_stable 40               # the bath is stable when "Object dropped" is enabled: press it until it is
 shot 04_live_run 20
 
 click $DOCK_CAL_TAB
@@ -124,4 +193,5 @@ key Escape
 kill -TERM "$LAB"
 shot 12_stopping 1
 for _ in $(seq 1 60); do kill -0 "$LAB" 2>/dev/null || break; sleep 1; done
+[[ $WHAT == all ]] && faults
 echo "done: $(ls "$OUT" | wc -l) screenshots in $OUT"

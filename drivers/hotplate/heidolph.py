@@ -333,8 +333,8 @@ class HeidolphHotplate:
             self.reconnects += 1
             log.warning("%s: link restored after %d attempt(s)", self.url, attempt)
             return
-        raise HotplateError(f"lost the hotplate on {self.url}; gave up after "
-                            f"{self.config.reconnect_attempts} reconnect attempts")
+        raise HotplateError(f"lost the hotplate on {self.url}: {self.config.reconnect_attempts} reconnect attempts "
+                            "failed")
 
     def _restore(self) -> None:
         """Re-send setpoints and switches the app commanded (after a reconnect or a watchdog trip)."""

@@ -222,10 +222,10 @@ class RunProcedure:
             session.note("info", "drop", "object dropped: time zero")
             audit(run.path, Action.DROP, "object dropped: time zero")
         else:
+            self._note_resumed_bath()
             session.start_stirring(cfg.bath.speed_rpm)
             last = run.frames[-1].t_s if run.frames else 0.0
             run.add_gap(last, session.t_s(), "acquisition interrupted; resumed into the same folder")
-            self._note_resumed_bath()
         if self.bench.on_drop is not None:
             self.bench.on_drop(session.t0_unix_s)
         self._acquire(engine)

@@ -109,7 +109,7 @@ class DevicePanel(QWidget):
         layout = QVBoxLayout(self)
         layout.addWidget(devices)
         layout.addLayout(buttons)                 # Connect under the device choice: in view on a small screen
-        for w in (readout, settings, bath):
+        for w in (readout, bath, settings):       # the bath in view at 1280 x 800; the camera's settings last
             layout.addWidget(w)
         layout.addStretch(1)
         self.stale_timer = QTimer(self)

@@ -16,17 +16,19 @@ from labapp.gui.window_layout import add_menu
 COLD_WATER_C = 5.0
 """How much colder the water gets with "cold water poured in", C."""
 
-FAULTS: tuple[tuple[str, Callable[[SimulatedBench], None], str], ...] = (
-    ("Camera busy (next capture)", lambda sim: sim.camera_busy(1), "the next capture fails as a busy camera's"),
-    ("Corrupt frame (next capture)", lambda sim: sim.corrupt_frames(1), "the next frame arrives truncated"),
+FAULTS: tuple[tuple[str, Callable[[SimulatedBench], None], str, str], ...] = (
+    ("Camera busy (next capture)", lambda sim: sim.camera_busy(1), "the next capture fails as a busy camera's",
+     "Ctrl+Shift+B"),
+    ("Corrupt frame (next capture)", lambda sim: sim.corrupt_frames(1), "the next frame arrives truncated",
+     "Ctrl+Shift+C"),
     ("Drop the hotplate link", lambda sim: sim.drop_hotplate_link(), "the hotplate's serial link is dead until "
-     "it is brought back (Simulated bench > Bring the hotplate link back)"),
+     "it is brought back (Simulated bench > Bring the hotplate link back)", "Ctrl+Shift+L"),
     ("Bring the hotplate link back", lambda sim: sim.restore_hotplate_link(), "the hotplate's serial link answers "
-     "again"),
+     "again", "Ctrl+Shift+R"),
     (f"Cold water poured in (-{COLD_WATER_C:g} C)", lambda sim: sim.cool_bath(COLD_WATER_C),
-     f"the water is {COLD_WATER_C:g} C colder"),
+     f"the water is {COLD_WATER_C:g} C colder", "Ctrl+Shift+W"),
 )
-"""(menu text, hook, what it does) of each fault."""
+"""(menu text, hook, what it does, shortcut) of each fault."""
 
 
 def add_fault_menu(window: QMainWindow, bench: Callable[[], SimulatedBench | None],
@@ -41,4 +43,5 @@ def add_fault_menu(window: QMainWindow, bench: Callable[[], SimulatedBench | Non
         hook(sim)
         say("info", f"simulated fault: {what}")
     return add_menu(window, "&Simulated bench",
-                    [(text, lambda checked=False, h=hook, w=what: inject(h, w), None) for text, hook, what in FAULTS])
+                    [(text, lambda checked=False, h=hook, w=what: inject(h, w), keys)
+                     for text, hook, what, keys in FAULTS])

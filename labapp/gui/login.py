@@ -114,7 +114,8 @@ def ask_operator(simulate: bool, parent: QWidget | None = None) -> str | None:
         dialog.reject()
     previous = {sig: signal.signal(sig, handle) for sig in (signal.SIGINT, signal.SIGTERM)}
     timer = QTimer()
-    timer.timeout.connect(lambda: None)          # back to Python: a pending signal handler runs
+    # back to Python: a pending signal handler runs; a signal that came before the dialog's loop closes it now
+    timer.timeout.connect(lambda: dialog.reject() if received else None)
     timer.start(SIGNAL_POLL_MS)
     print("sfr lab: choose the operator in the login window (Ctrl-C here quits)", file=sys.stderr, flush=True)
     try:

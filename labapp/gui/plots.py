@@ -253,6 +253,13 @@ class PlotsPanel(QWidget):
         self.bath_widget.setLabel("bottom", TIME_LABEL)
         self._dirty = True
 
+    @staticmethod
+    def t_now(t_unix_s: float, t0_unix_s: float | None, fallback: float | None) -> float:
+        """Seconds since the drop at ``t_unix_s`` (``fallback``, else 0, without a drop time)."""
+        if t0_unix_s is not None:
+            return t_unix_s - t0_unix_s
+        return fallback if fallback is not None else 0.0
+
     def smoothed(self) -> np.ndarray:
         """The Savitzky-Golay smoothed concentrations (g/kg) of the current data (raw while too short)."""
         t, c = np.asarray(self.t_s), np.asarray(self.conc)

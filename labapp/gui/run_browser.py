@@ -305,7 +305,10 @@ class RunBrowser(QWidget):
         """The release curve of an analysed run (``RUN/analysis/curve.csv``), if it has one."""
         curve_csv = self.analysis_dir(path) / "curve.csv"
         if not curve_csv.is_file():
+            self.plots.release.setTitle("release: not analysed yet (press Reanalyse)")
+            self.info.setText(f"{self.info.text()}; no analysis yet: press Reanalyse to see its release curve")
             return
+        self.plots.release.setTitle("release")
         try:
             with open(curve_csv, newline="") as fh:
                 rows = list(csv.DictReader(fh))

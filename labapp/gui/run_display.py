@@ -120,7 +120,11 @@ class RunDisplay(QObject):
         if isinstance(event, StateChanged) and event.phase == Phase.ACQUIRING:
             self.plots.set_drop(event.t0_unix_s)
             if self._resumed:
-                self.plots.mark("resume", t if t is not None else 0.0, "resumed")
+                now = self.plots.t_now(event.t_unix_s, event.t0_unix_s, t)
+                if self._last_frame_t is not None and now > self._last_frame_t:
+                    self.plots.mark("gap", self._last_frame_t, "", end_s=now)     # the time nothing was recorded
+                    self._last_frame_t = now
+                self.plots.mark("resume", now, "resumed")
             else:
                 self.plots.mark("drop", 0.0, "drop")
         elif isinstance(event, Reading) and event.t_s is None and self.run_config is not None \

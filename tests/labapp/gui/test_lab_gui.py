@@ -45,26 +45,29 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration, mo
             raise AssertionError(_diagnosis(win)) from None
         assert win.status.phase.startswith("waiting")
         win.controls.drop_button.click()
-        # 45 frames: the simulated print wets for up to 10 min before it dissolves (its hidden wetting lag)
-        qtbot.waitUntil(lambda: len(win.plots.t_s) >= 45 or not win.engine.running, timeout=300_000)
-        assert len(win.plots.t_s) >= 45, _diagnosis(win)
+        # until the curve has risen: the simulated print wets for up to 10 min before it dissolves (its hidden
+        # wetting lag), and how many frames that takes depends on the print, not on the test
+        qtbot.waitUntil(lambda: _risen(win.plots.conc, RISE_G_PER_KG) or not win.engine.running, timeout=300_000)
+        assert _risen(win.plots.conc, RISE_G_PER_KG), _diagnosis(win)
         win.controls.stop_button.click()
         qtbot.waitUntil(lambda: not win.engine.running, timeout=120_000)
         assert win.engine.outcome == "stopped"
 
         folder = win.procedure.run.path
         snap = read_run(folder)
-        assert snap.status == "stopped" and len(snap.frames) >= 45 and verify_run(folder).ok
+        assert snap.status == "stopped" and len(snap.frames) >= 2 and verify_run(folder).ok
         assert (folder / "reference.jpg").is_file() and snap.meta["object_name"] == ""
         qtbot.waitUntil(lambda: len(win.plots.t_s) == len(snap.frames), timeout=120_000)   # queued events
         win.plots.redraw()
         t_plot, conc_plot = win.plots.raw_curve.getData()
         assert np.allclose(t_plot, [f.t_s for f in snap.frames], atol=1e-3), (t_plot, snap.frames)  # all plotted
-        assert conc_plot[-1] > conc_plot[0] + 0.05     # dissolving, however many frames past 45
+        assert conc_plot[-1] > conc_plot[0] + 0.1      # dissolving: the frames after the Stop keep the rise
         assert len(win.plots.smooth_curve.getData()[0]) == len(t_plot)
-        t_bath, plate = win.plots.plate_curve.getData()                   # the bath logged with every frame
-        assert np.allclose(t_bath, t_plot, atol=1e-3)
-        assert np.allclose(plate, [f.plate_c for f in snap.frames], atol=1e-6)
+        t_bath, plate = win.plots.plate_curve.getData()                   # the bath logged with every frame,
+        assert np.all(t_bath[:-len(t_plot)][np.isfinite(t_bath[:-len(t_plot)])] <= 0.0)   # after its heating
+        assert np.allclose(t_bath[-len(t_plot):], t_plot, atol=1e-3)
+        stored = np.array([np.nan if f.plate_c is None else f.plate_c for f in snap.frames])
+        assert np.allclose(plate[-len(t_plot):], stored, atol=1e-6, equal_nan=True)
         speeds = [f.speed_rpm for f in snap.frames if f.speed_rpm is not None]
         assert speeds and min(speeds) >= 0.95 * 150                     # stirred before the reference frame
         qtbot.waitUntil(lambda: win.live.caption.text().startswith("frame_"), timeout=120_000)
@@ -82,6 +85,16 @@ def test_full_simulated_run_through_the_gui(qtbot, tmp_path, sim_calibration, mo
         win.engine.abort()
         win.engine.join(30)
         win.shutdown()
+
+
+RISE_G_PER_KG = 0.15
+"""How far the measured curve has risen when the test presses Stop, g/kg: above the 0.1 g/kg it then asserts, by
+more than the measurement's noise."""
+
+
+def _risen(conc: list[float], by: float) -> bool:
+    """True once the last concentration is ``by`` above the first (the object is dissolving)."""
+    return len(conc) >= 2 and conc[-1] > conc[0] + by
 
 
 def _diagnosis(win: MainWindow) -> str:
