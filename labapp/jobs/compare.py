@@ -39,7 +39,7 @@ from analysis.profile import (
 from analysis.regulatory import RULE_NAMES, RuleCheck, check_rule, get_rule
 from analysis.release_models import ModelFit, best_fit, fit_release_models
 from analysis.replicates import TIME_UNITS_MIN, ReplicateSet
-from labapp.records.curvefiles import CurveFileError, PhysicalCurve, read_physical_curve
+from labapp.records.curvefiles import CurveFileError, PhysicalCurve, check_same_unit, read_physical_curve
 
 DEFAULT_RULE = "ema"
 """The regulator's rule ``sfr compare`` follows unless told otherwise."""
@@ -254,11 +254,13 @@ def compare_curves(a: str | Path, b: str | Path, *, calibration=None, until_s: f
     Raises
     ------
     labapp.records.curvefiles.CurveFileError
-        A file that cannot be read as a physical curve (named with its row).
+        A file that cannot be read as a physical curve (named with its row), or whose times are in another unit
+        than the other's (named: :func:`labapp.records.curvefiles.check_same_unit`).
     analysis.AnalysisError
         Curves that cannot be compared (no common time span, a reference without release, ...).
     """
     curves = [read_physical_curve(p, calibration=calibration) for p in (a, b)]
+    check_same_unit([(str(p), float(c.t_s[-1])) for p, c in zip((a, b), curves)])
     basis = percent_basis(curves)
     pa, pb = (_profile(c, basis, str(p)) for c, p in zip(curves, (a, b)))
     return compare_profiles(pa, pb, until_s=until_s, times_s=times_s, rule=rule, percent_basis=basis)
@@ -489,6 +491,7 @@ def compare_sets(reference: Sequence[str | Path], test: Sequence[str | Path], *,
     if (ref_set is None) != (test_set is None):
         raise CurveFileError("give both products as units files, or both as curves (one per unit)")
     if ref_set is None:
+        check_same_unit([(c.source, float(c.t_s[-1])) for c in ref_curves + test_curves])
         basis = percent_basis(ref_curves + test_curves)
         pts, how = _common_times(ref_curves, test_curves, basis, times_s)
         notes.append(f"time points: {how}")

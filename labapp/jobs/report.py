@@ -28,7 +28,7 @@ from labapp.jobs.compare import DEFAULT_RULE, summarize
 from labapp.jobs.verify import verify
 from labapp.records import operators
 from labapp.records.audit import check_trail
-from labapp.records.curvefiles import read_physical_curve
+from labapp.records.curvefiles import check_same_unit, read_header, read_physical_curve
 from labapp.records.fileio import StorageError, atomic_file, sha256_file
 from labapp.records.manifests import EVENTS_LOG, read_run
 from labapp.records.outpaths import check_out
@@ -76,14 +76,14 @@ def _read_curve(folder: Path, curve: Path | None, calibration: BenchCalibration 
     """(source text, t_s, released_g, raw_g or None, analysis warnings) of the run's release curve."""
     path = curve or (folder / RECORDED_CURVE if (folder / RECORDED_CURVE).is_file() else None)
     if path is not None:
-        data = np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
-        names = data.dtype.names or ()
-        if "t_s" not in names or "released_g" not in names:
-            raise UsageError(f"{path}: not a curve.csv of sfr analyze (needs t_s and released_g columns)")
-        raw = np.atleast_1d(data["released_raw_g"]).astype(float) if "released_raw_g" in names else None
+        if path.is_dir():
+            raise UsageError(f"--curve {path} is a folder; give the curve CSV (sfr analyze's curve.csv)")
+        read = read_physical_curve(path)       # the checks of sfr compare and sfr design: values, rows, units
+        raw = None
+        if "released_raw_g" in read_header(path):
+            raw = read_physical_curve(path, column="released_raw_g").released_g
         source = f"{path} (SHA-256 {sha256_file(path)[:16]})"
-        return source, np.atleast_1d(data["t_s"]).astype(float), np.atleast_1d(data["released_g"]).astype(float), \
-            raw, []
+        return source, read.t_s, read.released_g, raw, []
     if calibration is None:
         raise UsageError(f"{folder} holds no calibration.json and no {RECORDED_CURVE}; give --curve CURVE.csv "
                          "(from sfr analyze)")
@@ -113,7 +113,8 @@ def collect(folder: str | Path, *, references: tuple[str | Path, ...] = (), rule
     Raises
     ------
     UsageError
-        For a folder that is not an acquisition run, an unknown rule, or a run whose curve cannot be had.
+        For a folder that is not an acquisition run, an unknown rule, or a run whose curve cannot be had; a
+        curve with a bad value or times in another unit (as ``sfr compare`` and ``sfr design`` refuse it).
     """
     folder = Path(folder)
     if rule not in RULE_NAMES:
@@ -127,6 +128,9 @@ def collect(folder: str | Path, *, references: tuple[str | Path, ...] = (), rule
     cal_file = folder / "calibration.json"
     calibration = BenchCalibration.load(cal_file) if cal_file.is_file() else None
     source, t_s, released, raw, warnings = _read_curve(folder, Path(curve) if curve else None, calibration)
+    if curve and snap.frames:           # a curve given for the run: in the unit of the run's own frames
+        check_same_unit([(str(curve), float(t_s[-1])),
+                         (f"the run's frames ({folder / 'frames.csv'})", float(snap.frames[-1].t_s))])
     mass = snap.record.object_mass_g
     try:
         summary, metrics_error = summarize(ReleaseProfile(t_s, released, "s", "g", mass, snap.record.name or folder.name)), ""

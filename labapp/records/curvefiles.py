@@ -13,7 +13,10 @@ Accepted sources (a file or a folder):
 - a folder holding exactly one of the CSVs above (an analysis, simulation or design folder).
 
 Every value is checked: a NaN or infinite entry, or a time that does not increase, is an error naming the
-file and its row (row 1 is the first data row after the header).
+file and its row (row 1 is the first data row after the header). A CSV whose times end before
+:data:`MIN_SPAN_S` is refused as times in hours or minutes (but ``sfr analyze``'s ``curve.csv``, whose times
+are its frames' own), and :func:`check_same_unit` refuses the one
+of several curves whose times are a unit's factor (60, 3600) shorter than another's, naming it.
 """
 from __future__ import annotations
 
@@ -32,6 +35,17 @@ from labapp.records.runrecord import RunRecord
 CURVE_FILES = ("curve.csv", "release_physical.csv", "curves_physical.csv")
 """The physical curve files the project writes, looked for in that order inside a folder."""
 _DEFAULT_COLUMN = {"curves_physical.csv": "design_released_g"}
+
+
+MIN_SPAN_S = 60.0
+"""The shortest release a curve of this bench spans, s: a printed object dissolves over minutes to hours and a
+frame is taken every few seconds, so a curve that ends sooner has its times in hours or minutes (a 2.43 h
+run written in hours ends at t_s = 2.43)."""
+UNIT_FACTORS = {"minutes": 60.0, "hours": 3600.0}
+"""The factors by which times in another unit fall short of seconds, with the unit's name."""
+UNIT_FACTOR_TOLERANCE = 1.5
+"""How far (as a factor either way) the ratio of two curves' spans may be from a unit factor to be read as one:
+two runs of one product differ in length by far less than the factor itself."""
 
 
 class CurveFileError(UsageError):
@@ -104,6 +118,58 @@ def check_curve(t_s: np.ndarray, released_g: np.ndarray, source: str) -> None:
                              f"(row {i} has {t_s[i - 1]:g} s); times must increase strictly")
 
 
+def check_time_unit(t_s: np.ndarray, source: str) -> None:
+    """Refuse times that end before :data:`MIN_SPAN_S`: hours or minutes written as ``t_s``.
+
+    Raises
+    ------
+    CurveFileError
+        Naming ``source``, the last time and what it would be in hours and in minutes.
+    """
+    end = float(t_s[-1])
+    if end < MIN_SPAN_S:
+        raise CurveFileError(f"{source}: t_s ends at {end:g}, a release over {end:g} s; a curve of this bench spans "
+                             f"at least {MIN_SPAN_S:g} s, so its times look like hours ({end:g} h = {end * 3600:g} s) "
+                             f"or minutes ({end * 60:g} s): t_s must be seconds since the drop")
+
+
+def _unit_between(short_s: float, long_s: float) -> str | None:
+    """The unit (``"hours"``, ``"minutes"``) whose factor the ratio of two spans is, within the tolerance."""
+    if not short_s > 0:
+        return None
+    ratio = long_s / short_s
+    return next((name for name, factor in UNIT_FACTORS.items()
+                 if factor / UNIT_FACTOR_TOLERANCE <= ratio <= factor * UNIT_FACTOR_TOLERANCE), None)
+
+
+def check_same_unit(spans: list[tuple[str, float]]) -> None:
+    """Refuse curves whose times are not all in one unit: of ``(source, span s)`` pairs, the shortest against the
+    longest; a span a unit's factor shorter (:data:`UNIT_FACTORS`) is that unit written as seconds.
+
+    Raises
+    ------
+    CurveFileError
+        Naming the curve at fault, the curve it was measured against and the unit its times look like.
+    """
+    if len(spans) < 2:
+        return
+    (short, short_s), (long, long_s) = min(spans, key=lambda p: p[1]), max(spans, key=lambda p: p[1])
+    unit = _unit_between(short_s, long_s)
+    if unit is not None:
+        raise CurveFileError(f"{short}: t_s spans {short_s:g} s, {long_s / short_s:.0f} times less than {long} "
+                             f"({long_s:g} s): its times look like {unit}, not seconds; convert t_s to seconds "
+                             f"since the drop")
+
+
+def read_header(path: str | Path) -> list[str]:
+    """The column names of a curve CSV's first line (empty for an empty or unreadable file)."""
+    try:
+        with open(path, newline="") as fh:
+            return [h.strip() for h in next(csv.reader(fh), [])]
+    except (OSError, UnicodeDecodeError):
+        return []
+
+
 def _read_csv(path: Path, column: str | None) -> PhysicalCurve:
     try:
         with open(path, newline="") as fh:
@@ -133,6 +199,8 @@ def _read_csv(path: Path, column: str | None) -> PhysicalCurve:
     t_s, released = numbers("t_s"), numbers(column)
     source = str(path) if column == "released_g" else f"{path} ({column})"
     check_curve(t_s, released, source)
+    if "file" not in cols:      # sfr analyze's curve.csv names each frame: its times are the frames' own, in s
+        check_time_unit(t_s, source)
     water = None
     conc_col = next((c for c in ("conc_smooth_g_per_kg", "conc_g_per_kg") if c in cols), None)
     if conc_col is not None and column == "released_g":

@@ -70,3 +70,57 @@ def test_a_series_with_too_few_masses_is_refused_before_the_bath_heats(tmp_path,
     err = capsys.readouterr().err
     assert "--masses" in err and "needs 3" in err
     assert not runs.exists() or not any(runs.iterdir())
+
+
+def _curve(path, factor=1.0, nan_row=None):
+    """A 4 h first-order release of 2 g every 5 min; times divided by ``factor`` (3600: hours, 60: minutes)."""
+    import numpy as np
+
+    t = np.arange(0.0, 4 * 3600.0 + 1, 300.0)
+    grams = 2.0 * (1 - np.exp(-3e-4 * t))
+    rows = [f"{a / factor:g},{'nan' if i + 1 == nan_row else f'{b:.6f}'}" for i, (a, b) in enumerate(zip(t, grams))]
+    path.write_text("t_s,released_g\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def test_report_refuses_a_curve_in_hours_or_with_a_nan_before_writing(tmp_path, capsys):
+    from labapp.errors import EXIT_USAGE
+
+    folder = _finished_run(tmp_path)
+    out = tmp_path / "r.pdf"
+    for curve, says in ((_curve(tmp_path / "hours.csv", 3600.0), "hours.csv: t_s ends at 4, a release over 4 s"),
+                        (_curve(tmp_path / "nan.csv", nan_row=7), "nan.csv: row 7: released_g = nan is not a finite")):
+        assert main(["report", str(folder), "--curve", str(curve), "--out", str(out)]) == EXIT_USAGE
+        assert says in capsys.readouterr().err and not out.exists()
+    assert main(["report", str(folder), "--curve", str(_curve(tmp_path / "good.csv")), "--out", str(out)]) == 0
+
+
+def test_compare_names_the_curve_in_hours_in_either_order(tmp_path, capsys):
+    from labapp.errors import EXIT_USAGE
+
+    good, hours = _curve(tmp_path / "good.csv"), _curve(tmp_path / "hours.csv", 3600.0)
+    minutes = _curve(tmp_path / "minutes.csv", 60.0)
+    for pair, blamed in (((good, hours), "hours.csv: t_s ends at 4"), ((hours, good), "hours.csv: t_s ends at 4"),
+                         ((good, minutes), "minutes.csv: t_s spans 240 s, 60 times less than"),
+                         ((minutes, good), "minutes.csv: t_s spans 240 s, 60 times less than")):
+        assert main(["compare", *map(str, pair)]) == EXIT_USAGE
+        err = capsys.readouterr().err
+        assert blamed in err and "good.csv:" not in err
+
+
+def test_design_refuses_a_target_in_hours_before_it_starts_naming_the_file(tmp_path, capsys):
+    import json
+
+    from labapp.errors import EXIT_USAGE
+    from labapp.records.simcal import FORMAT, FORWARD_MODEL
+
+    simcal = tmp_path / "simcal.json"
+    simcal.write_text(json.dumps({"format": FORMAT, "forward_model": FORWARD_MODEL, "model": "constant",
+                                  "physics": {"anisotropy": 1.0, "offset_mm": 0.0}, "seconds_per_mm": 1500.0,
+                                  "g_per_mm3": 2e-3, "resolution": 16, "voxel_size_mm": 1.0, "water_g": 500.0}))
+    out = tmp_path / "design"
+    hours = _curve(tmp_path / "hours.csv", 3600.0)
+    assert main(["design", "--target", str(hours), "--simcal", str(simcal), "--space", "extruded", "--resolution",
+                 "16", "--max-iter", "20", "--out", str(out)]) == EXIT_USAGE
+    assert f"{hours}: t_s ends at 4, a release over 4 s" in capsys.readouterr().err
+    assert not out.exists()

@@ -62,7 +62,7 @@ def test_rules_that_cannot_be_met_are_reported_not_computed(tmp_path, capsys):
     (lambda d: _csv(d / "release.csv", [0, 1, 2], [0, 1, 2], "tau_mm,released_mm3"), "no column t_s"),
     (lambda d: _csv(d / "late.csv", [2e5, 3e5], [0, 1]), "do not overlap in time"),
     (lambda d: _csv(d / "nan.csv", [0, 60, 120], [0, np.nan, 1]), "row 2: released_g = nan"),
-    (lambda d: _csv(d / "down.csv", [0, 60, 120, 180], [0, 1.0, 0.2, 1.2]), "must not decrease"),
+    (lambda d: _csv(d / "down.csv", [0, 600, 1200, 1800], [0, 1.0, 0.2, 1.2]), "must not decrease"),
 ])
 def test_bad_input_is_named(curves, capsys, make_b, message):
     tmp, a, _ = curves

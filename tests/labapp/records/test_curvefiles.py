@@ -31,11 +31,11 @@ def test_plain_and_design_csvs(tmp_path):
     plain = read_physical_curve(_write(tmp_path / "m.csv", "released_g,t_s\n0,0\n1.5,60\n"))
     assert plain.object_mass_g is None and plain.water_g is None
     np.testing.assert_allclose(plain.released_g, [0, 1.5])
-    design = _write(tmp_path / "curves_physical.csv", "t_s,target_released_g,design_released_g\n0,0,0\n9,1,0.9\n")
+    design = _write(tmp_path / "curves_physical.csv", "t_s,target_released_g,design_released_g\n0,0,0\n900,1,0.9\n")
     assert read_physical_curve(design).released_g[-1] == pytest.approx(0.9)
     assert read_physical_curve(design, column="target_released_g").released_g[-1] == pytest.approx(1.0)
     sim = read_physical_curve(_write(tmp_path / "release_physical.csv",
-                                     "t_s,released_g,conc_g_per_kg\n0,0,0\n5,0.5,1.0\n"))
+                                     "t_s,released_g,conc_g_per_kg\n0,0,0\n500,0.5,1.0\n"))
     assert sim.water_g == pytest.approx(500.0)
 
 
@@ -61,3 +61,14 @@ def test_missing_and_ambiguous(tmp_path):
         read_physical_curve(tmp_path)
     with pytest.raises(CurveFileError, match="neither a run folder"):
         read_physical_curve(tmp_path / "..")
+
+
+def test_times_in_hours_or_minutes_are_refused_naming_the_file(tmp_path):
+    from labapp.records.curvefiles import check_same_unit
+
+    hours = _write(tmp_path / "hours.csv", "t_s,released_g\n0,0\n1.2,1\n2.43,1.5\n")
+    with pytest.raises(CurveFileError, match=r"hours\.csv: t_s ends at 2\.43, .* look like hours \(2\.43 h = 8748 s\)"):
+        read_physical_curve(hours)
+    check_same_unit([("a.csv", 8748.0), ("b.csv", 7000.0)])                 # two runs of one product
+    with pytest.raises(CurveFileError, match=r"^min\.csv: .* 60 times less than s\.csv .* look like minutes"):
+        check_same_unit([("s.csv", 8748.0), ("min.csv", 145.8)])
