@@ -37,6 +37,7 @@ def test_an_insoluble_cup_releases_through_its_opening_only(meshes, tmp_path):
     assert s["volume_mm3"] == pytest.approx(64.0) and s["sealed_mm3"] == 0.0 and s["sealed_regions_mm3"] == []
     assert s["barrier_volume_mm3"] == pytest.approx(6 * 6 * 5 - 64.0) and s["overlap_voxels"] == 16 ** 3
     assert s["barrier_speed"] == 0.0 and not result.warnings
+    assert s["barrier_cover_mm"] < 1e-6 and s["release_starts_mm"] == 0.0
     assert (result.out / "release.png").stat().st_size > 10_000
 
 
@@ -44,6 +45,10 @@ def test_a_soluble_coat_delays_the_cube(meshes, tmp_path):
     result = simulate_barrier(meshes["drug"], meshes["coat"], tmp_path / "run", barrier_speed=0.5, resolution=24)
     tau, released = _curve(result.out).T
     # the coat (1 mm at half the drug's speed) is crossed at tau = 2; the cube then erodes from all faces
+    # the cover: 4 voxels of coat, exact through the faces; the marcher's three-term solves at the coat's
+    # corners come 0.08 dx short (observed 0.9808 mm): bound 0.1 dx
+    assert result.summary["barrier_cover_mm"] == pytest.approx(1.0, abs=0.025)
+    assert result.summary["release_starts_mm"] == pytest.approx(2.0, abs=0.05)
     exact = 64.0 - np.clip(4.0 - 2.0 * np.clip(tau - 2.0, 0, None), 0, None) ** 3
     # nothing before the coat is crossed, less one voxel: eq. (6) spreads a voxel's release over the voxel's
     # crossing time before u, and the marcher's corner voxels (three-term solves) lie up to 0.6 dx early
@@ -61,6 +66,7 @@ def test_drug_sealed_in_an_insoluble_coat_is_reported(meshes, tmp_path):
     assert np.all(_curve(result.out)[:, 1] == 0.0)
     s = json.loads((result.out / "summary.json").read_text())
     assert s["sealed_mm3"] == pytest.approx(64.0) and s["sealed_regions_mm3"] == [pytest.approx(64.0)]
+    assert s["barrier_cover_mm"] == pytest.approx(1.0, abs=0.025) and s["release_starts_mm"] is None
     assert any("sealed inside the insoluble barrier in 1 region" in w for w in s["warnings"])
 
 

@@ -6,7 +6,7 @@ from scipy.ndimage import gaussian_filter
 
 from design.errors import DesignError
 from design.forward.simulator import simulate
-from design.forward.twomaterial import N_INSOLUBLE, simulate_two, two_material_gradient
+from design.forward.twomaterial import N_INSOLUBLE, barrier_cover, simulate_two, two_material_gradient
 
 
 def _ball_grid(n, half_width=0.9):
@@ -51,6 +51,23 @@ def test_sphere_in_shell_is_delayed_sphere(s):
     # Bound dx (0.5 + 1 / s): 1.5, 2.5, 4.5 dx. Halving dx must about halve the error (observed 1.78-1.85).
     assert errors[1] <= dx * (0.5 + 1 / s)
     assert 1.6 < errors[0] / errors[1] < 2.4
+
+
+@pytest.mark.parametrize("n", [24, 48])
+def test_barrier_cover_predicts_the_delay(n):
+    dx, drug, barrier, (x, y, z) = _sphere_in_shell(n)
+    cover = barrier_cover(drug, barrier, dx)
+    # the voxelised shell is up to a voxel diagonal thinner than 0.3 mm along some ray (observed 0.61 dx and
+    # 0.65 dx thinner at 24 and 48 voxels); never thicker
+    assert 0.3 - np.sqrt(3) * dx <= cover <= 0.3
+    # the release starts when the front has crossed the cover at speed s, give or take one drug voxel's ramp
+    # (eq. 6, dx long): observed -0.24 dx (s = 1) to +0.01 dx (s = 0.25)
+    for s in (1.0, 0.25):
+        rel = simulate_two(drug, barrier, dx, s, total_time_mm=0.3 / s + 0.6)
+        assert abs(rel.tau_mm[np.argmax(rel.released_mm3 > 0)] - cover / s) <= dx
+    hole = (x * x + y * y < 0.1 ** 2) & (z > 0)
+    assert barrier_cover(drug, np.where(hole, 0.0, barrier), dx) < n * 1e-6 * dx  # n_min per void voxel crossed
+    assert barrier_cover(np.zeros(drug.shape), barrier, dx) == np.inf
 
 
 def test_insoluble_shell_seals_the_drug():

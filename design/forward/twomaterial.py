@@ -259,3 +259,37 @@ def two_material_gradient(release: TwoMaterialRelease, dJ_dC: np.ndarray,
     speed = None if s == 0.0 else float(-np.sum(n_bar * barrier)) / (s * s)
     return TwoMaterialGradient(drug=weight_bar.reshape(drug.shape) * scale + n_bar * (1.0 - N_MIN),
                                barrier=n_bar * (k - N_MIN), speed=speed)
+
+
+def barrier_cover(rho_d: np.ndarray, rho_b: np.ndarray, dx_mm: float, *, mirror: tuple[bool, ...] | None = None,
+                  anisotropy: float = 1.0) -> float:
+    """The least barrier thickness that water crosses to reach any drug, mm.
+
+    Eq. (5) solved on the slowness ``rho_b + (1 - rho_b) n_min`` counts only barrier along a path: its
+    solution at a drug voxel is the least barrier (in barrier density x length) between the outside and
+    that voxel. The drug's release starts once the front has crossed this thickness at the barrier's speed
+    s, at cover / s: a delay D needs a cover of at least D s. First-order in dx like every solve of eq. (5)
+    (the voxelised barrier's own staircase included). About 0 (void's slowness n_min) when drug touches
+    the outside or an opening.
+
+    Parameters
+    ----------
+    rho_d, rho_b : ndarray of float in [0, 1]
+        Drug and barrier densities on one grid.
+    dx_mm : float
+    mirror : tuple of bool, optional
+    anisotropy : float
+
+    Returns
+    -------
+    float
+        min over voxels with drug of the barrier crossed to reach them, mm; inf without drug.
+    """
+    drug, barrier = _check_pair(rho_d, rho_b)
+    dx = check_positive("dx_mm", dx_mm)
+    mirror = check_mirror(mirror, drug.ndim)
+    if not (drug > 0.0).any():
+        return math.inf
+    marching = march(barrier + (1.0 - barrier) * N_MIN, dx, mirror, None, float(anisotropy))
+    return float(marching.interior(marching.u_pad)[drug > 0.0].min())
+

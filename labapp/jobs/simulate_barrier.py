@@ -14,7 +14,7 @@ import numpy as np
 from design.errors import DesignError
 from design.files.pipeline import SAMPLE_PREFIX
 from design.files.twogrid import two_material_grid, union_bounds
-from design.forward.twomaterial import TwoMaterialRelease, check_barrier_speed, simulate_two
+from design.forward.twomaterial import TwoMaterialRelease, barrier_cover, check_barrier_speed, simulate_two
 from design.geometry.shapes import sample_shape
 from design.geometry.voxelize import DEFAULT_RESOLUTION
 from labapp.errors import UsageError
@@ -110,6 +110,7 @@ def simulate_barrier(source: str, barrier: str, out: str | Path, *, barrier_spee
         f"({time.perf_counter() - start:.1f} s) ...")
     release = simulate_two(grid.rho_d, grid.rho_b, grid.dx_mm, s, mirror=grid.mirror)
     regions = sealed_regions(release)
+    cover = barrier_cover(grid.rho_d, grid.rho_b, grid.dx_mm, mirror=grid.mirror)
     if regions:
         warnings.append(f"{release.sealed_mm3:.4g} mm^3 of drug ({release.sealed_mm3 / release.drug_volume_mm3:.1%}) is "
                         f"sealed inside the insoluble barrier in {len(regions)} region(s) and never releases; "
@@ -125,7 +126,8 @@ def simulate_barrier(source: str, barrier: str, out: str | Path, *, barrier_spee
                header="tau_mm,released_mm3", comments="", fmt="%.9g")
     summary = {"input": source, "barrier": barrier, "barrier_speed": s, "units": units,
                "volume_mm3": release.drug_volume_mm3, "barrier_volume_mm3": release.barrier_volume_mm3,
-               "sealed_mm3": release.sealed_mm3, "sealed_regions_mm3": regions,
+               "sealed_mm3": release.sealed_mm3, "sealed_regions_mm3": regions, "barrier_cover_mm": cover,
+               "release_starts_mm": cover / s if s > 0 else (0.0 if cover < grid.dx_mm else None),
                "total_time_mm": release.total_time_mm, "voxels": int(grid.rho_d.size),
                "grid_shape": list(grid.rho_d.shape), "voxel_size_mm": grid.dx_mm, "mirror": list(grid.mirror),
                "origin_mm": grid.origin_mm.tolist(),

@@ -40,6 +40,9 @@ def run_barrier(args: argparse.Namespace, progress: Callable[[str], None]) -> in
     print(f"drug {s['volume_mm3']:.1f} mm^3 in {s['barrier_volume_mm3']:.1f} mm^3 of barrier at speed "
           f"{s['barrier_speed']:g}: T = {s['total_time_mm']:.3f} mm, {s['voxels']:,} voxels, {s['seconds']:.2f} s "
           f"-> {result.out}")
+    starts = s["release_starts_mm"]
+    print(f"barrier cover: at least {s['barrier_cover_mm']:.3g} mm of barrier between the outside and the drug; "
+          + ("the drug is sealed" if starts is None else f"its release starts at tau = {starts:.3g} mm"))
     if s["sealed_mm3"] > 0:
         print(f"sealed: {s['sealed_mm3']:.4g} mm^3 of drug in {len(s['sealed_regions_mm3'])} region(s) never releases")
     error = s["error"]
