@@ -5,7 +5,7 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 from design.errors import DesignError
-from design.forward.simulator import simulate
+from design.forward.simulator import release_gradient, simulate
 from design.forward.twomaterial import N_INSOLUBLE, barrier_cover, simulate_two, two_material_gradient
 
 
@@ -140,7 +140,10 @@ def test_speed_one_is_the_one_material_model():
     np.testing.assert_allclose(rel.released_mm3, expected, rtol=1e-12, atol=1e-15)
     # no barrier at all: the one-material model exactly, at any barrier speed
     alone = simulate_two(drug, np.zeros(drug.shape), 0.2, 0.0, total_time_mm=1.0)
-    np.testing.assert_array_equal(alone.released_mm3, simulate(drug, 0.2, total_time_mm=1.0).released_mm3)
+    single = simulate(drug, 0.2, total_time_mm=1.0)
+    np.testing.assert_array_equal(alone.released_mm3, single.released_mm3)
+    g = rng.standard_normal(single.tau_mm.shape)
+    np.testing.assert_allclose(two_material_gradient(alone, g).drug, release_gradient(single, g), rtol=1e-13, atol=1e-16)
 
 
 def _mixture(shape, seed):
