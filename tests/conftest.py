@@ -23,9 +23,10 @@ TEST_OPERATOR, TEST_PASSWORD = "tester", "tester-password"
 def _hermetic_environment() -> None:
     """Replace the shell's home, XDG folders and product variables by a temporary home made for this test
     session, in the controlling process (an xdist worker inherits the controller's environment). Every test,
-    and every `sfr` subprocess it starts, acts as the operator "tester" of the session's users file (recording
-    needs a named operator; tests of the operator checks set their own) and caches the simulated bench's print
-    releases (`labapp.acquisition.worldcache`) in the session's cache."""
+    and every `sfr` subprocess it starts, acts as the operator "tester" of the session's users file (the
+    regulated lab: operators enforced; tests of the operator checks set their own, and the `no_users_file`
+    fixture gives the research lab, without a users file) and caches the simulated bench's print releases
+    (`labapp.acquisition.worldcache`) in the session's cache."""
     os.environ["QT_QPA_PLATFORM"] = "offscreen"
     os.environ["MPLBACKEND"] = "Agg"
     if os.environ.get("PYTEST_XDIST_WORKER"):
@@ -62,6 +63,16 @@ SESSION_ENVIRONMENT = {name: value for name, value in os.environ.items()
                        if name in HOME_VARIABLES or name.startswith(FOREIGN_PREFIXES)}
 """The environment every test starts from (restored before each test: a test or the code it runs may set
 `SFR_OPERATOR` and the like)."""
+
+
+@pytest.fixture
+def no_users_file(tmp_path, monkeypatch):
+    """A lab without a users file (operators not enforced) and no `SFR_OPERATOR`: actions are recorded under the
+    login name, unverified. Returns the users file's path (absent)."""
+    path = tmp_path / "no-users" / "users.json"
+    monkeypatch.setenv("SFR_USERS", str(path))
+    monkeypatch.delenv("SFR_OPERATOR", raising=False)
+    return path
 
 
 @pytest.fixture(autouse=True)

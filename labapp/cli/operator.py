@@ -1,8 +1,10 @@
-"""The operator a recording `sfr` command acts as: ``--operator NAME``, else ``$SFR_OPERATOR``.
+"""The operator a recording `sfr` command acts as: ``--operator NAME``, else ``$SFR_OPERATOR``, else (only while
+the lab has no users file) the login name, recorded unverified (:mod:`labapp.records.operators`).
 
-A command module that records actions sets ``RECORDS = True`` (refused without an operator: no operator, no
-recorded action) or ``RECORDS = "optional"`` (the command decides: ``sfr demo`` acts as the built-in demo
-operator); :func:`add_operator_option` gives it the ``--operator`` option and runs it as that operator.
+A command module that records actions sets ``RECORDS = True`` (with a users file, refused without an operator:
+no operator, no recorded action) or ``RECORDS = "optional"`` (the command decides: ``sfr demo`` acts as the
+built-in demo operator); :func:`add_operator_option` gives it the ``--operator`` option and runs it as that
+operator.
 """
 from __future__ import annotations
 
@@ -21,7 +23,8 @@ def add_operator_option(parser: argparse.ArgumentParser, run: Callable[[argparse
     """Add ``--operator`` to a command's parser and make it run as that operator (checked first)."""
     parser.add_argument("--operator", metavar="NAME",
                         help=f"the operator this command acts as, recorded in run.json and the audit trail "
-                             f"(default ${OPERATOR_ENV}; create operators with 'sfr users add NAME')")
+                             f"(default ${OPERATOR_ENV}; without a users file, your login name, recorded as "
+                             f"unverified; 'sfr users add NAME' creates the file and enforces operators)")
 
     def run_as_operator(args: argparse.Namespace) -> int:
         from labapp.records import operators

@@ -11,10 +11,16 @@ The process acts as one operator at a time (:func:`log_in`, :func:`acting_as`, w
 ``SFR_OPERATOR`` for the processes it starts; that variable alone when nobody logged in). The simulated
 demo acts as the built-in :data:`DEMO_OPERATOR`, which is not in any users file and records only on the
 simulated bench.
+
+Operators are enforced once the lab has a users file (:func:`enforced`): every recorded action then needs an
+enabled operator of it. Until then (a research lab, a first try) an action is recorded under the name given
+(``--operator``, ``SFR_OPERATOR``), else the login name, marked unverified (``"jdoe (unverified)"``,
+:func:`unverified`): the records say who acted without any password, and an unverified operator cannot sign.
 """
 from __future__ import annotations
 
 import contextlib
+import getpass
 import hashlib
 import hmac
 import json
@@ -28,9 +34,9 @@ from pathlib import Path
 from labapp.errors import UsageError
 from labapp.records.fileio import atomic_file
 
-__all__ = ["DEMO_OPERATOR", "MIN_PASSWORD_CHARS", "OPERATOR_ENV", "USERS_ENV", "OperatorError", "User", "acting_as",
-           "add_user", "check_password", "current", "load_users", "log_in", "log_out", "require", "set_enabled",
-           "users_path"]
+__all__ = ["DEMO_OPERATOR", "MIN_PASSWORD_CHARS", "OPERATOR_ENV", "UNVERIFIED", "USERS_ENV", "OperatorError", "User",
+           "acting_as", "add_user", "check_password", "current", "enforced", "is_verified", "load_users", "log_in",
+           "log_out", "require", "set_enabled", "unverified", "users_path"]
 
 USERS_ENV = "SFR_USERS"
 """Environment variable naming the users file (tests, a shared lab configuration)."""
@@ -38,6 +44,8 @@ OPERATOR_ENV = "SFR_OPERATOR"
 """Environment variable naming the operator when no ``--operator`` is given and nobody logged in."""
 DEMO_OPERATOR = "demo (simulated bench)"
 """The built-in operator of ``sfr demo``: needs no users file, records only on the simulated bench."""
+UNVERIFIED = " (unverified)"
+"""Appended to the name of an operator acting without a users file (:func:`unverified`)."""
 MIN_PASSWORD_CHARS = 8
 USERS_FORMAT = 1
 """The layout of the users file this version writes (its ``format`` key)."""
@@ -77,6 +85,29 @@ def users_path() -> Path:
         return Path(os.environ[USERS_ENV])
     base = Path(os.environ.get("XDG_CONFIG_HOME") or Path.home() / ".config")
     return base / "shape-from-release" / "users.json"
+
+
+def enforced() -> bool:
+    """Whether operators are enforced: the lab has a users file (:func:`users_path`). Then every recorded action
+    needs an enabled operator of it; without one, names are recorded unverified (:func:`unverified`)."""
+    return users_path().exists()
+
+
+def unverified(name: str) -> str:
+    """``name`` as recorded without a users file: ``"name (unverified)"`` (a name already marked is kept)."""
+    return name if name.endswith(UNVERIFIED) else f"{name}{UNVERIFIED}"
+
+
+def is_verified(name: str) -> bool:
+    """Whether ``name`` is an operator checked against a users file (not marked unverified)."""
+    return not name.endswith(UNVERIFIED)
+
+
+def _login_name() -> str:
+    try:
+        return getpass.getuser()
+    except (OSError, KeyError):     # no login name in the environment or the password database
+        return "unknown user"
 
 
 def _hash(password: str, salt: bytes, n: int, r: int, p: int) -> str:
@@ -119,6 +150,9 @@ def _check_name(name: str) -> str:
                             "leading or trailing spaces")
     if name == DEMO_OPERATOR:
         raise OperatorError(f"operator name {name!r} is the built-in demo operator's")
+    if not is_verified(name):
+        raise OperatorError(f"operator name {name!r}: a name ending {UNVERIFIED!r} marks an operator without a "
+                            "users file")
     return name
 
 
@@ -165,14 +199,16 @@ def check_password(name: str, password: str, path: Path | None = None) -> bool:
 
 
 def _known(name: str) -> str:
-    """``name`` when it is an enabled operator of the users file (or the demo operator)."""
+    """``name`` when it is an enabled operator of the users file (or the demo operator); without a users file,
+    ``name`` marked unverified."""
     if name == DEMO_OPERATOR:
         return name
+    if not enforced():
+        return unverified(name)
     users = load_users()
     if name not in users:
-        hint = "create it with 'sfr users add NAME'" if users else f"no users file at {users_path()}; create " \
-               "an operator with 'sfr users add NAME'"
-        raise OperatorError(f"operator {name!r} is not in the users file ({hint})")
+        raise OperatorError(f"operator {name!r} is not in the users file {users_path()} (operators are enforced "
+                            "once it exists; create it with 'sfr users add NAME')")
     if not users[name].enabled:
         raise OperatorError(f"operator {name!r} is disabled in {users_path()}")
     return name
@@ -214,21 +250,25 @@ def acting_as(name: str) -> Iterator[str]:
 
 
 def current() -> str | None:
-    """The operator this process acts as: the one logged in, else ``$SFR_OPERATOR``, else None.
+    """The operator this process acts as: the one logged in, else ``$SFR_OPERATOR``, else (without a users
+    file) the login name marked unverified, else None.
 
     Raises
     ------
     OperatorError
-        If the name in ``SFR_OPERATOR`` is not an enabled operator.
+        If the name in ``SFR_OPERATOR`` is not an enabled operator of the users file.
     """
     if _session is not None:
         return _session
     env = os.environ.get(OPERATOR_ENV, "").strip()
-    return _known(env) if env else None
+    if env:
+        return _known(env)
+    return None if enforced() else unverified(_login_name())
 
 
 def require(action: str) -> str:
-    """The operator doing ``action``; refused when there is none (no operator, no recorded action).
+    """The operator doing ``action``; refused when there is none (with a users file: no operator, no recorded
+    action; without one the login name is recorded, unverified).
 
     Raises
     ------
@@ -237,6 +277,6 @@ def require(action: str) -> str:
     """
     name = current()
     if name is None:
-        raise OperatorError(f"no operator: {action} is recorded under an operator's name; give --operator NAME or "
-                            f"set {OPERATOR_ENV} (create one with 'sfr users add NAME')")
+        raise OperatorError(f"no operator: {action} is recorded under an operator's name of the users file "
+                            f"{users_path()}; give --operator NAME or set {OPERATOR_ENV}")
     return name

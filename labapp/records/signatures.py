@@ -34,8 +34,8 @@ from labapp.records.fileio import sha256_file
 from labapp.records.manifests import RUN_JSON
 from labapp.records.verification import verify_run
 
-__all__ = ["Meaning", "SignatureError", "SignatureState", "check_signatures", "read_signatures", "record_checks",
-           "record_hash", "sign", "signed_heads", "trail_check"]
+__all__ = ["Meaning", "SignatureError", "SignatureState", "check_signatures", "check_signer", "read_signatures",
+           "record_checks", "record_hash", "sign", "signed_heads", "trail_check"]
 
 _UNHASHED = {AUDIT_FILE, SIGNATURES_FILE}
 
@@ -93,6 +93,23 @@ def _is_record(folder: Path) -> bool:
     return (folder / RUN_JSON).is_file() or (folder / AUDIT_FILE).is_file()
 
 
+def check_signer(signer: str) -> str:
+    """``signer`` when they may sign: an operator of the users file, not the demo operator nor an unverified one.
+
+    Raises
+    ------
+    SignatureError
+        Saying why, and how to get an operator who can sign.
+    """
+    if signer == operators.DEMO_OPERATOR:
+        raise SignatureError(f"the demo operator {signer!r} cannot sign; sign as an operator of the users file")
+    if not operators.is_verified(signer):
+        raise SignatureError(f"{signer!r} acts without a users file and cannot sign: a signature needs an operator "
+                             f"with a password; create one with 'sfr users add NAME' (operators are then enforced "
+                             f"for every recorded action)")
+    return signer
+
+
 def sign(folder: str | Path, meaning: Meaning | str, password: str, *, reason: str | None = None) -> dict[str, Any]:
     """Sign the record ``folder`` as the current operator, after checking their password.
 
@@ -103,9 +120,10 @@ def sign(folder: str | Path, meaning: Meaning | str, password: str, *, reason: s
     ------
     SignatureError
         For a wrong password, a folder that is not a record, a record that fails verification or whose
-        audit trail is broken, or an unknown meaning.
+        audit trail is broken, an unknown meaning, or a signer who is the demo operator or unverified (no
+        users file).
     labapp.records.operators.OperatorError
-        When the process acts as nobody (or as the demo operator, who cannot sign).
+        When the process acts as nobody.
     """
     folder = Path(folder)
     try:
@@ -114,9 +132,7 @@ def sign(folder: str | Path, meaning: Meaning | str, password: str, *, reason: s
         raise SignatureError(f"meaning {meaning!r}: expected one of {', '.join(m.value for m in Meaning)}") from None
     if not folder.is_dir() or not _is_record(folder):
         raise SignatureError(f"{folder} is not a record (no {RUN_JSON} or {AUDIT_FILE}); only records are signed")
-    signer = operators.require(f"signing {folder}")
-    if signer == operators.DEMO_OPERATOR:
-        raise SignatureError(f"the demo operator {signer!r} cannot sign; sign as an operator of the users file")
+    signer = check_signer(operators.require(f"signing {folder}"))
     if not operators.check_password(signer, password):
         append(folder, Action.SIGN_REFUSED, f"signature ({meaning}) refused: wrong password", operator=signer)
         raise SignatureError(f"signature refused: wrong password for operator {signer!r} (the refusal is in "

@@ -25,9 +25,9 @@ def run(args: argparse.Namespace) -> int:
     """Ask the password, sign, print the signature line."""
     from labapp.cli.operator import read_password
     from labapp.records import operators
-    from labapp.records.signatures import sign
+    from labapp.records.signatures import check_signer, sign
 
-    signer = operators.require(f"signing {args.record}")
+    signer = check_signer(operators.require(f"signing {args.record}"))     # refused before a password is asked
     password = read_password(f"password of {signer!r} (signing {args.record} as {args.meaning}): ",
                              args.password_stdin)
     signature = sign(args.record, args.meaning, password, reason=args.reason)

@@ -28,9 +28,13 @@ def run(args: argparse.Namespace) -> int:
 
     path = operators.users_path()
     if args.action == "add":
+        first = not operators.enforced()
         password = read_password(f"password for {args.name!r}: ", args.password_stdin, twice=True)
         operators.add_user(args.name, password)
         print(f"operator {args.name!r} added to {path}")
+        if first:
+            print("operators are now enforced: every recorded action needs an enabled operator of this file "
+                  "(--operator NAME or $SFR_OPERATOR), and may be signed")
     elif args.action == "list":
         users = operators.load_users()
         print(f"{path}: {len(users)} operator(s)")

@@ -111,6 +111,9 @@ def test_the_stirring_has_a_legend_entry_and_an_axis_from_zero(qtbot):
 
 
 def test_ctrl_c_ends_sfr_lab_at_its_login_dialog(tmp_path):
+    from labapp.records.operators import add_user
+
+    add_user("A. Jones", "a-password", tmp_path / "users.json")     # operators enforced: the GUI asks who
     env = {k: v for k, v in os.environ.items() if k != "SFR_OPERATOR"}
     env.update(QT_QPA_PLATFORM="offscreen", SFR_LAB_SETTINGS=str(tmp_path / "lab.ini"),
                SFR_USERS=str(tmp_path / "users.json"))
