@@ -4,7 +4,8 @@ A mesh file may hold several closed bodies. Outward-facing bodies are solid; an 
 inside a solid is a cavity. The solid is where the winding number is positive
 (`design.geometry.voxelize`), so two overlapping bodies mean their union, not the exclusive-or that
 ray parity would give. Every other path (exact distances, printing) needs one clean surface, so
-overlapping bodies are united here with manifold3d's exact booleans. A mesh that faces inward with no
+overlapping bodies, and bodies that touch (whose shared surface water cannot reach), are united here with
+manifold3d's exact booleans. A mesh that faces inward with no
 solid around it, or a body whose surface passes through itself, has no well-defined inside and is
 refused with where it goes wrong.
 """
@@ -20,6 +21,9 @@ from design.geometry.voxelize import grid_for, winding
 
 log = logging.getLogger(__name__)
 
+TOUCH_FRACTION = 1e-6
+"""Two bodies closer than this fraction of their size touch: they are one solid (the surface they share is not
+wetted)."""
 CHECK_RESOLUTION = 96
 """Voxels along a body's longest side on which its winding numbers are checked: a self-intersection
 or an overlap thinner than about one such voxel is not seen (and changes the volume by less than one
@@ -31,6 +35,47 @@ def _winding_range(mesh: trimesh.Trimesh) -> tuple[int, int, tuple[float, float]
     origin, shape = grid_for(mesh.bounds, dx)
     w = winding(mesh, dx, origin, shape)
     return w.low, w.high, w.odd_mm
+
+
+def _samples(body: trimesh.Trimesh) -> np.ndarray:
+    """A body's vertices, face centroids and edge midpoints."""
+    vx = body.vertices[body.faces]
+    return np.concatenate([body.vertices, vx.mean(axis=1), 0.5 * (vx + np.roll(vx, 1, axis=1)).reshape(-1, 3)])
+
+
+def _on_surface(points: np.ndarray, body: trimesh.Trimesh, tol: float) -> bool:
+    """Whether any point lies within ``tol`` of one of the body's triangles (its plane, inside its edges)."""
+    lo, hi = points.min(axis=0) - tol, points.max(axis=0) + tol
+    vx = body.vertices[body.faces]
+    keep = np.all((vx.max(axis=1) >= lo) & (vx.min(axis=1) <= hi), axis=1)
+    vx, normal = vx[keep], body.face_normals[keep]
+    for k in range(0, len(points), 256):
+        p = points[k:k + 256, None, :] - vx[None, :, 0, :]  # (P, F, 3) from each triangle's first vertex
+        e1, e2 = vx[:, 1] - vx[:, 0], vx[:, 2] - vx[:, 0]
+        d11, d12, d22 = (e1 * e1).sum(-1), (e1 * e2).sum(-1), (e2 * e2).sum(-1)
+        p1, p2 = (p * e1).sum(-1), (p * e2).sum(-1)
+        det = d11 * d22 - d12 * d12
+        u = (d22 * p1 - d12 * p2) / det
+        v = (d11 * p2 - d12 * p1) / det
+        slack = tol / np.sqrt(np.maximum(d11, d22))
+        on = (np.abs((p * normal).sum(-1)) <= tol) & (u >= -slack) & (v >= -slack) & (u + v <= 1 + slack)
+        if on.any():
+            return True
+    return False
+
+
+def _touching(solids: list[trimesh.Trimesh]) -> bool:
+    """Whether two solid bodies touch: a vertex, edge midpoint or face centroid of one lies on the other's surface
+    (within `TOUCH_FRACTION` of the pair's size)."""
+    for i, a in enumerate(solids):
+        for b in solids[i + 1:]:
+            tol = TOUCH_FRACTION * float(max(a.extents.max(), b.extents.max()))
+            for one, other in ((a, b), (b, a)):
+                pts = _samples(one)
+                pts = pts[np.all((pts >= other.bounds[0] - tol) & (pts <= other.bounds[1] + tol), axis=1)]
+                if len(pts) and _on_surface(pts, other, tol):
+                    return True
+    return False
 
 
 def solid_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> tuple[trimesh.Trimesh, list[str]]:
@@ -46,7 +91,8 @@ def solid_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> tuple[trimesh.Tri
     Returns
     -------
     mesh : trimesh.Trimesh
-        `mesh` itself when its bodies do not overlap; else the union of its solid bodies less its cavities.
+        `mesh` itself when its bodies neither overlap nor touch; else the union of its solid bodies less its
+        cavities (separate bodies stay separate bodies of the one mesh).
     notes : list of str
         What was changed (the bodies united and the volume they shared), for the user.
 
@@ -74,10 +120,10 @@ def solid_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> tuple[trimesh.Tri
     if low < 0:
         raise DesignError(f"{source}: a body faces inward with no solid around it (at x, y = {where} mm): it is "
                           "inside out, or a cavity pokes out of its solid; flip that body's faces")
-    if high <= 1:
-        return mesh, []
     solids = [b for b in bodies if b.volume > 0]
     cavities = [b for b in bodies if b.volume < 0]
+    if high <= 1 and not _touching(solids):
+        return mesh, []
     united = trimesh.boolean.union(solids, engine="manifold")
     if cavities:
         hollow = [trimesh.Trimesh(c.vertices, c.faces[:, ::-1]) for c in cavities]
@@ -86,8 +132,8 @@ def solid_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> tuple[trimesh.Tri
         raise DesignError(f"{source}: its {len(solids)} bodies overlap and could not be united into one closed "
                           "solid; unite them in a CAD program")
     shared = sum(b.volume for b in solids) - sum(-c.volume for c in cavities) - united.volume
-    note = (f"{source}: {len(solids)} overlapping bodies united into one solid of {united.volume:.4g} mm^3 "
-            f"(they shared {shared:.4g} mm^3)")
+    note = (f"{source}: {len(solids)} {'overlapping' if high > 1 else 'touching'} bodies united into one solid of "
+            f"{united.volume:.4g} mm^3 (they shared {shared:.4g} mm^3)")
     log.info("%s", note)
     return united, [note]
 

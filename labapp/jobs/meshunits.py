@@ -18,12 +18,21 @@ from labapp.errors import UsageError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MM_PER_UNIT", "check_memory", "design_memory_bytes", "grid_shape", "require_memory", "load_mesh_mm", "size_warnings"]
+__all__ = ["MIN_RESOLUTION", "MM_PER_UNIT", "check_memory", "design_memory_bytes", "grid_shape", "require_memory",
+           "load_mesh_mm", "size_warnings"]
 
 MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 PLAUSIBLE_VOLUME_MM3 = (1.0, 1e6)
 TYPICAL_VOLUME_MM3 = 3e3        # a pill-sized print; ranks the candidate units of an implausible mesh
 MIN_VOXELS_ACROSS = 4
+MIN_RESOLUTION = 8
+"""Fewest voxels along the longest side a simulation of a mesh takes (``sfr simulate --resolution``): at fewer,
+a typical part is under two voxels thick and voxelises to nothing or a few voxels."""
+MIN_LENGTH_MM = 3.0
+"""Shortest longest side plausible for a printed object, mm: a pill drawn in cm reads 2.3 mm long (and its
+volume, over 1 mm^3, looks plausible)."""
+TYPICAL_LENGTH_MM = 20.0
+"""A pill's length; ranks the candidate units of a mesh too small in its longest side."""
 #: Peak bytes per voxel of one forward simulation: the fast-marching and adjoint work arrays (traced with
 #: tracemalloc) and the density grid itself, rounded up.
 SIMULATE_BYTES_PER_VOXEL = 200
@@ -73,6 +82,14 @@ def _likely_unit(volume_mm3: float) -> str:
     return "check the units it was exported in (--units m|cm|mm|in)"
 
 
+def _likely_length_unit(longest_mm: float) -> str:
+    """The larger units that would make a longest side of ``longest_mm`` plausible, most likely first."""
+    fits = sorted((abs(math.log10(longest_mm * MM_PER_UNIT[u] / TYPICAL_LENGTH_MM)), u) for u in ("cm", "in")
+                  if longest_mm * MM_PER_UNIT[u] >= MIN_LENGTH_MM)
+    return "if it was drawn in " + " or ".join(
+        f"{'inches' if u == 'in' else u} ({longest_mm * MM_PER_UNIT[u]:.3g} mm long if so: --units {u})" for _, u in fits)
+
+
 def size_warnings(extents_mm: np.ndarray, volume_mm3: float, dx_mm: float | None = None,
                   source: str = "mesh") -> list[str]:
     """Warnings for a mesh whose size is implausible for a printed object, naming the likely unit error.
@@ -86,12 +103,19 @@ def size_warnings(extents_mm: np.ndarray, volume_mm3: float, dx_mm: float | None
     dx_mm : float, optional
         Voxel edge at the chosen resolution, mm; warns when the thinnest side is under
         :data:`MIN_VOXELS_ACROSS` voxels.
+
+    A volume outside :data:`PLAUSIBLE_VOLUME_MM3`, or a longest side under :data:`MIN_LENGTH_MM`, is warned
+    about with the units that would make it plausible.
     """
     lo, hi = PLAUSIBLE_VOLUME_MM3
     out = []
     if not lo <= abs(volume_mm3) <= hi:
         out.append(f"{source}: volume {abs(volume_mm3):.3g} mm^3 is outside {lo:g}..{hi:g} mm^3, implausible for a "
                    f"printed object; {_likely_unit(abs(volume_mm3))}")
+    longest = float(np.max(extents_mm))
+    if 0 < longest < MIN_LENGTH_MM and lo <= abs(volume_mm3):
+        out.append(f"{source}: its longest side is {longest:.3g} mm, implausibly small for a printed object; "
+                   f"{_likely_length_unit(longest)}")
     if dx_mm is not None and float(np.min(extents_mm)) / dx_mm < MIN_VOXELS_ACROSS:
         out.append(f"{source}: its thinnest side ({float(np.min(extents_mm)):.3g} mm) is under {MIN_VOXELS_ACROSS} "
                    f"voxels of {dx_mm:.3g} mm; raise --resolution or check the mesh units")

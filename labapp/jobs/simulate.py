@@ -1,4 +1,19 @@
-"""Simulate the release of a mesh, sample shape or density array (`sfr simulate`)."""
+"""Simulate the release of a mesh, sample shape or density array (`sfr simulate`).
+
+Two models make ``release.csv``:
+
+- ``exact`` (the default for a mesh or ``sample:NAME``): the reference evaluator
+  (:mod:`design.forward.reference`): exact surface distances, sealed voids wetted when the front reaches them,
+  a lattice sized by the solid's own thickness and refined until its stated error is within
+  `design.forward.solid_lattice.DEFAULT_TOLERANCE` of the volume; the curve ends at the mesh's exact volume. A
+  part too thin for it is refused, naming its thickness. Anisotropy (a calibration's) is the evaluator's metric.
+- ``grid`` (the only one for a density array, and for a calibration's surface offset or swelling): first-order
+  fast marching on voxels (eqs. 5-7), at ``--resolution`` voxels along the longest side, with its error
+  estimated against the exact release (a mesh) or a grid twice as coarse (a density array).
+
+Every output is written atomically (``labapp.records.fileio.atomic_write``): a full disk leaves no partial file
+and is a :class:`labapp.records.fileio.StorageError` naming it.
+"""
 from __future__ import annotations
 
 import json
@@ -12,15 +27,37 @@ from design import simulate as forward
 from design.errors import DesignError
 from design.files.meshio import DENSITY_SUFFIXES
 from design.files.pipeline import SAMPLE_PREFIX, input_grid, mesh_grid
-from design.forward.reference import design_lattice, reference_release
+from design.forward.reference import reference_release
+from design.forward.solid_lattice import DEFAULT_TOLERANCE, TooThinError
 from design.geometry.shapes import sample_shape
 from design.geometry.voxelize import DEFAULT_RESOLUTION
 from labapp.errors import UsageError
-from labapp.jobs.meshunits import SIMULATE_BYTES_PER_VOXEL, check_memory, grid_shape, load_mesh_mm, size_warnings
+from labapp.jobs.meshunits import MIN_RESOLUTION, SIMULATE_BYTES_PER_VOXEL, check_memory, grid_shape, load_mesh_mm, size_warnings
+from labapp.records.fileio import StorageError, atomic_write
 from labapp.records.outpaths import FolderKind, check_out
 
 log = logging.getLogger(__name__)
 
+GRID_WARN_FRACTION = 0.01
+"""A grid-model curve whose estimated error exceeds this fraction of the volume is warned about."""
+MODELS = ("exact", "grid")
+"""The models of :func:`simulate` (``sfr simulate --model``; ``mc`` is :mod:`labapp.jobs.simulate_mc`)."""
+
+
+@dataclass(frozen=True)
+class ExactRelease:
+    """The exact model's release: ``tau_mm`` (uniform, mm), ``released_mm3``, the solid's volume and the depth at
+    which it has all dissolved (mm), with the reference evaluation that made it."""
+
+    tau_mm: Any
+    released_mm3: Any
+    volume_mm3: float
+    total_time_mm: float
+    reference: Any
+
+    @property
+    def dtau_mm(self) -> float:
+        return float(self.tau_mm[1] - self.tau_mm[0]) if len(self.tau_mm) > 1 else 0.0
 
 
 @dataclass(frozen=True)
@@ -48,10 +85,15 @@ def simulation_grid(source: str, *, resolution: int | None = None, voxel_size_mm
     mirror : tuple of bool
     warnings : list of str
     """
+    if resolution is not None and int(resolution) < MIN_RESOLUTION:
+        raise UsageError(f"--resolution {resolution}: expected a whole number >= {MIN_RESOLUTION} voxels")
     if _is_density(source):
         if units != "mm":
             raise UsageError("--units applies to meshes; a density array's voxel size is in mm")
         rho, dx, mirror = input_grid(source, resolution=resolution, voxel_size_mm=voxel_size_mm, symmetry=symmetry)
+        if rho.ndim != 3:
+            raise UsageError(f"{source}: its density rho has shape {tuple(rho.shape)}; expected a 3-D array "
+                             "(X, Y, Z) of densities in [0, 1] with its voxel edge dx_mm")
         return rho, dx, mirror, ([f"{source}: a density array is simulated as given; the calibration's surface "
                                   f"offset {offset_mm:g} mm applies to meshes only"] if offset_mm else [])
     mesh = _source_mesh(source, units)
@@ -80,8 +122,8 @@ def error_estimate(source: str, units: str, release, rho, dx_mm: float,
     and as a fraction of its volume.
 
     A mesh (or sample shape) is released by the reference evaluator (`design.forward.reference`, exact
-    surface distances) on the same tau samples, on the lattice a design on a grid of the simulation's size
-    is judged on (`design.forward.reference.design_lattice`): the estimate is the largest difference, and
+    surface distances) on the same tau samples, on its lattice sized by the solid: the estimate is the largest
+    difference, and
     the evaluator's own stated error bounds how far that estimate can be off. A density array has no other
     description of its solid than its grid: the estimate is the largest difference from the same
     density averaged over blocks of 2 voxels per axis, simulated on voxels twice as large (the fast
@@ -91,8 +133,7 @@ def error_estimate(source: str, units: str, release, rho, dx_mm: float,
 
     if not _is_density(source):
         try:
-            ref = reference_release(_source_mesh(source, units), release.tau_mm, cells=design_lattice(max(rho.shape)),
-                                    anisotropy=anisotropy)
+            ref = reference_release(_source_mesh(source, units), release.tau_mm, anisotropy=anisotropy, source=source)
         except DesignError as exc:  # a mesh the voxeliser takes but the evaluator does not (not closed)
             return {"error_mm3": None, "error_fraction": None, "method": f"not estimated: {exc}"}
         diff = float(np.abs(release.released_mm3 - ref.released_mm3).max())
@@ -114,28 +155,91 @@ def error_estimate(source: str, units: str, release, rho, dx_mm: float,
 
 def simulate(source: str, out: str | Path, *, resolution: int | None = None, voxel_size_mm: float | None = None,
              symmetry: str = "", units: str = "mm", physics: dict | None = None,
-             progress: Callable[[str], None] | None = None) -> SimulationOutputs:
+             progress: Callable[[str], None] | None = None, model: str | None = None) -> SimulationOutputs:
     """Simulate the release of a mesh, ``sample:NAME`` or density array into ``out`` (release.csv,
-    summary.json, release.png); the grid comes from :func:`simulation_grid`. The summary's ``error``
-    states how far the curve is from the solid's physical release (:func:`error_estimate`). ``physics``
-    (``anisotropy``, ``offset_mm``, a calibration's print physics) simulates the print instead of the mesh.
+    summary.json, release.png). ``model`` ``exact`` (the default for a mesh) or ``grid`` (the default for a
+    density array, and for ``physics`` with a surface offset or swelling); see the module docstring. The
+    summary's ``model``, ``method``, ``error`` and ``lattice`` (or grid) say what made release.csv, how far it is
+    from the solid's physical release and why its resolution. ``physics`` (``anisotropy``, ``offset_mm``,
+    ``swelling_mm``: a calibration's print physics) simulates the print instead of the mesh.
 
     Raises
     ------
     UsageError
-        For an ``out`` that is an input or another command's folder, or a grid that would not fit in memory.
+        For an ``out`` that is an input or another command's folder, a grid option with the exact model, a part
+        too thin for the exact model, a grid that would not fit in memory, or a density array not 3-D.
+    StorageError
+        When an output cannot be written (a full disk); nothing partial is left of it.
     design.DesignError
         For an unreadable or invalid input.
     """
-    import time
-
-    import numpy as np
-
     say = progress or (lambda message: None)
     out = check_out(out, FolderKind.SIMULATION, [source])
+    physics = {"anisotropy": 1.0, "offset_mm": 0.0, **(physics or {})}
+    printed = physics["offset_mm"] != 0.0 or physics.get("swelling_mm", 0.0) != 0.0
+    chosen = model or ("grid" if _is_density(source) or printed else "exact")
+    if chosen not in MODELS:
+        raise UsageError(f"model {chosen!r}: expected one of {', '.join(MODELS)}")
+    if chosen == "exact":
+        if _is_density(source):
+            raise UsageError(f"{source}: a density array has no surface for the exact model; use --model grid")
+        if printed:
+            raise UsageError("the exact model has no surface offset or swelling (the calibration's print physics); "
+                             "use --model grid")
+        given = [name for name, v in (("--resolution", resolution), ("--voxel-size", voxel_size_mm),
+                                      ("--symmetry", symmetry)) if v]
+        if given:
+            raise UsageError(f"{', '.join(given)} set the grid model's voxels; the exact model sizes its lattice by "
+                             "the solid: drop them or add --model grid")
+        release, summary, warnings = _simulate_exact(source, units, physics, say)
+    else:
+        release, summary, warnings = _simulate_grid(source, units, physics, say, resolution=resolution,
+                                                    voxel_size_mm=voxel_size_mm, symmetry=symmetry)
+    say(f"[3/3] writing {out}/ ({summary['seconds']:.1f} s)")
+    write_outputs(out, release.tau_mm, release.released_mm3, summary, source)
+    return SimulationOutputs(release, summary, out, tuple(warnings))
+
+
+def _simulate_exact(source: str, units: str, physics: dict, say: Callable[[str], None]
+                    ) -> tuple[ExactRelease, dict[str, Any], list[str]]:
+    """The reference evaluator's release of a mesh or sample shape, on a lattice sized by the solid."""
+    import time
+
+    start = time.perf_counter()
+    say(f"[1/3] loading {source} ...")
+    mesh = _source_mesh(source, units)
+    warnings = size_warnings(mesh.extents, float(mesh.volume), None, source)
+    for w in warnings:
+        log.warning("%s", w)
+    say(f"[2/3] exact release by surface distances ({time.perf_counter() - start:.1f} s) ...")
+    try:
+        ref = reference_release(mesh, anisotropy=physics["anisotropy"], source=source,
+                                progress=lambda line: say(f"      {line}"))
+    except TooThinError as exc:
+        raise UsageError(str(exc)) from exc
+    if ref.relative_error > DEFAULT_TOLERANCE:
+        warnings.append(f"{source}: the exact model's stated error is {ref.relative_error:.2%} of the volume, above "
+                        f"the {DEFAULT_TOLERANCE:.2%} it aims at ({ref.lattice})")
+    release = ExactRelease(ref.tau_mm, ref.released_mm3, ref.volume_mm3, float(ref.tau_mm[-1]), ref)
+    seconds = time.perf_counter() - start
+    summary = {"input": source, "units": units, "model": "exact", "method": ref.method,
+               "volume_mm3": ref.volume_mm3, "total_time_mm": release.total_time_mm, "dtau_mm": release.dtau_mm,
+               "error": {"error_mm3": ref.error_mm3, "error_fraction": ref.relative_error,
+                         "method": "stated by the reference evaluator: max |C_h - C_2h| against a lattice twice as "
+                                   "coarse (the curve's own error is about a third of it)"},
+               "lattice": {"spacing_mm": ref.cell_mm, "reason": ref.lattice},
+               "bodies": len(mesh.split(only_watertight=False)),
+               "seconds": seconds, "warnings": warnings, "physics": physics}
+    return release, summary, warnings
+
+
+def _simulate_grid(source: str, units: str, physics: dict, say: Callable[[str], None], *, resolution: int | None,
+                   voxel_size_mm: float | None, symmetry: str) -> tuple[Any, dict[str, Any], list[str]]:
+    """The grid model's release (first-order fast marching, eqs. 5-7) with its error estimate."""
+    import time
+
     start = time.perf_counter()
     say(f"[1/3] loading and voxelising {source} ...")
-    physics = physics or {"anisotropy": 1.0, "offset_mm": 0.0}
     rho, dx, mirror, warnings = simulation_grid(source, resolution=resolution, voxel_size_mm=voxel_size_mm,
                                                 symmetry=symmetry, units=units, offset_mm=physics["offset_mm"])
     say(f"[2/3] fast marching {rho.size:,} voxels of {dx:.4g} mm ({time.perf_counter() - start:.1f} s) ...")
@@ -146,21 +250,59 @@ def simulate(source: str, out: str | Path, *, resolution: int | None = None, vox
                  "method": "not estimated: the reference evaluator has no surface offset or swelling"}
     else:
         error = error_estimate(source, units, release, rho, dx, mirror, physics["anisotropy"])
-    seconds = time.perf_counter() - start
-    say(f"[3/3] writing {out}/ ({seconds:.1f} s)")
-    out.mkdir(parents=True, exist_ok=True)
-    np.savetxt(out / "release.csv", np.column_stack([release.tau_mm, release.released_mm3]), delimiter=",",
-               header="tau_mm,released_mm3", comments="", fmt="%.9g")
-    summary = {"input": source, "units": units, "volume_mm3": release.volume_mm3,
+    if error.get("error_fraction") is not None and error["error_fraction"] > GRID_WARN_FRACTION:
+        warnings.append(f"{source}: the grid model's curve is {error['error_fraction']:.1%} of the volume off the "
+                        f"solid's release ({error['method']}); raise --resolution, or use the exact model "
+                        "(the default for a mesh)")
+    why = ("--voxel-size" if voxel_size_mm else f"--resolution {resolution}" if resolution else
+           f"the default {DEFAULT_RESOLUTION} voxels along the longest side")
+    summary = {"input": source, "units": units, "model": "grid",
+               "method": "first-order fast marching on voxels (eqs. 5-7)", "volume_mm3": release.volume_mm3,
                "total_time_mm": release.total_time_mm, "voxels": int(rho.size), "grid_shape": list(rho.shape),
-               "voxel_size_mm": dx, "mirror": list(mirror), "dtau_mm": release.dtau_mm, "error": error,
-               "seconds": seconds, "warnings": warnings, "physics": physics}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    _plot_release(release.tau_mm, release.released_mm3, out / "release.png", source)
-    return SimulationOutputs(release, summary, out, tuple(warnings))
+               "voxel_size_mm": dx, "resolution_reason": why, "mirror": list(mirror), "dtau_mm": release.dtau_mm,
+               "error": error, "seconds": time.perf_counter() - start, "warnings": warnings, "physics": physics}
+    return release, summary, warnings
 
 
-def _plot_release(tau_mm, released_mm3, path: Path, title: str) -> None:
+def write_outputs(out: Path, tau_mm, released_mm3, summary: dict[str, Any], title: str) -> None:
+    """release.csv, summary.json and release.png into ``out``, each written atomically.
+
+    Raises
+    ------
+    StorageError
+        Naming the file that could not be written (a full disk); nothing partial is left of it.
+    """
+    import io
+
+    import numpy as np
+
+    out.mkdir(parents=True, exist_ok=True)
+    table = io.StringIO()
+    np.savetxt(table, np.column_stack([tau_mm, released_mm3]), delimiter=",", header="tau_mm,released_mm3",
+               comments="", fmt="%.9g")
+    picture = io.BytesIO()
+    _plot_release(tau_mm, released_mm3, picture, title)
+    for name, data in (("release.csv", table.getvalue().encode()),
+                       ("summary.json", (json.dumps(summary, indent=2) + "\n").encode()),
+                       ("release.png", picture.getvalue())):
+        write_file(out / name, data)
+
+
+def write_file(path: Path, data: bytes) -> None:
+    """``labapp.records.fileio.atomic_write`` with a full or read-only disk as a :class:`StorageError`."""
+    import os
+
+    try:
+        atomic_write(path, data)
+    except StorageError:
+        raise
+    except OSError as exc:
+        path.with_name(f".{path.name}.part").unlink(missing_ok=True)
+        raise StorageError(f"cannot write {path}: {exc.strerror or os.strerror(exc.errno or 0)}; nothing of it was "
+                           "left; free space or choose another --out") from exc
+
+
+def _plot_release(tau_mm, released_mm3, path, title: str) -> None:
     """The cumulative curve and its rate dC/dtau, one above the other."""
     import matplotlib
 
@@ -177,5 +319,5 @@ def _plot_release(tau_mm, released_mm3, path: Path, title: str) -> None:
     bottom.set_xlabel("dissolution time $\\tau$ (mm dissolved)")
     for ax in (top, bottom):
         ax.grid(alpha=0.3)
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, format="png")
     plt.close(fig)

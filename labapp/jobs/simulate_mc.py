@@ -43,6 +43,9 @@ if TYPE_CHECKING:
     from labapp.jobs.simulate import SimulationOutputs
 
 
+UNCALIBRATED = ("its parameters (A, E_a) are uncalibrated defaults, not tuned to any measurement: times are in units "
+                "of 1/A; tune them with sfr evaluate and pass --mc-calibration")
+"""What a Monte Carlo simulation without a calibration file says of itself (output and summary)."""
 FORMAT = "sfr-mc-calibration/1"
 """``format`` of ``mc.json``."""
 
@@ -150,6 +153,9 @@ def simulate_mc_job(source: str, out: str | Path, calibration: McCalibration, *,
     atomic_write(out / "release_physical.csv", physical.encode())
     summary = {"input": source, "model": "mc", "units": units, "calibration": calibration.describe(),
                "calibration_file": None if calibration.path is None else str(calibration.path),
+               "calibrated": calibration.path is not None,
+               "calibration_note": "tuned (A, E_a) from the calibration file" if calibration.path is not None
+               else UNCALIBRATED,
                "params": release.params.to_dict(), "seeds": list(release.seeds), "dt_s": release.dt_s,
                "volume_mm3": release.volume_mm3, "voxels": int(rho.size), "grid_shape": list(rho.shape),
                "voxel_size_mm": dx, "mirror": list(mirror), "seconds": seconds, "warnings": warnings,
@@ -158,7 +164,7 @@ def simulate_mc_job(source: str, out: str | Path, calibration: McCalibration, *,
                             "release": release_summary(release.t_s, grams, None, "Monte Carlo mean")}}
     atomic_write(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
     plot_physical(out / "release.png", [(release.t_s, grams, "Monte Carlo mean", "C2-")],
-                  f"{source}: {calibration.describe()}",
+                  f"{source}: {calibration.describe()}" + ("" if calibration.path else " (uncalibrated defaults)"),
                   band=(release.t_s, grams - 2 * spread_g, grams + 2 * spread_g,
                         "+-2 standard deviations over the seeds"))
 

@@ -5,8 +5,12 @@ import argparse
 import sys
 
 from labapp.cli import interrupt
-from labapp.cli.argtypes import nonnegative_float, positive_float, positive_int
-from labapp.jobs.meshunits import MM_PER_UNIT
+from labapp.cli.argtypes import bounded, nonnegative_float, positive_float, positive_int
+from labapp.jobs.meshunits import MIN_RESOLUTION, MM_PER_UNIT
+
+MAX_RESOLUTION = 1024
+"""Most voxels along the longest side ``--resolution`` takes (far past what fits in memory for most parts; the
+grid's memory is checked before it is allocated)."""
 
 NAME = "simulate"
 HELP = "simulate the release curve of a mesh (STL/OBJ/PLY/OFF/3MF), sample:NAME or a density .npy/.npz"
@@ -17,24 +21,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="mesh file (mm unless --units), density array (.npz with rho and dx_mm, or .npy with --voxel-size), "
                              "or sample:NAME (sphere, pill, spinner_top, csg, polyhedron)")
     size = parser.add_mutually_exclusive_group()
-    size.add_argument("--resolution", type=positive_int, metavar="N",
-                      help="voxels along the longest bounding-box side (default 64)")
-    size.add_argument("--voxel-size", type=positive_float, metavar="MM", help="voxel edge length in mm")
+    size.add_argument("--resolution", type=bounded(MIN_RESOLUTION, MAX_RESOLUTION, integer=True, unit="voxels"),
+                      metavar="N", help=f"--model grid/mc: voxels along the longest bounding-box side "
+                                        f"({MIN_RESOLUTION}-{MAX_RESOLUTION}, default 64)")
+    size.add_argument("--voxel-size", type=positive_float, metavar="MM", help="--model grid/mc: voxel edge length in mm")
     parser.add_argument("--units", default="mm", choices=tuple(MM_PER_UNIT),
                         help="units of the mesh file's coordinates (default mm); a size implausible for a printed "
                              "object is warned about with the likely unit")
     parser.add_argument("--symmetry", default="", metavar="AXES",
-                        help="mirror planes through the bounding-box centre on these axes, e.g. xyz: simulates "
+                        help="--model grid/mc: mirror planes through the bounding-box centre on these axes, e.g. xyz: simulates "
                              "one half/quadrant/octant; the curve is still the full object's")
     parser.add_argument("--out", default="simulation", metavar="DIR", help="output folder (default ./simulation)")
     parser.add_argument("--simcal", metavar="SIMCAL.json",
                         help="simulation calibration (sfr calibrate-sim): also write release_physical.csv "
-                             "(t_s,released_g,conc_g_per_kg) and release_physical.png; simulates at its resolution")
+                             "(t_s,released_g,conc_g_per_kg) and release_physical.png; its anisotropy applies to "
+                             "the exact model, a surface offset or swelling takes the grid model at its resolution")
     parser.add_argument("--water-g", type=positive_float, help="bath water for the physical curve, g (default: the "
                         "calibration's)")
-    parser.add_argument("--model", choices=("forward", "mc"), default="forward",
-                        help="forward: the fast-marching model (default); mc: the kinetic Monte Carlo baseline "
-                             "(release.csv in seconds with the spread over seeds, release_physical.csv)")
+    parser.add_argument("--model", choices=("exact", "grid", "mc"), default=None,
+                        help="exact (the default for a mesh): exact surface distances on a lattice sized by the "
+                             "part's thickness, within 0.25%% of its volume; grid (the default for a density "
+                             "array): first-order fast marching on voxels, its error estimated; mc: the kinetic "
+                             "Monte Carlo baseline (release.csv in seconds with the spread over seeds, "
+                             "release_physical.csv)")
     parser.add_argument("--seeds", type=positive_int, default=4, help="--model mc: runs averaged (default 4)")
     parser.add_argument("--mc-calibration", metavar="MC.json",
                         help="--model mc: tuned (A, E_a) from sfr evaluate; without it --mc-a and --mc-ea")
@@ -55,7 +64,7 @@ def _run_mc(args: argparse.Namespace) -> int:
     """``--model mc``: the Monte Carlo job with a tuned calibration or explicit (A, E_a)."""
     from design.montecarlo.erosion import MonteCarloParams
     from labapp.errors import UsageError
-    from labapp.jobs.simulate_mc import McCalibration, load_mc_calibration, simulate_mc_job
+    from labapp.jobs.simulate_mc import UNCALIBRATED, McCalibration, load_mc_calibration, simulate_mc_job
 
     if args.simcal:
         raise UsageError("--simcal calibrates the forward model; the Monte Carlo model takes --mc-calibration")
@@ -68,12 +77,13 @@ def _run_mc(args: argparse.Namespace) -> int:
     else:
         calibration = McCalibration(MonteCarloParams(1.0 if args.mc_a is None else args.mc_a,
                                                      5000.0 if args.mc_ea is None else args.mc_ea))
-        print("sfr simulate: no --mc-calibration: times are in units of 1/A; tune (A, E_a) with sfr evaluate",
-              file=sys.stderr)
+        print(f"sfr simulate: no --mc-calibration: {UNCALIBRATED}", file=sys.stderr)
     result = simulate_mc_job(args.input, args.out, calibration, resolution=args.resolution,
                              voxel_size_mm=args.voxel_size, symmetry=args.symmetry, units=args.units,
                              seeds=args.seeds, water_g=args.water_g, progress=_progress)
     s = result.summary
+    if not s["calibrated"]:
+        print(f"uncalibrated: {s['calibration_note']}")
     print(f"Monte Carlo: {s['physical']['mass_g']:.3f} g released over {s['physical']['duration_s'] / 3600:.2f} h, "
           f"spread over {len(s['seeds'])} seeds up to {s['spread_max_g']:.4f} g ({calibration.describe()}), "
           f"{s['seconds']:.2f} s -> {result.out}")
@@ -99,18 +109,21 @@ def _run(args: argparse.Namespace) -> int:
     from labapp.jobs.compare import release_summary
     from labapp.jobs.physical import write_release_physical
     from labapp.jobs.simulate import simulate as simulate_job
+    from labapp.jobs.simulate import write_file
     from labapp.records.simcal import check_resolution, load_simcal
 
-    simcal = None
+    simcal, model = None, args.model
     if args.simcal:
         simcal = load_simcal(args.simcal)
-        if args.voxel_size is not None:
-            print(f"sfr simulate: {args.simcal} holds for resolution {simcal.resolution}; drop --voxel-size",
-                  file=sys.stderr)
-            return 2
-        args.resolution = check_resolution(simcal, args.resolution)
+        printed = simcal.physics.get("offset_mm", 0.0) != 0.0 or simcal.physics.get("swelling_mm", 0.0) != 0.0
+        if model == "grid" or (model is None and printed):
+            if args.voxel_size is not None:
+                print(f"sfr simulate: {args.simcal} holds for resolution {simcal.resolution}; drop --voxel-size",
+                      file=sys.stderr)
+                return 2
+            args.resolution, model = check_resolution(simcal, args.resolution), "grid"
     result = simulate_job(args.input, args.out, resolution=args.resolution, voxel_size_mm=args.voxel_size,
-                          symmetry=args.symmetry, units=args.units, progress=_progress,
+                          symmetry=args.symmetry, units=args.units, progress=_progress, model=model,
                           physics=None if simcal is None else simcal.physics)
     release, summary, out = result.release, result.summary, result.out
     seconds = summary["seconds"]
@@ -130,7 +143,7 @@ def _run(args: argparse.Namespace) -> int:
                                "mass_g": float(grams[-1, 1]), "duration_s": float(grams[-1, 0]),
                                "water_g": args.water_g or simcal.water_g,
                                "release": release_summary(grams[:, 0], grams[:, 1], None, "prediction")}
-        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        write_file(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
         print(f"predicted: {grams[-1, 1]:.3f} g released over {grams[-1, 0] / 3600:.2f} h "
               f"({simcal.describe()}) -> {physical}")
         if grams.shape[1] > 3:
@@ -142,7 +155,12 @@ def _run(args: argparse.Namespace) -> int:
     estimate = ("not estimated" if error["error_mm3"] is None else
                 f"within {error['error_mm3']:.3g} mm^3 ({error['error_fraction']:.2%} of the volume) of the physical "
                 f"release ({error['method']})")
-    print(f"volume {release.volume_mm3:.1f} mm^3, T = {release.total_time_mm:.3f} mm, {summary['voxels']:,} voxels, "
-          f"{seconds:.2f} s -> {out}")
+    if summary["model"] == "exact":
+        how = f"exact model ({summary['method']}), lattice {summary['lattice']['spacing_mm']:.4g} mm"
+    else:
+        how = f"grid model, {summary['voxels']:,} voxels of {summary['voxel_size_mm']:.4g} mm"
+    print(f"volume {release.volume_mm3:.1f} mm^3, T = {release.total_time_mm:.3f} mm, {how}, {seconds:.2f} s -> {out}")
     print(f"error: the simulated curve is {estimate}")
+    for warning in summary["warnings"]:
+        print(f"warning: {warning}")
     return 0

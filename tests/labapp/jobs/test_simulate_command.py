@@ -1,4 +1,4 @@
-"""`sfr simulate`: output files, the full-object convention and error reporting."""
+"""`sfr simulate --model grid` (and density arrays): output files, the full-object convention and error reporting."""
 import csv
 import json
 
@@ -14,13 +14,15 @@ from labapp.cli.main import main
 
 def test_sample_shape_writes_csv_summary_and_plot(tmp_path):
     out = tmp_path / "run"
-    assert main(["simulate", "sample:sphere", "--resolution", "24", "--symmetry", "xyz", "--out", str(out)]) == 0
+    assert main(["simulate", "sample:sphere", "--model", "grid", "--resolution", "24", "--symmetry", "xyz",
+                 "--out", str(out)]) == 0
     with open(out / "release.csv") as fh:
         rows = list(csv.reader(fh))
     assert rows[0] == ["tau_mm", "released_mm3"] and len(rows) == 1002
     summary = json.loads((out / "summary.json").read_text())
     for key in ("volume_mm3", "total_time_mm", "voxels", "voxel_size_mm", "seconds"):
         assert key in summary
+    assert summary["model"] == "grid" and summary["resolution_reason"] == "--resolution 24"
     # the octant was simulated, but the curve ends at the full sphere's voxel volume
     assert float(rows[-1][1]) == pytest.approx(summary["volume_mm3"], rel=1e-9)
     assert summary["voxels"] == 12 ** 3
@@ -33,7 +35,8 @@ def test_an_anisotropic_simulation_states_its_error_against_the_reference_at_its
 
     box = tmp_path / "box.stl"
     trimesh.creation.box(extents=(12.0, 9.0, 6.0)).export(box)  # whole voxels of 0.375 mm
-    outputs = simulate(str(box), tmp_path / "run", resolution=32, physics={"anisotropy": 0.6, "offset_mm": 0.0})
+    outputs = simulate(str(box), tmp_path / "run", resolution=32, physics={"anisotropy": 0.6, "offset_mm": 0.0},
+                       model="grid")
     error = outputs.summary["error"]
     assert error["reference_method"] == "exact-distance, anisotropy 0.6"
     # the grid's own error at its anisotropy (observed 0.96% of the volume), far below the gap to the isotropic
@@ -41,28 +44,31 @@ def test_an_anisotropic_simulation_states_its_error_against_the_reference_at_its
     curve = np.loadtxt(outputs.out / "release.csv", delimiter=",", skiprows=1)
     iso = reference_release(trimesh.load(box), curve[:, 0], cells=64).released_mm3
     assert error["error_fraction"] < 0.02 and np.abs(curve[:, 1] - iso).max() / error["reference_volume_mm3"] > 0.05
-    error = simulate(str(box), tmp_path / "grown", resolution=32,
-                     physics={"anisotropy": 0.6, "offset_mm": 0.2}).summary["error"]
-    assert error["error_mm3"] is None and "no surface offset or swelling" in error["method"]
+    grown = simulate(str(box), tmp_path / "grown", resolution=32, physics={"anisotropy": 0.6, "offset_mm": 0.2}).summary
+    # a surface offset is simulated by the grid model (the exact one has none)
+    assert grown["model"] == "grid" and grown["error"]["error_mm3"] is None
+    assert "no surface offset or swelling" in grown["error"]["method"]
 
 
 def test_a_mesh_s_simulation_states_its_error_against_the_reference_evaluator(tmp_path, capsys):
     out = tmp_path / "run"
-    assert main(["simulate", "sample:sphere", "--resolution", "24", "--out", str(out)]) == 0
+    assert main(["simulate", "sample:sphere", "--model", "grid", "--resolution", "24", "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     curve = np.loadtxt(out / "release.csv", delimiter=",", skiprows=1)
     reference = reference_release(sample_shape("sphere"), curve[:, 0])
     error = summary["error"]
     assert error["method"] == "reference evaluator" and error["reference_method"] == "exact-distance"
-    # the run's estimate, on the lattice of a 24-voxel grid, agrees with one against the default lattice within
-    # the two evaluations' stated errors
+    # the run's estimate agrees with one against the evaluator's default within the two evaluations' stated errors
     assert abs(error["error_mm3"] - np.abs(curve[:, 1] - reference.released_mm3).max()) <= (
         error["reference_error_mm3"] + reference.error_mm3)
     assert error["error_fraction"] == pytest.approx(error["error_mm3"] / sample_shape("sphere").volume, rel=1e-9)
     # first-order fast marching at 24 voxels across misses a sphere by a few per cent, far above the
     # evaluator's own error
     assert 0.005 < error["error_fraction"] < 0.1 and error["reference_error_mm3"] < 0.1 * error["error_mm3"]
-    assert f"({error['error_fraction']:.2%} of the volume) of the physical release" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert f"({error['error_fraction']:.2%} of the volume) of the physical release" in printed
+    # a grid curve that far off says so
+    assert summary["warnings"] and "the grid model's curve is" in summary["warnings"][0] and "warning: " in printed
 
 
 def test_density_array_input(tmp_path):
@@ -86,9 +92,9 @@ def test_errors_name_the_problem(tmp_path, capsys):
 def test_a_mesh_the_reference_evaluator_refuses_is_simulated_without_an_estimate(tmp_path, monkeypatch):
     import labapp.jobs.simulate
 
-    def refuse(mesh, tau_mm, cells, anisotropy):
+    def refuse(mesh, tau_mm, **options):
         raise DesignError("reference release: the mesh has inconsistent face winding")
     monkeypatch.setattr(labapp.jobs.simulate, "reference_release", refuse)
-    assert main(["simulate", "sample:sphere", "--resolution", "12", "--out", str(tmp_path / "o")]) == 0
+    assert main(["simulate", "sample:sphere", "--model", "grid", "--resolution", "12", "--out", str(tmp_path / "o")]) == 0
     error = json.loads((tmp_path / "o" / "summary.json").read_text())["error"]
     assert error["error_mm3"] is None and error["method"].startswith("not estimated: reference release")

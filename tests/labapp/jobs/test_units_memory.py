@@ -37,16 +37,18 @@ def test_size_warnings_name_the_likely_unit():
 
 def test_simulate_warns_then_scales_with_units(metre_sphere, tmp_path, caplog):
     out = tmp_path / "a"
-    assert main(["simulate", str(metre_sphere), "--resolution", "16", "--out", str(out)]) == 0
+    assert main(["simulate", "--model", "grid", str(metre_sphere), "--resolution", "16", "--out", str(out)]) == 0
     assert "--units m" in caplog.text
     summary = json.loads((out / "summary.json").read_text())
     assert summary["volume_mm3"] < 1e-3 and "--units m" in summary["warnings"][0]
     out_m = tmp_path / "b"
     ref = tmp_path / "c"
-    assert main(["simulate", str(metre_sphere), "--units", "m", "--resolution", "16", "--out", str(out_m)]) == 0
-    assert main(["simulate", str(SPHERE), "--resolution", "16", "--out", str(ref)]) == 0
+    assert main(["simulate", "--model", "grid", str(metre_sphere), "--units", "m", "--resolution", "16",
+                 "--out", str(out_m)]) == 0
+    assert main(["simulate", "--model", "grid", str(SPHERE), "--resolution", "16", "--out", str(ref)]) == 0
     scaled, mm = (json.loads((p / "summary.json").read_text()) for p in (out_m, ref))
-    assert scaled["warnings"] == [] and scaled["volume_mm3"] == pytest.approx(mm["volume_mm3"], rel=1e-6)
+    assert not any("--units" in w for w in scaled["warnings"])
+    assert scaled["volume_mm3"] == pytest.approx(mm["volume_mm3"], rel=1e-6)
 
 
 def test_memory_is_estimated_and_refused_with_the_figure(monkeypatch, tmp_path, capsys):
@@ -56,7 +58,7 @@ def test_memory_is_estimated_and_refused_with_the_figure(monkeypatch, tmp_path, 
     assert check_memory((100, 100, 100), 200, "x") == 200_000_000
     with pytest.raises(UsageError, match=r"600 x 600 x 600 voxels needs about 40.2 GiB, only 1.6 GiB"):
         check_memory((600, 600, 600), 200, "x")
-    assert main(["simulate", str(SPHERE), "--voxel-size", "0.01", "--out", str(tmp_path / "s")]) == 2
+    assert main(["simulate", "--model", "grid", str(SPHERE), "--voxel-size", "0.01", "--out", str(tmp_path / "s")]) == 2
     assert "GiB of memory is available" in capsys.readouterr().err and not (tmp_path / "s").exists()
     out = tmp_path / "d"
     assert main(["design", "--target", "sphere", "--resolution", "512", "--max-iter", "1", "--out", str(out)]) == 2
