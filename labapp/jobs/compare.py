@@ -25,8 +25,9 @@ import numpy as np
 
 from analysis.bootstrap import DEFAULT_SEED, ESTIMATORS, INTERVALS, BootstrapF2, bootstrap_f2
 from analysis.errors import AnalysisError
-from analysis.msd import MTAD_PCT, SIGNIF, MsdResult, msd_test
+from analysis.msd import BOUNDS_PCT, MTAD_PCT, SIGNIF, MsdResult, msd_test
 from analysis.profile import (
+    CUTOFF_PCT,
     MAX_SAMPLED_POINTS,
     ReleaseProfile,
     Similarity,
@@ -456,7 +457,9 @@ def _mean_summary(s: ReplicateSet, curves: Sequence[PhysicalCurve], basis: str, 
 
 def compare_sets(reference: Sequence[str | Path], test: Sequence[str | Path], *, calibration=None,
                  rule: str = DEFAULT_RULE, times_s: Sequence[float] | None = None, n_boot: int = 0,
-                 seed: int = DEFAULT_SEED, mtad: float = MTAD_PCT, signif: float = SIGNIF) -> SetComparison:
+                 seed: int = DEFAULT_SEED, mtad: float = MTAD_PCT, signif: float = SIGNIF,
+                 both_tr_85: bool = False, cutoff_pct: float = CUTOFF_PCT,
+                 bounds: tuple[float, float] = BOUNDS_PCT) -> SetComparison:
     """Compare the replicate units of a reference and a test product.
 
     Parameters
@@ -476,6 +479,13 @@ def compare_sets(reference: Sequence[str | Path], test: Sequence[str | Path], *,
         R's ``set.seed`` value of the bootstrap (bootf2's default 306).
     mtad, signif : float
         Of Tsong's MSD and Hoffelder's T^2.
+    both_tr_85 : bool
+        The fda rule's older reading of its 85 % sentence (the published values of Shah et al. 1998; see
+        :func:`analysis.regulatory.check_rule`), for f2 and its bootstrap.
+    cutoff_pct : float
+        The release after whose first point f2 stops, % (default 85).
+    bounds : (float, float)
+        The profile portion of the MSD and T^2 tests, % (disprofas' ``bounds``; default 1, 85).
 
     Raises
     ------
@@ -501,13 +511,14 @@ def compare_sets(reference: Sequence[str | Path], test: Sequence[str | Path], *,
         if times_s is not None:
             raise CurveFileError("--times applies to curves; a units file brings its own time points")
         basis = "units file"
-    check = check_rule(test_set, ref_set, rule)
+    check = check_rule(test_set, ref_set, rule, both_tr_85=both_tr_85, cutoff_pct=cutoff_pct)
     boot = None
     if n_boot:
-        boot = bootstrap_f2(test_set, ref_set, rule, n_boot=n_boot, seed=seed)
+        boot = bootstrap_f2(test_set, ref_set, rule, n_boot=n_boot, seed=seed, both_tr_85=both_tr_85,
+                            cutoff_pct=cutoff_pct)
     msd, msd_error = None, None
     try:
-        msd = msd_test(ref_set, test_set, mtad=mtad, signif=signif)
+        msd = msd_test(ref_set, test_set, mtad=mtad, signif=signif, bounds=bounds)
     except AnalysisError as exc:
         msd_error = str(exc)
     return SetComparison(ref_set, test_set, check, boot, msd, msd_error,

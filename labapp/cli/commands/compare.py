@@ -44,7 +44,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mtad", type=bounded(0.0, 50.0, low_open=True, unit="%"), default=10.0, metavar="PCT",
                         help="replicate units: largest tolerable mean difference per point of the MSD and T^2 tests, "
                              "%% (default 10)")
+    parser.add_argument("--signif", type=bounded(0.0, 1.0, low_open=True), metavar="ALPHA",
+                        help="replicate units: significance level of the MSD and T^2 tests (default 0.05)")
+    parser.add_argument("--both-tr-85", action="store_true",
+                        help="replicate units, --rule fda: the older reading of the FDA's 85 %% sentence (a point "
+                             "is dropped only once both means exceed 85 %%), which published values such as Shah "
+                             "et al. 1998's use; bootf2's both.TR.85")
+    parser.add_argument("--cutoff", type=bounded(0.0, 100.0, low_open=True, unit="%"), metavar="PCT",
+                        help="replicate units: f2 stops after the first point above this release, %% (default 85)")
+    parser.add_argument("--bounds", type=_bounds, metavar="LOW,HIGH",
+                        help="replicate units: the profile portion of the MSD and T^2 tests, %% released: points "
+                             "with both means above LOW, up to the first above HIGH (default 1,85; disprofas' bounds)")
     parser.add_argument("--calibration", help="bench calibration JSON for run folders without calibration.json")
+
+
+def _given(**options) -> dict:
+    """The options given on the command line (the others take the job's defaults)."""
+    return {name: value for name, value in options.items() if value is not None}
+
+
+def _bounds(text: str) -> tuple[float, float]:
+    """``LOW,HIGH`` in %, 0 <= LOW <= HIGH <= 100."""
+    try:
+        low, high = (float(p) for p in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected LOW,HIGH in %, e.g. 1,85") from None
+    if not 0 <= low <= high <= 100:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected 0 <= LOW <= HIGH <= 100 (%)")
+    return low, high
 
 
 def _times(text: str | None) -> list[float] | None:
@@ -89,6 +116,11 @@ def run(args: argparse.Namespace) -> int:
                              "--reference UNIT... --test UNIT...")
         if args.bootstrap:
             raise UsageError("--bootstrap needs replicate units: give each product's units with --reference and --test")
+        for name, value in (("--both-tr-85", args.both_tr_85 or None), ("--cutoff", args.cutoff),
+                            ("--bounds", args.bounds), ("--signif", args.signif)):
+            if value is not None:
+                raise UsageError(f"{name} applies to replicate units: give each product's units with --reference "
+                                 "and --test")
         for name, value in (("A", args.a), ("B", args.b)):
             if "," in value and not Path(value).exists():
                 raise UsageError(f"{name} {value!r}: replicate units are given as --reference UNIT... --test UNIT..., "
@@ -96,6 +128,8 @@ def run(args: argparse.Namespace) -> int:
         inputs = [args.a, args.b]
     if args.bootstrap and args.bootstrap < 100:
         raise UsageError(f"--bootstrap {args.bootstrap}: expected a number of samples >= 100, or 0 for none")
+    if args.both_tr_85 and args.rule != "fda":
+        raise UsageError(f"--both-tr-85 is a reading of the FDA's rule; it needs --rule fda (given: {args.rule})")
     plot = check_out(args.plot, "compare", inputs, file=True, option="--plot") if args.plot else None
     calibration = None
     if args.calibration:
@@ -104,7 +138,9 @@ def run(args: argparse.Namespace) -> int:
         calibration = BenchCalibration.load(args.calibration)
     if sets:
         result = compare_sets(args.reference, args.test, calibration=calibration, rule=args.rule,
-                              times_s=_times(args.times), n_boot=args.bootstrap, seed=args.seed, mtad=args.mtad)
+                              times_s=_times(args.times), n_boot=args.bootstrap, seed=args.seed, mtad=args.mtad,
+                              both_tr_85=args.both_tr_85, **_given(signif=args.signif, cutoff_pct=args.cutoff,
+                                                                   bounds=args.bounds))
         text, draw = format_set_table, plot_sets
     else:
         result = compare_curves(args.a, args.b, calibration=calibration, until_s=args.until,

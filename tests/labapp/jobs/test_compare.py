@@ -235,3 +235,38 @@ def test_the_who_rule_cuts_two_curves_where_the_reference_passes_85_percent(tmp_
     assert got["who"]["times_s"] == [600, 1200, 1800, 2400] and got["who"]["rule"] == "who"
     r, s = np.array([0.30, 0.55, 0.75, 0.90]) / 0.98 * 100, np.array([0.50, 0.88, 0.95, 0.97]) / 0.98 * 100
     assert got["who"]["f2"] == pytest.approx(100 - 25 * np.log10(1 + np.mean((r - s) ** 2)))
+
+
+@pytest.mark.parametrize("batch, f2", [("test1", 60.03), ("test2", 51.08), ("test3", 51.19),
+                                       ("test4", 50.07), ("test5", 48.05)])
+def test_shah_1998_published_f2_from_the_command_line(tmp_path, capsys, batch, f2):
+    # Shah et al. 1998 (Pharm. Res. 15:889), as bootf2 computes them: calcf2(..., "FDA", both.TR.85 = TRUE)
+    ref, test = _shah(tmp_path, "ref"), _shah(tmp_path, batch)
+    assert main(["compare", "--reference", ref, "--test", test, "--rule", "fda", "--both-tr-85", "--json"]) == 0
+    assert round(json.loads(capsys.readouterr().out)["f2"], 2) == f2
+
+
+def test_disprofas_profile_portion_from_the_command_line(tmp_path, capsys):
+    from tests.analysis.published import dip
+
+    cols = ["t.5", "t.10", "t.15", "t.20", "t.30", "t.60", "t.90", "t.120"]
+    r, t = dip("dip1", "type", "R", cols), dip("dip1", "type", "T", cols)
+    ref = _units_csv(tmp_path / "r.csv", r.times, r.units)
+    test = _units_csv(tmp_path / "t.csv", t.times, t.units)
+    assert main(["compare", "--reference", ref, "--test", test, "--bounds", "1,95", "--signif", "0.1", "--json"]) == 0
+    msd = json.loads(capsys.readouterr().out)["msd"]
+    # disprofas examples_mimcr.R, res4: mimcr(dip1, tcol = 3:10, grouping = "type", bounds = c(1, 95), signif = 0.1)
+    assert len(msd["times"]) == 8 and round(msd["p_hoffelder"], 7) == 0.1449045
+    assert round(msd["sim_limit"], 7) == 19.4271898 and round(msd["obs_upper"], 7) == 33.3180044
+
+
+def test_options_of_replicate_units_are_refused_for_two_curves_and_other_rules(tmp_path, capsys):
+    ref, test = _shah(tmp_path, "ref"), _shah(tmp_path, "test1")
+    assert main(["compare", "--reference", ref, "--test", test, "--both-tr-85"]) == 2
+    assert "needs --rule fda" in capsys.readouterr().err
+    a = _csv(tmp_path / "a.csv", [0, 600, 1200], [0, 1, 2])
+    assert main(["compare", a, a, "--bounds", "1,95"]) == 2
+    assert "--bounds applies to replicate units" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["compare", "--reference", ref, "--test", test, "--bounds", "90,10"])
+    assert exc.value.code == 2 and "LOW <= HIGH" in capsys.readouterr().err
