@@ -125,6 +125,20 @@ def rate_resolution_warnings(target: Target, dx_mm: float, w_rate: float, resolu
             f"deviation is that uncertain; at about resolution {needed} it spans {RATE_SPAN_MIN_VOX:g}",)
 
 
+def _check_rate_span(target: Target, spec: str) -> None:
+    """Refuse, before any optimisation, a target whose middle 80% (10% to 90% released) lies within one sample of
+    its tau grid: the rate deviation every design reports (`design.inverse.rate.rate_deviation`) cannot be
+    measured on it, and a release that fast has no shape to design."""
+    if not target.final_mm3 > 0:
+        return
+    lo, hi = middle_span_mm(target.tau_mm, target.released_mm3)
+    if not np.any((target.tau_mm > lo) & (target.tau_mm < hi)):
+        step = float(target.tau_mm[1] - target.tau_mm[0])
+        raise DesignError(f"target {spec}: the middle 80% of its release ({lo:.6g} .. {hi:.6g} mm) lies within one "
+                          f"tau sample ({step:.4g} mm) of the design grid: a release that fast has no rate to design "
+                          "for; check the target's time column (a measured curve: seconds since the drop)")
+
+
 def _source_mesh(spec: str, mesh: trimesh.Trimesh | None) -> trimesh.Trimesh | None:
     """The source shape of a sample-shape or mesh-file target (the latter as loaded), else None."""
     if spec in SAMPLE_SHAPES:
@@ -256,6 +270,7 @@ def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
         source_solid = voxelize(mesh, dx, origin_mm=origin, shape=sim_full) > 0.5
     else:
         target = _curve_target(config, analytic, curve, t_total, box_volume, box_time)
+    _check_rate_span(target, config.target)
     ext = np.asarray(sim_full, float) * dx
     area = 2.0 * float(ext[0] * ext[1] + ext[1] * ext[2] + ext[0] * ext[2])
     feasibility = check_feasibility(target, domain_volume, dx_mm=dx, domain_area_mm2=area)

@@ -121,12 +121,14 @@ def error_line(exc: BaseException, out: str | None = None) -> str:
     from drivers.errors import DriverError
 
     text = " ".join(str(exc).split()) or type(exc).__name__
-    disk = disk_error(exc) if not isinstance(exc, LabError) else None
+    expected = (LabError, DesignError, AnalysisError, DriverError, ValueError, OSError)
+    # an OSError, or an unexpected error a full disk caused (a compressor failing after its write did); the
+    # package errors name the file themselves
+    disk = disk_error(exc) if isinstance(exc, OSError) or not isinstance(exc, expected) else None
     if disk is not None:
         where = disk.filename or (out if out else "its output")
         return f"cannot write {where}: {disk.strerror or os.strerror(disk.errno)}" + \
             ("" if disk.filename else "; free space or choose a writable --out")
-    expected = (LabError, DesignError, AnalysisError, DriverError, ValueError, OSError)
     if not isinstance(exc, expected):
         return f"internal error ({type(exc).__name__}: {text}); rerun with --debug for the traceback"
     return text

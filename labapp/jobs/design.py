@@ -15,7 +15,7 @@ from design.files.records import load_config, stored_form
 from design.inverse.settings import option_flag
 from labapp.errors import UsageError
 from labapp.jobs.meshunits import design_memory_bytes, load_mesh_mm, require_memory, size_warnings
-from labapp.jobs.physical import design_from_target, is_physical
+from labapp.jobs.physical import TARGET_CSV, design_from_target, is_physical
 from labapp.records.fileio import timestamp_name
 from labapp.records.lock import folder_lock
 from labapp.records.outpaths import FolderKind, check_out
@@ -273,6 +273,9 @@ def design(config, out: str | Path, *, resume: bool = False, units: str | None =
             shutil.rmtree(path) if path.is_dir() else path.unlink()
         if not existed and out.exists() and not any(out.iterdir()):
             out.rmdir()
-        if target != source and target in str(exc) and type(exc).__init__ is Exception.__init__:
-            raise type(exc)(str(exc).replace(target, source)) from exc   # name the operator's file, not the copy
+        text = str(exc)
+        for written in {target, str(out / TARGET_CSV), str((out / TARGET_CSV).resolve())} - {source}:
+            text = text.replace(written, source if written == target else f"{source} (through --simcal)")
+        if text != str(exc) and type(exc).__init__ is Exception.__init__:
+            raise type(exc)(text) from exc      # name the operator's file, not the copy or the conversion
         raise

@@ -124,3 +124,16 @@ def test_design_refuses_a_target_in_hours_before_it_starts_naming_the_file(tmp_p
                  "16", "--max-iter", "20", "--out", str(out)]) == EXIT_USAGE
     assert f"{hours}: t_s ends at 4, a release over 4 s" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_design_refuses_a_target_too_fast_to_have_a_rate_before_optimising(tmp_path, capsys):
+    from labapp.errors import EXIT_USAGE
+
+    step = tmp_path / "step.csv"                    # all of it released within 0.001 mm of tau
+    step.write_text("tau_mm,released_mm3\n0,0\n1,0\n1.001,50\n3,50\n")
+    out = tmp_path / "design"
+    assert main(["design", "--target", str(step), "--space", "extruded", "--resolution", "16", "--max-iter", "10",
+                 "--out", str(out)]) == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert f"target {step}: the middle 80% of its release" in err and "it   " not in err   # no evaluation ran
+    assert not out.exists()
