@@ -147,8 +147,10 @@ def read_frame_list(folder: str | Path, *, interval_s: float | None = None) -> F
         Missing or empty folder, malformed manifest, non-increasing times, no usable times.
     """
     folder = Path(folder)
+    if not folder.exists():
+        raise AnalysisError(f"{folder} does not exist; give a run folder or a folder of images")
     if not folder.is_dir():
-        raise AnalysisError(f"{folder} is not a folder")
+        raise AnalysisError(f"{folder} is not a folder; give a run folder or a folder of images")
     if interval_s is not None and not interval_s > 0:
         raise AnalysisError(f"interval_s={interval_s!r} s must be positive")
     warnings: list[str] = []

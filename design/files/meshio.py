@@ -36,7 +36,11 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
     except Exception as exc:  # trimesh raises many types for a bad file
         raise DesignError(f"{path}: cannot read mesh ({exc})") from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
-        raise DesignError(f"{path}: contains no triangles")
+        kind = path.suffix[1:].upper()
+        a_kind = ("an " if kind[0] in "SO" else "a ") + kind   # an STL, an OBJ, an OFF; a PLY, a 3MF
+        raise DesignError(f"{path}: empty file; expected {a_kind} triangle mesh in mm" if path.stat().st_size == 0 else
+                          f"{path}: not {a_kind} mesh (no triangles could be read from it); expected a closed "
+                          f"triangle mesh in mm saved as {kind}")
     _check_finite(loaded.vertices, str(path), per_facet=path.suffix.lower() == ".stl")
     return checked_mesh(trimesh.Trimesh(loaded.vertices, loaded.faces, process=True), str(path))
 

@@ -36,6 +36,14 @@ def parse_analytic(spec: str) -> tuple[float, float, float] | None:
             raise DesignError(f"bad value {value!r} for {key} in target {spec!r}") from exc
     if head == "zero-order":
         params["q"] = 1.0
+    for key, ok, expected in (("q", params["q"] >= 0, "a number >= 0: the final over the initial release rate "
+                                                     "(1 = zero-order, 0 = the rate falls to zero)"),
+                              ("final", 0 < params["final"] <= 1, "in (0, 1]: the total release as a fraction of "
+                                                                  "the domain volume"),
+                              ("duration", 0 < params["duration"] <= 1, "in (0, 1]: when the release ends, as a "
+                                                                        "fraction of the simulated time T")):
+        if not ok:      # NaN fails every comparison: refused too
+            raise DesignError(f"target {spec!r}: {key} = {params[key]:g}; expected {expected}")
     return params["q"], params["final"], params["duration"]
 
 

@@ -144,8 +144,8 @@ def constant_acceleration(total_time_mm: float, final_mm3: float, duration_mm: f
         Final over initial release rate, >= 0; 1 gives zero-order (constant-rate) release.
     """
     if not 0 < duration_mm <= total_time_mm or not final_mm3 > 0 or rate_ratio < 0:
-        raise DesignError(f"need 0 < duration <= T = {total_time_mm} mm, final > 0 mm^3, rate ratio >= 0; "
-                          f"got {duration_mm}, {final_mm3}, {rate_ratio}")
+        raise DesignError(f"need 0 < duration <= T = {total_time_mm:.4g} mm, final > 0 mm^3, rate ratio >= 0; "
+                          f"got {duration_mm:.4g} mm, {final_mm3:.4g} mm^3, {rate_ratio:.4g}")
     grid = tau_grid(total_time_mm, samples)
     s = np.clip(grid / duration_mm, 0.0, 1.0)
     # C'(tau) = v0 (1 + (q - 1) s) with v0 fixed by C(duration) = final: C = final (s + (q-1) s^2/2) / ((1+q)/2)

@@ -163,7 +163,8 @@ class SeriesConfig:
         if len(self.crop) != 3 or min(self.crop) < 0 or self.crop[2] < self.grid:
             raise UsageError(f"SeriesConfig.crop must be (x, y, size) px with size >= grid, got {self.crop}")
         if any(b <= a for a, b in zip((0.0,) + self.masses_g, self.masses_g)):
-            raise UsageError(f"SeriesConfig.masses_g must be positive and increasing (cumulative), got {self.masses_g}")
+            raise UsageError(f"masses {', '.join(f'{m:g}' for m in self.masses_g)} g (--masses): each must be above the "
+                             f"one before and above 0, the cumulative filament added to the water at each level")
         if self.masses_g and len(self.masses_g) + 1 < MIN_LEVELS:
             raise UsageError(f"masses {', '.join(f'{m:g}' for m in self.masses_g)} g: clear water and "
                              f"{len(self.masses_g)} addition(s) make {len(self.masses_g) + 1} levels; a calibration "

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from analysis import BenchCalibration, ReleaseProfile, similarity
+from labapp.errors import UsageError
 from labapp.jobs.analyse import analyse_run
 from labapp.jobs.compare import profile_of
 from labapp.records.curvefiles import read_physical_curve
@@ -128,11 +129,17 @@ def analyse_many(runs: list[str | Path], calibration: str | Path, out: str | Pat
         For an ``out`` that is or holds an input or another command's folder.
     labapp.records.curvefiles.CurveFileError
         For a reference that cannot be read.
+    labapp.errors.UsageError
+        For run folders that do not exist (all named; nothing is analysed).
     """
     if not runs:
         raise ValueError("give at least one run folder")
     out = check_out(out, FolderKind.BATCH_ANALYSIS, [calibration, reference, *runs], replace=True)   # a rerun completes it
     BenchCalibration.load(calibration)  # a bad calibration stops the batch before any work
+    missing = [str(r) for r in runs if not Path(r).is_dir()]
+    if missing:
+        raise UsageError(f"{len(missing)} of the {len(runs)} run folders do not exist or are not folders: "
+                         f"{', '.join(missing)}; nothing was analysed")
     ref = None
     if reference is not None:
         ref = profile_of(read_physical_curve(reference, calibration=BenchCalibration.load(calibration)),

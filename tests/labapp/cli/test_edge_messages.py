@@ -95,3 +95,54 @@ def _curve(path: Path, start_s: float) -> str:
 def test_compare_refuses_negative_times_implausible_percents_and_names_nan_cells(make, says, tmp_path, capsys):
     assert main(["compare", *make(tmp_path)]) == 2
     assert says in capsys.readouterr().err
+
+
+def test_masses_out_of_order_name_the_option(tmp_path, capsys):
+    assert main(["calibrate-bench", "--record", str(tmp_path / "rec"), "--simulate", "--masses", "0.5,0.3"]) == 2
+    err = capsys.readouterr().err
+    assert "masses 0.5, 0.3 g (--masses): each must be above the one before" in err and "SeriesConfig" not in err
+    assert not (tmp_path / "rec").exists()
+
+
+@pytest.mark.parametrize("spec, says", [
+    ("accel:q=-1", "target 'accel:q=-1': q = -1; expected a number >= 0: the final over the initial release rate"),
+    ("accel:q=2,final=1.5", "final = 1.5; expected in (0, 1]"),
+    ("zero-order:duration=0", "duration = 0; expected in (0, 1]"),
+])
+def test_analytic_target_parameters_are_named_in_the_users_terms(spec, says, tmp_path, capsys):
+    assert main(["design", "--target", spec, "--out", str(tmp_path / "d")]) == 2
+    err = capsys.readouterr().err
+    assert says in err and "T = " not in err
+    assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize("content, says", [
+    ("this is a shopping list, not a mesh\n", "fake.stl: not an STL mesh (no triangles could be read from it)"),
+    ("", "fake.stl: empty file; expected an STL triangle mesh in mm"),
+])
+def test_a_text_file_renamed_stl_is_named_not_a_mesh(content, says, tmp_path, capsys):
+    (tmp_path / "fake.stl").write_text(content)
+    assert main(["simulate", str(tmp_path / "fake.stl"), "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err
+    assert says in err and "contains no triangles" not in err
+
+
+def test_a_folder_that_does_not_exist_is_named_so(tmp_path, capsys):
+    from analysis import read_frame_list
+
+    with pytest.raises(AnalysisError, match=r"gone does not exist; give a run folder or a folder of images"):
+        read_frame_list(tmp_path / "gone")
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(AnalysisError, match=r"file is not a folder"):
+        read_frame_list(tmp_path / "file")
+
+
+def test_a_batch_with_a_missing_run_folder_is_refused_before_any_work(tmp_path, capsys):
+    from labapp.jobs.calibrate_bench import calibrate_series
+
+    calibrate_series(BENCH / "calibration", tmp_path / "cal.json")
+    code = main(["analyze", str(BENCH / "run"), str(tmp_path / "gone"), "--calibration", str(tmp_path / "cal.json"),
+                 "--out", str(tmp_path / "batch")])
+    assert code == 2
+    assert f"1 of the 2 run folders do not exist or are not folders: {tmp_path / 'gone'}" in capsys.readouterr().err
+    assert not (tmp_path / "batch").exists()
