@@ -56,9 +56,9 @@ def test_simulate_refuses_a_design_folder_before_any_work(tmp_path, capsys):
 
 def test_simulate_never_overwrites_an_earlier_simulation_and_refuses_its_input(tmp_path, capsys):
     out = tmp_path / "sim"
-    assert main(["simulate", "sample:sphere", "--resolution", "12", "--out", str(out)]) == 0
+    assert main(["simulate", "sample:sphere", "--model", "grid", "--resolution", "12", "--out", str(out)]) == 0
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    assert main(["simulate", "sample:sphere", "--resolution", "14", "--out", str(out)]) == 2
+    assert main(["simulate", "sample:sphere", "--model", "grid", "--resolution", "14", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "already holds a simulation folder" in err and f"e.g. {out}-2" in err
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
