@@ -1,6 +1,10 @@
 """Start or resume an acquisition run: the procedure the engine walks (`sfr run`, `sfr run --resume`)."""
 from __future__ import annotations
 
+import math
+import os
+import shutil
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -11,7 +15,7 @@ from labapp.acquisition.procedures import RunConfig, RunProcedure, check_change
 from labapp.acquisition.settings import INTERVAL
 from labapp.errors import UsageError
 from labapp.records import operators, requests
-from labapp.records.fileio import StorageError
+from labapp.records.fileio import StorageError, WriteError, check_disk_space
 from labapp.records.manifests import RunSnapshot, read_run
 from labapp.records.outpaths import FolderKind, check_data_dir, folder_kind
 from labapp.records.runrecord import RecordKind, RecordStatus
@@ -28,11 +32,60 @@ def new_run(config: RunConfig, bench: Bench, data_dir: str | Path,
     ------
     UsageError
         If ``data_dir`` is a file or lies inside a record or another command's folder.
+    labapp.records.fileio.WriteError
+        If no run folder can be written there, or the run's frames would not fit (:func:`check_run_data_dir`).
     """
-    proc = RunProcedure(config, bench, check_data_dir(data_dir), calibration)
+    data_dir = check_run_data_dir(data_dir)
+    n_frames = math.ceil(config.max_duration_s / config.interval_s)
+    try:
+        check_disk_space(data_dir if data_dir.exists() else _existing_parent(data_dir),
+                         config.frame_bytes_estimate or bench.frame_bytes, n_frames)
+    except StorageError as exc:
+        raise WriteError(f"--out {data_dir}: {exc}; no run was started: free space or choose another --out") from None
+    proc = RunProcedure(config, bench, data_dir, calibration)
     if method is not None:
         proc.record_extra["method"] = method.citation()
     return proc
+
+
+def check_run_data_dir(data_dir: str | Path, option: str = "--out") -> Path:
+    """The data directory of a new run, resolved, once it is known that a run folder can be written there: checked
+    by `labapp.records.outpaths.check_data_dir`, then by writing and removing a small probe folder in it (or in its
+    nearest existing parent), so that a read-only, forbidden or full disk is refused before the bench heats.
+
+    Raises
+    ------
+    UsageError
+        As `check_data_dir`.
+    labapp.records.fileio.WriteError
+        Naming the folder and the operating system's reason (exit code 2); nothing is left behind.
+    """
+    data_dir = check_data_dir(data_dir, option)
+    where = _existing_parent(data_dir)
+    try:
+        probe = Path(tempfile.mkdtemp(prefix=".sfr-write-check-", dir=where))
+        try:
+            with open(probe / "probe", "wb") as fh:
+                fh.write(bytes(PROBE_BYTES))
+                fh.flush()
+                os.fsync(fh.fileno())
+        finally:
+            shutil.rmtree(probe, ignore_errors=True)
+    except OSError as exc:
+        raise WriteError(f"{option} {data_dir}: no run folder can be written in {where} ({exc.strerror or exc}); "
+                         f"no run was started: choose a writable data directory or free space") from None
+    return data_dir
+
+
+PROBE_BYTES = 65536
+"""Size of the probe file :func:`check_run_data_dir` writes, bytes: about one JPEG frame's first blocks."""
+
+
+def _existing_parent(path: Path) -> Path:
+    """``path`` or its nearest ancestor that exists."""
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
 
 
 def resumable(folder: str | Path) -> RunSnapshot:

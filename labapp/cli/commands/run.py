@@ -69,8 +69,7 @@ def _run(args: argparse.Namespace) -> int:
     from labapp.acquisition.status import RunStatus
     from labapp.cli.drive import write_line
     from labapp.errors import UsageError
-    from labapp.jobs.run import new_run, resumable, resume_run
-    from labapp.records.outpaths import check_data_dir
+    from labapp.jobs.run import check_run_data_dir, new_run, resumable, resume_run
 
     if not args.verbose:
         logging.getLogger().setLevel(logging.WARNING)
@@ -83,7 +82,7 @@ def _run(args: argparse.Namespace) -> int:
         sample = stored.object_name or sample
         config = None
     else:
-        check_data_dir(args.out)
+        check_run_data_dir(args.out)       # before the simulated calibration and the bench: nothing heats in vain
         config = RunConfig(name=args.name, interval_s=args.interval_s, max_duration_s=args.max_duration_s,
                            stop_on_steady=not args.no_steady_stop, min_duration_s=args.min_duration_s,
                            object_mass_g=args.object_mass_g,

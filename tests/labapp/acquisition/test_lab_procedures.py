@@ -112,7 +112,7 @@ def test_config_guards():
         RunConfig(interval_s=0)
     with pytest.raises(ValueError, match=r"BathSettings.setpoint_c must be in \[25, 100\] C, got 400"):
         RunConfig(bath=BathSettings(setpoint_c=400))
-    with pytest.raises(ValueError, match="increasing"):
+    with pytest.raises(ValueError, match=r"masses 0.5, 0.25 g \(--masses\): each must be above the one before"):
         SeriesConfig(crop=(0, 0, 100), masses_g=(0.5, 0.25))
     with pytest.raises(ValueError, match=r"SeriesConfig.reduce must be one of 1, 2, 4, 8, got 3"):
         SeriesConfig(crop=(0, 0, 100), reduce=3)

@@ -146,3 +146,33 @@ def test_a_batch_with_a_missing_run_folder_is_refused_before_any_work(tmp_path, 
     assert code == 2
     assert f"1 of the 2 run folders do not exist or are not folders: {tmp_path / 'gone'}" in capsys.readouterr().err
     assert not (tmp_path / "batch").exists()
+
+
+def test_a_read_only_data_directory_is_refused_before_the_run_starts(tmp_path, capsys, monkeypatch):
+    import errno
+
+    import labapp.jobs.run as run_job
+
+    def read_only(*args, **kwargs):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr(run_job.tempfile, "mkdtemp", read_only)
+    assert main(["run", "--simulate", "--speed", "0", "--out", str(tmp_path / "runs")]) == 2
+    captured = capsys.readouterr()
+    assert f"--out {tmp_path / 'runs'}: no run folder can be written in {tmp_path} (Read-only file system)" in captured.err
+    assert "Errno" not in captured.err and "simulated calibration" not in captured.out + captured.err
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_data_directory_without_room_for_the_run_is_refused_before_it_starts(tmp_path, capsys, monkeypatch):
+    import labapp.records.fileio as fileio
+
+    monkeypatch.setattr(fileio, "free_bytes", lambda folder: 10_000_000)
+    cal = tmp_path / "cal.json"
+    from labapp.jobs.calibrate_bench import calibrate_series
+
+    calibrate_series(BENCH / "calibration", cal)
+    assert main(["run", "--simulate", "--speed", "0", "--calibration", str(cal), "--out", str(tmp_path / "runs")]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {tmp_path / 'runs'}: not enough disk space" in err and "no run was started" in err
+    assert not (tmp_path / "runs").exists()
