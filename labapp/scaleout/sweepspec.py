@@ -32,7 +32,9 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 from design.errors import DesignError
+from design.geometry.shapes import SAMPLE_SHAPES
 from design.inverse.config import DesignConfig
+from design.inverse.target_spec import parse_analytic
 from labapp.errors import UsageError
 from labapp.jobs.physical import is_physical
 from labapp.records.simcal import SimCalError, load_simcal
@@ -119,6 +121,7 @@ def parse_spec(text: str, *, base_dir: str | Path = ".", source: str = "spec") -
     if simcal is not None and not isinstance(simcal, str):
         raise SpecError(f"{source}: 'simcal' must be a path string, got {simcal!r}")
     target, simcal = _resolve(target, base_dir), _resolve(simcal, base_dir) if simcal else None
+    _check_target(source, target, base_dir)
     _check_simcal(source, target, simcal)
     fixed = {k: v for k, v in data.items() if k in SETTING_KEYS}
     for key, value in fixed.items():
@@ -160,6 +163,22 @@ def _resolve(value: str, base_dir: str | Path) -> str:
     """An existing relative path made absolute (the workers' working folder is not the spec's)."""
     candidate = Path(base_dir) / value
     return str(candidate.resolve()) if not Path(value).is_absolute() and candidate.exists() else value
+
+
+def _check_target(source: str, target: str, base_dir: str | Path) -> None:
+    """A target that names a file or folder must exist (looked for in the spec's folder, then the working folder):
+    refused here, before a cluster starts, not by each combination."""
+    try:
+        if target in SAMPLE_SHAPES or parse_analytic(target) is not None:
+            return
+    except DesignError as exc:
+        raise SpecError(f"{source}: target: {exc}") from exc
+    if not Path(target).exists():
+        looked = Path(base_dir).resolve() / target
+        raise SpecError(f"{source}: target {target!r} does not exist (looked for {looked}"
+                        f"{'' if Path(target).is_absolute() else ' and in the working folder'}); expected a sample "
+                        f"shape ({', '.join(SAMPLE_SHAPES)}), an analytic curve (zero-order, accel:q=Q), or an existing "
+                        f"mesh, CSV curve or run folder")
 
 
 def _check_simcal(source: str, target: str, simcal: str | None) -> None:

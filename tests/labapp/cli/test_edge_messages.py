@@ -176,3 +176,12 @@ def test_a_data_directory_without_room_for_the_run_is_refused_before_it_starts(t
     err = capsys.readouterr().err
     assert f"--out {tmp_path / 'runs'}: not enough disk space" in err and "no run was started" in err
     assert not (tmp_path / "runs").exists()
+
+
+def test_a_sweep_of_a_missing_target_is_refused_before_any_work(tmp_path, capsys):
+    spec = tmp_path / "sweep.toml"
+    spec.write_text('target = "gone.stl"\nmax_iter = 2\nresolution = 16\n[grid]\nw_binary = [10, 20]\n')
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "sw")]) == 2
+    err = capsys.readouterr().err
+    assert f"target 'gone.stl' does not exist (looked for {tmp_path / 'gone.stl'}" in err
+    assert not (tmp_path / "sw").exists()

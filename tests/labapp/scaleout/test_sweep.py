@@ -68,11 +68,12 @@ def test_measured_targets_need_a_readable_simcal(tmp_path):
         parse_spec('target = "curve.csv"\nsimcal = "simcal.json"\n', base_dir=tmp_path)
 
 
-def test_spec_text_round_trips():
+def test_spec_text_round_trips(tmp_path):
+    (tmp_path / 'a "b".csv').write_text("tau_mm,released_mm3\n0,0\n1,1\n")
     text = spec_text('a "b".csv', {"space": "nfc", "resolution": 16, "allow_infeasible": True},
                      {"w_binary": [10, 20.5]}, [{"preset": "paper:pill"}])
-    spec = parse_spec(text)
-    assert spec.target == 'a "b".csv' and spec.combinations[0].config.allow_infeasible
+    spec = parse_spec(text, base_dir=tmp_path)
+    assert spec.target == str(tmp_path / 'a "b".csv') and spec.combinations[0].config.allow_infeasible
     assert [c.name for c in spec.combinations] == ["w_binary=10", "w_binary=20.5", "preset=paper-pill"]
 
 
