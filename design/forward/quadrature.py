@@ -264,7 +264,7 @@ def lattice_curve(surface: Surface, offset: np.ndarray, bounds: np.ndarray, h: f
     total = Ramps.empty(tau)
     workers = workers or min(len(blocks), os.cpu_count() or 1) or 1
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        for k, ramps in enumerate(pool.map(one, blocks), 1):
+        for k, ramps in enumerate(pool.map(one, blocks) if workers > 1 else map(one, blocks), 1):
             total.merge(ramps)
             if progress is not None:
                 progress(k / len(blocks))

@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "calibration's)")
     parser.add_argument("--model", choices=("exact", "grid", "mc"), default=None,
                         help="exact (the default for a mesh): exact surface distances on a lattice sized by the "
-                             "part's thickness, within 0.25%% of its volume; grid (the default for a density "
+                             "part's thickness, within 0.4%% of its volume as stated; grid (the default for a density "
                              "array): first-order fast marching on voxels, its error estimated; mc: the kinetic "
                              "Monte Carlo baseline (release.csv in seconds with the spread over seeds, "
                              "release_physical.csv)")
