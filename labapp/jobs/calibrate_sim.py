@@ -316,19 +316,36 @@ def _refit_at_second_resolution(set_csv: Path, sims: _Simulations, fit: PhysicsF
     return dataclasses.replace(fit, uncertainty=combined), discretisation
 
 
+MODEL_TIE_REL = 0.01
+"""Mean leave-one-out errors within this fraction of each other are a tie, which the simpler constant model wins: a
+difference of 1 % of a few-percent error is far below what leaving one of a handful of runs out resolves."""
+SATURATION_INERT = 0.01
+"""A saturation fit whose c_sat lies so far beyond the data that the most loaded bath reaches less than this
+fraction of it changes no curve by more than about 1 %: it is the constant model, and is not chosen as another."""
+
+
 @dataclass(frozen=True)
 class _ModelFits:
-    """The calibration models fitted to every run, with their leave-one-out predictions."""
+    """The calibration models fitted to every run, with their leave-one-out predictions, and the highest
+    concentration the runs reach, g/kg."""
 
     models: tuple[str, ...]
     fits: dict
     loos: dict
     mean_loo: dict
+    top_conc_g_per_kg: float = 0.0
 
     @property
     def chosen(self) -> str:
-        """The model with the lowest mean leave-one-out error."""
-        return min(self.models, key=self.mean_loo.get)
+        """The model with the lowest mean leave-one-out error; the constant model on a tie (`MODEL_TIE_REL`) or
+        when the saturation fit's c_sat lies far beyond the data (`SATURATION_INERT`)."""
+        best = min(self.models, key=self.mean_loo.get)
+        if best != "saturation" or "constant" not in self.models:
+            return best
+        c_sat = self.fits["saturation"].cal.saturation_g_per_kg
+        tie = self.mean_loo["saturation"] >= (1.0 - MODEL_TIE_REL) * self.mean_loo["constant"]
+        inert = c_sat is None or self.top_conc_g_per_kg < SATURATION_INERT * c_sat
+        return "constant" if tie or inert else best
 
 
 def _fit_models(shapes: list[ShapeRun], model: str, lag: bool, max_offset_s: float, say: Progress) -> _ModelFits:
@@ -344,7 +361,7 @@ def _fit_models(shapes: list[ShapeRun], model: str, lag: bool, max_offset_s: flo
                                    progress=lambda done, total, name=name, base=base, span=span: say(
                                        base + span * done / total, f"{name} model: left {done} of {total} out"))
     mean_loo = {m: float(np.mean([s.rel_rmse for s in loos[m]])) for m in models}
-    return _ModelFits(models, fits, loos, mean_loo)
+    return _ModelFits(models, fits, loos, mean_loo, 1000.0 * max(s.mass_g / s.water_g for s in shapes))
 
 
 def _simcal_doc(set_csv: Path, bench_calibration, rows: list[SetRow], shapes: list[ShapeRun], dxs: list[float],

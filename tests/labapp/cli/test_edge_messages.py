@@ -185,3 +185,19 @@ def test_a_sweep_of_a_missing_target_is_refused_before_any_work(tmp_path, capsys
     err = capsys.readouterr().err
     assert f"target 'gone.stl' does not exist (looked for {tmp_path / 'gone.stl'}" in err
     assert not (tmp_path / "sw").exists()
+
+
+@pytest.mark.parametrize("loo, c_sat, chosen", [
+    ({"constant": 0.0500, "saturation": 0.0500}, 5.7e6, "constant"),    # a tie, c_sat far beyond the data
+    ({"constant": 0.0500, "saturation": 0.0498}, 50.0, "constant"),     # within 1 %: a tie
+    ({"constant": 0.0500, "saturation": 0.0400}, 5.7e6, "constant"),    # better, but c_sat 1e5 x the data's
+    ({"constant": 0.0500, "saturation": 0.0400}, 50.0, "saturation"),   # better and reached: saturation
+])
+def test_the_simpler_model_wins_a_tie_and_an_inert_saturation(loo, c_sat, chosen):
+    from types import SimpleNamespace
+
+    from labapp.jobs.calibrate_sim import _ModelFits
+
+    fits = {"constant": SimpleNamespace(cal=SimpleNamespace(saturation_g_per_kg=None)),
+            "saturation": SimpleNamespace(cal=SimpleNamespace(saturation_g_per_kg=c_sat))}
+    assert _ModelFits(("constant", "saturation"), fits, {}, loo, top_conc_g_per_kg=4.0).chosen == chosen
