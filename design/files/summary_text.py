@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from design.files.records import DesignSummary
+from design.inverse.status import DesignStatus
 
 RESULT_FILES = ("design.stl", "density.npz", "curves.csv", "curves_physical.csv", "report.png", "history.csv",
                 "summary.json", "design.ini")
@@ -47,7 +48,7 @@ def summary_lines(summary: DesignSummary, out_dir: Path) -> list[str]:
         The run folder; the last line names the result files it holds.
     """
     s = summary
-    lines = [f"{s['status']} after {s['iterations']} evaluations ({s['seconds']:.1f} s, "
+    lines = [f"{DesignStatus(s['status']).text} after {s['iterations']} evaluations ({s['seconds']:.1f} s, "
              f"{s['seconds_per_iteration'] or 0:.3f} s each)",
              f"fit of the print: rel. RMSE {print_fit_text(s)} (design.stl by exact surface distances, "
              "against the target's physical release)",

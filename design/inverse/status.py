@@ -19,6 +19,12 @@ class DesignStatus(enum.StrEnum):
     """Ctrl-C; the run resumes."""
 
     @property
+    def text(self) -> str:
+        """The status in words for the summary's first line: a stalled line search is where L-BFGS converges to
+        numerical precision (no step lowers J), said so rather than as a failure."""
+        return "converged (no step lowers J further)" if self is DesignStatus.STALLED else self.value
+
+    @property
     def finished(self) -> bool:
         """Whether the run is over (converged, max_iter or stalled), rather than stopped or interrupted."""
         return self in FINISHED

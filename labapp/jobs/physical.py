@@ -93,8 +93,8 @@ class MeasuredTarget:
         return (f"measured target adjusted to a feasible curve: monotone least-squares fit (changes up to "
                 f"{self.pct(self.fit_max_g):.2f} % of the {self.mass_basis} mass {self.mass_g:.4g} g), then "
                 f"{self.points_lowered} points lowered onto the isoperimetric bound (up to "
-                f"{self.pct(self.projection_max_g):.2f} %); the measurement's noise is about "
-                f"{self.pct(self.noise_g):.2f} %")
+                f"{self.pct(self.projection_max_g):.2f} %); the measurement's noise is "
+                f"{_about_pct(self.pct(self.noise_g))}")
 
     def notes(self) -> dict:
         """The record written beside the CSV."""
@@ -106,6 +106,11 @@ class MeasuredTarget:
                 "fit_max_g": self.fit_max_g, "fit_max_pct": self.pct(self.fit_max_g),
                 "projection_max_g": self.projection_max_g, "projection_max_pct": self.pct(self.projection_max_g),
                 "points_lowered": self.points_lowered, "text": self.text()}
+
+
+def _about_pct(value: float) -> str:
+    """A small percentage in words: "about 0.37 %", "below 0.01 %" (never "about 0.00 %")."""
+    return "below 0.01 %" if 0 <= value < 0.01 else f"about {value:.2g} %" if value < 1 else f"about {value:.3g} %"
 
 
 def adjustment_line(target: MeasuredTarget) -> str:

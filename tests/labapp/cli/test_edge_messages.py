@@ -201,3 +201,23 @@ def test_the_simpler_model_wins_a_tie_and_an_inert_saturation(loo, c_sat, chosen
     fits = {"constant": SimpleNamespace(cal=SimpleNamespace(saturation_g_per_kg=None)),
             "saturation": SimpleNamespace(cal=SimpleNamespace(saturation_g_per_kg=c_sat))}
     assert _ModelFits(("constant", "saturation"), fits, {}, loo, top_conc_g_per_kg=4.0).chosen == chosen
+
+
+@pytest.mark.parametrize("noise_g, says", [(1e-6, "noise is below 0.01 %"), (0.0037, "noise is about 0.25 %")])
+def test_the_noise_of_a_measured_target_is_never_about_zero(noise_g, says):
+    from labapp.jobs.physical import MeasuredTarget
+
+    target = MeasuredTarget(Path("t.csv"), 1.5, "weighed", noise_g, 0.01, 0.0, 0)
+    assert says in target.text() and "0.00 %)" not in target.text().split("noise")[1]
+
+
+def test_a_design_whose_line_search_stalls_is_reported_as_converged(tmp_path):
+    from design.files.summary_text import summary_lines
+
+    summary = {"status": "stalled", "iterations": 73, "seconds": 40.0, "seconds_per_iteration": 0.55,
+               "rel_rmse_print": 0.0056, "rel_rmse_density": 0.005, "rel_rmse_design_grid_binary": 0.006,
+               "rate_dev_mid80": {"print": 0.02, "density": 0.02, "design_grid_binary": 0.02}, "pieces": 1,
+               "print_mass_g": 1.2, "min_channel_mm": None, "enclosed_voids": 0, "enclosed_void_mm3": 0.0,
+               "overhang_fraction": 0.1, "max_overhang_run_mm": 1.0, "warnings": []}
+    first = summary_lines(summary, tmp_path)[0]
+    assert first.startswith("converged (no step lowers J further) after 73 evaluations") and "stalled" not in first
