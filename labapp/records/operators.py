@@ -35,8 +35,8 @@ from labapp.errors import UsageError
 from labapp.records.fileio import atomic_file
 
 __all__ = ["DEMO_OPERATOR", "MIN_PASSWORD_CHARS", "OPERATOR_ENV", "UNVERIFIED", "USERS_ENV", "OperatorError", "User",
-           "acting_as", "add_user", "check_password", "current", "enforced", "is_verified", "load_users", "log_in",
-           "log_out", "require", "set_enabled", "unverified", "users_path"]
+           "acting_as", "add_user", "check_password", "current", "enforced", "given", "is_verified", "load_users",
+           "log_in", "log_out", "require", "set_enabled", "unverified", "users_path"]
 
 USERS_ENV = "SFR_USERS"
 """Environment variable naming the users file (tests, a shared lab configuration)."""
@@ -249,9 +249,9 @@ def acting_as(name: str) -> Iterator[str]:
             os.environ[OPERATOR_ENV] = before_env
 
 
-def current() -> str | None:
-    """The operator this process acts as: the one logged in, else ``$SFR_OPERATOR``, else (without a users
-    file) the login name marked unverified, else None.
+def given() -> str | None:
+    """The operator named for this process: the one logged in, else ``$SFR_OPERATOR`` (checked as by
+    :func:`log_in`), else None.
 
     Raises
     ------
@@ -261,9 +261,22 @@ def current() -> str | None:
     if _session is not None:
         return _session
     env = os.environ.get(OPERATOR_ENV, "").strip()
-    if env:
-        return _known(env)
-    return None if enforced() else unverified(_login_name())
+    return _known(env) if env else None
+
+
+def current() -> str | None:
+    """The operator this process acts as: the one named (:func:`given`), else (without a users file) the login
+    name marked unverified, else None.
+
+    Raises
+    ------
+    OperatorError
+        If the name in ``SFR_OPERATOR`` is not an enabled operator of the users file.
+    """
+    name = given()
+    if name is not None or enforced():
+        return name
+    return unverified(_login_name())
 
 
 def require(action: str) -> str:

@@ -214,11 +214,15 @@ def _record(args: argparse.Namespace) -> int:
 
 
 def _level_printer(write_line):
+    import sys
+
     from labapp.acquisition.events import CalibrationLevel
+
+    start = "\r" if sys.stdout.isatty() else ""     # over the status line on a terminal only
 
     def on_event(event) -> None:
         if isinstance(event, CalibrationLevel):
-            write_line(f"\rlevel {event.index}: {event.file}, {event.added_mass_g:g} g added, "
+            write_line(f"{start}level {event.index}: {event.file}, {event.added_mass_g:g} g added, "
                        f"{event.conc_g_per_kg:.4f} g/kg")
     return on_event
 

@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
         logging.getLogger().setLevel(logging.ERROR)
     from labapp.records import operators
 
-    operator = operators.current() or operators.DEMO_OPERATOR
+    operator = operators.given() or operators.DEMO_OPERATOR     # not the login name: the demo's own operator
     print(f"operator: {operator}" + (" (built-in: records only on the simulated bench)"
                                      if operator == operators.DEMO_OPERATOR else ""), flush=True)
     with operators.acting_as(operator):

@@ -32,6 +32,7 @@ def _run(tmp_path):
 def test_without_a_users_file_the_login_name_is_recorded_unverified(no_users_file, tmp_path, monkeypatch):
     login = f"{getpass.getuser()} (unverified)"
     assert not operators.enforced() and operators.current() == login
+    assert operators.given() is None            # nobody named: sfr demo acts as its own operator, not the login
     folder = _run(tmp_path)
     assert read_record(folder).operator == login
     assert {e["operator"] for e in read_trail(folder)} == {login}
