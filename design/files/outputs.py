@@ -85,7 +85,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     _write_data(out_dir, problem, best_x, rho, printed, density_mm3, release, history)  # density.npz, csv, ini
     summary = _summary(problem, objective, config, status, history, session_seconds, rho, density_mm3, printed,
                        release, checks, warnings)
-    _log_warnings(out_dir, warnings, announce)
+    _log_warnings(out_dir, warnings[len(problem.warnings):], announce)   # the problem's: logged when it was prepared
     _write_report(out_dir / "report.png", problem, config, printed, density_mm3, release, summary)
     path = out_dir / SUMMARY
     _write_text(path, json.dumps(summary, indent=2))

@@ -258,9 +258,10 @@ def finished_run(out_dir: str | Path, config: DesignConfig | None = None) -> Des
                         DesignOutputs(out_dir / SUMMARY, summary), unchanged=True)
 
 
-def _problem(config: DesignConfig, out_dir: Path) -> Problem:
-    """The prepared problem, its feasibility report in ``feasibility.txt`` (written when it changes)."""
-    problem = load_problem(config)
+def _problem(config: DesignConfig, out_dir: Path, announce: bool = True) -> Problem:
+    """The prepared problem, its feasibility report in ``feasibility.txt`` (written when it changes); its warnings
+    logged as such (``announce``) or, for a coarse start, at DEBUG level."""
+    problem = load_problem(config, announce)
     text = problem.feasibility.text() + "\n"
     path = out_dir / FEASIBILITY
     if not path.is_file() or path.read_text() != text:
@@ -283,7 +284,7 @@ def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint, coa
     """The outputs of a run whose optimisation finished, from its last checkpoint: its best design, history
     and status, with the objective as the run left it (`restore_objective`: the final beta). ``problem``: the
     run's, when already prepared."""
-    problem = problem or _problem(config, out_dir)
+    problem = problem or _problem(config, out_dir, not coarse_start)
     _check_size(saved, problem, out_dir)
     objective = build_objective(problem, config)
     restore_objective(objective, saved, config)
@@ -357,7 +358,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
             raise DesignError(f"{out_dir} already holds a design run; resume it or choose another folder")
         out_dir.mkdir(parents=True, exist_ok=True)
         save_config(out_dir, config)
-    problem = _problem(config, out_dir)
+    problem = _problem(config, out_dir, not coarse_start)
     if saved is not None:
         _check_size(saved, problem, out_dir)
     if saved is None and start is None and config.starts > 1:  # multi-start

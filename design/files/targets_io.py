@@ -67,8 +67,9 @@ def target_from_csv(path: str | Path, total_time_mm: float, samples: int = TAU_S
     return target_from_curve(tau, c, total_time_mm, samples, source=str(path))
 
 
-def load_problem(config: DesignConfig) -> Problem:
-    """`design.inverse.problem.prepare` with the target's file read: a mesh file's mesh, a CSV's curve.
+def load_problem(config: DesignConfig, announce: bool = True) -> Problem:
+    """`design.inverse.problem.prepare` with the target's file read: a mesh file's mesh, a CSV's curve (``announce``:
+    as `prepare`).
 
     Raises
     ------
@@ -80,7 +81,7 @@ def load_problem(config: DesignConfig) -> Problem:
         path = Path(config.target)
         if not path.exists():
             raise DesignError(f"target mesh {path} does not exist")
-        return prepare(config, mesh=load_mesh(path))
+        return prepare(config, mesh=load_mesh(path), announce=announce)
     if kind == "csv":
-        return prepare(config, curve=read_curve_csv(config.target))
-    return prepare(config)
+        return prepare(config, curve=read_curve_csv(config.target), announce=announce)
+    return prepare(config, announce=announce)

@@ -193,8 +193,9 @@ def _radius_vox(config: DesignConfig, dx_mm: float) -> float:
 
 
 def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
-            curve: tuple[np.ndarray, np.ndarray] | None = None) -> Problem:
-    """Build the design space, the target on its tau grid, and the feasibility report.
+            curve: tuple[np.ndarray, np.ndarray] | None = None, announce: bool = True) -> Problem:
+    """Build the design space, the target on its tau grid, and the feasibility report; its warnings are logged as
+    warnings (``announce``: once per design run, when it is prepared) or, for a multi-start's coarse start, at DEBUG.
 
     Parameters
     ----------
@@ -281,6 +282,6 @@ def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
     warnings = (source_warnings(source_solid, config.allow_pieces)
                 + rate_resolution_warnings(target, dx, config.w_rate, config.resolution))
     for warning in warnings:
-        log.warning("%s", warning)
+        (log.warning if announce else log.debug)("%s", warning)
     return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, radius_vox,
                    start_regions(space, target, half_mm, radius_vox * dx), warnings, mesh, target_error)

@@ -221,3 +221,14 @@ def test_a_design_whose_line_search_stalls_is_reported_as_converged(tmp_path):
                "overhang_fraction": 0.1, "max_overhang_run_mm": 1.0, "warnings": []}
     first = summary_lines(summary, tmp_path)[0]
     assert first.startswith("converged (no step lowers J further) after 73 evaluations") and "stalled" not in first
+
+
+def test_an_extruded_multistart_design_warns_once(tmp_path, capsys, caplog):
+    import logging
+
+    caplog.set_level(logging.DEBUG)
+    assert main(["design", "--target", "zero-order", "--space", "extruded", "--resolution", "16", "--max-iter", "4",
+                 "--out", str(tmp_path / "d")]) == 0
+    warned = [r for r in caplog.records if r.levelno >= logging.WARNING and "middle 80%" in r.getMessage()]
+    assert len(warned) == 1                                          # at the start, not once per start and again
+    assert capsys.readouterr().out.count("warning: the target's middle 80%") == 1    # and in the summary
