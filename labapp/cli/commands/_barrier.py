@@ -28,11 +28,11 @@ def run_barrier(args: argparse.Namespace, progress: Callable[[str], None]) -> in
         raise UsageError("--barrier-speed applies to a drug inside a barrier: give --barrier MESH")
     if args.barrier_speed is None:
         raise UsageError("--barrier needs --barrier-speed S (the barrier's erosion speed over the drug's; 0: insoluble)")
-    refused = [name for name, given in (("--model mc", args.model != "forward"), ("--simcal", bool(args.simcal)),
-                                        ("--water-g", args.water_g is not None)) if given]
+    refused = [name for name, given in ((f"--model {args.model}", args.model not in (None, "grid")),
+                                        ("--simcal", bool(args.simcal)), ("--water-g", args.water_g is not None)) if given]
     if refused:
-        raise UsageError(f"--barrier does not take {', '.join(refused)}: the two-material model has no calibration "
-                         "and no Monte Carlo model yet")
+        raise UsageError(f"--barrier does not take {', '.join(refused)}: two materials are simulated by the grid "
+                         "model only, without a calibration")
     result = simulate_barrier(args.input, args.barrier, args.out, barrier_speed=args.barrier_speed,
                               resolution=args.resolution, voxel_size_mm=args.voxel_size, symmetry=args.symmetry,
                               units=args.units, progress=progress)
