@@ -97,12 +97,12 @@ drop_when_stable() {   # press Object dropped (F7) until the bath is stable and 
 
 faults() {
     DATA=$WORK/rehearsal           # a data folder of its own: nothing interrupted to offer at the start
-    # a short rehearsal run: 40 C (heats in seconds at x25), 30 s frames, 25 min
+    # a short rehearsal run: 40 C (heats in seconds at x25), 30 s frames, 1 h (under two and a half minutes at x25)
     SFR_LAB_SETTINGS="$SFR_LAB_SETTINGS" "$PY" -c "
 from labapp.acquisition.procedures import RunConfig
 from labapp.acquisition.settings import BathSettings
 from labapp.gui import persist
-config = RunConfig(name='rehearsal', interval_s=30, max_duration_s=1500, stop_on_steady=False,
+config = RunConfig(name='rehearsal', interval_s=30, max_duration_s=3600, stop_on_steady=False,
                    bath=BathSettings(setpoint_c=40.0, tolerance_c=1.0, hold_s=60.0))
 persist.remember_run(persist.app_settings(), config, '$CAL')"
     start_lab "$WORK/faults.log"
@@ -120,9 +120,9 @@ persist.remember_run(persist.app_settings(), config, '$CAL')"
     shot 15_link_lost 25
     echo "faults: the link comes back"
     key ctrl+shift+r
-    shot 16_link_back 15
+    shot 16_link_back 8
     echo "faults: a second run, before its drop"
-    sleep 40                       # the first run ends at 25 min (one minute at x25)
+    sleep 95                       # the first run ends at 1 h (144 s at x25)
     click $DOCK_RUN_TAB
     key F6
     shot 17_second_run_before_drop 35
@@ -132,7 +132,7 @@ persist.remember_run(persist.app_settings(), config, '$CAL')"
     stop_lab
     start_lab "$WORK/resumed.log"
     key Return                     # "Resume newest"
-    shot 18_resumed_run 30
+    shot 18_resumed_run 15
     click $DOCK_RUN_TAB
     shot 19_resumed_run_tab 2
     stop_lab

@@ -37,6 +37,8 @@ class EventLog(QPlainTextEdit):
 
     def add(self, level: str, message: str) -> None:
         """Append ``message`` at ``level`` (info, warning, error)."""
+        bar = self.verticalScrollBar()
+        at_end = bar.value() >= bar.maximum() - 2            # follow the newest line unless scrolled back
         line, kind = f"{level.upper():7s} {message}", kind_of(level, message)
         count, first = 1, time.strftime("%H:%M:%S")
         kinds = [k for k, _, _ in self._tail]
@@ -54,3 +56,5 @@ class EventLog(QPlainTextEdit):
         self.appendPlainText(line)
         self._tail.append((kind, count, first))
         del self._tail[:-RECENT]
+        if at_end:
+            bar.setValue(bar.maximum())

@@ -48,6 +48,7 @@ from labapp.gui.run_settings import RunSettings
 from labapp.gui.simulated_session import SimulatedSession
 from labapp.gui.window_layout import (
     LOG_HEIGHT_PX,
+    ElidedLine,
     RunProgress,
     add_actions,
     add_dock,
@@ -102,7 +103,7 @@ class MainWindow(QMainWindow):
         self._build_menus()
         self._connect_signals()
         self._start_timers()
-        self.statusBar().showMessage("idle")
+        self.status_line.set_line("idle")
         if simulate:
             self.crop = SimulatedBench.default_crop()
             self.live.set_geometry(*self.crop)
@@ -146,6 +147,8 @@ class MainWindow(QMainWindow):
         self.bench_dock = add_dock(self, "bench", self.bench_tabs, Qt.DockWidgetArea.LeftDockWidgetArea)
         self.log_dock = add_dock(self, "event log", self.messages, Qt.DockWidgetArea.BottomDockWidgetArea)
         self.resizeDocks([self.log_dock], [LOG_HEIGHT_PX], Qt.Orientation.Vertical)
+        self.status_line = ElidedLine("")         # ends in "..." beside the progress bar, never under it
+        self.statusBar().addWidget(self.status_line, 1)
         self.statusBar().addPermanentWidget(self.progress)
 
     def _build_menus(self) -> None:
@@ -489,7 +492,9 @@ class MainWindow(QMainWindow):
     def refresh(self) -> None:
         """~10 Hz: status line, run progress and the newest frame."""
         if not self.building and not self.close_timer.isActive():
-            self.statusBar().showMessage(self.status.line())
+            if self.statusBar().currentMessage():
+                self.statusBar().clearMessage()      # the status line again, after "connecting..."
+            self.status_line.set_line(self.status.line())
         self.display.refresh(self.engine.running, self.procedure)
         self.controls.show_state(*state_of(self.status, self.engine.running, self.engine.should_stop()))
 

@@ -27,6 +27,10 @@ TIME_LABEL = "time since drop (h:mm)"
 HEATING_LABEL = "time (h:mm): 0 = now, the drop will be time zero"
 _STEPS_S = (1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600, 7200, 3 * 3600, 6 * 3600, 12 * 3600, 86400)
 LEGEND_BRUSH = pg.mkBrush(0, 0, 0, 170)
+LABEL_BRUSH = pg.mkBrush(0, 0, 0, 190)
+"""A mark's label background."""
+LABEL_ROWS = (0.92, 0.80, 0.68)
+"""Heights (fraction of the plot) at which successive marks' labels sit, so that close marks do not overlap."""
 """A legend's background: dark enough to read its labels over the traces it may cover."""
 
 #: Colour of each kind of mark (any other kind is drawn magenta).
@@ -98,7 +102,7 @@ class PlotsPanel(QWidget):
         self.release = self.release_widget.getPlotItem()
         self.release.setLabel("left", "concentration (g/kg)")
         self.release.showAxis("right")
-        self.release.addLegend(offset=(10, 10), brush=LEGEND_BRUSH)
+        self.release.addLegend(offset=(-10, -10), brush=LEGEND_BRUSH)   # bottom right: under a rising curve
         self.raw_curve = self.release.plot([], [], pen=None, symbol="o", symbolSize=4, symbolBrush=(120, 120, 255),
                                            name="measured")
         self.smooth_curve = self.release.plot([], [], pen=pg.mkPen("r", width=2), name="Savitzky-Golay")
@@ -177,6 +181,13 @@ class PlotsPanel(QWidget):
             axis.setScale(self.water_g / 1000.0)
             axis.setLabel("released (g)")
 
+    def set_duration(self, max_duration_s: float) -> None:
+        """Show the release plot from the drop to the run's maximum duration (s) until data arrive, not the
+        previous run's axes."""
+        self.release.setXRange(0.0, max_duration_s, padding=0.02)
+        self.release.setYRange(0.0, 0.1, padding=0.0)
+        self.release.enableAutoRange()
+
     def set_setpoint_band(self, setpoint_c: float | None, tolerance_c: float | None) -> None:
         """Shade setpoint +- tolerance on the bath plot (None: no band)."""
         if setpoint_c is None or tolerance_c is None:
@@ -198,8 +209,12 @@ class PlotsPanel(QWidget):
                 item = pg.InfiniteLine(pos=t_s, angle=90, movable=False,
                                        pen=pg.mkPen(colour, width=1.5, style=Qt.PenStyle.DashLine))
             if plot is self.release and text:          # labelled on the release plot only
+                # horizontal, near the top, on a dark ground: a label never longer than the plot is high; left of
+                # the line (an alarm comes at the newest time, the right edge), right of it for the drop and a resume
+                right = kind in ("drop", "resume")
                 label = pg.InfLineLabel(item if isinstance(item, pg.InfiniteLine) else item.lines[0], text=text,
-                                        position=0.06, rotateAxis=(1, 0), anchor=(0, 1), color=colour)
+                                        position=LABEL_ROWS[len(self.marks) % len(LABEL_ROWS)],
+                                        anchor=(0 if right else 1, 0.5), color=colour, fill=LABEL_BRUSH)
                 label.setZValue(20)
             plot.addItem(item, ignoreBounds=True)
             self._mark_items.append((plot, item))

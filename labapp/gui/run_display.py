@@ -97,6 +97,7 @@ class RunDisplay(QObject):
             self.plots.set_water(config.bath.water_g)
             self.plots.set_object_mass(config.object_mass_g)
             self.plots.set_setpoint_band(config.bath.setpoint_c, config.bath.tolerance_c)
+            self.plots.set_duration(config.max_duration_s)
 
     def on_frame(self, frame: FrameStored) -> None:
         """A run frame was stored: plot it, remember it for the live view."""
@@ -123,6 +124,7 @@ class RunDisplay(QObject):
                 now = self.plots.t_now(event.t_unix_s, event.t0_unix_s, t)
                 if self._last_frame_t is not None and now > self._last_frame_t:
                     self.plots.mark("gap", self._last_frame_t, "", end_s=now)     # the time nothing was recorded
+                    self.plots.add_reading(self._last_frame_t, None, None, None)   # no bath line across it
                     self._last_frame_t = now
                 self.plots.mark("resume", now, "resumed")
             else:

@@ -6,7 +6,18 @@ from collections.abc import Callable, Iterable
 
 from PySide6.QtCore import QRect, Qt
 from PySide6.QtGui import QAction, QKeySequence
-from PySide6.QtWidgets import QDockWidget, QMainWindow, QMenu, QProgressBar, QScrollArea, QSplitter, QTabWidget, QWidget
+from PySide6.QtWidgets import (
+    QDockWidget,
+    QLabel,
+    QMainWindow,
+    QMenu,
+    QProgressBar,
+    QScrollArea,
+    QSizePolicy,
+    QSplitter,
+    QTabWidget,
+    QWidget,
+)
 
 from labapp.gui.plots import hmm
 
@@ -94,12 +105,37 @@ def fit_to_screen(window: QMainWindow, available: QRect, bench_dock: QDockWidget
                        Qt.Orientation.Horizontal)
 
 
+class ElidedLine(QLabel):
+    """One line of text that ends in "..." where it does not fit (never under a neighbour); the whole text is its
+    tooltip and :attr:`full`."""
+
+    def __init__(self, text: str = "", parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+        self.full = ""
+        self.set_line(text)
+
+    def set_line(self, text: str) -> None:
+        """Show ``text``, elided to the label's width."""
+        if text != self.full:
+            self.full = text
+            self.setToolTip(text)
+            self._elide()
+
+    def resizeEvent(self, event) -> None:  # noqa: N802 (Qt override)
+        super().resizeEvent(event)
+        self._elide()
+
+    def _elide(self) -> None:
+        self.setText(self.fontMetrics().elidedText(self.full, Qt.TextElideMode.ElideRight, max(self.width(), 40)))
+
+
 class RunProgress(QProgressBar):
     """The recording run's time against its maximum duration, in h:mm (hidden until shown)."""
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.setMaximumWidth(360)
+        self.setFixedWidth(300)          # the status line beside it gives way, never the bar
         self.setTextVisible(True)
         self.hide()
 
