@@ -300,7 +300,7 @@ def _write_report(path: Path, problem, config, printed: _Print, density_mm3: np.
                 f"{target.source} | {problem.space.name} | print rel. RMSE {print_fit_text(summary)} | design grid: "
                 f"density {summary['rel_rmse_density']:.2%}, binary {summary['rel_rmse_design_grid_binary']:.2%} | "
                 f"overhang {summary['overhang_fraction']:.1%} | {summary['iterations']} it."
-                + (f" | preset {config.preset}" if config.preset else ""))
+                + (f" | preset {config.preset}" if config.preset else ""), dx_mm=problem.dx_mm)
 
 
 def _history_rows(history: list[list[float]]) -> np.ndarray:

@@ -21,8 +21,46 @@ def _rate(tau: np.ndarray, c: np.ndarray, points: int = 100) -> tuple[np.ndarray
     return 0.5 * (t[1:] + t[:-1]), np.diff(v) / np.diff(t)
 
 
+TITLE_CHARS = 120
+"""Characters of a title line: the figure's width at the suptitle's font size, with a margin on both edges."""
+AXES = ("x", "y", "z")
+"""The design grid's array axes (z, axis 2, the build direction)."""
+
+
+def wrap_title(title: str, width: int = TITLE_CHARS) -> str:
+    """``title`` broken into lines of at most ``width`` characters at its `` | `` separators (a longer part on a
+    line of its own), so that no edge of the figure cuts it."""
+    lines: list[str] = []
+    for part in title.split(" | "):
+        if lines and len(lines[-1]) + 3 + len(part) <= width:
+            lines[-1] += " | " + part
+        else:
+            lines.append(part)
+    return "\n".join(lines)
+
+
+def _slice(ax, image: np.ndarray, across: int, dx_mm: float | None, cmap: str, what: str) -> None:
+    """The mid-slice of a full (X, Y, Z) grid across axis ``across``, drawn with the remaining axes in mm (the
+    first across the page, the second up it: z up for the vertical slice) and a 5 mm-class scale."""
+    n = image.shape[across]
+    sl = [slice(None)] * 3
+    sl[across] = n // 2
+    plane = image[tuple(sl)].T           # rows: the second remaining axis, drawn upwards
+    first, second = (k for k in range(3) if k != across)
+    step = dx_mm or 1.0
+    unit = "mm" if dx_mm else "voxels"
+    ax.imshow(plane, cmap=cmap, vmin=0, vmax=1, origin="lower", interpolation="nearest",
+              extent=(0.0, plane.shape[1] * step, 0.0, plane.shape[0] * step))
+    ax.set_xlabel(f"{AXES[first]} ({unit})")
+    ax.set_ylabel(f"{AXES[second]} ({unit})")
+    where = f"{AXES[across]} = {(n // 2 + 0.5) * step:.3g} {unit}"
+    ax.set_title(f"{what}, mid-slice {where}", fontsize=10)
+    ax.tick_params(labelsize=8)
+
+
 def report_figure(tau_mm: np.ndarray, target_mm3: np.ndarray, print_mm3: np.ndarray, density_mm3: np.ndarray,
-                  binary_mm3: np.ndarray, rho_full: np.ndarray, solid_full: np.ndarray, title: str) -> Figure:
+                  binary_mm3: np.ndarray, rho_full: np.ndarray, solid_full: np.ndarray, title: str,
+                  dx_mm: float | None = None) -> Figure:
     """Build the report figure.
 
     Parameters
@@ -32,11 +70,14 @@ def report_figure(tau_mm: np.ndarray, target_mm3: np.ndarray, print_mm3: np.ndar
         Cumulative release of the (physical) target, of the printed solid by the reference evaluator
         (`design.forward.reference`), and on the design grid of the optimised density and of the
         re-voxelised binary solid.
-    rho_full : (D, H, W) ndarray of float
+    rho_full : (X, Y, Z) ndarray of float
         Full optimised density.
-    solid_full : (D, H, W) ndarray of bool
+    solid_full : (X, Y, Z) ndarray of bool
         Full re-voxelised solid.
     title : str
+        Parts separated by `` | ``; wrapped to the figure's width (`wrap_title`).
+    dx_mm : float, optional
+        Voxel edge, mm: the slices' axes in mm (else in voxels).
     """
     fig = Figure(figsize=(13, 7.5), layout="constrained")
     FigureCanvasAgg(fig)
@@ -58,20 +99,10 @@ def report_figure(tau_mm: np.ndarray, target_mm3: np.ndarray, print_mm3: np.ndar
     ax_c.set(xlabel="tau (mm dissolved)", ylabel="released (mm^3)", title="cumulative release")
     ax_r.set(xlabel="tau (mm dissolved)", ylabel="rate (mm^3 per mm)", title="release rate")
     ax_c.legend()
-    mids = [n // 2 for n in rho_full.shape]
-    names = ("axis 0", "axis 1", "axis 2")
-    for col, ax_idx in enumerate((0, 2)):
-        sl = [slice(None)] * 3
-        sl[ax_idx] = mids[ax_idx]
-        a = fig.add_subplot(grid[1, col])
-        a.imshow(rho_full[tuple(sl)], cmap="gray_r", vmin=0, vmax=1, origin="lower")
-        a.set_title(f"density, mid-slice {names[ax_idx]}")
-        a.axis("off")
-        b = fig.add_subplot(grid[1, 2 + col])
-        b.imshow(solid_full[tuple(sl)], cmap="Greens", vmin=0, vmax=1, origin="lower")
-        b.set_title(f"binary solid, mid-slice {names[ax_idx]}")
-        b.axis("off")
-    fig.suptitle(title)
+    for col, across in enumerate((0, 2)):      # a vertical slice (z up) and a horizontal one
+        _slice(fig.add_subplot(grid[1, col]), rho_full, across, dx_mm, "gray_r", "density")
+        _slice(fig.add_subplot(grid[1, 2 + col]), solid_full.astype(float), across, dx_mm, "Greens", "binary solid")
+    fig.suptitle(wrap_title(title), fontsize=11)
     return fig
 
 
