@@ -37,7 +37,8 @@ def run(args: argparse.Namespace) -> int:
                   "(--operator NAME or $SFR_OPERATOR), and may be signed")
     elif args.action == "list":
         users = operators.load_users()
-        print(f"{path}: {len(users)} operator(s)")
+        print(f"{path}: {len(users)} operator(s)" + ("" if operators.enforced() else
+              " (no users file: operators are not enforced; actions name the login name, unverified)"))
         for user in users.values():
             print(f"  {user.name:<24} {'enabled ' if user.enabled else 'DISABLED'}  since {user.created_utc}")
     else:

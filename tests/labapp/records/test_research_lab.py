@@ -56,6 +56,8 @@ def test_a_recording_command_works_without_a_users_file_and_sign_is_refused(no_u
 
 
 def test_a_users_file_enforces_operators(no_users_file, tmp_path, monkeypatch, capsys):
+    assert main(["users", "list"]) == 0
+    assert "operators are not enforced" in capsys.readouterr().out
     monkeypatch.setattr("sys.stdin", io.StringIO(PASSWORD + "\n"))
     assert main(["users", "add", "A. Jones", "--password-stdin"]) == 0
     assert "operators are now enforced" in capsys.readouterr().out and operators.enforced()
