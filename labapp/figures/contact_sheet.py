@@ -23,6 +23,11 @@ from design.inverse.status import FINISHED
 TILES_PER_ROW = 3
 MAX_PIXELS = 16000
 """Longest side of the contact sheet, pixels: large sweeps get a lower resolution."""
+TILE_IN = (6.0, 3.0)
+"""A design's tile (curve and views), inches: at 100 dpi the views span about 300 pixels, the design itself, cropped
+to its solid (`crop_to_solid`), most of them."""
+SCALE_BARS_MM = (0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
+"""Lengths a view's scale bar takes, mm: the longest within a third of the top view's width."""
 
 
 def _curves(folder: Path) -> dict[str, np.ndarray] | None:
@@ -124,12 +129,35 @@ def views(solid: np.ndarray, build_axis: int) -> np.ndarray:
     return np.concatenate([top, np.zeros((top.shape[0], 2), dtype=top.dtype), side], axis=1)
 
 
-def _picture(folder: Path) -> np.ndarray | None:
+def crop_to_solid(solid: np.ndarray, margin: int = 1) -> np.ndarray:
+    """The solid's bounding box with ``margin`` empty voxels around it (the grid unchanged when it holds none)."""
+    if not solid.any():
+        return solid
+    box = []
+    for axis in range(solid.ndim):
+        filled = np.flatnonzero(solid.any(axis=tuple(a for a in range(solid.ndim) if a != axis)))
+        box.append(slice(max(0, filled[0] - margin), filled[-1] + 1 + margin))
+    return solid[tuple(box)]
+
+
+def _picture(folder: Path) -> tuple[np.ndarray, float | None, int] | None:
+    """A run's views of its solid cropped to it, its voxel edge (mm; None when not recorded) and the top view's
+    width, voxels."""
     try:
         with np.load(folder / "density.npz") as data:
-            return views(data["solid"].astype(bool), BUILD_AXIS)
+            solid = crop_to_solid(data["solid"].astype(bool))
+            dx = float(data["dx_mm"]) if "dx_mm" in data else None
     except (OSError, KeyError, ValueError):
         return None
+    across = [a for a in range(3) if a != BUILD_AXIS][1]       # the top view's columns
+    return views(solid, BUILD_AXIS), dx, int(solid.shape[across])
+
+
+def _scale_bar(ax, dx_mm: float, top_width_vox: int) -> None:
+    """A bar of a round length in mm under the top view, labelled."""
+    length = max((mm for mm in SCALE_BARS_MM if mm / dx_mm <= top_width_vox / 3), default=SCALE_BARS_MM[0])
+    ax.plot([0.5, 0.5 + length / dx_mm], [-1.5, -1.5], "-", color="k", lw=2, solid_capstyle="butt")
+    ax.text(0.5 + 0.5 * length / dx_mm, -2.2, f"{length:g} mm", ha="center", va="top", fontsize=7)
 
 
 def _label(rank_no: int, row: dict) -> str:
@@ -151,10 +179,10 @@ def draw_contact_sheet(rows: list[dict], path: str | Path, sweep_dir: str | Path
     path = Path(path)
     base = Path(sweep_dir) if sweep_dir is not None else path.parent
     n_rows = math.ceil(len(rows) / TILES_PER_ROW)
-    width_in, height_in = 5.0 * TILES_PER_ROW, 2.6 * n_rows
-    dpi = min(90.0, MAX_PIXELS / max(width_in, height_in))
+    width_in, height_in = TILE_IN[0] * TILES_PER_ROW, TILE_IN[1] * n_rows
+    dpi = min(100.0, MAX_PIXELS / max(width_in, height_in))
     fig, axes = plt.subplots(n_rows, 2 * TILES_PER_ROW, figsize=(width_in, height_in), dpi=dpi, squeeze=False,
-                             gridspec_kw={"width_ratios": [1.4, 1.2] * TILES_PER_ROW})
+                             gridspec_kw={"width_ratios": [1.0, 1.4] * TILES_PER_ROW})
     for ax in axes.ravel():
         ax.set_axis_off()
     for i, row in enumerate(rows):
@@ -169,10 +197,13 @@ def draw_contact_sheet(rows: list[dict], path: str | Path, sweep_dir: str | Path
             curve_ax.plot(curves["tau_mm"], _achieved(curves), "--", color="m", lw=1.2)
         picture = _picture(folder)
         if picture is not None:
-            pic_ax.imshow(np.ma.masked_equal(picture, 0), cmap="viridis", origin="lower",
-                          interpolation="nearest")
+            image, dx_mm, top_width = picture
+            pic_ax.imshow(np.ma.masked_equal(image, 0), cmap="viridis", origin="lower", interpolation="nearest")
+            if dx_mm:
+                _scale_bar(pic_ax, dx_mm, top_width)
+                pic_ax.set_ylim(-4.0, image.shape[0])
     fig.suptitle("sweep: target (green) vs the print (magenta dashed), tau (mm) vs released (mm^3); "
-                 "top view | side view, coloured by height", fontsize=8)
+                 "top view | side view of the design, coloured by height, with a scale bar", fontsize=8)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.3 / height_in))
     tmp = path.with_suffix(".tmp.png")
     fig.savefig(tmp)
