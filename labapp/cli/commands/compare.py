@@ -91,14 +91,8 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from labapp.errors import UsageError
-    from labapp.jobs.compare import (
-        compare_curves,
-        compare_sets,
-        format_set_table,
-        format_table,
-        plot_comparison,
-        plot_sets,
-    )
+    from labapp.jobs.compare import compare_curves, compare_sets
+    from labapp.jobs.compare_tables import format_set_table, format_table, plot_comparison, plot_sets
     from labapp.records.outpaths import check_out
 
     sets = args.reference is not None or args.test is not None
