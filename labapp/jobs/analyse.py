@@ -52,13 +52,26 @@ def run_calibration(run: str | Path, calibration: str | Path | None) -> Path:
 def _check_out(out: Path, inputs: list, run: Path) -> Path:
     """`check_out` for the analysis folder of ``run``, naming a source package (``analysis/`` of a checkout) as such."""
     try:
-        return check_out(out, FolderKind.ANALYSIS, inputs, analysed=run, replace=True)   # its cell cache reused
+        checked = check_out(out, FolderKind.ANALYSIS, inputs, analysed=run, replace=True)   # its cell cache reused
     except OutPathError:
         if (Path(out) / "__init__.py").is_file():
             raise OutPathError(f"--out {Path(out).resolve()} is a Python package of the software (it holds "
                                "__init__.py), not an output folder; leave --out out to write RUN/analysis, or "
                                "give a new folder name") from None
         raise
+    other = _analysed_run(checked)
+    if other is not None and other.resolve() != run.resolve() and other.name != run.name:
+        raise OutPathError(f"--out {checked} holds the analysis of {other}, another run; its results are never "
+                           "overwritten: choose a new folder")
+    return checked
+
+
+def _analysed_run(folder: Path) -> Path | None:
+    """The run whose analysis ``folder`` holds (its ``summary.json``), None when it holds none."""
+    try:
+        return Path(json.loads((folder / "summary.json").read_text())["run"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def writes_into_record(run: str | Path, out: str | Path | None = None) -> bool:

@@ -120,3 +120,16 @@ def test_folder_kinds(tmp_path):
     assert folder_kind(FIXTURES / "bench" / "run") == RecordKind.RUN and folder_kind(FIXTURES / "shapes") == FolderKind.OTHER
     with pytest.raises(OutPathError, match="not a analysis folder|is a simulation folder"):
         check_out(tmp_path, FolderKind.ANALYSIS)
+
+
+def test_analyze_never_writes_over_another_runs_analysis(tmp_path, capsys):
+    run = create_run(tmp_path / "data", "r", {"kind": "run"})
+    run.finish(RecordStatus.COMPLETE)
+    run.close()
+    out = tmp_path / "analysis-of-another"
+    out.mkdir()
+    (out / "curve.csv").write_text("t_s,released_g\n")
+    (out / "summary.json").write_text(json.dumps({"run": str(tmp_path / "other-run")}))
+    assert main(["analyze", str(run.path), "--calibration", str(tmp_path / "c.json"), "--out", str(out)]) == 2
+    assert f"holds the analysis of {tmp_path / 'other-run'}, another run" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["curve.csv", "summary.json"]
