@@ -58,7 +58,7 @@ class DesignOutputs:
 
 def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np.ndarray,
                   history: list[list[float]], config, *, status: DesignStatus,
-                  session_seconds: float, announce: bool = True) -> DesignOutputs:
+                  session_seconds: float, announce: bool = True, judged: bool = True) -> DesignOutputs:
     """Extract, re-simulate, assess and write every output of a design run.
 
     Parameters
@@ -75,12 +75,15 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
         Wall time of this session (resumes add up through the history's seconds column).
     announce : bool
         Log the run's warnings as warnings (False: at INFO level, naming ``out_dir``; a coarse start's).
+    judged : bool
+        Release the print by the reference evaluator (False: a coarse start's, which its J alone ranks; its print
+        figures are None and its curve NaN, `design.files.printed.print_release`).
     """
     rho = objective.density(best_x)
     density_mm3 = _density_release(problem, config, rho)
     warnings: list[str] = list(problem.warnings)
     printed = _write_print(out_dir, problem, config, rho, warnings)  # design.stl (+ formats)
-    release = print_release(problem, config, printed.mesh, printed.solid)
+    release = print_release(problem, config, printed.mesh, printed.solid, judged)
     checks = _check_print(problem, config, status, printed, release, warnings)
     _write_data(out_dir, problem, best_x, rho, printed, density_mm3, release, history)  # density.npz, csv, ini
     summary = _summary(problem, objective, config, status, history, session_seconds, rho, density_mm3, printed,
@@ -221,7 +224,7 @@ def _summary(problem, objective: DesignObjective, config, status: DesignStatus, 
         "status": status,
         "target": target.source,
         "space": space.name,
-        "rel_rmse_print": release.rel_rmse if printed.mesh is not None else None,
+        "rel_rmse_print": release.rel_rmse if printed.mesh is not None and np.isfinite(release.rel_rmse) else None,
         "rel_rmse_print_error": release.rel_rmse_error if release.reference is not None else None,
         "rel_rmse_density": rel_rmse(density_mm3, target.released_mm3),
         "rel_rmse_design_grid_binary": rel_rmse(release.binary_mm3, target.released_mm3),

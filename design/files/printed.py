@@ -119,7 +119,8 @@ class PrintRelease:
     rel_rmse_error: float
 
 
-def print_release(problem, config, mesh: trimesh.Trimesh | None, solid: np.ndarray) -> PrintRelease:
+def print_release(problem, config, mesh: trimesh.Trimesh | None, solid: np.ndarray, judged: bool = True
+                  ) -> PrintRelease:
     """The release of a design's print and of its re-voxelised solid, and its fit to the target.
 
     Parameters
@@ -131,6 +132,9 @@ def print_release(problem, config, mesh: trimesh.Trimesh | None, solid: np.ndarr
         The print (``design.stl`` grown by the print offset), mm; None when no solid was extracted.
     solid : ndarray of bool, ``problem.full_shape``
         The print re-voxelised on the full design grid.
+    judged : bool
+        Release the print (False: only its re-voxelised solid; the print's curve and fit NaN, its volume the
+        mesh's). A coarse start of a multi-start, which its J alone ranks, is not judged.
     """
     space, target = problem.space, problem.target
     physics = {"anisotropy": config.anisotropy, "swelling_mm": config.swelling_mm}
@@ -138,6 +142,9 @@ def print_release(problem, config, mesh: trimesh.Trimesh | None, solid: np.ndarr
     binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm, **physics)
     # the print: design.stl (grown by the offset) released by exact surface distances at the print's anisotropy,
     # its volume the mesh's own; with swelling, by the forward model with the print physics on a finer grid
+    if not judged:
+        nan = np.full_like(binary_curve, np.nan)
+        return PrintRelease(nan, binary_curve, None, float(mesh.volume) if mesh is not None else 0.0, np.nan, np.nan)
     modelled = config.swelling_mm > 0
     printed = (reference_release(mesh, target.tau_mm, cells=design_lattice(config.resolution),
                                  anisotropy=config.anisotropy)

@@ -49,6 +49,7 @@ from design.inverse.optimize import (
     with_phase,
 )
 from design.inverse.problem import Problem
+from design.inverse.progress import RunClock, run_plan
 from design.inverse.status import FINISHED, DesignStatus
 
 log = logging.getLogger(__name__)
@@ -124,9 +125,10 @@ class CheckpointFile:
 class _StartFolders:
     """The coarse runs of a multi-start (`design.inverse.multistart.CoarseRuns`): run folders ``starts/NN``."""
 
-    def __init__(self, out_dir: Path, should_stop: Callable[[], bool] | None) -> None:
+    def __init__(self, out_dir: Path, should_stop: Callable[[], bool] | None, resolution: int) -> None:
         self.out_dir = out_dir
         self.should_stop = should_stop
+        self.resolution = resolution  # the run's: a start below it is ranked by its J, its print not judged
 
     def folder(self, k: int) -> Path:
         return self.out_dir / STARTS / start_name(k)
@@ -139,7 +141,8 @@ class _StartFolders:
         folder = self.folder(k)
         resume = (folder / CONFIG).exists()
         return run_design(None if resume else config, folder, on_iteration=on_iteration,
-                          should_stop=self.should_stop, resume=resume, start=start, coarse_start=True).status
+                          should_stop=self.should_stop, resume=resume, start=start, coarse_start=True,
+                          judge_print=config.resolution == self.resolution).status
 
     def best_value(self, k: int) -> float:
         history = np.loadtxt(self.folder(k) / "history.csv", delimiter=",", skiprows=1, ndmin=2)
@@ -166,7 +169,7 @@ def _multistart(config: DesignConfig, out_dir: Path, on_iteration: IterationCall
     """Run the starts of a multi-start in ``out_dir/starts`` and record the choice in ``multistart.json``. Returns
     the refinement's start, or for starts at the run's resolution the chosen start's last checkpoint, now the
     run's own (`_StartFolders.adopt`); None when `should_stop` ended a start."""
-    folders = _StartFolders(out_dir, should_stop)
+    folders = _StartFolders(out_dir, should_stop, config.resolution)
     choice = coarse_start(config, folders, on_iteration=on_iteration)
     if choice is None:
         return None
@@ -280,7 +283,7 @@ def _check_size(saved: Checkpoint, problem: Problem, out_dir: Path) -> None:
 
 
 def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint, coarse_start: bool,
-                     problem: Problem | None = None) -> DesignResult:
+                     problem: Problem | None = None, judge_print: bool = True) -> DesignResult:
     """The outputs of a run whose optimisation finished, from its last checkpoint: its best design, history
     and status, with the objective as the run left it (`restore_objective`: the final beta). ``problem``: the
     run's, when already prepared."""
@@ -292,13 +295,13 @@ def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint, coa
     best = np.asarray(saved.best_x, float).reshape(problem.space.var_shape)
     history = [list(row) for row in saved.history]
     outputs = write_outputs(out_dir, problem, objective, best, history, config, status=saved.status,
-                            session_seconds=0.0, announce=not coarse_start)
+                            session_seconds=0.0, announce=not coarse_start, judged=judge_print)
     return DesignResult(out_dir, saved.status, len(history), float(saved.best_value), outputs)
 
 
 def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration: IterationCallback | None = None,
                should_stop: Callable[[], bool] | None = None, resume: bool = False,
-               start: StartDesign | None = None, coarse_start: bool = False) -> DesignResult:
+               start: StartDesign | None = None, coarse_start: bool = False, judge_print: bool = True) -> DesignResult:
     """Run (or resume) an inverse design in ``out_dir``.
 
     Parameters
@@ -326,6 +329,9 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     coarse_start : bool
         The run is a coarse start of a multi-start (``starts/NN``): its warnings (pieces, evaluation limit)
         are about that start, not the design, and are logged at INFO level; its summary keeps them.
+    judge_print : bool
+        Release the print by the reference evaluator in the outputs (False: a coarse start below the run's
+        resolution, which its J alone ranks; its print figures are None).
 
     Returns
     -------
@@ -348,7 +354,8 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         if ckpt.exists():
             saved = load_checkpoint(ckpt)
         if saved is not None and saved.status is not None and _finished(saved, out_dir, config):
-            return _rewrite_outputs(out_dir, stored, saved, coarse_start)  # the optimisation ended, not all outputs got written
+            # the optimisation ended, not all outputs got written
+            return _rewrite_outputs(out_dir, stored, saved, coarse_start, judge_print=judge_print)
         if config != stored:  # a raised evaluation limit
             save_config(out_dir, config)
     else:
@@ -361,6 +368,9 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     problem = _problem(config, out_dir, not coarse_start)
     if saved is not None:
         _check_size(saved, problem, out_dir)
+    clock = None
+    if on_iteration is not None and not coarse_start:  # the whole run's time left; a start's is part of it
+        on_iteration = clock = RunClock(run_plan(config), on_iteration)
     if saved is None and start is None and config.starts > 1:  # multi-start
         start = _multistart(config, out_dir, on_iteration, should_stop)
         if isinstance(start, Checkpoint):  # the chosen start is the design
@@ -372,7 +382,11 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         on_iteration = with_phase(on_iteration, refinement_phase(config.resolution))
     outcome, objective = optimise_physical(objective, problem, config, CheckpointFile(ckpt), RoundFile(out_dir / ROUNDS),
                                            saved=saved, start=start, on_iteration=on_iteration, should_stop=should_stop)
+    if clock is not None and clock.outputs_s() is not None:
+        log.info("print: extracting design.stl and releasing it by the reference evaluator (about %.0f s)",
+                 clock.outputs_s())
     outputs = write_outputs(out_dir, problem, objective, outcome.best_x, outcome.history, config,
-                            status=outcome.status, session_seconds=outcome.session_seconds, announce=not coarse_start)
+                            status=outcome.status, session_seconds=outcome.session_seconds, announce=not coarse_start,
+                            judged=judge_print)
     log.info("design %s after %d evaluations: %s", outcome.status, outcome.iterations, outputs.summary_path)
     return DesignResult(out_dir, outcome.status, outcome.iterations, outcome.best_value, outputs)

@@ -58,6 +58,7 @@ from design.inverse.settings import (
     ROBUST_ETA,
     SAMPLES,
     SPACE,
+    SPACE_CORRECTION_EVALS_SHARE,
     SPACE_DEFAULTS,
     STARTS,
     STIFFNESS_LAW,
@@ -184,8 +185,8 @@ class DesignConfig:
     correction_rounds : int
         Defect-correction rounds after the optimisation (`design.inverse.defect`), 1 to 10.
     correction_evals : int or None
-        Objective evaluations of each round, part of ``max_iter``; None = `CORRECTION_EVALS_SHARE` of ``max_iter``
-        (at least 1).
+        Objective evaluations of each round, part of ``max_iter``; None = the space's `SPACE_CORRECTION_EVALS_SHARE`,
+        else `CORRECTION_EVALS_SHARE`, of ``max_iter`` (at least 1).
     anisotropy : float
         Print physics (a simulation calibration's, ``sfr design --simcal``): erosion speed along z (the build
         direction) over the in-plane speed in the forward model; 1 = the paper's isotropic model.
@@ -303,7 +304,8 @@ def resolved_defaults(config: DesignConfig) -> dict[str, Any]:
         correct = config.space in CORRECTION_SPACES and not config.swelling_mm > 0
         fill("physical_correction", PHYSICAL_CORRECTIONS[0] if correct else "none")
     if values["correction_evals"] is None:
-        fill("correction_evals", max(1, int(round(CORRECTION_EVALS_SHARE * config.max_iter))))
+        share = SPACE_CORRECTION_EVALS_SHARE.get(config.space, CORRECTION_EVALS_SHARE)
+        fill("correction_evals", max(1, int(round(share * config.max_iter))))
     return resolved
 
 

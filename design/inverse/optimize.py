@@ -26,11 +26,12 @@ variable at exactly 0 or 1 has a zero gradient in z whatever dJ/d rho_hat, and i
 where J would fall as it moves inside (a saddle, not a minimum). J_binary drives the variables of an extruded
 design to 0 and 1 (to round-off) within its first beta stage; every later session (the next beta stages, the restarts,
 the defect-correction rounds of `design.inverse.defect`, whose targets have moved) then began with a zero
-gradient for all of them and ended at once, its design unchanged. So every new session of an extruded design
-starts from rho_hat moved `SESSION_FLOOR` inside the bounds (``from_x``), where the gradient in z is about
-``sqrt(SESSION_FLOOR)`` of dJ/d rho_hat: the variables whose J falls inwards move, the others return to the
-bound. A run's first session starts inside anyway (`design.inverse.objective.START_OUTSIDE`), and a resumed
-session restores its optimiser's own variables, so resumes stay exact. Free 3D (nfc) designs keep their
+gradient for all of them and ended at once, its design unchanged. So every new session of an extruded (or ICO)
+design starts from rho_hat moved `SESSION_FLOOR` inside the bounds (``from_x``), where
+the gradient in z is about ``sqrt(SESSION_FLOOR)`` of dJ/d rho_hat: the variables whose J falls inwards move,
+the others return to the bound. A run's first session starts inside anyway
+(`design.inverse.objective.START_OUTSIDE`), and a resumed session restores its optimiser's own variables, so
+resumes stay exact. Free 3D (nfc) designs keep their
 sessions' variables as they are: there the floor helped one of two shapes and set the other back
 (docs/design.md#optimiser-sessions-start-inside-the-bounds).
 
@@ -67,10 +68,12 @@ terms (`optimise`)."""
 
 
 def with_phase(on_iteration: IterationCallback | None, phase: str) -> IterationCallback | None:
-    """``on_iteration`` with ``terms["phase"]`` set to ``phase`` (which run of a multi-start, for progress)."""
+    """``on_iteration`` with ``terms["phase"]`` set to ``phase`` (which run of a multi-start, which correction
+    round, for progress); a phase the terms already name is a part of it: "PHASE, PART"."""
     if on_iteration is None:
         return None
-    return lambda k, x, terms: on_iteration(k, x, dict(terms, phase=phase))
+    return lambda k, x, terms: on_iteration(k, x, dict(terms, phase=f"{phase}, {terms['phase']}" if "phase" in terms
+                                                        else phase))
 
 
 StartDesign = Callable[[DesignObjective, Problem], np.ndarray]
@@ -78,10 +81,11 @@ MAX_RESTARTS = 20
 """L-BFGS restarts from the best point after the optimiser ends early (module doc)."""
 RESTART_GAIN = 1e-3
 """Relative decrease of J a session must achieve for another restart to be tried."""
-SESSION_FLOOR = {"extruded": 1e-3}
+SESSION_FLOOR = {"extruded": 1e-3, "ico": 1e-3}
 """With the cosine map, how far inside the bounds 0 and 1 every new session (a beta stage, a restart, a defect
 correction round) starts each variable of rho_hat, per design space (0 for the spaces it does not name; module
-doc)."""
+doc). ICO designs: J_binary at their fixed beta drives their variables to the bounds, and without the floor the
+pill's correction rounds at resolution 48 stalled at their first evaluation (docs/design.md#physical-correction)."""
 _ERROR = "error"
 """The stop reason of an evaluation that raised (the error is re-raised; never a run's status)."""
 HISTORY_COLUMNS = ("iteration", "J", "J_fit", "J_binary", "J_fab", "fab_seconds", "grad_norm", "seconds")

@@ -57,7 +57,7 @@ def _progress(max_iter: int):
         phase = f"{terms['phase']}: " if "phase" in terms else ""
         line = (f"{phase}it {k:4d}/{max_iter}  J {terms['J']:.5g}  fit {terms['J_fit']:.4g}"
                 f"  binary {terms['J_binary']:.4g}"
-                f"  |g| {terms['grad_norm']:.3g}  {terms['seconds']:.0f}s  ETA <= {terms['eta_s'] / 60:.1f} min")
+                f"  |g| {terms['grad_norm']:.3g}  {terms['seconds']:.0f}s  ETA {terms['eta_s'] / 60:.1f} min")
         print(("\r" + line + "   ") if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
     return show
 

@@ -49,12 +49,15 @@ def test_multistart_runs_the_starts_and_refines_the_best(tmp_path, caplog, monke
     assert sorted(warned) == sorted(result.outputs.summary["warnings"]), warned
     # progress names the run each evaluation belongs to
     assert list(dict.fromkeys(phases)) == ["coarse start 1 of 2 at resolution 16",
-                                           "coarse start 2 of 2 at resolution 16", "refinement at resolution 32"]
+                                           "coarse start 2 of 2 at resolution 16", "refinement at resolution 32",
+                                           "refinement at resolution 32, physical correction round 1 of 2",
+                                           "refinement at resolution 32, physical correction round 2 of 2"]
     record = json.loads((tmp_path / "run" / "multistart.json").read_text())
     assert record["coarse_resolution"] == 16 and set(record["best_J"]) == {"00", "01"}
     for k in ("00", "01"):
         coarse = json.loads((tmp_path / "run" / "starts" / k / "summary.json").read_text())
         assert coarse["config"]["resolution"] == 16 and coarse["config"]["starts"] == 1
+        assert coarse["rel_rmse_print"] is None and coarse["reference"] is None  # ranked by J: its print not judged
     assert result.outputs.summary["config"]["resolution"] == 32 and result.iterations == 6
     # the refinement started from the best start, not from the uniform design: J at its first evaluation
     # is below the uniform start's

@@ -1,0 +1,145 @@
+"""A design run's phases in order and the time it has left (``terms["eta_s"]`` of the progress callback).
+
+A run is a sequence of phases (`run_plan`): the seeded starts of a multi-start (`design.inverse.multistart`), the
+optimisation at the run's resolution (the refinement of the best coarse start, or the single run), its correction
+rounds (`design.inverse.defect`), each after a check of the current design's print, and the outputs, whose print
+is extracted and released by the reference evaluator (`design.files.outputs`). Each phase is named as the progress
+line names it (``terms["phase"]``) and costs a number of objective evaluations, each weighted by the size of its
+grid against the run's (an evaluation is a fast-marching solve and its adjoint, whose cost follows the voxels); the
+print checks and the outputs cost a fixed number of the run's evaluations (`PRINT_CHECK_EVALS`, `OUTPUTS_EVALS`,
+measured, docs/benchmarks.md#design-stages).
+
+`RunClock` wraps the run's progress callback: at every evaluation it measures the seconds per weighted evaluation of
+the phase in progress and sets ``eta_s`` to what is left of it and of every later phase at that rate. A phase that
+ends early (an optimisation that converges or stalls before its limit) makes the estimate fall at once.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from design.inverse.config import DesignConfig
+from design.inverse.optimize import IterationCallback
+
+PRINT_CHECK_EVALS = 12.0
+"""The time of a correction round's print check (extraction, the reference evaluator's release, the design grid's
+release) in evaluations of the run's grid (docs/benchmarks.md#design-stages)."""
+OUTPUTS_EVALS = 30.0
+"""The time of the outputs (the print's extraction and release on the full lattice, the binary solid's release,
+the report) in evaluations of the run's grid (docs/benchmarks.md#design-stages)."""
+RATE_MIN_EVALS = 3
+"""Evaluations of a phase after which its own rate replaces the one carried from the phase before."""
+
+
+@dataclass(frozen=True)
+class Phase:
+    """One phase of a run.
+
+    Attributes
+    ----------
+    name : str or None
+        ``terms["phase"]`` of its evaluations (None: a single run's optimisation, which names none).
+    end : int
+        The run-local evaluation count at which it ends (a start counts its own evaluations).
+    evals : int
+        Its evaluations.
+    weight : float
+        The cost of one of its evaluations in evaluations of the run's grid.
+    after : float
+        What follows it before the next phase's first evaluation (print checks, outputs), in evaluations of the
+        run's grid.
+    """
+
+    name: str | None
+    end: int
+    evals: int
+    weight: float
+    after: float
+
+
+def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bool) -> list[Phase]:
+    """The phases of one run of ``config`` (no multi-start): its optimisation, its rounds, its outputs."""
+    from design.inverse.defect import correction_plan, round_phase
+
+    rounds, first = correction_plan(config)
+
+    def named(name: str | None) -> str | None:
+        return prefix if name is None else name if prefix is None else f"{prefix}, {name}"
+
+    tail = OUTPUTS_EVALS * weight if outputs else 0.0
+    phases = [Phase(named(None), first, first, weight, (PRINT_CHECK_EVALS * weight if rounds else 0.0)
+                    + (tail if not rounds else 0.0))]
+    for r in range(1, rounds + 1):
+        end = first + r * config.correction_evals
+        after = PRINT_CHECK_EVALS * weight + (tail if r == rounds else 0.0)
+        phases.append(Phase(named(round_phase(r, rounds)), end, config.correction_evals, weight, after))
+    return phases
+
+
+def run_plan(config: DesignConfig) -> list[Phase]:
+    """The phases of a design run of ``config`` in order (module doc)."""
+    from design.inverse.multistart import coarse_phase, coarse_resolution, refinement_phase
+
+    if config.starts <= 1:
+        return _single(config, None, 1.0, True)
+    resolution = coarse_resolution(config.resolution)
+    if resolution == config.resolution:  # every start a whole run; the chosen one's outputs written again
+        phases = [p for k in range(config.starts)
+                  for p in _single(config, coarse_phase(k, config.starts, resolution, coarse=False), 1.0, True)]
+        last = phases[-1]
+        return phases[:-1] + [Phase(last.name, last.end, last.evals, last.weight, last.after + OUTPUTS_EVALS)]
+    weight = (resolution / config.resolution) ** 3
+    coarse = [Phase(coarse_phase(k, config.starts, resolution), config.max_iter, config.max_iter, weight,
+                    OUTPUTS_EVALS * weight) for k in range(config.starts)]
+    return coarse + _single(config, refinement_phase(config.resolution), 1.0, True)
+
+
+class RunClock:
+    """The progress callback of a run with ``eta_s`` set to the time its plan has left (module doc).
+
+    Parameters
+    ----------
+    plan : list of Phase
+        `run_plan` of the run.
+    on_iteration : callable
+        The callback it wraps.
+    """
+
+    def __init__(self, plan: list[Phase], on_iteration: IterationCallback) -> None:
+        self.plan = plan
+        self.on_iteration = on_iteration
+        self.rate: float | None = None  # seconds per evaluation of the run's grid
+        self.current: int | None = None
+        self.t0 = self.k0 = 0.0
+
+    def _index(self, name: str | None, k: int) -> int | None:
+        """The phase of an evaluation: the first of that name that has not ended before ``k``."""
+        for i, phase in enumerate(self.plan):
+            if phase.name == name and k <= phase.end and (self.current is None or i >= self.current):
+                return i
+        return None
+
+    def eta_s(self, name: str | None, k: int) -> float | None:
+        """Seconds left after evaluation ``k`` of the phase named ``name``; None before a rate is known."""
+        now = time.perf_counter()
+        i = self._index(name, k)
+        if i is None:
+            return None
+        if i != self.current:
+            self.current, self.t0, self.k0 = i, now, k
+        phase = self.plan[i]
+        if k - self.k0 >= RATE_MIN_EVALS:
+            self.rate = (now - self.t0) / (k - self.k0) / phase.weight
+        if self.rate is None:
+            return None
+        left = (phase.end - k) * phase.weight + phase.after
+        left += sum(p.evals * p.weight + p.after for p in self.plan[i + 1:])
+        return self.rate * left
+
+    def outputs_s(self) -> float | None:
+        """The estimated seconds of the outputs (`OUTPUTS_EVALS` at the last rate); None before a rate is known."""
+        return None if self.rate is None else self.rate * OUTPUTS_EVALS
+
+    def __call__(self, k: int, x, terms: dict) -> None:
+        eta = self.eta_s(terms.get("phase"), k)
+        self.on_iteration(k, x, terms if eta is None else dict(terms, eta_s=eta))

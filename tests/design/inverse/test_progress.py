@@ -1,0 +1,54 @@
+"""A design run's phases and its time left (design.inverse.progress)."""
+import pytest
+
+import design.inverse.progress as progress
+from design.files.rundir import run_design
+from design.inverse.config import DesignConfig
+from design.inverse.progress import OUTPUTS_EVALS, PRINT_CHECK_EVALS, RunClock, run_plan
+
+
+def test_a_single_run_is_its_optimisation_its_rounds_and_its_outputs():
+    plan = run_plan(DesignConfig(target="sphere", resolution=32, max_iter=100))
+    assert [(p.name, p.end, p.evals, p.weight) for p in plan] == [
+        (None, 80, 80, 1.0), ("physical correction round 1 of 2", 90, 10, 1.0),
+        ("physical correction round 2 of 2", 100, 10, 1.0)]
+    assert [p.after for p in plan] == [PRINT_CHECK_EVALS, PRINT_CHECK_EVALS, PRINT_CHECK_EVALS + OUTPUTS_EVALS]
+
+
+def test_a_multistart_plan_has_its_coarse_starts_at_an_eighth_of_the_cost_then_the_refinement():
+    plan = run_plan(DesignConfig(target="sphere", resolution=128, max_iter=100))
+    names = [p.name for p in plan]
+    assert names[:4] == [f"coarse start {k} of 4 at resolution 64" for k in range(1, 5)]
+    assert names[4:] == ["refinement at resolution 128", "refinement at resolution 128, physical correction round 1 of 2",
+                         "refinement at resolution 128, physical correction round 2 of 2"]
+    assert [p.weight for p in plan] == [0.125] * 4 + [1.0] * 3
+
+
+def test_the_time_left_is_the_plan_left_at_the_phase_rate(monkeypatch):
+    now = [0.0]
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
+    plan = run_plan(DesignConfig(target="sphere", resolution=32, max_iter=100))
+    seen = []
+    clock = RunClock(plan, lambda k, x, terms: seen.append(terms.get("eta_s")))
+    for k in range(1, 11):  # 2 s per evaluation
+        now[0] += 2.0
+        clock(k, None, {"eta_s": -1.0})
+    assert seen[0] == -1.0  # no rate yet: the optimiser's own bound is kept
+    left = (80 - 10) + PRINT_CHECK_EVALS + 2 * (10 + PRINT_CHECK_EVALS) + OUTPUTS_EVALS
+    assert seen[-1] == pytest.approx(2.0 * left)
+    now[0] += 50.0  # the print check
+    clock(81, None, {"phase": "physical correction round 1 of 2"})
+    for k in range(82, 86):  # 1 s per evaluation in the round
+        now[0] += 1.0
+        clock(k, None, {"phase": "physical correction round 1 of 2"})
+    assert seen[-1] == pytest.approx(1.0 * ((90 - 85) + PRINT_CHECK_EVALS + 10 + PRINT_CHECK_EVALS + OUTPUTS_EVALS))
+
+
+def test_every_evaluation_of_a_run_names_a_phase_of_its_plan(tmp_path):
+    config = DesignConfig(target="sphere", resolution=16, radius_vox=2.0, max_iter=20, checkpoint_every=5)
+    names = {p.name for p in run_plan(config)}
+    seen = []
+    run_design(config, tmp_path / "run", on_iteration=lambda k, x, terms: seen.append((terms.get("phase"),
+                                                                                          terms["eta_s"])))
+    assert len(seen) == 20 and {name for name, _ in seen} == names
+    assert all(eta > 0 for _, eta in seen)  # the last evaluation still has its print check and outputs ahead
