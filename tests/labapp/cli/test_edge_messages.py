@@ -232,3 +232,21 @@ def test_an_extruded_multistart_design_warns_once(tmp_path, capsys, caplog):
     warned = [r for r in caplog.records if r.levelno >= logging.WARNING and "middle 80%" in r.getMessage()]
     assert len(warned) == 1                                          # at the start, not once per start and again
     assert capsys.readouterr().out.count("warning: the target's middle 80%") == 1    # and in the summary
+
+
+def test_the_guide_names_everything_analyze_adds_to_a_run_folder(tmp_path):
+    import re
+    import shutil
+
+    from labapp.jobs.calibrate_bench import calibrate_series
+
+    run = tmp_path / "myrun"
+    shutil.copytree(BENCH / "run", run)
+    before = {p.name for p in run.iterdir()}
+    calibrate_series(BENCH / "calibration", tmp_path / "cal.json")
+    assert main(["analyze", str(run), "--calibration", str(tmp_path / "cal.json")]) == 0
+    added = {p.name for p in run.iterdir()} - before
+    assert added == {"analysis", "audit.jsonl"}
+    guide = (ROOT / "docs" / "guide.md").read_text()
+    record_rule = re.search(r"A run folder is a record: no command changes it except (.*?)(?:\n\n|\Z)", guide, re.S).group(1)
+    assert all(f"`RUN/{name}" in record_rule for name in added)
