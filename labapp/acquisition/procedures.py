@@ -176,9 +176,9 @@ class RunProcedure:
         leaves no new folder behind and an interrupted run untouched."""
         cfg = self.config
         n_frames = math.ceil(cfg.max_duration_s / cfg.interval_s)
-        if self.resume_path is None:
-            self.data_dir.mkdir(parents=True, exist_ok=True)
-            check_disk_space(self.data_dir, cfg.frame_bytes_estimate or self.bench.frame_bytes, n_frames)
+        if self.resume_path is None:     # the data directory is made with the run folder: a bench not reached leaves none
+            existing = next(p for p in (self.data_dir, *self.data_dir.parents) if p.exists())
+            check_disk_space(existing, cfg.frame_bytes_estimate or self.bench.frame_bytes, n_frames)
         self.session = BenchSession(self.bench, engine, None, keepalive_s=cfg.bath.keepalive_s)
         if self.resume_path is None and self.bench.on_new_beaker is not None:
             self.bench.on_new_beaker()

@@ -250,3 +250,9 @@ def test_the_guide_names_everything_analyze_adds_to_a_run_folder(tmp_path):
     guide = (ROOT / "docs" / "guide.md").read_text()
     record_rule = re.search(r"A run folder is a record: no command changes it except (.*?)(?:\n\n|\Z)", guide, re.S).group(1)
     assert all(f"`RUN/{name}" in record_rule for name in added)
+
+
+def test_a_run_whose_camera_cannot_be_reached_leaves_no_data_directory(tmp_path, capsys):
+    code = main(["run", "--camera", f"folder:{tmp_path / 'no-camera'}", "--out", str(tmp_path / "runs")])
+    assert code == 1 and "no run folder written" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()
