@@ -34,10 +34,12 @@ def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_
     """Ramps of the split^3 sub-cells of each listed lattice cell, by exact distances to the triangles
     closest to the cell and its 26 neighbours (the candidates for its sub-cells' closest triangles).
 
-    A sub-cell of spacing hs at signed distance f <= hs/2 from the surface arrives at offset[t] + f,
-    t its closest triangle, and releases nothing before offset[t] (its fluid region's wetting time),
-    unless another region's front reaches it first, at T = min_t (offset[t] + |p - t|): its solid
-    fraction f / hs + 1/2 then releases around T. Deeper, it arrives at T. Returns (start, end) per
+    A sub-cell of spacing hs at signed distance f <= hs/2 from the bath's surface arrives at f and
+    releases nothing before 0, unless another region's front reaches it first, at T = min_t (offset[t] +
+    |p - t|): its solid fraction f / hs + 1/2 then releases around T. One as close to a void's wall (t its
+    closest triangle, w = offset[t] > 0 the void's wetting time) releases its solid, f + hs/2 thick, from the
+    wall's side at w + s and from the other side at (the other regions' T at its centre) + f - s, s the depth
+    from the wall, whichever is first. Deeper, it arrives at T. Returns (start, end) per
     sub-cell (equal when the sub-cell lies outside the solid). `cells` index the arrays `tri_u`, `tri_t` of a
     block whose cell (0, 0, 0) is the lattice's cell `base`.
     """
@@ -47,6 +49,7 @@ def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_
     start = np.zeros(cells.shape[0] * per)
     end = np.zeros(cells.shape[0] * per)
     cand = np.empty(54, dtype=np.int64)
+    value = np.empty(54)
     for c in range(cells.shape[0]):
         ci, cj, ck = cells[c, 0], cells[c, 1], cells[c, 2]
         n_cand = 0
@@ -76,16 +79,35 @@ def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_
                         t = cand[m]
                         qx, qy, qz, _ = closest_on_triangle(px, py, pz, t, vx)
                         d = np.sqrt((px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2)
+                        value[m] = offset[t] + d
                         if d < best_d:
                             best_d = d
                             near = t
-                        best_t = min(best_t, offset[t] + d)
+                        best_t = min(best_t, value[m])
                     sg, _, _, _ = inside_sign(px, py, pz, near, vx, face_n, edge_n, vert_n, faces)
                     f = sg * best_d
+                    w = offset[near]
                     if f <= -0.5 * hs:
                         start[s] = 0.0
                         end[s] = 0.0
-                    elif f <= 0.5 * hs and best_t < offset[near] + abs(f) - 1e-9 * hs:
+                    elif f <= 0.5 * hs and w > 0.0:
+                        # a void's wall: the solid, L = f + hs/2 thick, is reached by the void's front at
+                        # w + s (s from the wall) and by any other region's at about a - s, a = that front's
+                        # time at the centre + f (extrapolated to the wall along the normal)
+                        other = np.inf
+                        for m in range(n_cand):
+                            if offset[cand[m]] != w:
+                                other = min(other, value[m])
+                        length = f + 0.5 * hs
+                        reach = other + f
+                        if reach <= w:  # the other front crosses it all before the void is wetted
+                            start[s] = reach - length
+                            end[s] = reach
+                        else:  # the fronts meet at s* = (a - w) / 2 (or the void's front takes it all)
+                            meet_at = w + min(0.5 * (reach - w), length)
+                            start[s] = meet_at - length
+                            end[s] = meet_at
+                    elif f <= 0.5 * hs and best_t < w + abs(f) - 1e-9 * hs:
                         half = 0.5 * (f / hs + 0.5) * hs
                         start[s] = best_t - half
                         end[s] = best_t + half

@@ -5,12 +5,14 @@ thick. Here the spacing comes from the solid's own thickness and the evaluator's
 (:mod:`design.forward.reference`, max_tau |C_h - C_2h|):
 
 1. The solid's mean half-thickness m = V / A (volume over surface area: t / 2 for a plate of thickness t, r / 2
-   for a rod of radius r, r / 3 for a ball) sets the first spacing, h = m / `CELLS_PER_THICKNESS`.
+   for a rod of radius r, r / 3 for a ball) sets the first spacing, h = m / `CELLS_PER_THICKNESS`, or the finest
+   affordable one up to m / `MIN_CELLS_PER_THICKNESS` when that would take more than `MAX_POINTS` points.
 2. The release and its stated error E are evaluated at h (and 2h). While E exceeds `DEFAULT_TOLERANCE` of the
    volume, h shrinks by (`TARGET_MARGIN` tolerance V / E)^(1 / `ORDER`), at most `MAX_PASSES` times.
 3. A spacing whose lattice would hold more than `MAX_POINTS` points (the solid's cells and a shell around its
-   surface: `design.forward.quadrature.lattice_points`) is not attempted: the solid is refused with
-   :class:`TooThinError`, naming its thickness and the spacing it would need.
+   surface: `design.forward.quadrature.lattice_points`) is not attempted: the finest affordable lattice is tried
+   instead if it is clearly finer than the last; otherwise the solid is refused with :class:`TooThinError`,
+   naming its thickness and the spacing it would need.
 
 Only the blocks of the lattice that meet the solid are evaluated (`design.forward.quadrature.lattice_curve`),
 so the cost is that of the solid's volume and surface at h, not of its box.
@@ -29,20 +31,24 @@ DEFAULT_TOLERANCE = 0.004
 """Stated error (max over the curve of |C_h - C_2h|) a solid-sized reference release meets, as a fraction of the
 volume: within the 0.5% that ``sfr simulate`` promises (RMS over the curve), with margin, since the error of C_h
 itself is a third to a fifth of the stated one (docs/evidence/forward.md: measured errors on hard parts)."""
-CELLS_PER_THICKNESS = 4.0
-"""First spacing: the mean half-thickness V / A over this (a slab's half-thickness in 4 cells)."""
+CELLS_PER_THICKNESS = 2.5
+"""First spacing: the mean half-thickness V / A over this (a slab 5 cells thick; refined from there)."""
+MIN_CELLS_PER_THICKNESS = 1.5
+"""Coarsest spacing tried when the first one would take too many points: V / A over this (a slab 3 cells thick);
+its stated error still decides whether it is kept."""
 TARGET_MARGIN = 0.6
 """A refined spacing aims at this fraction of the tolerance, so that one refinement usually suffices."""
 ORDER = 1.5
 """Order in h assumed when refining: the quadrature is second order where T is smooth, but the error of faceted
 curved parts (prisms, tori) falls more slowly at coarse spacings; a lower order shrinks h further per step."""
-SHRINK_RANGE = (0.25, 0.8)
+SHRINK_RANGE = (0.25, 0.7)
 """Least and largest factor by which one refinement shrinks the spacing."""
-MAX_PASSES = 3
-"""Lattices tried at most (the first and two refinements)."""
-MAX_POINTS = 14e6
-"""Most lattice points of one evaluation (the fine lattice; the coarse one has an eighth): about 30 s on one
-core of a 2-core machine (docs/evidence/forward.md)."""
+MAX_PASSES = 5
+"""Lattices tried at most (the first and four refinements: each has at least 1 / 0.7^3 = 2.9 times the points of the
+last, so the last dominates the cost)."""
+MAX_POINTS = 10e6
+"""Most lattice points of one evaluation (the fine lattice; the coarse one and the first scout have an eighth each):
+2-4 microseconds of CPU per point (docs/evidence/forward.md), so under a minute on two cores."""
 
 
 class TooThinError(DesignError):
@@ -97,7 +103,11 @@ def choose(evaluate: Callable[[float], float], bounds: np.ndarray, volume_mm3: f
     for k in range(MAX_PASSES):
         points = lattice_points(bounds, h, volume_mm3, area_mm2)
         if points > max_points:
-            raise _too_thin(source, m, h, points, max_points, passes, tolerance)
+            # the finest affordable lattice, if it is finer than the last one and still resolves the thickness
+            cheapest = _affordable(bounds, volume_mm3, area_mm2, max_points, h)
+            if cheapest > m / MIN_CELLS_PER_THICKNESS or (passes and cheapest > SHRINK_RANGE[1] * passes[-1][0]):
+                raise _too_thin(source, m, h, points, max_points, passes, tolerance)
+            h, points = cheapest, lattice_points(bounds, cheapest, volume_mm3, area_mm2)
         if say is not None:
             say(f"lattice {k + 1}: spacing {h:.4g} mm, about {points / 1e6:.2g} million points")
         error = evaluate(h)
@@ -111,6 +121,18 @@ def choose(evaluate: Callable[[float], float], bounds: np.ndarray, volume_mm3: f
     h, error = passes[-1]
     return Choice(h, tuple(passes), f"mean half-thickness V/A = {m:.4g} mm; stated error {100 * error:.3g}% of the "
                                     f"volume after {MAX_PASSES} lattices, above the {100 * tolerance:.3g}% aimed at")
+
+
+def _affordable(bounds: np.ndarray, volume_mm3: float, area_mm2: float, max_points: float, h: float) -> float:
+    """The smallest spacing above ``h`` whose lattice takes at most ``max_points`` points (bisection; the count
+    falls as the spacing grows)."""
+    lo, hi = h, h
+    while lattice_points(bounds, hi, volume_mm3, area_mm2) > max_points:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if lattice_points(bounds, mid, volume_mm3, area_mm2) > max_points else (lo, mid)
+    return hi
 
 
 def _too_thin(source: str, m: float, h: float, points: float, max_points: float, passes: list, tolerance: float
