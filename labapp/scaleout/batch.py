@@ -103,6 +103,19 @@ def analyse_one(run: str, calibration: str, out: str, reference: ReleaseProfile 
     return {k: ("" if v is None else v) for k, v in row.items()}
 
 
+def check_runs(runs: list[str | Path]) -> None:
+    """Refuse a batch naming run folders that do not exist, all of them named, before any work (or cluster).
+
+    Raises
+    ------
+    labapp.errors.UsageError
+    """
+    missing = [str(r) for r in runs if not Path(r).is_dir()]
+    if missing:
+        raise UsageError(f"{len(missing)} of the {len(runs)} run folders do not exist or are not folders: "
+                         f"{', '.join(missing)}; nothing was analysed")
+
+
 def analyse_many(runs: list[str | Path], calibration: str | Path, out: str | Path, client=None, *,
                  reference: str | Path | None = None, on_progress: Callable[[Progress], None] | None = None,
                  **options) -> BatchResult:
@@ -136,10 +149,7 @@ def analyse_many(runs: list[str | Path], calibration: str | Path, out: str | Pat
         raise ValueError("give at least one run folder")
     out = check_out(out, FolderKind.BATCH_ANALYSIS, [calibration, reference, *runs], replace=True)   # a rerun completes it
     BenchCalibration.load(calibration)  # a bad calibration stops the batch before any work
-    missing = [str(r) for r in runs if not Path(r).is_dir()]
-    if missing:
-        raise UsageError(f"{len(missing)} of the {len(runs)} run folders do not exist or are not folders: "
-                         f"{', '.join(missing)}; nothing was analysed")
+    check_runs(runs)
     ref = None
     if reference is not None:
         ref = profile_of(read_physical_curve(reference, calibration=BenchCalibration.load(calibration)),

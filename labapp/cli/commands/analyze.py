@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
 def _run_batch(args: argparse.Namespace) -> int:
     """Many runs: the analysis job on Dask workers, one row each in ``--out/batch_summary.csv``."""
     from labapp.records.lock import folder_lock
-    from labapp.scaleout.batch import TASK_MEMORY_GB, RowStatus, analyse_many
+    from labapp.scaleout.batch import TASK_MEMORY_GB, RowStatus, analyse_many, check_runs
     from labapp.scaleout.cluster import dashboard_link, dask_client
 
     if not args.out:
@@ -97,6 +97,7 @@ def _run_batch(args: argparse.Namespace) -> int:
     if not args.calibration:
         raise UsageError("a batch of runs (several runs, --reference or --scheduler) needs --calibration: the bench "
                          "calibration every run is analysed with")
+    check_runs(args.run)        # before the cluster starts
     interrupt.set_hint(f"the runs analysed so far are in {args.out}/batch_summary.csv; rerun the same command to "
                        "analyse them all")
     show, stopping = progress_printer(), []

@@ -144,7 +144,9 @@ def test_a_batch_with_a_missing_run_folder_is_refused_before_any_work(tmp_path, 
     code = main(["analyze", str(BENCH / "run"), str(tmp_path / "gone"), "--calibration", str(tmp_path / "cal.json"),
                  "--out", str(tmp_path / "batch")])
     assert code == 2
-    assert f"1 of the 2 run folders do not exist or are not folders: {tmp_path / 'gone'}" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"1 of the 2 run folders do not exist or are not folders: {tmp_path / 'gone'}" in err
+    assert "cluster" not in err                                     # refused before Dask starts
     assert not (tmp_path / "batch").exists()
 
 
