@@ -97,7 +97,7 @@ def test_cached_cells_make_a_rerun_decode_nothing(tmp_path, monkeypatch):
 
 
 def test_bad_folders(tmp_path):
-    with pytest.raises(AnalysisError, match="not a folder"):
+    with pytest.raises(AnalysisError, match="missing does not exist"):
         read_frame_list(tmp_path / "missing")
     (tmp_path / "empty").mkdir()
     with pytest.raises(AnalysisError, match="no frames"):
