@@ -7,6 +7,7 @@ depends on the shape, and a print is judged against what the source itself relea
 """
 from __future__ import annotations
 
+import hashlib
 import logging
 from dataclasses import dataclass
 
@@ -17,7 +18,7 @@ from design._validate import MESH_SUFFIXES
 from design.errors import DesignError
 from design.fabrication.extract import count_pieces
 from design.fabrication.ico import IcoConfig
-from design.forward.reference import design_lattice, reference_release
+from design.forward.reference import ReferenceRelease, design_lattice, reference_release
 from design.forward.simulator import total_time
 from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.geometry.voxelize import voxelize
@@ -39,6 +40,24 @@ from design.inverse.targets import (
 )
 
 log = logging.getLogger(__name__)
+
+SOURCE_RELEASES_KEPT = 4
+"""Source releases `source_release` keeps in the process."""
+_source_releases: dict[tuple[str, str, int], ReferenceRelease] = {}
+
+
+def source_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray, cells: int) -> ReferenceRelease:
+    """The reference evaluator's release of a source mesh on a tau grid (`reference_release` at ``cells``), kept for
+    the process's later problems of the same mesh, tau grid and lattice: a multi-start's coarse starts prepare the
+    same target, each at a reference release's cost (`SOURCE_RELEASES_KEPT` are kept, the oldest dropped)."""
+    digest = hashlib.sha256(np.ascontiguousarray(mesh.vertices, float).tobytes())
+    digest.update(np.ascontiguousarray(mesh.faces, np.int64).tobytes())
+    key = (digest.hexdigest(), hashlib.sha256(np.ascontiguousarray(tau_mm, float).tobytes()).hexdigest(), int(cells))
+    if key not in _source_releases:
+        while len(_source_releases) >= SOURCE_RELEASES_KEPT:
+            _source_releases.pop(next(iter(_source_releases)))
+        _source_releases[key] = reference_release(mesh, tau_mm, cells=cells)
+    return _source_releases[key]
 
 DEFAULT_DOMAIN_MM = 20.0
 """Edge of the cubic domain used when the target has no source mesh and no --domain-mm, mm."""
@@ -265,7 +284,7 @@ def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
     if mesh is not None:
         # the source's physical release (exact surface distances), not its release on the design grid
         grid_tau = tau_grid(t_total, config.samples)
-        reference = reference_release(mesh, grid_tau, cells=design_lattice(config.resolution))
+        reference = source_release(mesh, grid_tau, design_lattice(config.resolution))
         target = Target(grid_tau, reference.released_mm3, f"mesh:{config.target}")
         target_error = reference.error_mm3
         source_solid = voxelize(mesh, dx, origin_mm=origin, shape=sim_full) > 0.5

@@ -7,7 +7,7 @@ is extracted and released by the reference evaluator (`design.files.outputs`). E
 line names it (``terms["phase"]``) and costs a number of objective evaluations, each weighted by the size of its
 grid against the run's (an evaluation is a fast-marching solve and its adjoint, whose cost follows the voxels); the
 print checks and the outputs cost a fixed number of the run's evaluations (`PRINT_CHECK_EVALS`, `OUTPUTS_EVALS`,
-measured, docs/benchmarks.md#design-stages).
+measured, docs/benchmarks.md#the-stages-of-a-design).
 
 `RunClock` wraps the run's progress callback: at every evaluation it measures the seconds per weighted evaluation of
 the phase in progress and sets ``eta_s`` to what is left of it and of every later phase at that rate. A phase that
@@ -23,10 +23,10 @@ from design.inverse.optimize import IterationCallback
 
 PRINT_CHECK_EVALS = 12.0
 """The time of a correction round's print check (extraction, the reference evaluator's release, the design grid's
-release) in evaluations of the run's grid (docs/benchmarks.md#design-stages)."""
+release) in evaluations of the run's grid (docs/benchmarks.md#the-stages-of-a-design)."""
 OUTPUTS_EVALS = 30.0
 """The time of the outputs (the print's extraction and release on the full lattice, the binary solid's release,
-the report) in evaluations of the run's grid (docs/benchmarks.md#design-stages)."""
+the report) in evaluations of the run's grid (docs/benchmarks.md#the-stages-of-a-design)."""
 RATE_MIN_EVALS = 3
 """Evaluations of a phase after which its own rate replaces the one carried from the phase before."""
 
