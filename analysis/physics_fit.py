@@ -98,7 +98,7 @@ class _Simulations:
 def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequence[str], *,
                 max_offset_s: float = DEFAULT_MAX_OFFSET_S, window_s: float = DEFAULT_WINDOW_S,
                 order: int = DEFAULT_ORDER, progress: Callable[[int, int], None] | None = None,
-                offset_floor_mm: float = 0.0) -> PhysicsFit:
+                offset_floor_mm: float = 0.0, losses: dict | None = None) -> PhysicsFit:
     """Fit print physics and the constant-rate scales together, with leave-one-out and uncertainties.
 
     Each candidate parameter value is scored by the section 4.3 loss of the scales fitted at it (the
@@ -124,6 +124,10 @@ def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequenc
     offset_floor_mm : float
         Least standard error of the offset and of the swelling width, mm: a voxelised surface is placed, and a
         channel's width measured, only to within its voxels (the caller passes half the simulations' voxel edge).
+    losses : dict, optional
+        The losses evaluated, per (physics values, left-out shape, lag fitted): a dict the caller shares between
+        the fits of several parameter sets on the same shapes and settings, so that a candidate value two sets
+        search (every set with the anisotropy scans its grid at the identity offset) is fitted once.
 
     Returns
     -------
@@ -135,11 +139,15 @@ def fit_physics(shapes_at: Callable[[dict], Sequence[ShapeRun]], fitted: Sequenc
     lag = LAG in fitted
     simulated = [p for p in fitted if p in PHYSICS_PARAMETERS]
     sims = _Simulations(shapes_at, max_offset_s, window_s, order)
+    losses = {} if losses is None else losses
 
     def loss_without(skip: int | None) -> Callable[[dict], float]:
         def loss_at(values: dict) -> float:
-            sub = [p for j, p in enumerate(sims.at(values)) if j != skip]
-            return fit_prepared(sub, "constant", max_offset_s, sims.around, lag=lag).loss
+            key = (tuple(round(values[p], 9) for p in PHYSICS_PARAMETERS), skip, lag)
+            if key not in losses:
+                sub = [p for j, p in enumerate(sims.at(values)) if j != skip]
+                losses[key] = fit_prepared(sub, "constant", max_offset_s, sims.around, lag=lag).loss
+            return losses[key]
         return loss_at
 
     n = len(sims.base)

@@ -43,6 +43,9 @@ PHYSICS_SETS = {**{k: v for k, v in _SIMULATED_SETS.items() if k != "anisotropy+
 PHYSICS_CHOICES = tuple(PHYSICS_SETS) + ("auto",)
 """``--physics`` values: a set of `PHYSICS_SETS` to fit; ``auto`` fits every subset and keeps the one leave-one-out
 prefers."""
+DEFAULT_PHYSICS = "auto"
+"""What a calibration fits by default: the print physics leave-one-out shows earn their place (``none``, the
+isotropic model of the mesh as designed, when none does)."""
 _PHYSICS_ROUNDS = 2
 _LOO_WINDOW = 3
 
@@ -90,17 +93,42 @@ def _nearest(p: str, value: float) -> int:
     return int(np.argmin([abs(grid_coord(p, g) - grid_coord(p, value)) for g in PHYSICS_GRIDS[p]]))
 
 
+def _descend(loss_of: Callable[[int], float], start: int, lo: int, hi: int) -> tuple[int, int, int]:
+    """Walk from grid index ``start`` to a local minimum of ``loss_of`` within ``lo..hi - 1`` (one step at a time
+    to the lower neighbour), then across the flat run of equal losses there. Returns ``(best, a, b)``: the minimum
+    and the first and last index of the evaluated stretch around it (the minimum's neighbours included)."""
+    i = start
+    while True:
+        here = loss_of(i)
+        left = loss_of(i - 1) if i > lo else math.inf
+        right = loss_of(i + 1) if i < hi - 1 else math.inf
+        if min(left, right) >= here:
+            break
+        i = i - 1 if left < right else i + 1
+    tol = 1e-12 * max(abs(here), 1e-300)
+    a = b = i
+    while a > lo and abs(loss_of(a - 1) - here) <= tol:
+        a -= 1
+    while b < hi - 1 and abs(loss_of(b + 1) - here) <= tol:
+        b += 1
+    return i, max(a - 1, lo), min(b + 1, hi - 1)
+
+
 def physics_search(loss_at: Callable[[dict], float], fitted: Sequence[str], near: dict | None = None,
-                    flat: dict | None = None) -> dict:
+                   flat: dict | None = None) -> dict:
     """Coordinate search over the grids of the ``fitted`` parameters (values on grid points), then a parabola
-    refinement of each from its grid neighbours. Returns every parameter's value. With ``near`` (values), the
-    search starts there and covers `_LOO_WINDOW` grid points either side of it (leave-one-out refits). ``flat``,
-    when given, receives per parameter the half-width of its flat minimum (`_flat_run`, in its grid coordinate;
-    0 for a single best point)."""
+    refinement of each from its grid neighbours. Returns every parameter's value.
+
+    Coarse to fine: without ``near`` each parameter's grid is scanned at every other point (both ends included)
+    and the search walks from the best of those to a neighbouring grid minimum (`_descend`); with ``near``
+    (values: leave-one-out refits) it walks from there, within `_LOO_WINDOW` grid points either side. Losses are
+    asked once per point. ``flat``, when given, receives per parameter the half-width of its flat minimum
+    (`_flat_run`, in its grid coordinate; 0 for a single best point)."""
     start = near or PHYSICS_IDENTITY
     index = {p: _nearest(p, start[p]) for p in fitted}
     span = {p: (0, len(PHYSICS_GRIDS[p])) if near is None else
             (max(index[p] - _LOO_WINDOW, 0), min(index[p] + _LOO_WINDOW + 1, len(PHYSICS_GRIDS[p]))) for p in fitted}
+    seen: dict[tuple, float] = {}
 
     def point(overrides: dict) -> dict:
         values = dict(PHYSICS_IDENTITY)
@@ -108,19 +136,33 @@ def physics_search(loss_at: Callable[[dict], float], fitted: Sequence[str], near
         values.update(overrides)
         return values
 
-    profiles: dict[str, list[float]] = {}
-    for _ in range(_PHYSICS_ROUNDS if len(fitted) > 1 else 1):
+    def loss_of(p: str) -> Callable[[int], float]:
+        def at(k: int) -> float:
+            key = tuple(sorted({**index, p: k}.items()))
+            if key not in seen:
+                seen[key] = loss_at(point({p: PHYSICS_GRIDS[p][k]}))
+            return seen[key]
+        return at
+
+    stretch: dict[str, tuple[int, int]] = {}
+    for round_ in range(_PHYSICS_ROUNDS if len(fitted) > 1 else 1):
         for p in fitted:
             lo, hi = span[p]
-            grid = PHYSICS_GRIDS[p][lo:hi]
-            profiles[p] = [loss_at(point({p: g})) for g in grid]
-            index[p] = lo + int(np.argmin(profiles[p]))
+            at = loss_of(p)
+            begin = index[p]
+            if near is None and round_ == 0:     # coarse: every other grid point, then walk from the best
+                coarse = sorted(set(range(lo, hi, 2)) | {hi - 1})
+                begin = min(coarse, key=at)
+            best, a, b = _descend(at, begin, lo, hi)
+            index[p], stretch[p] = best, (a, b)
     values = point({})
     for p in fitted:
-        lo, hi = span[p]
-        values[p] = _refine(p, PHYSICS_GRIDS[p][lo:hi], index[p] - lo, profiles[p])
+        a, b = stretch[p]
+        at = loss_of(p)
+        profile = [at(k) for k in range(a, b + 1)]
+        grid = PHYSICS_GRIDS[p][a:b + 1]
+        values[p] = _refine(p, grid, index[p] - a, profile)
         if flat is not None:
-            a, b = _flat_run(profiles[p], index[p] - lo)
-            grid = PHYSICS_GRIDS[p][lo:hi]
-            flat[p] = 0.5 * abs(grid_coord(p, grid[b]) - grid_coord(p, grid[a]))
+            f0, f1 = _flat_run(profile, index[p] - a)
+            flat[p] = 0.5 * abs(grid_coord(p, grid[f1]) - grid_coord(p, grid[f0]))
     return values

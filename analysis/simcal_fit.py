@@ -75,21 +75,36 @@ class PreparedRun:
         other.sim_slope = np.gradient(other.sim, other.tau)
         return other
 
+    def _clock(self, inv_csat: float) -> tuple[np.ndarray | None, np.ndarray]:
+        """The model's clock in units of seconds_per_mm at each simulated tau (None: the constant rate's, tau
+        itself) and the simulated slope on it, dC_s/dtau times the bath's free fraction."""
+        if inv_csat <= 0:
+            return None, self.sim_slope
+        free = 1.0 - inv_csat * 1000.0 * self.load_fraction * self.sim
+        steps = 0.5 * (1.0 / free[1:] + 1.0 / free[:-1]) * np.diff(self.tau)
+        return np.concatenate([[0.0], np.cumsum(steps)]), self.sim_slope * free
+
     def loss(self, seconds_per_mm: float, inv_csat: float, offset_s: float) -> float:
         """Section 4.3's L for this run (hours), the simulated curve on the clock of the model."""
-        free = 1.0 - inv_csat * 1000.0 * self.load_fraction * self.sim
-        if inv_csat > 0:
-            steps = 0.5 * (1.0 / free[1:] + 1.0 / free[:-1]) * np.diff(self.tau)
-            clock = np.concatenate([[0.0], np.cumsum(steps)]) * seconds_per_mm
+        return float(self.losses(np.array([seconds_per_mm]), np.array([offset_s]), inv_csat)[0])
+
+    def losses(self, seconds_per_mm: np.ndarray, offset_s: np.ndarray, inv_csat: float = 0.0) -> np.ndarray:
+        """:meth:`loss` at M pairs (seconds_per_mm, offset_s) at once, (M,). The clock scales with seconds_per_mm,
+        so the measured time t - offset maps to tau through the clock at (t - offset) / seconds_per_mm (tau itself,
+        clipped to the simulated range, at a constant rate)."""
+        s, offset = np.broadcast_arrays(np.asarray(seconds_per_mm, float), np.asarray(offset_s, float))
+        s = s.reshape(-1, 1)
+        t = self.t[None, :] - offset.reshape(-1, 1)
+        x = t / s
+        clock, slope = self._clock(inv_csat)
+        if clock is None:
+            tau, end = np.minimum(np.maximum(x, self.tau[0]), self.tau[-1]), self.tau[-1]
         else:
-            clock = self.tau * seconds_per_mm
-        t = self.t - offset_s
-        tau = np.interp(t, clock, self.tau)
-        started = (t > 0) & (t < clock[-1])
+            tau, end = np.interp(x, clock, self.tau), clock[-1]
+        started = (t > 0) & (x < end)
         pred = np.interp(tau, self.tau, self.sim)
-        pred_slope = np.where(started, np.interp(tau, self.tau, self.sim_slope * free), 0.0) \
-            * (_HOUR_S / seconds_per_mm)
-        return float(np.sum(self.weight * (W_SLOPE * np.abs(pred_slope - self.meas_slope) + np.abs(pred - self.meas))))
+        pred_slope = np.where(started, np.interp(tau, self.tau, slope), 0.0) * (_HOUR_S / s)
+        return np.sum(self.weight * (W_SLOPE * np.abs(pred_slope - self.meas_slope) + np.abs(pred - self.meas)), axis=1)
 
 
 def _bounded(f: Callable[[float], float], lo: float, hi: float, xatol: float) -> tuple[float, float]:
@@ -97,9 +112,11 @@ def _bounded(f: Callable[[float], float], lo: float, hi: float, xatol: float) ->
     return float(res.x), float(res.fun)
 
 
-def _scan_then_refine(f: Callable[[float], float], grid: np.ndarray, xatol: float) -> tuple[float, float]:
-    """Robust 1-D minimum of a non-smooth f: best grid point, then Brent between its neighbours."""
-    values = np.array([f(x) for x in grid])
+def _scan_then_refine(f: Callable[[float], float], grid: np.ndarray, xatol: float,
+                      on_grid: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[float, float]:
+    """Robust 1-D minimum of a non-smooth f: best grid point, then Brent between its neighbours. ``on_grid``, when
+    given, is f on the whole grid at once (vectorised)."""
+    values = np.asarray(on_grid(grid), float) if on_grid is not None else np.array([f(x) for x in grid])
     i = int(np.argmin(values))
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
     x, fx = _bounded(f, lo, hi, xatol) if hi > lo else (float(grid[i]), float(values[i]))
@@ -123,15 +140,18 @@ def _fit_time(prepared: Sequence[PreparedRun], inv_csat: float, max_offset_s: fl
         s = math.exp(log_s)
         return sum(p.loss(s, inv_csat, lag_s + o) for p, o in zip(prepared, offsets))
 
+    def total_on(log_s: np.ndarray) -> np.ndarray:   # the scans are vectorised (PreparedRun.losses)
+        return sum(p.losses(np.exp(log_s), lag_s + o, inv_csat) for p, o in zip(prepared, offsets))
+
     lo, hi = (math.log(b) for b in SECONDS_PER_MM_BOUNDS)
     full_grid = np.linspace(lo, hi, int(round((hi - lo) / math.log(10) * _SCAN_PER_DECADE)) + 1)
     if around is None:
-        log_s, _ = _scan_then_refine(total, full_grid, 1e-5)
+        log_s, _ = _scan_then_refine(total, full_grid, 1e-5, total_on)
     else:
         grid = np.linspace(math.log(around) - 0.3, math.log(around) + 0.3, 13)
-        log_s, _ = _scan_then_refine(total, grid, 1e-5)
+        log_s, _ = _scan_then_refine(total, grid, 1e-5, total_on)
         if min(log_s - grid[0], grid[-1] - log_s) < 0.5 * (grid[1] - grid[0]):   # at the window's edge: scan all
-            log_s, _ = _scan_then_refine(total, full_grid, 1e-5)
+            log_s, _ = _scan_then_refine(total, full_grid, 1e-5, total_on)
     lag_grid = np.linspace(*LAG_BOUNDS_S, _LAG_SCAN)
     # a lag changes the time scale the first scan found (it absorbed the delay): more rounds, a wider step
     rounds, window = (_LAG_ROUNDS, 0.15) if lag else (_ROUNDS if max_offset_s > 0 else 0, 0.05)
@@ -139,10 +159,12 @@ def _fit_time(prepared: Sequence[PreparedRun], inv_csat: float, max_offset_s: fl
         s = math.exp(log_s)
         if lag:
             lag_s, _ = _scan_then_refine(
-                lambda d: sum(p.loss(s, inv_csat, d + o) for p, o in zip(prepared, offsets)), lag_grid, 0.1)
+                lambda d: sum(p.loss(s, inv_csat, d + o) for p, o in zip(prepared, offsets)), lag_grid, 0.1,
+                lambda ds: sum(p.losses(s, ds + o, inv_csat) for p, o in zip(prepared, offsets)))
         if max_offset_s > 0:
             offset_grid = np.linspace(-max_offset_s, max_offset_s, 17)
-            offsets = [_scan_then_refine(lambda o, p=p: p.loss(s, inv_csat, lag_s + o), offset_grid, 0.1)[0]
+            offsets = [_scan_then_refine(lambda o, p=p: p.loss(s, inv_csat, lag_s + o), offset_grid, 0.1,
+                                         lambda os_, p=p: p.losses(s, lag_s + os_, inv_csat))[0]
                        for p in prepared]
             if lag:
                 moved = min(max(lag_s + float(np.mean(offsets)), LAG_BOUNDS_S[0]), LAG_BOUNDS_S[1])

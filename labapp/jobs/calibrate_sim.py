@@ -29,6 +29,7 @@ from analysis.physics_fit import (
     with_discretisation,
 )
 from analysis.physics_grid import (
+    DEFAULT_PHYSICS,
     FIT_IDENTITY,
     FIT_PARAMETERS,
     LAG,
@@ -112,7 +113,8 @@ def _loo_summary(loo: tuple[LooShape, ...], rows: list[SetRow]) -> list[dict]:
 
 def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out_dir: str | Path, *,
                   model: str = "auto", resolution: int = DEFAULT_RESOLUTION,
-                  max_offset_s: float = DEFAULT_MAX_OFFSET_S, physics: str = "none", second_resolution: int | None = None,
+                  max_offset_s: float = DEFAULT_MAX_OFFSET_S, physics: str = DEFAULT_PHYSICS,
+                  second_resolution: int | None = None,
                   progress: Progress | None = None) -> SimCalRun:
     """Calibrate the simulator against measured runs and write ``simcal.json``, ``loo.csv``, ``simcal.png``.
 
@@ -142,10 +144,11 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         (:func:`analysis.physics_fit.fit_physics`): the build-direction anisotropy, the surface offset, the swelling
         width below which channels are shut, the wetting lag after the drop (shared by all runs; the per-run
         drop offsets of ``max_offset_s`` are then its jitter around it);
-        ``none`` keeps the isotropic model of the mesh as designed; ``auto`` fits every subset and keeps the
-        one leave-one-out prefers (a parameter must earn its place; the sets with the swelling width only when
-        a shape has a channel the widest width searched would shut). The models of ``model`` are then
-        fitted on the meshes simulated with the chosen physics.
+        ``none`` keeps the isotropic model of the mesh as designed; ``auto`` (the default,
+        ``analysis.physics_grid.DEFAULT_PHYSICS``) fits every subset and keeps the one leave-one-out prefers (a
+        parameter must earn its place; the sets with the swelling width only when a shape has a channel the widest
+        width searched would shut). The models of ``model`` are then fitted on the meshes simulated with the
+        chosen physics.
     progress : callable, optional
         ``progress(fraction, message)`` before each run and each fit; it may raise ``KeyboardInterrupt`` to stop
         there (nothing is written into ``out_dir``).
@@ -233,7 +236,8 @@ class _Simulations:
         """``(tau_mm, released_mm3, dx_mm)`` of a row's mesh with print physics ``values``."""
         key = (row.mesh, *(round(values[p], 9) for p in PHYSICS_PARAMETERS))
         if key not in self.simulated:
-            self.simulated[key] = mesh_release(self.meshes[row.mesh], row.mesh, self.resolution, values, self.grids)
+            self.simulated[key] = mesh_release(self.meshes[row.mesh], row.mesh, self.resolution, values, self.grids,
+                                               interpolated=True)
         return self.simulated[key]
 
     def shapes_at(self, values: dict) -> list[ShapeRun]:
@@ -282,16 +286,18 @@ def _fit_print_physics(set_csv: Path, sims: _Simulations, physics: str, max_offs
         return physics_fits, "none"
     rows = sims.rows
     names = [m for m in PHYSICS_SETS if physics == "auto" or m in ("none", physics)]
+    losses: dict = {}   # shared by the sets: each candidate value's loss fitted once
     if physics == "auto" and not any(_has_channels(sims.grids[(row.mesh, 0.0)]) for row in rows):
         # no shape has a channel the widest swelling width would shut: its release cannot tell the width
         names = [m for m in names if "swelling_mm" not in PHYSICS_SETS[m]]
+    offset_floor = 0.5 * float(np.median([sims.simulation(row, PHYSICS_IDENTITY)[2] for row in rows]))
     for j, name in enumerate(names):
         base, span = 0.1 + 0.5 * j / len(names), 0.5 / len(names)
         say(base, f"fitting print physics '{name}' and its leave-one-out ...")
         try:
             physics_fits[name] = fit_physics(
-                sims.shapes_at, PHYSICS_SETS[name], max_offset_s=max_offset_s, offset_floor_mm=0.5 * float(
-                    np.median([sims.simulation(row, PHYSICS_IDENTITY)[2] for row in rows])),
+                sims.shapes_at, PHYSICS_SETS[name], max_offset_s=max_offset_s, offset_floor_mm=offset_floor,
+                losses=losses,
                 progress=lambda done, total, name=name, base=base, span=span: say(
                     base + span * done / total, f"print physics '{name}': {done} of {total} fits"))
         except AnalysisError as exc:

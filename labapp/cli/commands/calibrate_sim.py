@@ -16,7 +16,7 @@ RECORDS = True
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr calibrate-sim`."""
     from analysis.physics_fit import DISCRETISATION_FACTOR
-    from analysis.physics_grid import PHYSICS_CHOICES
+    from analysis.physics_grid import DEFAULT_PHYSICS, PHYSICS_CHOICES
     from analysis.simcal_fit import DEFAULT_MAX_OFFSET_S
     from design.geometry.voxelize import DEFAULT_RESOLUTION
     from labapp.jobs.calibrate_sim import MAX_RESOLUTION, MIN_RESOLUTION
@@ -30,13 +30,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default="auto", choices=("auto", "constant", "saturation"),
                         help="model used for prediction: constant rate, Appendix B's saturating bath, or auto "
                              "(the lower leave-one-out error; both are always reported)")
-    parser.add_argument("--physics", default="none", choices=PHYSICS_CHOICES,
+    parser.add_argument("--physics", default=DEFAULT_PHYSICS, choices=PHYSICS_CHOICES,
                         help="print physics of the forward model to fit with the scales: the build-direction "
                              "anisotropy (z / in-plane erosion rate), the surface offset (print larger or smaller "
                              "than its mesh, mm), the swelling width (channels narrower are shut until their walls "
                              "dissolve, mm), the wetting lag (s after the drop, shared by all runs: lag), sets joined by +, "
                              "all four, or auto (every subset; a parameter is kept only where "
-                             "leave-one-out shows it earns it). Default none: the isotropic model of the mesh")
+                             f"leave-one-out shows it earns it). Default {DEFAULT_PHYSICS}; none: the isotropic model "
+                             "of the mesh as designed")
     parser.add_argument("--resolution", type=bounded(MIN_RESOLUTION, MAX_RESOLUTION, integer=True, unit="voxels"),
                         default=DEFAULT_RESOLUTION,
                         help=f"voxels along each mesh's longest side (default {DEFAULT_RESOLUTION})")

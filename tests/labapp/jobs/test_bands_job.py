@@ -39,7 +39,7 @@ def calibrated(tmp_path_factory):
         rows.append(f"{name}.csv,{name}.stl,{release.mass_g:.4f}")
     (folder / "set.csv").write_text("\n".join(rows) + "\n")
     assert main(["calibrate-sim", str(folder / "set.csv"), "--out", str(folder / "cal"), "--resolution", "24",
-                 "--model", "constant"]) == 0
+                 "--model", "constant", "--physics", "none"]) == 0
     return folder
 
 

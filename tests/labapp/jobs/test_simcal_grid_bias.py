@@ -157,7 +157,7 @@ def test_calibration_recovers_time_scale_and_predicts_unseen_curved_shape(tmp_pa
 
     # the grid alone (no bias): the sphere's front runs ahead of the box's, so neither the time scale nor the
     # capsule comes out right (measured: the time scale 6.8 % off, the capsule 3.2 % of its mass)
-    def grid_alone(mesh, grid, resolution, physics, release=None):
+    def grid_alone(mesh, grid, resolution, physics, release=None, interpolated=False):
         plain = simulate(*grid[:2], mirror=grid[2], anisotropy=physics["anisotropy"])
         return plain.tau_mm, pr.exact_volume_release(plain.released_mm3, mesh, physics["offset_mm"])
 

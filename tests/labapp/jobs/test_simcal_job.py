@@ -4,7 +4,9 @@ Measured curves here are the simulated bench's objects (forward model at resolut
 material, each print its own few-percent deviation) sampled every 30 s with 0.2%-of-mass noise; the
 calibration simulates the meshes at resolution 32, so the discretisation differs as it does on a real
 bench. Tolerances are the acceptance figures: scales within 2%, leave-one-out within 3% RMS of the
-weighed mass, a design's predicted release within 3% RMS of its measured target.
+weighed mass, a design's predicted release within 3% RMS of its measured target. The material has no print
+physics, so these calibrations fit the scales of the isotropic model alone (``physics="none"``); that the default
+(``auto``) keeps no print physics on such a bench is test_simcal_physics.py's identity case.
 """
 import json
 
@@ -63,7 +65,7 @@ def _true_scales(releases):
 def test_hidden_scales_are_recovered_and_left_out_shapes_predicted(tmp_path, releases, case):
     overrides = {} if case == "complete" else dict(stop={"pill": 0.8}, shift={"csg": 30.0})
     run = calibrate_sim(_write_set(tmp_path / "set", releases, **overrides), None, tmp_path / "cal", resolution=32,
-                        model="constant")
+                        model="constant", physics="none")
     doc = run.doc
     rate, g_per_mm3 = _true_scales(releases)
     assert doc["seconds_per_mm"] == pytest.approx(rate, rel=0.02)
@@ -85,7 +87,7 @@ def test_hidden_scales_are_recovered_and_left_out_shapes_predicted(tmp_path, rel
 
 def test_different_water_masses_share_one_calibration(tmp_path, releases):
     run = calibrate_sim(_write_set(tmp_path / "set", releases, water={"sphere": 300.0, "csg": 800.0}), None,
-                        tmp_path / "cal", resolution=32)             # auto: both models, the better one used
+                        tmp_path / "cal", resolution=32, physics="none")   # model auto: both, the better one used
     assert set(run.doc["models"]) == {"constant", "saturation"}
     assert len((tmp_path / "cal" / "loo.csv").read_text().splitlines()) == 1 + 2 * 4
     waters = [s["water_g"] for s in run.doc["shapes"]]
@@ -97,7 +99,7 @@ def test_different_water_masses_share_one_calibration(tmp_path, releases):
 @pytest.mark.slow
 def test_the_loop_measured_curve_to_design_within_3_percent(tmp_path, releases):
     set_csv = _write_set(tmp_path / "set", dict(list(releases.items())[:3]))
-    calibrate_sim(set_csv, None, tmp_path / "cal", resolution=32, model="constant")
+    calibrate_sim(set_csv, None, tmp_path / "cal", resolution=32, model="constant", physics="none")
     simcal = tmp_path / "cal" / "simcal.json"
     further = sample_release("polyhedron", index=7, resolution=48, material=MATERIAL)
     t, grams, conc = _curve(further, 7)
@@ -122,7 +124,8 @@ def test_the_loop_measured_curve_to_design_within_3_percent(tmp_path, releases):
 
 
 def test_simulate_with_simcal_writes_the_physical_curve_and_refuses_another_resolution(tmp_path, releases):
-    calibrate_sim(_write_set(tmp_path / "set", releases), None, tmp_path / "cal", resolution=32, model="constant")
+    calibrate_sim(_write_set(tmp_path / "set", releases), None, tmp_path / "cal", resolution=32, model="constant",
+                  physics="none")
     simcal = tmp_path / "cal" / "simcal.json"
     assert main(["simulate", "sample:pill", "--simcal", str(simcal), "--out", str(tmp_path / "sim")]) == 0
     rows = np.genfromtxt(tmp_path / "sim" / "release_physical.csv", delimiter=",", names=True)
@@ -132,8 +135,8 @@ def test_simulate_with_simcal_writes_the_physical_curve_and_refuses_another_reso
     half = [np.interp(0.5 * c["released_g"][-1], c["released_g"], c["t_s"]) for c in (rows, truth.__dict__)]
     assert half[0] == pytest.approx(half[1], rel=0.03)                  # half released at the true time
     np.testing.assert_allclose(rows["conc_g_per_kg"], rows["released_g"] * 2.0, atol=1e-5)
-    with pytest.raises(SimCalError, match="calibrated at resolution 32, not 48"):
-        _raise_through(["simulate", "sample:pill", "--simcal", str(simcal), "--resolution", "48",
+    with pytest.raises(SimCalError, match="calibrated at resolution 32, not 48"):    # the grid model's voxels
+        _raise_through(["simulate", "sample:pill", "--simcal", str(simcal), "--model", "grid", "--resolution", "48",
                         "--out", str(tmp_path / "s2")])
 
 
@@ -146,7 +149,8 @@ def _raise_through(argv):
 
 
 def test_bad_calibration_files_are_refused(tmp_path, releases):
-    calibrate_sim(_write_set(tmp_path / "set", releases), None, tmp_path / "cal", resolution=32, model="constant")
+    calibrate_sim(_write_set(tmp_path / "set", releases), None, tmp_path / "cal", resolution=32, model="constant",
+                  physics="none")
     doc = json.loads((tmp_path / "cal" / "simcal.json").read_text())
     for change, message in ((dict(model="cubic"), "model 'cubic' is not one of"),
                             (dict(format="sfr-bench-calibration/1"), "format 'sfr-bench-calibration/1' is not"),
