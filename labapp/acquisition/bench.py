@@ -221,10 +221,12 @@ class BenchSession:
             gap = setpoint_c - temp
             if abs(gap) <= tolerance_c:
                 left = f"within +/- {tolerance_c:g} C: holding for {hold_s:g} s"
-            elif rate is not None and rate * gap > 0:
+            elif rate is None:
+                left = "the next note says how fast it rises"
+            elif rate * gap > 0:
                 left = f"about {gap / rate:.0f} min to the setpoint"
             else:
-                left = "not approaching the setpoint yet"
+                left = "not approaching the setpoint"
             rising = "" if rate is None else f", {rate:+.1f} C/min"
             self.note("info", "heating", f"heating: bath {temp:.1f} C of {setpoint_c:g} C{rising}; {left}")
             last[:] = [(now, temp)]

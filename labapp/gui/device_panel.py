@@ -75,6 +75,7 @@ class DevicePanel(QWidget):
         self.stale_label = QLabel("")
         self.stale_label.setStyleSheet("color: #777777;")
         self.stale_label.setWordWrap(True)         # never wider than the dock
+        self.stale_label.hide()
         self.stale_after_s: float | None = None
         """Wall seconds after which a reading is stale (None: the reading's own ``fresh_s``)."""
         self.last_reading: Reading | None = None
@@ -217,6 +218,7 @@ class DevicePanel(QWidget):
                                      f"{self.limit_s():g} s; the plate is polled while connected")
         elif not stale:
             self.stale_label.setText("")
+        self.stale_label.setVisible(bool(self.stale_label.text()))     # no empty row: the bath stays in view
         heating = self.last_reading is not None and self.last_reading.heating
         look = (stale, heating, self.link_ok)
         if look == self._look:

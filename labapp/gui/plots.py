@@ -185,8 +185,7 @@ class PlotsPanel(QWidget):
         """Show the release plot from the drop to the run's maximum duration (s) until data arrive, not the
         previous run's axes."""
         self.release.setXRange(0.0, max_duration_s, padding=0.02)
-        self.release.setYRange(0.0, 0.1, padding=0.0)
-        self.release.enableAutoRange()
+        self.release.setYRange(0.0, 0.1, padding=0.0)          # fitted to the data again from the first frame
 
     def set_setpoint_band(self, setpoint_c: float | None, tolerance_c: float | None) -> None:
         """Shade setpoint +- tolerance on the bath plot (None: no band)."""
@@ -201,6 +200,7 @@ class PlotsPanel(QWidget):
         ``end_s`` (a gap). ``kind``: drop, steady, gap, resume, fault, alarm, excursion or any other word."""
         colour = MARK_COLOURS.get(kind, (200, 0, 200))
         self.marks.append((kind, float(t_s), text))
+        row = LABEL_ROWS[sum(1 for _, _, label in self.marks if label) % len(LABEL_ROWS)]
         for plot in (self.release, self.temps):
             if end_s is not None and end_s > t_s:
                 item = pg.LinearRegionItem(values=(t_s, end_s), movable=False, brush=pg.mkBrush(*colour, 50),
@@ -213,7 +213,7 @@ class PlotsPanel(QWidget):
                 # the line (an alarm comes at the newest time, the right edge), right of it for the drop and a resume
                 right = kind in ("drop", "resume")
                 label = pg.InfLineLabel(item if isinstance(item, pg.InfiniteLine) else item.lines[0], text=text,
-                                        position=LABEL_ROWS[len(self.marks) % len(LABEL_ROWS)],
+                                        position=row,
                                         anchor=(0 if right else 1, 0.5), color=colour, fill=LABEL_BRUSH)
                 label.setZValue(20)
             plot.addItem(item, ignoreBounds=True)
@@ -241,6 +241,8 @@ class PlotsPanel(QWidget):
             self.t_s.append(t_s)
             self.conc.append(conc_g_per_kg)
             self._dirty = True
+            if len(self.t_s) == 1:
+                self.release.enableAutoRange()
 
     def add_reading(self, t_s: float, plate_c: float | None, probe_c: float | None, speed_rpm: float | None) -> None:
         """Append one hotplate reading (unknown values as NaN)."""

@@ -15,6 +15,7 @@ from PySide6.QtCore import QObject
 
 from labapp.acquisition.events import (
     CalibrationLevel,
+    Done,
     EngineEvent,
     FrameStored,
     Message,
@@ -84,6 +85,7 @@ class RunDisplay(QObject):
         """The newest stored frame not shown yet (shown at the next :meth:`refresh`)."""
         self._last_frame_t: float | None = None
         self._resumed = False
+        self._before_drop = False          # a run's readings before its drop go on the bath plot
 
     def prepare(self, config: RunConfig | None) -> None:
         """A clean view for a run with ``config``: empty plots (its water, object mass and setpoint band), an empty
@@ -91,6 +93,7 @@ class RunDisplay(QObject):
         self.run_config = config
         self._last_frame_t = None
         self.latest_frame = None
+        self._before_drop = config is not None
         self.plots.clear()
         self.live.clear("waiting for the reference frame (clear water) ...")
         if config is not None:
@@ -118,7 +121,10 @@ class RunDisplay(QObject):
         t = self.status.t_s
         if isinstance(event, StateChanged) and event.phase == Phase.OPENED:
             self._resumed = event.resumed
+        if isinstance(event, Done):
+            self._before_drop = False
         if isinstance(event, StateChanged) and event.phase == Phase.ACQUIRING:
+            self._before_drop = False
             self.plots.set_drop(event.t0_unix_s)
             if self._resumed:
                 now = self.plots.t_now(event.t_unix_s, event.t0_unix_s, t)
@@ -129,8 +135,7 @@ class RunDisplay(QObject):
                 self.plots.mark("resume", now, "resumed")
             else:
                 self.plots.mark("drop", 0.0, "drop")
-        elif isinstance(event, Reading) and event.t_s is None and self.run_config is not None \
-                and not self.plots.dropped:
+        elif isinstance(event, Reading) and event.t_s is None and self._before_drop:
             self.plots.add_heating_reading(event.t_unix_s, event.plate_c, event.probe_c, event.speed_rpm)
         elif isinstance(event, Message) and t is not None and event.topic == "steady":
             self.plots.mark("steady", t, "steady state")

@@ -135,7 +135,7 @@ class RunProgress(QProgressBar):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.setFixedWidth(300)          # the status line beside it gives way, never the bar
+        self.setFixedWidth(390)          # the status line beside it gives way, never the bar
         self.setTextVisible(True)
         self.hide()
 

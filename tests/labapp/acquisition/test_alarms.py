@@ -2,6 +2,7 @@
 series refuses a level already captured and can redo the last one; every run starts in a fresh beaker."""
 import csv
 import threading
+from types import SimpleNamespace
 
 import pytest
 
@@ -71,7 +72,7 @@ def test_the_excursion_band_alarms_once_per_excursion():
     engine = Engine(clock)
     events = _collect(engine)
     session = BenchSession(Bench(RenderCamera(clock, lambda t: 0.0), ModelHotplate(clock)), engine, None)
-    session.monitor = object()                       # watched only with a hotplate
+    session.monitor = SimpleNamespace(fresh_s=2.5)   # watched only with a hotplate
     session.t0_unix_s = clock.now()
     session.watch_bath(70.0, 2.0)
     for probe_c in (70.1, 68.1, 67.0, 66.0, 69.0, 73.0, 72.5, 70.0):
