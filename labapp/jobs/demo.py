@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis import BenchCalibration, RunCurve, analyze_run, write_cells_csv, write_curve_csv
+from analysis.physics_grid import LAG
 from design.errors import DesignError
 from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.inverse.config import DesignConfig
@@ -63,7 +64,7 @@ SIMCAL_RESOLUTION, DESIGN_RESOLUTION, DESIGN_ITERATIONS = 48, 40, 120
 DEMO_DESIGN_PLACEHOLDER = "zero-order"
 """The target the design settings are checked with before the measured curve that replaces it exists."""
 DEMO_FREE_BYTES = 200_000_000
-"""Free disk space a demo needs before it starts, bytes: a session's folder holds about 60 MB (the frames of its
+"""Free disk space a demo needs before it starts, bytes: a session's folder holds about 70 MB (the frames of its
 five runs), with a margin for the file system's blocks and the analysis caches."""
 
 
@@ -82,14 +83,26 @@ class DemoResult:
     loo: tuple[tuple[str, float], ...]
     seconds_per_mm: float
     true_seconds_per_mm: float
+    """The calibration prints' own hidden rates, mean, s/mm: what the calibration can learn."""
     density_g_per_cm3: float
+    """The calibrated effective density: weighed grams per mm^3 of the modelled print (the mesh with the fitted
+    surface offset, none when the offset is not kept)."""
     true_density_g_per_cm3: float
+    """The hidden prints' grams per mm^3 of the same modelled print: the like-for-like truth of
+    ``density_g_per_cm3``."""
     rel_rmse_prediction: float
     rel_rmse_design: float
     n_frames: int
     duration_s: float
     faults_logged: int
     wall_s: float
+    physics: str
+    """The print physics the calibration kept, with their values."""
+    material_density_g_per_cm3: float
+    """The hidden prints' own density over their true volume (the bench's prints may be larger than their
+    meshes), mean, g/cm^3."""
+    material_seconds_per_mm: float
+    """The hidden material's rate, s/mm (each print draws its own around it)."""
 
 
 def simulated_calibration(out_dir: Path, clock: SteppedClock | None = None,
@@ -281,14 +294,38 @@ def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interva
     _plot(cal_run, prediction.measured, prediction.predicted, designed, sample, figure, prediction.band)
 
     _write_truth(out_dir / "truth.json", material, truths)
-    true_rate = float(np.mean([t["seconds_per_mm"] for t in truths.values()]))
-    true_density = float(np.mean([t["g_per_mm3"] for t in truths.values()])) * 1000.0
+    truth = _truth_like_the_model(truths, simcal)
     result_ = DemoResult(out_dir, cal_path, simcal.path, run_dir, curve_csv, design_dir, figure,
-                         out_dir / "summary.json", loo, simcal.cal.seconds_per_mm, true_rate,
-                         simcal.cal.g_per_mm3 * 1000.0, true_density, prediction.rel_rmse, physical["rel_rmse_physical"],
-                         len(curve.t_s), float(curve.t_s[-1]), faults, time.monotonic() - start)
+                         out_dir / "summary.json", loo, simcal.cal.seconds_per_mm, truth["seconds_per_mm"],
+                         simcal.cal.g_per_mm3 * 1000.0, truth["effective_density_g_per_cm3"], prediction.rel_rmse,
+                         physical["rel_rmse_physical"], len(curve.t_s), float(curve.t_s[-1]), faults,
+                         time.monotonic() - start, _physics_line(cal_run.doc["physics"]), truth["density_g_per_cm3"],
+                         material.seconds_per_mm)
     _write_summary(result_, result.status, physical, cal_run, prediction)
     return result_
+
+
+def _truth_like_the_model(truths: dict[str, dict], simcal: SimCalFile) -> dict:
+    """The hidden truth of the calibration prints in the calibration's own terms: their mean rate, s/mm; their
+    weighed grams per cm^3 of the print the model simulates (each mesh with the fitted surface offset: the effective
+    density, which absorbs the volume of an offset the model does not fit); their own mean density over their
+    true volume."""
+    from labapp.jobs.printrelease import print_volume_mm3
+
+    cal = {name: t for name, t in truths.items() if name in CALIBRATION_SHAPES}
+    modelled = sum(print_volume_mm3(sample_shape(name), simcal.physics["offset_mm"]) for name in cal)
+    return {"seconds_per_mm": float(np.mean([t["seconds_per_mm"] for t in cal.values()])),
+            "effective_density_g_per_cm3": 1000.0 * sum(t["mass_g"] for t in cal.values()) / modelled,
+            "density_g_per_cm3": 1000.0 * float(np.mean([t["g_per_mm3"] for t in cal.values()]))}
+
+
+def _physics_line(physics: dict) -> str:
+    """The print physics ``simcal.json``'s block ``physics`` kept, in a few words, e.g. ``anisotropy 0.731, wetting lag
+    551 s``."""
+    units = {"anisotropy": "", "offset_mm": " mm", "swelling_mm": " mm", LAG: " s"}
+    names = {"anisotropy": "anisotropy", "offset_mm": "surface offset", "swelling_mm": "swelling width",
+             LAG: "wetting lag"}
+    return ", ".join(f"{names[p]} {physics[p]:.3g}{units[p]}" for p in physics.get("fitted") or []) or "none (isotropic)"
 
 
 def _calibration_runs(out_dir: Path, clock: SteppedClock, calibration: BenchCalibration, interval_s: float,
@@ -368,13 +405,15 @@ class _Prediction:
 def _predict_further(curve_csv: Path, sample: str, simcal: SimCalFile, cal_run: SimCalRun,
                      progress: Callable[[str], None]) -> _Prediction:
     """The further object's release predicted from its mesh by the simulation calibration, against its measured
-    curve."""
+    curve: from its weighed mass, which its run records (the calibration's pooled density only without one; the
+    pooled density's error is then the print's own density draw, which no calibration can know)."""
     measured = read_physical_curve(curve_csv)
     simulate_at = source_simulator(f"sample:{sample}", simcal.resolution, method=simcal.release_method)
     tau, vol = simulate_at(simcal.physics)
-    predicted = simcal.cal.to_physical(tau, vol, measured.t_s, measured.water_g or WATER_G)
+    water, mass = measured.water_g or WATER_G, measured.object_mass_g
+    predicted = simcal.cal.to_physical(tau, vol, measured.t_s, water, mass_g=mass)
     rel_pred = float(np.sqrt(np.mean((predicted - measured.released_g) ** 2)) / measured.released_g.max())
-    band = prediction_band(simcal, tau, vol, measured.t_s, measured.water_g or WATER_G, simulate_at)
+    band = prediction_band(simcal, tau, vol, measured.t_s, water, simulate_at, mass_g=mass)
     inside = None if band is None else float(np.mean((measured.released_g >= band[0]) & (measured.released_g <= band[1])))
     if band is not None:
         progress(f"   {100 * inside:.0f}% of the further object's measured points lie inside its predicted "
@@ -420,8 +459,8 @@ def _plot(run, measured, predicted: np.ndarray, designed, sample: str, path: Pat
         left.plot(shape.t_s / 3600, shape.measured_g, color=f"C{i}", lw=2, label=f"{name}: measured")
         left.plot(shape.t_s / 3600, shape.predicted_g, "--", color="k", lw=1,
                   label=f"{name}: left-out prediction ({100 * shape.rel_rmse:.1f}%)")
-    left.set_title(f"calibration: {doc['seconds_per_mm']:.0f} s/mm, {doc['g_per_mm3'] * 1000:.3f} g/cm$^3$ "
-                   f"({doc['model']} model)", fontsize=10)
+    left.set_title(f"calibration: {doc['seconds_per_mm']:.0f} s/mm, {doc['g_per_mm3'] * 1000:.3f} g/cm$^3$ effective "
+                   f"({doc['model']} model)\nprint physics kept: {_physics_line(doc['physics'])}", fontsize=10)
     level = (doc.get("band") or {}).get("level")
     if band is not None:
         right.fill_between(measured.t_s / 3600, band[0], band[1], color="C3", alpha=0.15, lw=0,

@@ -51,14 +51,16 @@ def run(args: argparse.Namespace) -> int:
         r = run_demo(out, sample=args.sample, interval_s=args.interval, progress=progress)
     print()
     print(f"done in {r.wall_s:.0f} s (wall)")
-    print(f"  time scale            {r.seconds_per_mm:.1f} s/mm calibrated, {r.true_seconds_per_mm:.1f} s/mm hidden "
-          f"truth ({100 * (r.seconds_per_mm / r.true_seconds_per_mm - 1):+.1f}%)")
-    print(f"  print density         {r.density_g_per_cm3:.4f} g/cm^3 calibrated, {r.true_density_g_per_cm3:.4f} "
-          f"hidden truth ({100 * (r.density_g_per_cm3 / r.true_density_g_per_cm3 - 1):+.1f}%)")
+    print(f"  time scale            {r.seconds_per_mm:.1f} s/mm calibrated, {r.true_seconds_per_mm:.1f} s/mm the "
+          f"calibration prints' hidden mean ({100 * (r.seconds_per_mm / r.true_seconds_per_mm - 1):+.1f}%)")
+    print(f"  print physics kept    {r.physics}")
+    print(f"  effective density     {r.density_g_per_cm3:.4f} g/cm^3 calibrated, {r.true_density_g_per_cm3:.4f} "
+          f"hidden ({100 * (r.density_g_per_cm3 / r.true_density_g_per_cm3 - 1):+.1f}%): weighed grams per mm^3 of the "
+          f"modelled print (the prints' own density over their true volume: {r.material_density_g_per_cm3:.4f})")
     print("  leave-one-out         " + ", ".join(f"{name} {100 * e:.2f}%" for name, e in r.loo)
           + " (RMS error / weighed mass)")
-    print(f"  '{args.sample}' predicted from its mesh: {100 * r.rel_rmse_prediction:.2f}% RMS of its measured final "
-          f"mass ({r.n_frames} frames, {r.duration_s / 3600:.2f} h, {r.faults_logged} warnings in its event log)")
+    print(f"  '{args.sample}' predicted from its mesh and weighed mass: {100 * r.rel_rmse_prediction:.2f}% RMS of its "
+          f"measured final mass ({r.n_frames} frames, {r.duration_s / 3600:.2f} h, {r.faults_logged} warnings in its event log)")
     print(f"  design for its measured curve: predicted within {100 * r.rel_rmse_design:.2f}% RMS")
     print("results:")
     print(f"  bench calibration     {r.calibration_path}")
