@@ -21,12 +21,14 @@ from dataclasses import dataclass
 from design.inverse.config import DesignConfig
 from design.inverse.optimize import IterationCallback
 
-PRINT_CHECK_EVALS = 12.0
+PRINT_CHECK_EVALS = 20.0
 """The time of a correction round's print check (extraction, the reference evaluator's release, the design grid's
-release) in evaluations of the run's grid (docs/benchmarks.md#the-stages-of-a-design)."""
-OUTPUTS_EVALS = 30.0
+release) in evaluations of the run's grid: about 20 for a default nfc design at resolution 128, 14 at 64
+(docs/benchmarks.md#the-stages-of-a-design)."""
+OUTPUTS_EVALS = 45.0
 """The time of the outputs (the print's extraction and release on the full lattice, the binary solid's release,
-the report) in evaluations of the run's grid (docs/benchmarks.md#the-stages-of-a-design)."""
+the report) in evaluations of the run's grid: about 45 for a default nfc design at resolution 128 (more at coarser
+grids, whose full lattice is finer for their size; docs/benchmarks.md#the-stages-of-a-design)."""
 RATE_MIN_EVALS = 3
 """Evaluations of a phase after which its own rate replaces the one carried from the phase before."""
 
