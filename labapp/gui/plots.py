@@ -24,7 +24,7 @@ from labapp.acquisition.settings import WATER
 REDRAW_MS = 100
 DEGREES_C = "\u00b0C"
 TIME_LABEL = "time since drop (h:mm)"
-HEATING_LABEL = "time (h:mm): 0 = now, the drop will be time zero"
+HEATING_LABEL = "time before now (h:mm)"
 _STEPS_S = (1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600, 7200, 3 * 3600, 6 * 3600, 12 * 3600, 86400)
 LEGEND_BRUSH = pg.mkBrush(0, 0, 0, 170)
 LABEL_BRUSH = pg.mkBrush(0, 0, 0, 190)

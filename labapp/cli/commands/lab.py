@@ -2,7 +2,8 @@
 
 Ctrl-C in its terminal (SIGINT) and SIGTERM close the window as closing it mid-run does, without asking: a
 run is interrupted (heating and stirring off, the folder left resumable); the exit status is then 130
-(SIGINT) or 143 (SIGTERM); see :class:`labapp.gui.app.SignalStop`.
+(SIGINT) or 143 (SIGTERM); see :class:`labapp.gui.app.SignalStop`. At the login dialog they close it and nothing
+starts (the same exit statuses; :func:`labapp.gui.login.ask_operator`).
 """
 from __future__ import annotations
 
