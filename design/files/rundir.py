@@ -49,7 +49,7 @@ from design.inverse.optimize import (
     with_phase,
 )
 from design.inverse.problem import Problem
-from design.inverse.progress import RunClock, run_plan
+from design.inverse.progress import RunClock, outputs_evals, run_plan
 from design.inverse.status import FINISHED, DesignStatus
 
 log = logging.getLogger(__name__)
@@ -370,7 +370,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         _check_size(saved, problem, out_dir)
     clock = None
     if on_iteration is not None and not coarse_start:  # the whole run's time left; a start's is part of it
-        on_iteration = clock = RunClock(run_plan(config), on_iteration)
+        on_iteration = clock = RunClock(run_plan(config), on_iteration, outputs_evals(config))
     if saved is None and start is None and config.starts > 1:  # multi-start
         start = _multistart(config, out_dir, on_iteration, should_stop)
         if isinstance(start, Checkpoint):  # the chosen start is the design

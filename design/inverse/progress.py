@@ -21,14 +21,20 @@ from dataclasses import dataclass
 from design.inverse.config import DesignConfig
 from design.inverse.optimize import IterationCallback
 
-PRINT_CHECK_EVALS = 20.0
+PRINT_CHECK_EVALS = {"extruded": 110.0}
 """The time of a correction round's print check (extraction, the reference evaluator's release, the design grid's
-release) in evaluations of the run's grid: about 20 for a default nfc design at resolution 128, 14 at 64
-(docs/benchmarks.md#the-stages-of-a-design)."""
-OUTPUTS_EVALS = 45.0
+release) in evaluations of the run's grid, per design space (`DEFAULT_PRINT_CHECK_EVALS` for the others): default
+designs of the pill at resolution 128 took 20 nfc evaluations and 110 extruded ones, whose evaluations are ten times
+cheaper while the print is the same kind of solid (docs/benchmarks.md#the-stages-of-a-design)."""
+DEFAULT_PRINT_CHECK_EVALS = 20.0
+"""`PRINT_CHECK_EVALS` of the spaces it does not name."""
+OUTPUTS_EVALS = {"extruded": 700.0}
 """The time of the outputs (the print's extraction and release on the full lattice, the binary solid's release,
-the report) in evaluations of the run's grid: about 45 for a default nfc design at resolution 128 (more at coarser
-grids, whose full lattice is finer for their size; docs/benchmarks.md#the-stages-of-a-design)."""
+the report) in evaluations of the run's grid, per design space (`DEFAULT_OUTPUTS_EVALS` for the others): 45 nfc
+evaluations and 700 extruded ones for the pill at resolution 128 (more at coarser grids, whose full lattice is finer
+for their size; docs/benchmarks.md#the-stages-of-a-design)."""
+DEFAULT_OUTPUTS_EVALS = 45.0
+"""`OUTPUTS_EVALS` of the spaces it does not name."""
 RATE_MIN_EVALS = 3
 """Evaluations of a phase after which its own rate replaces the one carried from the phase before."""
 
@@ -64,18 +70,24 @@ def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bo
     from design.inverse.defect import correction_plan, round_phase
 
     rounds, first = correction_plan(config)
+    check = PRINT_CHECK_EVALS.get(config.space, DEFAULT_PRINT_CHECK_EVALS)
 
     def named(name: str | None) -> str | None:
         return prefix if name is None else name if prefix is None else f"{prefix}, {name}"
 
-    tail = OUTPUTS_EVALS * weight if outputs else 0.0
-    phases = [Phase(named(None), first, first, weight, (PRINT_CHECK_EVALS * weight if rounds else 0.0)
+    tail = outputs_evals(config) * weight if outputs else 0.0
+    phases = [Phase(named(None), first, first, weight, (check * weight if rounds else 0.0)
                     + (tail if not rounds else 0.0))]
     for r in range(1, rounds + 1):
         end = first + r * config.correction_evals
-        after = PRINT_CHECK_EVALS * weight + (tail if r == rounds else 0.0)
+        after = check * weight + (tail if r == rounds else 0.0)
         phases.append(Phase(named(round_phase(r, rounds)), end, config.correction_evals, weight, after))
     return phases
+
+
+def outputs_evals(config: DesignConfig) -> float:
+    """`OUTPUTS_EVALS` of the space of ``config``."""
+    return OUTPUTS_EVALS.get(config.space, DEFAULT_OUTPUTS_EVALS)
 
 
 def run_plan(config: DesignConfig) -> list[Phase]:
@@ -89,10 +101,10 @@ def run_plan(config: DesignConfig) -> list[Phase]:
         phases = [p for k in range(config.starts)
                   for p in _single(config, coarse_phase(k, config.starts, resolution, coarse=False), 1.0, True)]
         last = phases[-1]
-        return phases[:-1] + [Phase(last.name, last.end, last.evals, last.weight, last.after + OUTPUTS_EVALS)]
+        return phases[:-1] + [Phase(last.name, last.end, last.evals, last.weight, last.after + outputs_evals(config))]
     weight = (resolution / config.resolution) ** 3
     coarse = [Phase(coarse_phase(k, config.starts, resolution), config.max_iter, config.max_iter, weight,
-                    OUTPUTS_EVALS * weight) for k in range(config.starts)]
+                    outputs_evals(config) * weight) for k in range(config.starts)]
     return coarse + _single(config, refinement_phase(config.resolution), 1.0, True)
 
 
@@ -105,12 +117,15 @@ class RunClock:
         `run_plan` of the run.
     on_iteration : callable
         The callback it wraps.
+    outputs : float
+        The outputs' cost in evaluations of the run's grid (`outputs_evals`), for `outputs_s`.
     """
 
-    def __init__(self, plan: list[Phase], on_iteration: IterationCallback) -> None:
+    def __init__(self, plan: list[Phase], on_iteration: IterationCallback, outputs: float = 0.0) -> None:
         self.plan = plan
         self.on_iteration = on_iteration
         self.rate: float | None = None  # seconds per evaluation of the run's grid
+        self.outputs = outputs
         self.current: int | None = None
         self.t0 = self.k0 = 0.0
 
@@ -139,8 +154,8 @@ class RunClock:
         return self.rate * left
 
     def outputs_s(self) -> float | None:
-        """The estimated seconds of the outputs (`OUTPUTS_EVALS` at the last rate); None before a rate is known."""
-        return None if self.rate is None else self.rate * OUTPUTS_EVALS
+        """The estimated seconds of the outputs (``outputs`` at the last rate); None before a rate is known."""
+        return None if self.rate is None else self.rate * self.outputs
 
     def __call__(self, k: int, x, terms: dict) -> None:
         eta = self.eta_s(terms.get("phase"), k)

@@ -4,7 +4,9 @@ import pytest
 import design.inverse.progress as progress
 from design.files.rundir import run_design
 from design.inverse.config import DesignConfig
-from design.inverse.progress import OUTPUTS_EVALS, PRINT_CHECK_EVALS, RunClock, run_plan
+from design.inverse.progress import DEFAULT_OUTPUTS_EVALS as OUTPUTS_EVALS
+from design.inverse.progress import DEFAULT_PRINT_CHECK_EVALS as PRINT_CHECK_EVALS
+from design.inverse.progress import RunClock, run_plan
 
 
 def test_a_single_run_is_its_optimisation_its_rounds_and_its_outputs():
