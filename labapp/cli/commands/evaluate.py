@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from labapp.cli.argtypes import positive_int
+from labapp.cli.argtypes import bounded, positive_int
 
 NAME = "evaluate"
 HELP = ("measured vs forward model (leave-one-out) vs Monte Carlo on a calibration set, with f2 and RMS "
@@ -13,11 +13,14 @@ HELP = ("measured vs forward model (leave-one-out) vs Monte Carlo on a calibrati
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `sfr evaluate`."""
+    from labapp.jobs.calibrate_sim import MAX_RESOLUTION, MIN_RESOLUTION
+
     parser.add_argument("set", metavar="SET.csv", help="calibration set: run,mesh,object_mass_g rows (as for "
                         "sfr calibrate-sim), paths relative to the file")
     parser.add_argument("--calibration", help="bench calibration JSON for run folders (default: each run's own)")
     parser.add_argument("--out", required=True, metavar="DIR", help="new output folder")
-    parser.add_argument("--resolution", type=positive_int, help="voxels along each mesh's longest side, both models "
+    parser.add_argument("--resolution", type=bounded(MIN_RESOLUTION, MAX_RESOLUTION, integer=True, unit="voxels"),
+                        help="voxels along each mesh's longest side, both models "
                         "(default: sfr calibrate-sim's)")
     parser.add_argument("--seeds", type=positive_int, default=4, help="Monte Carlo runs averaged per object (default 4)")
 

@@ -41,6 +41,7 @@ def test_resolution_one_limit(capsys):
     (["calibrate-sim", "set.csv", "--out", "x", "--resolution", "2"],
      "--resolution: '2': expected a whole number in [8, 512] voxels"),
     (["compare", "a.csv", "b.csv", "--mtad", "60"], "--mtad: '60': expected a number in (0, 50] %"),
+    (["evaluate", "set.csv", "--out", "x", "--resolution", "2"], "--resolution: '2': expected a whole number in [8, 512] voxels"),
 ])
 def test_other_commands_state_their_one_limit(argv, says, capsys):
     with pytest.raises(SystemExit) as exc:
