@@ -31,7 +31,10 @@ tetrahedra). Lattice points more than BAND cells outside the solid are only clas
 
 Error estimate: the same quadrature on a lattice twice as coarse (one eighth of the cost). For a
 second-order quadrature the fine curve's error is about a third of the difference between the two;
-`ReferenceRelease.error_mm3` states the whole difference, max_tau |C_h - C_2h|, as the bound. The
+`ReferenceRelease.error_mm3` states the whole difference, max_tau |C_h - C_2h|, as the bound. A lattice sized
+by the solid after a first one states the smaller of that and its difference from the previous, coarser
+lattice (at least 1.4 times coarser): a lattice twice as coarse can be too coarse for a thin part's edges
+when the fine one is not. The
 validation shapes of docs/forward.md#reference-evaluator meet it with a margin.
 """
 from __future__ import annotations
@@ -213,6 +216,8 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray | None = None, *
         curves = [lattice_curve(surface, offset, bounds, s, tau) for s in (h, 2.0 * h)]
         scaled = [c * (volume / est) for c, est, _ in curves]
         error = float(np.abs(scaled[0] - scaled[1]).max()) if tau.size else 0.0
+        if found and tau.size:  # a refinement: also against the previous (coarser) lattice, if that is closer
+            error = min(error, float(np.abs(scaled[0] - found[min(found)][0]).max()))
         found[h] = (scaled[0], error, curves[0][2])
         return error / volume
 

@@ -11,8 +11,9 @@ thick. Here the spacing comes from the solid's own thickness and the evaluator's
    volume, h shrinks by (`TARGET_MARGIN` tolerance V / E)^(1 / `ORDER`), at most `MAX_PASSES` times.
 3. A spacing whose lattice would hold more than `MAX_POINTS` points (the solid's cells and a shell around its
    surface: `design.forward.quadrature.lattice_points`) is not attempted: the finest affordable lattice is tried
-   instead if it is clearly finer than the last; otherwise the solid is refused with :class:`TooThinError`,
-   naming its thickness and the spacing it would need.
+   instead if it is clearly finer than the last; otherwise the best lattice so far is kept (with its stated
+   error, above the tolerance) if it states at most `REFUSE_FRACTION` of the volume, and the solid is refused
+   with :class:`TooThinError` if not, naming its thickness and the spacing it would need.
 
 Only the blocks of the lattice that meet the solid are evaluated (`design.forward.quadrature.lattice_curve`),
 so the cost is that of the solid's volume and surface at h, not of its box.
@@ -31,8 +32,9 @@ DEFAULT_TOLERANCE = 0.004
 """Stated error (max over the curve of |C_h - C_2h|) a solid-sized reference release meets, as a fraction of the
 volume: within the 0.5% that ``sfr simulate`` promises (RMS over the curve), with margin, since the error of C_h
 itself is a third to a fifth of the stated one (docs/evidence/forward.md: measured errors on hard parts)."""
-CELLS_PER_THICKNESS = 2.5
-"""First spacing: the mean half-thickness V / A over this (a slab 5 cells thick; refined from there)."""
+CELLS_PER_THICKNESS = 4.0
+"""First spacing: the mean half-thickness V / A over this (a slab 8 cells thick): coarser first lattices (5 cells
+across a 1.5 mm wall) miss the thick edges of thin-walled parts in both lattices, unseen by the stated error."""
 MIN_CELLS_PER_THICKNESS = 1.5
 """Coarsest spacing tried when the first one would take too many points: V / A over this (a slab 3 cells thick);
 its stated error still decides whether it is kept."""
@@ -46,6 +48,9 @@ SHRINK_RANGE = (0.25, 0.7)
 MAX_PASSES = 5
 """Lattices tried at most (the first and four refinements: each has at least 1 / 0.7^3 = 2.9 times the points of the
 last, so the last dominates the cost)."""
+REFUSE_FRACTION = 0.01
+"""A solid whose best affordable lattice states more than this fraction of the volume is refused; between the
+tolerance and this, its release is given with its stated error and a warning."""
 MAX_POINTS = 10e6
 """Most lattice points of one evaluation (the fine lattice; the coarse one and the first scout have an eighth each):
 2-4 microseconds of CPU per point (docs/evidence/forward.md), so under a minute on two cores."""
@@ -95,7 +100,8 @@ def choose(evaluate: Callable[[float], float], bounds: np.ndarray, volume_mm3: f
     Raises
     ------
     TooThinError
-        When the next spacing needed would take more than ``max_points`` lattice points.
+        When no lattice within ``max_points`` points resolves the thickness, or the best affordable one states more
+        than `REFUSE_FRACTION` of the volume.
     """
     m = mean_half_thickness(volume_mm3, area_mm2)
     h = m / CELLS_PER_THICKNESS
@@ -106,7 +112,9 @@ def choose(evaluate: Callable[[float], float], bounds: np.ndarray, volume_mm3: f
             # the finest affordable lattice, if it is finer than the last one and still resolves the thickness
             cheapest = _affordable(bounds, volume_mm3, area_mm2, max_points, h)
             if cheapest > m / MIN_CELLS_PER_THICKNESS or (passes and cheapest > SHRINK_RANGE[1] * passes[-1][0]):
-                raise _too_thin(source, m, h, points, max_points, passes, tolerance)
+                if not passes or min(e for _, e in passes) > REFUSE_FRACTION:
+                    raise _too_thin(source, m, h, points, max_points, passes, tolerance)
+                break
             h, points = cheapest, lattice_points(bounds, cheapest, volume_mm3, area_mm2)
         if say is not None:
             say(f"lattice {k + 1}: spacing {h:.4g} mm, about {points / 1e6:.2g} million points")
@@ -118,9 +126,12 @@ def choose(evaluate: Callable[[float], float], bounds: np.ndarray, volume_mm3: f
                                             f"(lattice {k + 1} of at most {MAX_PASSES})")
         if k + 1 < MAX_PASSES:
             h *= float(np.clip((TARGET_MARGIN * tolerance / error) ** (1.0 / ORDER), *SHRINK_RANGE))
-    h, error = passes[-1]
+    h, error = min(passes, key=lambda p: p[1])
+    if error > REFUSE_FRACTION:
+        raise _too_thin(source, m, h, lattice_points(bounds, h, volume_mm3, area_mm2), max_points, passes, tolerance)
     return Choice(h, tuple(passes), f"mean half-thickness V/A = {m:.4g} mm; stated error {100 * error:.3g}% of the "
-                                    f"volume after {MAX_PASSES} lattices, above the {100 * tolerance:.3g}% aimed at")
+                                    f"volume at spacing {h:.4g} mm, the best of {len(passes)} lattices within "
+                                    f"{max_points / 1e6:.0f} million points, above the {100 * tolerance:.3g}% aimed at")
 
 
 def _affordable(bounds: np.ndarray, volume_mm3: float, area_mm2: float, max_points: float, h: float) -> float:
