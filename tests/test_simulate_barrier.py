@@ -6,6 +6,7 @@ import pytest
 import trimesh
 
 from design.errors import DesignError
+from labapp.cli.main import main
 from labapp.errors import UsageError
 from labapp.jobs.simulate_barrier import simulate_barrier
 
@@ -110,3 +111,41 @@ def test_bad_inputs_are_refused_before_any_work(meshes, tmp_path):
     for name in "abc":
         assert not (tmp_path / name).exists()
 
+def test_the_command_simulates_the_drug_inside_the_barrier(meshes, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["simulate", meshes["drug"], "--barrier", meshes["coat"], "--barrier-speed", "0",
+                 "--resolution", "24", "--out", str(out)]) == 0
+    captured = capsys.readouterr().out
+    assert "drug 64.0 mm^3 in 152.0 mm^3 of barrier at speed 0" in captured
+    assert "barrier cover: at least 0.981 mm of barrier between the outside and the drug" in captured
+    assert "the drug is sealed" in captured and "sealed: 64 mm^3 of drug in 1 region(s) never releases" in captured
+    assert np.all(_curve(out)[:, 1] == 0.0)
+    assert main(["simulate", meshes["drug"], "--barrier", meshes["cup"], "--barrier-speed", "0.5",
+                 "--resolution", "24", "--out", str(tmp_path / "open")]) == 0
+    assert "barrier cover: none, some drug is open to the bath" in capsys.readouterr().out
+    # a second run into the same folder is refused: the record is kept
+    assert main(["simulate", meshes["drug"], "--barrier", meshes["cup"], "--barrier-speed", "0",
+                 "--resolution", "24", "--out", str(out)]) == 2
+    assert np.all(_curve(out)[:, 1] == 0.0)
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--barrier", "{cup}"], "--barrier needs --barrier-speed"),
+    (["--barrier-speed", "0.5"], "give --barrier MESH"),
+    (["--barrier", "{cup}", "--barrier-speed", "0.5", "--simcal", "{npy}"], "does not take --simcal"),
+    (["--barrier", "{cup}", "--barrier-speed", "0.5", "--model", "mc"], "does not take --model mc"),
+    (["--barrier", "{cup}", "--barrier-speed", "0.5", "--model", "exact"], "does not take --model exact"),
+    (["--barrier", "{npy}", "--barrier-speed", "0.5"], "must be a mesh"),
+])
+def test_the_command_refuses_what_does_not_apply(meshes, tmp_path, capsys, extra, message):
+    np.save(tmp_path / "rho.npy", np.ones((4, 4, 4)))
+    argv = [a.format(cup=meshes["cup"], npy=tmp_path / "rho.npy") for a in extra]
+    assert main(["simulate", meshes["drug"], *argv, "--out", str(tmp_path / "run")]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_negative_barrier_speed_is_a_parser_error(meshes, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate", meshes["drug"], "--barrier", meshes["cup"], "--barrier-speed", "-1", "--out", str(tmp_path)])
+    assert exc.value.code == 2 and "--barrier-speed: '-1': expected a number >= 0" in capsys.readouterr().err

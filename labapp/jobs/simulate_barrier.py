@@ -71,6 +71,17 @@ def coarse_error(release: TwoMaterialRelease) -> dict[str, Any]:
             "method": "first-order: against both materials on voxels twice as large"}
 
 
+OPEN_COVER_VOXELS = 0.01
+"""A barrier cover under this many voxels is no barrier: void on the way costs n_min dx per voxel (eq. 2)."""
+
+
+def _release_start(cover_mm: float, s: float, dx_mm: float) -> float | None:
+    """When the drug's release starts, tau in mm: cover / s; 0 for drug open to the bath; None when sealed."""
+    if cover_mm < OPEN_COVER_VOXELS * dx_mm:
+        return 0.0
+    return cover_mm / s if s > 0 else None
+
+
 def simulate_barrier(source: str, barrier: str, out: str | Path, *, barrier_speed: float,
                      resolution: int | None = None, voxel_size_mm: float | None = None, symmetry: str = "",
                      units: str = "mm", progress: Callable[[str], None] | None = None) -> BarrierSimulation:
@@ -127,7 +138,7 @@ def simulate_barrier(source: str, barrier: str, out: str | Path, *, barrier_spee
     summary = {"input": source, "barrier": barrier, "barrier_speed": s, "units": units,
                "volume_mm3": release.drug_volume_mm3, "barrier_volume_mm3": release.barrier_volume_mm3,
                "sealed_mm3": release.sealed_mm3, "sealed_regions_mm3": regions, "barrier_cover_mm": cover,
-               "release_starts_mm": cover / s if s > 0 else (0.0 if cover < grid.dx_mm else None),
+               "release_starts_mm": _release_start(cover, s, grid.dx_mm),
                "total_time_mm": release.total_time_mm, "voxels": int(grid.rho_d.size),
                "grid_shape": list(grid.rho_d.shape), "voxel_size_mm": grid.dx_mm, "mirror": list(grid.mirror),
                "origin_mm": grid.origin_mm.tolist(),

@@ -41,8 +41,11 @@ def run_barrier(args: argparse.Namespace, progress: Callable[[str], None]) -> in
           f"{s['barrier_speed']:g}: T = {s['total_time_mm']:.3f} mm, {s['voxels']:,} voxels, {s['seconds']:.2f} s "
           f"-> {result.out}")
     starts = s["release_starts_mm"]
-    print(f"barrier cover: at least {s['barrier_cover_mm']:.3g} mm of barrier between the outside and the drug; "
-          + ("the drug is sealed" if starts is None else f"its release starts at tau = {starts:.3g} mm"))
+    if starts == 0.0:
+        print("barrier cover: none, some drug is open to the bath; its release starts at tau = 0")
+    else:
+        print(f"barrier cover: at least {s['barrier_cover_mm']:.3g} mm of barrier between the outside and the drug; "
+              + ("the drug is sealed" if starts is None else f"its release starts at tau = {starts:.3g} mm"))
     if s["sealed_mm3"] > 0:
         print(f"sealed: {s['sealed_mm3']:.4g} mm^3 of drug in {len(s['sealed_regions_mm3'])} region(s) never releases")
     error = s["error"]

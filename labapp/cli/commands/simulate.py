@@ -6,6 +6,7 @@ import sys
 
 from labapp.cli import interrupt
 from labapp.cli.argtypes import bounded, nonnegative_float, positive_float, positive_int
+from labapp.cli.commands._barrier import add_barrier_arguments, run_barrier
 from labapp.jobs.meshunits import MIN_RESOLUTION, MM_PER_UNIT
 
 MAX_RESOLUTION = 1024
@@ -53,6 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mc-ea", type=nonnegative_float, metavar="J_PER_MOL",
                         help="--model mc without a calibration: activation energy per solid neighbour, J/mol "
                              "(default 5000)")
+    add_barrier_arguments(parser)
 
 
 def _progress(message: str) -> None:
@@ -103,6 +105,8 @@ def _run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    if args.barrier is not None or args.barrier_speed is not None:
+        return run_barrier(args, _progress)
     if args.model == "mc":
         return _run_mc(args)
 
