@@ -234,12 +234,14 @@ class RoundStore(Protocol):
 
 
 def _better(check: PrintCheck, state: RoundState | None) -> bool:
-    """Whether a judged design beats the best so far: fewer pieces above one, else a lower fit. Of two designs with
-    no print yet, the later one (the optimisation's progress)."""
-    if state is None or (check.pieces == 0 and state.best_pieces == 0):
+    """Whether a judged design beats the best so far: any print beats no print (no density reaches the extraction
+    level); of two prints, fewer pieces, else a lower fit. Of two designs with no print yet, the later one (the
+    optimisation's progress)."""
+    if state is None or state.best_pieces == 0:
         return True
-    mine, theirs = max(check.pieces, 1), max(state.best_pieces, 1)
-    return mine < theirs or (mine == theirs and check.fit < state.best_fit)
+    if check.pieces == 0:
+        return False
+    return check.pieces < state.best_pieces or (check.pieces == state.best_pieces and check.fit < state.best_fit)
 
 
 def aimed_bias(check: PrintCheck, target_mm3: np.ndarray, step: float) -> np.ndarray:

@@ -262,3 +262,8 @@ def test_a_design_with_no_print_yet_is_not_corrected_and_the_rounds_carry_on_fro
     printed = defect.PrintCheck(0.02, 1, np.full(5, 3.0), np.full(5, 2.0))
     assert defect._better(printed, state)
     assert not defect._better(empty, replace(state, best_fit=0.02, best_pieces=1))
+    # any print beats no print, whatever its pieces; no print never beats a print of several pieces
+    several = defect.PrintCheck(0.24, 5, np.full(5, 3.0), np.full(5, 2.0))
+    assert defect._better(several, state)
+    assert not defect._better(empty, replace(state, best_fit=0.24, best_pieces=5))
+    assert defect._better(printed, replace(state, best_fit=0.24, best_pieces=5))
