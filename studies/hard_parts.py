@@ -207,7 +207,8 @@ def _how(summary: dict) -> str:
         return f"refused: {summary['failed'][:90]}"
     if summary.get("model") == "exact":
         reason = summary["lattice"]["reason"]
-        passes = reason.split("(lattice ")[-1].split(" of")[0] if "(lattice " in reason else "3, over tolerance"
+        passes = (reason.split("(lattice ")[-1].split(" of")[0] if "(lattice " in reason
+                  else "best of " + reason.split("the best of ")[-1].split(" lattices")[0] + ", over the aim")
         return (f"exact, h {summary['lattice']['spacing_mm']:.3g} mm (lattice {passes}), "
                 f"stated {100 * summary['error']['error_fraction']:.2f}%")
     return f"grid {summary.get('voxels', 0):,} voxels of {summary.get('voxel_size_mm', 0):.3g} mm"
