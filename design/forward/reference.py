@@ -231,10 +231,8 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray | None = None, *
         h = choice.spacing_mm
         lattice = choice.reason
     released, error, total = found[h]
-    if tau_mm is None:  # the samples end at the first depth where everything has dissolved
-        done = np.flatnonzero(released >= volume * (1.0 - 1e-9))
-        keep = int(done[0]) + 1 if done.size else tau.size
-        tau, released = tau[:keep], released[:keep]
+    if tau_mm is None:
+        tau, released = _until_dissolved(tau, released, volume)
     seconds = time.perf_counter() - began
     method = ("exact-distance-voids" if n_voids else "exact-distance") + (f", anisotropy {a:g}" if a != 1.0 else "")
     log.debug("reference release: %d faces, %d voids, h = %.4g mm, error %.3g mm^3 (%.3g%%), %.2f s",
@@ -242,6 +240,13 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray | None = None, *
     return ReferenceRelease(tau_mm=tau, released_mm3=released, volume_mm3=volume, error_mm3=error, method=method,
                             cell_mm=check_positive("cell_mm", h), total_time_mm=total, seconds=seconds,
                             lattice=lattice)
+
+
+def _until_dissolved(tau: np.ndarray, released: np.ndarray, volume: float) -> tuple[np.ndarray, np.ndarray]:
+    """The samples up to the first depth at which everything has dissolved."""
+    done = np.flatnonzero(released >= volume * (1.0 - 1e-9))
+    keep = int(done[0]) + 1 if done.size else tau.size
+    return tau[:keep], released[:keep]
 
 
 def signed_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
