@@ -28,6 +28,7 @@ from analysis.physics_grid import LAG
 from design.errors import DesignError
 from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.inverse.config import DesignConfig
+from design.inverse.settings import MAX_ITER
 from drivers.sim import BenchScene
 from labapp.acquisition.calseries import CalibrationProcedure, SeriesConfig
 from labapp.acquisition.clock import SteppedClock
@@ -59,8 +60,10 @@ TRUTH_RESOLUTION = 80
 """Voxels along the longest side of the simulated bench's own (hidden) forward simulations."""
 CALIBRATION_INTERVAL_S = 60.0
 """Frame interval of the calibration set's short runs, s."""
-SIMCAL_RESOLUTION, DESIGN_RESOLUTION, DESIGN_ITERATIONS = 48, 40, 120
-"""The demo's simulation-calibration resolution, design grid and design evaluation budget."""
+SIMCAL_RESOLUTION, DESIGN_RESOLUTION = 48, 40
+"""The demo's simulation-calibration resolution and design grid."""
+DESIGN_ITERATIONS = MAX_ITER.default
+"""The demo design's evaluation budget: `sfr design`'s own default (at 40 voxels its evaluations take seconds)."""
 DEMO_DESIGN_PLACEHOLDER = "zero-order"
 """The target the design settings are checked with before the measured curve that replaces it exists."""
 DEMO_FREE_BYTES = 200_000_000
