@@ -51,6 +51,7 @@ from design._validate import check_positive
 from design.errors import DesignError
 from design.forward.distance import Surface
 from design.forward.quadrature import lattice_curve
+from design.forward.simulator import DEFAULT_STEPS
 from design.forward.solid_lattice import DEFAULT_TOLERANCE, MAX_POINTS, choose
 from design.forward.wetting import wetting
 
@@ -59,7 +60,7 @@ log = logging.getLogger(__name__)
 DEFAULT_CELLS = 160
 """Lattice cells along the longest side of the mesh's bounding box where a caller sizes the lattice by its box
 (the cap of `design_lattice`; without ``cells`` the lattice is sized by the solid, `design.forward.solid_lattice`)."""
-SAMPLES = 1001
+SAMPLES = DEFAULT_STEPS + 1
 """Erosion depths of a release sampled without given depths: uniform from 0 to where the solid is gone."""
 MIN_CELLS = 16
 """Fewest cells along the longest side: the coarse estimate's lattice must still resolve the solid."""
