@@ -106,12 +106,18 @@ def atomic_file(path: str | Path, mode: int = 0o666) -> Iterator[IO[bytes]]:
         os.replace(tmp, path)
         _fsync_dir(path.parent)
     except BaseException as exc:
-        tmp.unlink(missing_ok=True)
-        cause = disk_error(exc)
-        if cause is not None:
-            raise WriteError(f"cannot write {path}: {cause.strerror or os.strerror(cause.errno)}; nothing of it was "
-                             "left; free space or choose a writable place") from exc
+        _discard(tmp, path, exc)
         raise
+
+
+def _discard(tmp: Path, path: Path, exc: BaseException) -> None:
+    """Remove the part file ``tmp`` of ``path`` after ``exc``; a full, read-only or forbidden disk raises
+    `WriteError` naming ``path`` (any other error is the caller's to re-raise)."""
+    tmp.unlink(missing_ok=True)
+    cause = disk_error(exc)
+    if cause is not None:
+        raise WriteError(f"cannot write {path}: {cause.strerror or os.strerror(cause.errno)}; nothing of it was "
+                         "left; free space or choose a writable place") from exc
 
 
 @contextlib.contextmanager
@@ -131,11 +137,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         os.replace(tmp, path)
         _fsync_dir(path.parent)
     except BaseException as exc:
-        tmp.unlink(missing_ok=True)
-        cause = disk_error(exc)
-        if cause is not None:
-            raise WriteError(f"cannot write {path}: {cause.strerror or os.strerror(cause.errno)}; nothing of it was "
-                             "left; free space or choose a writable place") from exc
+        _discard(tmp, path, exc)
         raise
 
 
