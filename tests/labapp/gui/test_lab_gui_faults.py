@@ -130,7 +130,8 @@ def test_heating_and_the_drop_are_visible(qtbot, tmp_path, monkeypatch):
         assert len(t) >= 5 and np.all(t[np.isfinite(t)] <= 0.0)        # drawn while heating, before time zero
         qtbot.waitUntil(win.controls.drop_button.isEnabled, timeout=WAIT_MS)
         assert "heating: bath" in win.messages.toPlainText()          # progress between "heating on" and "stable"
-        assert AlarmKind.DROP in win.alarms.kinds() and win.alarms.isVisible() and win.alarms.sound.isChecked()
+        qtbot.waitUntil(lambda: AlarmKind.DROP in win.alarms.kinds(), timeout=WAIT_MS)  # its own queued event
+        assert win.alarms.isVisible() and win.alarms.sound.isChecked()
         assert "DROP THE OBJECT NOW" in win.alarms.text.text()
         win.refresh()
         assert win.controls.state_label.text() == "WAITING FOR DROP"
