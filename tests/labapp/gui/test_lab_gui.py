@@ -111,6 +111,7 @@ def test_crop_overlay_geometry():
     assert mirrored_x(100, 50, 300) == 450                       # the square mirrored across column 300
 
 
+@pytest.mark.slow  # a whole series, its fit, a reanalysis and a design through the GUI: over 30 s
 def test_calibration_wizard_reanalysis_and_design_launcher(qtbot, tmp_path, monkeypatch):
     win = MainWindow(tmp_path / "data", simulate=True, speed=float("inf"), sample="sphere")
     qtbot.addWidget(win)
