@@ -36,6 +36,9 @@ EARN_MARGIN = 0.05
 fraction: a parameter must earn its place, not win by the noise of the fit."""
 EARN_SIGMAS = 2.0
 """... and only if each of its parameters lies more than this many standard errors from its identity value."""
+MIN_RUNS_TO_CHOOSE = 3
+"""Fewest runs from which ``auto`` chooses print physics: with two, each leave-one-out refit rests on one run, and
+the spread of two refits is no standard error to judge a parameter by; fewer runs keep the isotropic model."""
 LAG_FLOOR_S = 1.0
 """Least standard error of the wetting lag, s."""
 

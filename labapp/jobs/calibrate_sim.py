@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import json
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +23,7 @@ from analysis import AnalysisError, BenchCalibration, LooShape, ShapeRun, fit_si
 from analysis.bands import band_block
 from analysis.physics_fit import (
     DISCRETISATION_FACTOR,
+    MIN_RUNS_TO_CHOOSE,
     PhysicsFit,
     choose_physics,
     fit_physics,
@@ -57,6 +59,8 @@ from labapp.records.simcalset import SetRow, read_set
 MIN_RESOLUTION, MAX_RESOLUTION = 8, 512
 """The resolutions a calibration accepts, voxels along each mesh's longest side."""
 Progress = Callable[[float, str], None]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -285,6 +289,10 @@ def _fit_print_physics(set_csv: Path, sims: _Simulations, physics: str, max_offs
     if physics == "none":
         return physics_fits, "none"
     rows = sims.rows
+    if physics == "auto" and len(rows) < MIN_RUNS_TO_CHOOSE:
+        log.warning("%s: %d runs; print physics are chosen from at least %d (leave-one-out needs them): the isotropic "
+                    "model is kept; name a set with --physics to fit one anyway", set_csv, len(rows), MIN_RUNS_TO_CHOOSE)
+        return physics_fits, "none"
     names = [m for m in PHYSICS_SETS if physics == "auto" or m in ("none", physics)]
     losses: dict = {}   # shared by the sets: each candidate value's loss fitted once
     if physics == "auto" and not any(_has_channels(sims.grids[(row.mesh, 0.0)]) for row in rows):
