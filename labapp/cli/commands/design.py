@@ -43,6 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--calibration", metavar="BENCH_CAL.json",
                         help="bench calibration for a run-folder target (default: the run's own)")
     parser.add_argument("--out", required=True, help="run folder")
+    from labapp.cli.commands._design_barrier import add_barrier_design_arguments
+    add_barrier_design_arguments(parser)
 
 
 def _progress(max_iter: int):
@@ -84,6 +86,9 @@ def run(args: argparse.Namespace) -> int:
     from labapp.records.lock import folder_lock
     from labapp.records.simcal import SimCalError, load_simcal
 
+    if args.barrier_speed is not None:     # two materials: labapp.cli.commands._design_barrier
+        from labapp.cli.commands._design_barrier import run_barrier_design
+        return run_barrier_design(args, _given_options(args))
     try:
         options = _given_options(args)
         if args.resume:

@@ -1,0 +1,112 @@
+"""`sfr design --target T --barrier-speed S`: the two-material option and its run (a drug and a barrier)."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from labapp.cli.argtypes import nonnegative_float
+
+TAKEN = {"space": "space", "resolution": "resolution", "domain_mm": "domain_mm", "height_mm": "height_mm",
+         "radius_mm": "radius_mm", "max_iter": "max_iter", "beta": "beta", "beta_final": "beta_final",
+         "w_binary": "w_binary"}
+"""The `sfr design` settings a two-material design takes: setting -> `TwoMaterialSettings` field."""
+
+
+def add_barrier_design_arguments(parser: argparse.ArgumentParser) -> None:
+    """The two-material option of `sfr design`."""
+    group = parser.add_argument_group("two materials (a drug and a placebo barrier)")
+    group.add_argument("--barrier-speed", type=nonnegative_float, metavar="S",
+                       help="design a drug and a barrier eroding at S times the drug's rate (0: insoluble), in nfc or "
+                            "extruded; --target: delay-zero:delay=D,rate=R,volume=V, pulses:volume=V,width=W,gap=G, "
+                            "constant:rate=R,volume=V (mm, mm^3) or a tau_mm,released_mm3 CSV; writes design.stl (drug), "
+                            "barrier.stl and design.3mf (both)")
+
+
+def _settings_options(args: argparse.Namespace, given: dict) -> dict:
+    """The given design settings as `TwoMaterialSettings` fields; refuses the ones a two-material design does not take."""
+    from labapp.errors import UsageError
+
+    refused = [name for name in given if name != "target" and name not in TAKEN]
+    refused += [flag for flag, value in (("--simcal", args.simcal), ("--calibration", args.calibration),
+                                         ("--units", args.units)) if value]
+    if refused:
+        raise UsageError(f"--barrier-speed does not take {', '.join(sorted(refused))}: a two-material design takes "
+                         "--space (nfc, extruded), --resolution, --domain-mm, --height, --radius-mm, --max-iter, --beta, "
+                         "--beta-final and --w-binary")
+    options = {TAKEN[k]: v for k, v in given.items() if k in TAKEN}
+    if "domain_mm" in options:
+        x, y, z = options["domain_mm"]
+        if not x == y or (options.get("space", "nfc") == "nfc" and not x == z):
+            raise UsageError(f"--domain-mm {x:g} {y:g} {z:g}: a two-material domain is square in x, y (and cubic for "
+                             "nfc); give equal sizes (the extrusion height is --height)")
+        options["domain_mm"] = float(x)
+    if options.get("space") == "ico":
+        raise UsageError("--space ico with --barrier-speed: the ICO term models one material's stiffness, and no "
+                         "stiffness law for a drug/barrier pair is calibrated; use --space nfc or extruded")
+    return options
+
+
+def _progress(max_iter: int):
+    tty = sys.stderr.isatty()
+
+    def show(k: int, terms: dict) -> None:
+        from labapp.cli import interrupt
+
+        interrupt.check()
+        if not tty and k % 10 and k < max_iter:
+            return
+        line = (f"stage {terms['stage']} (beta {terms['beta']:.3g}): it {k:4d}/{max_iter}  J {terms['J']:.5g}  "
+                f"fit {terms['rel_rmse']:.2%}  binary {terms['J_binary']:.3g}  {terms['seconds']:.0f}s")
+        print(("\r" + line + "   ") if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
+    return show
+
+
+def summary_text(s: dict, out) -> list[str]:
+    """What the command prints about a finished two-material design."""
+    b = s["barrier"]
+    lines = [f"two-material design ({s['space']}, barrier speed {s['barrier_speed']:g}): {s['status']} after "
+             f"{s['evaluations']} evaluations, {s['seconds']:.0f} s -> {out}",
+             f"  drug {s['drug']['volume_mm3']:.2f} mm^3 (design.stl), barrier {b['volume_mm3']:.2f} mm^3 (barrier.stl), "
+             f"both in design.3mf",
+             f"  fit (relative RMS): density {s['density_fit']:.2%}, print on the design grid {s['grid_fit']:.2%}"
+             + (f", print by the reference evaluator {s['reference_fit']:.2%}" if s["reference_fit"] is not None else
+                f" (reference evaluator: {s['reference']})"),
+             f"  pieces: print {s['print_pieces']}, drug {s['drug']['pieces']}, barrier {b['pieces']}",
+             "  thinnest barrier wall in front of covered drug: "
+             + ("none (no covered drug)" if b["min_wall_mm"] is None else f"{b['min_wall_mm']:.3g} mm")
+             + f" (at least {b['min_wall_required_mm']:g} mm)"
+             + (f"; {s['thickened_voxels']} drug voxels made barrier to reach it" if s["thickened_voxels"] else ""),
+             f"  barrier cover {b['cover_mm']:.3g} mm: "
+             + ("release starts at tau = 0" if b["release_starts_mm"] == 0.0 else "drug sealed" if b["release_starts_mm"]
+                is None else f"release starts at tau = {b['release_starts_mm']:.3g} mm")]
+    lines += [f"  note: {n}" for n in s["piece_notes"]]
+    return lines
+
+
+def run_barrier_design(args: argparse.Namespace, given: dict) -> int:
+    """Run `sfr design` given ``--barrier-speed``: check the options, design, print the summary."""
+    from design.inverse.twomaterial_problem import TwoMaterialSettings
+    from labapp.cli import interrupt
+    from labapp.errors import UsageError
+    from labapp.jobs.design_barrier import design_barrier
+
+    options = _settings_options(args, given)
+    if not args.resume and not args.target:
+        raise UsageError("--target is required (unless --resume)")
+    settings = None if args.resume else TwoMaterialSettings(args.target, args.barrier_speed, **options)
+    interrupt.set_hint(f"the best design so far is saved in {args.out}; resume with: sfr design --resume "
+                       f"--barrier-speed {args.barrier_speed:g} --out {args.out}")
+    max_iter = settings.max_iter if settings else options.get("max_iter", 0)
+    try:
+        result = design_barrier(settings, args.out, resume=args.resume, options=dict(options, barrier_speed=args.barrier_speed),
+                                on_iteration=_progress(max_iter))
+    finally:
+        print(file=sys.stderr)
+    if result.summary is None:
+        print(f"stopped: resume with sfr design --resume --barrier-speed {args.barrier_speed:g} --out {args.out}")
+        return 130
+    if result.unchanged:
+        print(f"already finished: nothing to do ({result.out} is left as it is)")
+    for line in summary_text(result.summary, result.out):
+        print(line)
+    return 0
