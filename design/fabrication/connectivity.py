@@ -54,6 +54,10 @@ plane p's face.
 """
 from __future__ import annotations
 
+import os
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
+
 import numpy as np
 
 from design.errors import DesignError
@@ -72,6 +76,21 @@ SOLID_LEVEL = 0.5
 """Block-averaged density from which a coarse voxel counts as solid for the tail's reference."""
 OPENING_SLOWNESS = 1e-6
 """Slowness of the gate voxels that let the front in at a seed."""
+SEED_WORKERS = max(1, min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1))
+"""Threads that solve the seeds' distances at the same time (`Connectivity.submit`): the cores this process may
+use, at most 4 (one per seed of a 3D design with three mirror planes). The result does not depend on it."""
+
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def _executor() -> ThreadPoolExecutor:
+    """The seeds' worker threads, shared by every `Connectivity` of the process (created on first use)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(max_workers=SEED_WORKERS, thread_name_prefix="connectivity")
+        return _POOL
 
 
 def _pool(x: np.ndarray, c: int) -> np.ndarray:
@@ -133,7 +152,6 @@ class Connectivity:
         self.coarse_shape = tuple(-(-n // self.coarsen) for n in self.shape)
         self._flips = tuple(ax for ax, m in enumerate(self.mirror) if m)
         gated = tuple(n + 1 for n in self.coarse_shape)
-        self._buffers = MarchBuffers(gated)
         self._inner = tuple(slice(0, n) for n in self.coarse_shape)
         # seeds in the flipped, gated frame: the gate voxel next to the core (high corner on mirrored
         # axes, middle of the others), then each plane's whole gate layer; with their weights and allowances
@@ -143,6 +161,8 @@ class Connectivity:
         faces = faces if planes else []
         self._openings = [tuple(core)] + faces
         self._weights = [1.0] + [1.0 / len(faces) for _ in faces]
+        self._buffers = [MarchBuffers(gated) for _ in self._openings]  # one per seed: the seeds solve in parallel
+        self._tasks: list[Future] = []
         # all solid: every path inside is shorter than the gate's 10 (1 + sum of the gated sizes) voxels
         solid = np.ones(self.coarse_shape)
         self._d0 = [self._distance(solid, opening, gate=10.0 * (1.0 + sum(gated)))[0] for opening in self._openings]
@@ -152,12 +172,13 @@ class Connectivity:
         self.s_void = 1.0 + 2.0 * max(float(a.max()) for a in self._allow) / self.dx_mm
         self._gate = 10.0 * self.s_void * sum(gated)
 
-    def _distance(self, s: np.ndarray, opening: tuple, gate: float):
-        """Geodesic distance from one seed for slowness ``s`` (coarse grid), and the solve."""
+    def _distance(self, s: np.ndarray, opening: tuple, gate: float, buffers: MarchBuffers | None = None):
+        """Geodesic distance from one seed for slowness ``s`` (coarse grid), and the solve (on ``buffers``, default
+        the first seed's)."""
         n = np.full(tuple(k + 1 for k in self.coarse_shape), gate)
         n[self._inner] = np.flip(s, self._flips)
         n[opening] = OPENING_SLOWNESS
-        marching = march(n, self.dx_mm, (True,) * len(self.shape), self._buffers)
+        marching = march(n, self.dx_mm, (True,) * len(self.shape), buffers or self._buffers[0])
         d = np.array(marching.interior(marching.u_pad)[self._inner])
         return np.flip(d, self._flips), marching
 
@@ -180,34 +201,38 @@ class Connectivity:
         value : float
         grad : ndarray of float, ``shape``
         """
+        return self.submit(rho, cell_mm3).result()
+
+    def submit(self, rho: np.ndarray, cell_mm3: float) -> "PendingConnectivity":
+        """Start J_conn and its gradient (as `__call__`) in the worker threads and return at once: one seed's
+        distance solve and adjoint per task, `SEED_WORKERS` at a time (the marcher releases the GIL), so that the
+        caller can solve the release meanwhile. ``rho`` must not change until the result is taken."""
         c = self.coarsen
         rc = _pool(rho, c)
         s = self.slowness(rc)
         cell = cell_mm3 * c ** len(self.shape)
-        h_sum = np.zeros(self.coarse_shape)  # sum over the seeds of weight * h
-        value_tail, g_tail = 0.0, np.zeros(self.coarse_shape)
-        s_bar = np.zeros(self.coarse_shape)
-        for seed, (opening, weight, d0, allow) in enumerate(zip(self._openings, self._weights, self._d0,
-                                                                  self._allow)):
-            d, marching = self._distance(s, opening, gate=self._gate)
-            over = np.maximum((d - d0) / allow - 1.0, 0.0)
-            h_sum += weight * over ** 2 / (1.0 + over ** 2)
-            dh_dt = 2.0 * over / (1.0 + over ** 2) ** 2
-            # adjoint of sum rc^2 h(t) through this seed's solve (flipped, gated frame); the next solve
-            # reuses the marcher's buffers, so it runs now
-            e_bar = rc ** 2 * dh_dt / allow * weight * cell
-            if seed == 0 and self.tail_slope > 0:
-                tail, tail_e_bar, tail_rc_bar = self._tail(rc, d - d0, allow)
-                value_tail += tail * cell
-                e_bar = e_bar + tail_e_bar * cell
-                g_tail += tail_rc_bar * cell
-            u_bar = np.zeros(tuple(k + 1 for k in self.coarse_shape))
-            u_bar[self._inner] = np.flip(e_bar, self._flips)
-            s_bar += np.flip(march_adjoint(marching, u_bar)[self._inner], self._flips)
-        value = float(np.sum(rc ** 2 * h_sum) * cell) + value_tail
-        ds_drho = -2.0 * (self.s_void - 1.0) * (1.0 - rc)
-        g_coarse = 2.0 * rc * h_sum * cell + s_bar * ds_drho + g_tail
-        return value, _pool_adjoint(g_coarse, c, self.shape)
+        for task in self._tasks:  # a call whose result was never taken (its caller raised) still holds the buffers
+            task.exception()
+        self._tasks = [_executor().submit(self._seed, seed, rc, s, cell) for seed in range(len(self._openings))]
+        return PendingConnectivity(self, rc, cell, self._tasks)
+
+    def _seed(self, seed: int, rc: np.ndarray, s: np.ndarray, cell: float):
+        """One seed's part of J_conn: its weighted h, its tail (the core's; value, gradient by rc) and its share of
+        dJ/ds through its solve's adjoint (flipped, gated frame), on its own marcher buffers."""
+        opening, weight, d0, allow = self._openings[seed], self._weights[seed], self._d0[seed], self._allow[seed]
+        d, marching = self._distance(s, opening, gate=self._gate, buffers=self._buffers[seed])
+        over = np.maximum((d - d0) / allow - 1.0, 0.0)
+        h = weight * over ** 2 / (1.0 + over ** 2)
+        dh_dt = 2.0 * over / (1.0 + over ** 2) ** 2
+        e_bar = rc ** 2 * dh_dt / allow * weight * cell
+        tail = None
+        if seed == 0 and self.tail_slope > 0:
+            value, tail_e_bar, tail_rc_bar = self._tail(rc, d - d0, allow)
+            tail = (value * cell, tail_rc_bar * cell)
+            e_bar = e_bar + tail_e_bar * cell
+        u_bar = np.zeros(tuple(k + 1 for k in self.coarse_shape))
+        u_bar[self._inner] = np.flip(e_bar, self._flips)
+        return h, tail, np.flip(march_adjoint(marching, u_bar)[self._inner], self._flips)
 
     def _tail(self, rc: np.ndarray, excess: np.ndarray, allow: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """The core term's tail (module doc) per unit cell volume, and its partial derivatives by the
@@ -229,3 +254,29 @@ class Connectivity:
         shape (1 + planes, *coarse_shape)."""
         s = self.slowness(_pool(rho, self.coarsen))
         return np.stack([self._distance(s, opening, gate=self._gate)[0] for opening in self._openings])
+
+
+class PendingConnectivity:
+    """J_conn being computed in the worker threads (`Connectivity.submit`); `result` waits for it."""
+
+    def __init__(self, term: Connectivity, rc: np.ndarray, cell: float, tasks: list[Future]) -> None:
+        self.term, self.rc, self.cell, self.tasks = term, rc, cell, tasks
+
+    def result(self) -> tuple[float, np.ndarray]:
+        """J_conn and dJ_conn/drho, as `Connectivity.__call__` returns them: the seeds' parts summed in seed order,
+        so the sums do not depend on which thread finished first."""
+        term, rc = self.term, self.rc
+        h_sum = np.zeros(term.coarse_shape)  # sum over the seeds of weight * h
+        value_tail, g_tail = 0.0, np.zeros(term.coarse_shape)
+        s_bar = np.zeros(term.coarse_shape)
+        for task in self.tasks:
+            h, tail, s_bar_seed = task.result()
+            h_sum += h
+            if tail is not None:
+                value_tail += tail[0]
+                g_tail += tail[1]
+            s_bar += s_bar_seed
+        value = float(np.sum(rc ** 2 * h_sum) * self.cell) + value_tail
+        ds_drho = -2.0 * (term.s_void - 1.0) * (1.0 - rc)
+        g_coarse = 2.0 * rc * h_sum * self.cell + s_bar * ds_drho + g_tail
+        return value, _pool_adjoint(g_coarse, term.coarsen, term.shape)

@@ -39,7 +39,7 @@ from design.files.rounds import ROUNDS, RoundFile
 from design.files.targets_io import load_problem
 from design.inverse.config import DesignConfig
 from design.inverse.defect import optimise_physical
-from design.inverse.multistart import coarse_start, refine_start, refinement_phase, start_name
+from design.inverse.multistart import coarse_start, refine_start, refinement_config, refinement_phase, start_name
 from design.inverse.optimize import (
     Checkpoint,
     IterationCallback,
@@ -218,7 +218,7 @@ def _finished(saved: Checkpoint, out_dir: Path, config: DesignConfig) -> bool:
         status = None if summary is None else summary["status"]
     if status not in FINISHED:
         return False
-    return not (status == DesignStatus.MAX_ITER and len(saved.history) < config.max_iter)
+    return not (status == DesignStatus.MAX_ITER and len(saved.history) < refinement_config(config).max_iter)
 
 
 def _complete_outputs(out_dir: Path, saved: Checkpoint) -> DesignSummary | None:
@@ -289,8 +289,8 @@ def _rewrite_outputs(out_dir: Path, config: DesignConfig, saved: Checkpoint, coa
     run's, when already prepared."""
     problem = problem or _problem(config, out_dir, not coarse_start)
     _check_size(saved, problem, out_dir)
-    objective = build_objective(problem, config)
-    restore_objective(objective, saved, config)
+    objective = build_objective(problem, refinement_config(config))
+    restore_objective(objective, saved, refinement_config(config))
     log.info("%s: optimisation finished (%s); writing its outputs", out_dir, saved.status)
     best = np.asarray(saved.best_x, float).reshape(problem.space.var_shape)
     history = [list(row) for row in saved.history]
@@ -375,12 +375,13 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         start = _multistart(config, out_dir, on_iteration, should_stop)
         if isinstance(start, Checkpoint):  # the chosen start is the design
             return _rewrite_outputs(out_dir, config, start, coarse_start, problem)
-    objective = build_objective(problem, config)
+    optimised = refinement_config(config)  # a multi-start's refinement: at the final beta, its own evaluations
+    objective = build_objective(problem, optimised)
     if saved is not None:
         log.info("resuming %s at evaluation %d", out_dir, len(saved.history))
     if config.starts > 1:
         on_iteration = with_phase(on_iteration, refinement_phase(config.resolution))
-    outcome, objective = optimise_physical(objective, problem, config, CheckpointFile(ckpt), RoundFile(out_dir / ROUNDS),
+    outcome, objective = optimise_physical(objective, problem, optimised, CheckpointFile(ckpt), RoundFile(out_dir / ROUNDS),
                                            saved=saved, start=start, on_iteration=on_iteration, should_stop=should_stop)
     if clock is not None and clock.outputs_s() is not None:
         log.info("print: extracting design.stl and releasing it by the reference evaluator (about %.0f s)",

@@ -23,10 +23,11 @@ import numpy as np
 from scipy import ndimage
 
 from design.inverse.config import DesignConfig
+from design.inverse.defect import correction_plan
 from design.inverse.objective import DesignObjective
 from design.inverse.optimize import IterationCallback, StartDesign, with_phase
 from design.inverse.problem import Problem
-from design.inverse.settings import MULTISTART_MIN_RESOLUTION
+from design.inverse.settings import COARSE_EVALS_SHARE, MULTISTART_MIN_RESOLUTION, REFINE_EVALS_SHARE
 from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)
@@ -46,6 +47,33 @@ def coarse_resolution(resolution: int) -> int:
     if resolution < MULTISTART_MIN_RESOLUTION:
         return resolution
     return max(MIN_COARSE_RESOLUTION, 2 * (resolution // 4))
+
+
+def refined(config: DesignConfig) -> bool:
+    """Whether a run of ``config`` refines a coarse start: a multi-start whose starts run below its resolution."""
+    return config.starts > 1 and coarse_resolution(config.resolution) < config.resolution
+
+
+def coarse_config(config: DesignConfig) -> DesignConfig:
+    """The configuration of each coarse start of a refined multi-start (`refined`): ``config`` at `coarse_resolution`
+    with a single start, no physical correction (the refinement corrects the print) and `COARSE_EVALS_SHARE` of its
+    evaluations."""
+    return replace(config, resolution=coarse_resolution(config.resolution), starts=1, physical_correction="none",
+                   max_iter=max(1, int(round(COARSE_EVALS_SHARE * config.max_iter))))
+
+
+def refinement_config(config: DesignConfig) -> DesignConfig:
+    """What the optimisation of a run of ``config`` runs with: for a refined multi-start (`refined`) ``config`` at its
+    final beta throughout (the coarse start went through the continuation) with `REFINE_EVALS_SHARE` of its
+    evaluations before the correction rounds, whose evaluations follow as configured (``max_iter`` is the refinement's
+    and its rounds'); else ``config`` itself."""
+    if not refined(config):
+        return config
+    rounds, _ = correction_plan(config)
+    beta = float(config.beta if config.beta_final is None else config.beta_final)
+    # at least the rounds' evaluations: correction_plan keeps as many rounds as fit in half the evaluations
+    first = max(1, int(round(REFINE_EVALS_SHARE * config.max_iter)), rounds * config.correction_evals)
+    return replace(config, beta=beta, beta_final=beta, max_iter=first + rounds * config.correction_evals)
 
 
 def start_name(k: int) -> str:
@@ -165,8 +193,7 @@ def coarse_start(config: DesignConfig, runs: CoarseRuns, *,
     resolution = coarse_resolution(config.resolution)
     final = resolution == config.resolution
     # coarse runs only rank the starts by J: the refinement corrects the print (design.inverse.defect)
-    start_config = (replace(config, starts=1) if final else
-                    replace(config, resolution=resolution, starts=1, physical_correction="none"))
+    start_config = replace(config, starts=1) if final else coarse_config(config)
     values = []
     for k in range(config.starts):
         if not runs.finished(k):

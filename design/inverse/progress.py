@@ -92,7 +92,7 @@ def outputs_evals(config: DesignConfig) -> float:
 
 def run_plan(config: DesignConfig) -> list[Phase]:
     """The phases of a design run of ``config`` in order (module doc)."""
-    from design.inverse.multistart import coarse_phase, coarse_resolution, refinement_phase
+    from design.inverse.multistart import coarse_config, coarse_phase, coarse_resolution, refinement_config, refinement_phase
 
     if config.starts <= 1:
         return _single(config, None, 1.0, True)
@@ -103,9 +103,10 @@ def run_plan(config: DesignConfig) -> list[Phase]:
         last = phases[-1]
         return phases[:-1] + [Phase(last.name, last.end, last.evals, last.weight, last.after + outputs_evals(config))]
     weight = (resolution / config.resolution) ** 3
-    coarse = [Phase(coarse_phase(k, config.starts, resolution), config.max_iter, config.max_iter, weight,
+    evals = coarse_config(config).max_iter
+    coarse = [Phase(coarse_phase(k, config.starts, resolution), evals, evals, weight,
                     outputs_evals(config) * weight) for k in range(config.starts)]
-    return coarse + _single(config, refinement_phase(config.resolution), 1.0, True)
+    return coarse + _single(refinement_config(config), refinement_phase(config.resolution), 1.0, True)
 
 
 class RunClock:

@@ -51,6 +51,15 @@ MULTISTART_SPACES = ("nfc", "extruded")
 """Default multi-start (`DesignConfig.starts`): 4 seeded starts at half the resolution, then the best
 refined, for nfc and extruded designs of a source shape at resolution 128 or finer; ICO designs and curve
 targets in nfc keep one start. Why: docs/design.md#multi-start."""
+COARSE_EVALS_SHARE = 0.5
+"""Evaluations of each coarse start of a multi-start, as a share of `DesignConfig.max_iter` (at least 1): the coarse
+starts only rank the outlines by J and give the refinement its start; past half the budget their J moves little
+(docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
+REFINE_EVALS_SHARE = 0.2
+"""Evaluations of a multi-start's refinement before its correction rounds, as a share of `DesignConfig.max_iter`
+(at least 1). The refinement starts from the best coarse design, which went through the beta continuation, and runs at
+the final beta; the rounds' evaluations follow as for a single run
+(docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 CURVE_EXTRUDED_STARTS = 3
 """Default starts of an extruded design of a curve target (`DesignConfig.starts`): its three start outlines, a
 square, a cross and a ring (`design.inverse.starts.start_regions`; noisy squares in place of those that do not fit),

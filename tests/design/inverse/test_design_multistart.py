@@ -11,7 +11,7 @@ from design.errors import DesignError
 from design.files.records import load_checkpoint
 from design.files.rundir import run_design
 from design.inverse.config import DesignConfig
-from design.inverse.multistart import coarse_resolution, perturbed_start, upsample
+from design.inverse.multistart import coarse_resolution, perturbed_start, refinement_config, upsample
 from design.inverse.problem import prepare
 from design.inverse.settings import CURVE_EXTRUDED_STARTS, MULTISTART_STARTS
 
@@ -36,9 +36,14 @@ def test_multistart_runs_the_starts_and_refines_the_best(tmp_path, caplog, monke
     # the coarse path, as from resolution 128 on, at a resolution a test can afford
     monkeypatch.setattr(design.inverse.multistart, "MULTISTART_MIN_RESOLUTION", 32)
     config = DesignConfig(target="sphere", space="extruded", resolution=32, max_iter=6, radius_vox=1.5, starts=2)
-    phases = []
+    phases, firsts = [], {}
+
+    def on_iteration(k, x, terms):
+        phases.append(terms["phase"])
+        firsts.setdefault(terms["phase"], np.array(x))
+
     with caplog.at_level(logging.INFO):
-        result = run_design(config, tmp_path / "run", on_iteration=lambda k, x, terms: phases.append(terms["phase"]))
+        result = run_design(config, tmp_path / "run", on_iteration=on_iteration)
     # a coarse start's own warnings (6 evaluations: not converged) stay the start's: in its summary and at INFO
     # level naming its folder, never as the design's warnings
     start_warnings = json.loads((tmp_path / "run" / "starts" / "00" / "summary.json").read_text())["warnings"]
@@ -58,13 +63,16 @@ def test_multistart_runs_the_starts_and_refines_the_best(tmp_path, caplog, monke
         coarse = json.loads((tmp_path / "run" / "starts" / k / "summary.json").read_text())
         assert coarse["config"]["resolution"] == 16 and coarse["config"]["starts"] == 1
         assert coarse["rel_rmse_print"] is None and coarse["reference"] is None  # ranked by J: its print not judged
-    assert result.outputs.summary["config"]["resolution"] == 32 and result.iterations == 6
-    # the refinement started from the best start, not from the uniform design: J at its first evaluation
-    # is below the uniform start's
-    single = run_design(DesignConfig(target="sphere", space="extruded", resolution=32, max_iter=1, radius_vox=1.5),
-                        tmp_path / "single")
-    refined_first = np.loadtxt(tmp_path / "run" / "history.csv", delimiter=",", skiprows=1)[0, 1]
-    assert refined_first < single.best_value
+    # the refinement: REFINE_EVALS_SHARE of 6 evaluations, at least the rounds' 2 x 1, then the 2 rounds
+    assert result.outputs.summary["config"]["resolution"] == 32 and result.iterations == 4
+    # the refinement started from the chosen start's design interpolated onto its grid (within the session floor of
+    # an extruded design's variables, 1e-3)
+    with np.load(tmp_path / "run" / "starts" / record["refined"] / "density.npz") as data:
+        coarse, dx_coarse = data["rho_hat"], float(data["dx_mm"])
+    refined_first = firsts["refinement at resolution 32"]
+    start = upsample(coarse, dx_coarse, refined_first.shape, result.outputs.summary["dx_mm"])
+    assert np.abs(refined_first - start).max() <= 1.001e-3
+    assert refinement_config(config).beta == config.beta_final  # at the final beta throughout
 
 
 def test_perturbed_starts_differ_by_seed_and_start_zero_is_the_default():
