@@ -31,10 +31,10 @@ def _window(qtbot, data_dir, **kwargs) -> MainWindow:
 
 
 class _Latency:
-    """The longest gap between 10 ms timer ticks of the GUI thread's event loop."""
+    """The GUI thread's event loop ticking every 10 ms: the ticks counted and the longest gap between two, ms."""
 
     def __init__(self) -> None:
-        self.clock, self.worst_ms = QElapsedTimer(), 0
+        self.clock, self.worst_ms, self.ticks = QElapsedTimer(), 0, 0
         self.timer = QTimer()
         self.timer.setInterval(10)
         self.timer.timeout.connect(self._tick)
@@ -42,6 +42,7 @@ class _Latency:
         self.timer.start()
 
     def _tick(self) -> None:
+        self.ticks += 1
         self.worst_ms = max(self.worst_ms, self.clock.restart())
 
 
@@ -57,9 +58,11 @@ def test_connect_never_blocks_the_gui_thread(qtbot, tmp_path):
         assert "connecting" in win.devices.connect_button.text()          # until the built bench arrives
         assert not win.devices.connect_button.isEnabled()
         qtbot.waitUntil(lambda: not win.building, timeout=120_000)
+        build_ms = (time.perf_counter() - start) * 1000
         latency.timer.stop()
-        # the event loop kept turning while the bench was built (slack for a loaded test machine)
-        assert latency.worst_ms < 3 * MAX_BLOCK_MS, latency.worst_ms
+        # the event loop kept turning while the bench was built: a build on the GUI thread would leave one gap as
+        # long as the build; measured against the build's own duration, so a loaded machine's slower ticks pass
+        assert latency.ticks >= 5 and latency.worst_ms < 0.5 * build_ms, (latency.ticks, latency.worst_ms, build_ms)
         qtbot.waitUntil(lambda: win.live.image.image is not None and not win.engine.running, timeout=120_000)
         assert win.devices.connect_button.isEnabled() and "connecting" not in win.devices.connect_button.text()
     finally:
