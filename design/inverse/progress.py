@@ -11,7 +11,9 @@ measured, docs/benchmarks.md#the-stages-of-a-design).
 
 `RunClock` wraps the run's progress callback: at every evaluation it measures the seconds per weighted evaluation of
 the phase in progress and sets ``eta_s`` to what is left of it and of every later phase at that rate. A phase that
-ends early (an optimisation that converges or stalls before its limit) makes the estimate fall at once.
+ends early (an optimisation that converges or stalls before its limit) makes the estimate fall at once. It also sets
+``terms["limit"]``, the evaluations of the run the phase is part of (a coarse start's, or the optimisation's and its
+rounds').
 """
 from __future__ import annotations
 
@@ -56,6 +58,9 @@ class Phase:
     after : float
         What follows it before the next phase's first evaluation (print checks, outputs), in evaluations of the
         run's grid.
+    limit : int
+        The run-local evaluation count at which the run it is part of ends (a coarse start's, or the optimisation's
+        and its rounds'): the progress line's "it k/limit". 0: ``end``.
     """
 
     name: str | None
@@ -63,6 +68,7 @@ class Phase:
     evals: int
     weight: float
     after: float
+    limit: int = 0
 
 
 def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bool) -> list[Phase]:
@@ -76,12 +82,13 @@ def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bo
         return prefix if name is None else name if prefix is None else f"{prefix}, {name}"
 
     tail = outputs_evals(config) * weight if outputs else 0.0
+    limit = first + rounds * config.correction_evals
     phases = [Phase(named(None), first, first, weight, (check * weight if rounds else 0.0)
-                    + (tail if not rounds else 0.0))]
+                    + (tail if not rounds else 0.0), limit)]
     for r in range(1, rounds + 1):
         end = first + r * config.correction_evals
         after = check * weight + (tail if r == rounds else 0.0)
-        phases.append(Phase(named(round_phase(r, rounds)), end, config.correction_evals, weight, after))
+        phases.append(Phase(named(round_phase(r, rounds)), end, config.correction_evals, weight, after, limit))
     return phases
 
 
@@ -101,7 +108,8 @@ def run_plan(config: DesignConfig) -> list[Phase]:
         phases = [p for k in range(config.starts)
                   for p in _single(config, coarse_phase(k, config.starts, resolution, coarse=False), 1.0, True)]
         last = phases[-1]
-        return phases[:-1] + [Phase(last.name, last.end, last.evals, last.weight, last.after + outputs_evals(config))]
+        return phases[:-1] + [Phase(last.name, last.end, last.evals, last.weight, last.after + outputs_evals(config),
+                                    last.limit)]
     weight = (resolution / config.resolution) ** 3
     evals = coarse_config(config).max_iter
     coarse = [Phase(coarse_phase(k, config.starts, resolution), evals, evals, weight,
@@ -160,4 +168,7 @@ class RunClock:
 
     def __call__(self, k: int, x, terms: dict) -> None:
         eta = self.eta_s(terms.get("phase"), k)
+        if self.current is not None:  # the evaluations of the run this phase is part of (``terms["limit"]``)
+            phase = self.plan[self.current]
+            terms = dict(terms, limit=phase.limit or phase.end)
         self.on_iteration(k, x, terms if eta is None else dict(terms, eta_s=eta))

@@ -54,10 +54,11 @@ def _progress(max_iter: int):
 
     def show(k: int, x, terms: dict) -> None:
         interrupt.check()   # a safe point after an evaluation: Ctrl-C stops the run here (checkpoint, outputs)
-        if not tty and k % 10 and k < max_iter:
+        limit = terms.get("limit", max_iter)  # the evaluations of the run the phase is part of
+        if not tty and k % 10 and k < limit:
             return
         phase = f"{terms['phase']}: " if "phase" in terms else ""
-        line = (f"{phase}it {k:4d}/{max_iter}  J {terms['J']:.5g}  fit {terms['J_fit']:.4g}"
+        line = (f"{phase}it {k:4d}/{limit}  J {terms['J']:.5g}  fit {terms['J_fit']:.4g}"
                 f"  binary {terms['J_binary']:.4g}"
                 f"  |g| {terms['grad_norm']:.3g}  {terms['seconds']:.0f}s  ETA {terms['eta_s'] / 60:.1f} min")
         print(("\r" + line + "   ") if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)

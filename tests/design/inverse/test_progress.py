@@ -24,6 +24,17 @@ def test_a_multistart_plan_has_its_coarse_starts_at_an_eighth_of_the_cost_then_t
     assert names[4:] == ["refinement at resolution 128", "refinement at resolution 128, physical correction round 1 of 2",
                          "refinement at resolution 128, physical correction round 2 of 2"]
     assert [p.weight for p in plan] == [0.125] * 4 + [1.0] * 3
+    # each coarse start half the evaluations; the refinement a fifth (20) at its final beta, then its two rounds of 10
+    assert [(p.end, p.limit or p.end) for p in plan] == [(50, 50)] * 4 + [(20, 40), (30, 40), (40, 40)]
+
+
+def test_the_progress_line_counts_the_evaluations_of_the_run_of_its_phase():
+    plan = run_plan(DesignConfig(target="sphere", resolution=128, max_iter=100))
+    seen = []
+    clock = RunClock(plan, lambda k, x, terms: seen.append(terms.get("limit")))
+    clock(1, None, {"phase": "coarse start 1 of 4 at resolution 64"})
+    clock(25, None, {"phase": "refinement at resolution 128, physical correction round 1 of 2"})
+    assert seen == [50, 40]
 
 
 def test_the_time_left_is_the_plan_left_at_the_phase_rate(monkeypatch):
