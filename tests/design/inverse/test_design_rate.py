@@ -115,6 +115,7 @@ def test_rate_deviation_sees_a_rate_error_the_cumulative_fit_hardly_sees():
     assert rate_deviation(tau, c) == pytest.approx(0.2, abs=0.02)
 
 
+@pytest.mark.slow
 def test_rate_term_lowers_the_rate_deviation_on_a_tiny_problem(tmp_path):
     """A 12^3 octant, 80 evaluations: with J_rate the density's rate is closer to constant (J_rate alone:
     no connectivity term)."""

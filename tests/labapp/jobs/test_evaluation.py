@@ -37,6 +37,7 @@ def calibration_set(tmp_path_factory):
     return root
 
 
+@pytest.mark.slow
 def test_evaluate_writes_the_fig8_table_picture_and_a_monte_carlo_calibration(calibration_set, tmp_path, capsys):
     out = tmp_path / "eval"
     assert main(["evaluate", str(calibration_set / "set.csv"), "--out", str(out), "--resolution", str(RESOLUTION),

@@ -181,6 +181,7 @@ SLOTTED = {"slot05": lambda: _slotted(0.5), "slot10": lambda: _slotted(1.0),
            "bar": lambda: trimesh.creation.box((10, 3, 3))}
 
 
+@pytest.mark.slow
 def test_hidden_swelling_is_bracketed_by_the_slots_it_shuts_and_opens(tmp_path, monkeypatch):
     """The bench's 0.75 mm swelling shuts the 0.5 mm slot and leaves the 1.0 mm one open: every width in
     (0.5, 1.0] mm fits alike at 0.25 mm voxels, so the fit is the middle of that flat minimum on the search grid,

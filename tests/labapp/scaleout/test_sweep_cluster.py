@@ -74,6 +74,7 @@ def _spawn(args, **kw):
     return subprocess.Popen([sys.executable, *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, **kw)
 
 
+@pytest.mark.slow
 def test_sweep_survives_a_killed_worker(tmp_path):
     spec, out = tmp_path / "spec.toml", tmp_path / "sweep"
     spec.write_text(_spec(16, 60))     # 60 evaluations: the killed design is still running after its first checkpoint
