@@ -50,6 +50,7 @@ import trimesh
 from design._validate import check_positive
 from design.errors import DesignError
 from design.forward.distance import Surface
+from design.forward.offset_lattice import PrintLattice
 from design.forward.quadrature import lattice_curve
 from design.forward.simulator import DEFAULT_STEPS
 from design.forward.solid_lattice import DEFAULT_TOLERANCE, MAX_POINTS, choose
@@ -87,10 +88,11 @@ class ReferenceRelease:
     released_mm3 : (K,) ndarray of float, mm^3
         Released volume at each tau (0 at tau <= 0, the volume once every point has dissolved).
     volume_mm3 : float
-        The solid's volume, exact for the mesh (signed tetrahedra), mm^3.
+        The solid's volume, exact for the mesh (signed tetrahedra), mm^3; a print with a surface offset: the
+        quadrature's.
     error_mm3 : float
         Estimated bound on max |released error|: max |C_h - C_2h| between the lattice and one twice
-        as coarse, mm^3.
+        as coarse (plus ``unsure_mm3``), mm^3.
     method : str
         "exact-distance" (every shell faces the bath) or "exact-distance-voids" (sealed voids wetted
         when the front reaches them), followed by ", anisotropy a" for a release at anisotropy a.
@@ -102,6 +104,11 @@ class ReferenceRelease:
         Wall time of the evaluation, s.
     lattice : str
         How the lattice was sized (cells along the box, or the solid-sized choice and why).
+    offset_mm : float
+        The print's surface offset released, mm (0: the mesh itself).
+    unsure_mm3 : float
+        Of ``error_mm3``, the volume of a grown print whose arrival times are lower bounds (creases and gaps the
+        offset fills: `design.forward.offset_lattice`), mm^3; 0 for the mesh itself and for a shrink.
     """
 
     tau_mm: np.ndarray
@@ -113,6 +120,8 @@ class ReferenceRelease:
     total_time_mm: float
     seconds: float
     lattice: str = ""
+    offset_mm: float = 0.0
+    unsure_mm3: float = 0.0
 
     @property
     def relative_error(self) -> float:
@@ -144,7 +153,8 @@ def metric_mesh(mesh: trimesh.Trimesh, anisotropy: float) -> trimesh.Trimesh:
 
 def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray | None = None, *, cells: int | None = None,
                       anisotropy: float = 1.0, tolerance: float = DEFAULT_TOLERANCE, max_points: float = MAX_POINTS,
-                      source: str = "the solid", progress: Callable[[str], None] | None = None) -> ReferenceRelease:
+                      source: str = "the solid", progress: Callable[[str], None] | None = None,
+                      offset_mm: float = 0.0) -> ReferenceRelease:
     """Release of a closed solid by exact surface distances, with its error estimate.
 
     Parameters
@@ -171,6 +181,11 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray | None = None, *
         Named in a refusal.
     progress : callable, optional
         Called with a line per lattice evaluated.
+    offset_mm : float
+        The print's surface offset o, mm: the release is that of the print {x : signed distance > -o} (the mesh grown
+        by o, shrunk by |o| if negative; :mod:`design.forward.offset_lattice`), its volume the quadrature's. Exact
+        for a shrink and for a convex solid grown; a grown print's creases and gaps the offset fills are counted
+        into ``error_mm3`` (``unsure_mm3``). Not with sealed voids.
 
     Returns
     -------
@@ -179,8 +194,8 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray | None = None, *
     Raises
     ------
     DesignError
-        If the mesh is not closed or consistently wound, `tau_mm` is not a finite 1D array, or
-        `cells` < `MIN_CELLS`.
+        If the mesh is not closed or consistently wound, `tau_mm` is not a finite 1D array, `cells` <
+        `MIN_CELLS`, or an offset is given for a mesh with sealed voids or leaves no print.
     design.forward.solid_lattice.TooThinError
         Without ``cells``, for a solid whose features need more than ``max_points`` lattice points.
 
@@ -198,49 +213,71 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray | None = None, *
     if cells is not None and (int(cells) != cells or cells < MIN_CELLS):
         raise DesignError(f"cells must be an integer >= {MIN_CELLS}, got {cells!r}")
     a = check_positive("anisotropy", anisotropy)
-    mesh = metric_mesh(_check_mesh(mesh), a)
-    volume = float(mesh.volume) * a  # mm^3 of the print: the scaled mesh's volume times a
+    o = float(offset_mm)
+    if not np.isfinite(o):
+        raise DesignError(f"offset_mm must be a finite number of mm, got {offset_mm!r}")
+    checked = _check_mesh(mesh)
+    mesh = metric_mesh(checked, a)
     surface = Surface(mesh)
     wet, n_voids = wetting(mesh)
+    if o != 0.0 and n_voids:
+        raise DesignError(f"{source}: a surface offset with sealed voids ({n_voids}) is not modelled by the exact "
+                          "evaluator (their walls' wetting in a print that shrinks or closes them)")
+    printed = None if o == 0.0 else PrintLattice(surface, o, a, None if a == 1.0 else Surface(checked))
     offset = surface.stored(wet)
     bounds = np.asarray(mesh.bounds, dtype=np.float64)
+    volume = float(mesh.volume) * a  # mm^3 of the print: the scaled mesh's volume times a
     found: dict[float, tuple] = {}
+
+    def quadrature(h: float, tau: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+        """(curve in physical mm^3 before scaling, its volume, the latest arrival, the unsure volume)."""
+        if printed is None:
+            curve, est, end = lattice_curve(surface, offset, bounds, h, tau)
+            return curve * (volume / est), volume, end, 0.0
+        got = printed.curve(bounds, h, tau)
+        if not got.volume > 0.0:
+            raise DesignError(f"{source}: the print is empty: a surface offset of {o:g} mm removes all of it")
+        return got.curve * a, got.volume * a, got.end, got.unsure_mm3 * a
 
     def evaluate(h: float) -> float:
         nonlocal tau
         if tau is None:  # a scout on the coarse lattice finds where the solid is gone
-            upper = 0.5 * float((bounds[1] - bounds[0]).min()) + 4.0 * h
-            end = lattice_curve(surface, offset, bounds, 2.0 * h, np.linspace(0.0, upper, 3))[2]
+            grow = 0.0 if printed is None else printed.grow
+            upper = 0.5 * float((bounds[1] - bounds[0]).min()) + 4.0 * h + grow
+            end = quadrature(2.0 * h, np.linspace(0.0, upper, 3))[2]
             # the fine lattice's last ramp ends within 1.25 h of the coarse one's (a coarse cell's half-diagonal
             # sqrt(3) h, less the coarse ramp's half-width h, plus the fine one's h / 2)
             tau = np.linspace(0.0, end + 1.25 * h, SAMPLES)
-        curves = [lattice_curve(surface, offset, bounds, s, tau) for s in (h, 2.0 * h)]
-        scaled = [c * (volume / est) for c, est, _ in curves]
-        error = float(np.abs(scaled[0] - scaled[1]).max()) if tau.size else 0.0
+        fine, coarse = (quadrature(s, tau) for s in (h, 2.0 * h))
+        error = float(np.abs(fine[0] - coarse[0]).max()) if tau.size else 0.0
         if found and tau.size:  # a refinement: also against the previous (coarser) lattice, if that is closer
-            error = min(error, float(np.abs(scaled[0] - found[min(found)][0]).max()))
-        found[h] = (scaled[0], error, curves[0][2])
-        return error / volume
+            error = min(error, float(np.abs(fine[0] - found[min(found)][0]).max()))
+        found[h] = (fine[0], error, fine[2], fine[1], fine[3])
+        return error / fine[1]
 
     if cells is not None:
         h = float((bounds[1] - bounds[0]).max()) / int(cells)
         evaluate(h)
         lattice = f"{int(cells)} cells along the bounding box's longest side"
     else:
-        choice = choose(evaluate, bounds, float(mesh.volume), float(mesh.area), tolerance=tolerance,
+        box, solid = bounds, float(mesh.volume)
+        if printed is not None:  # sized by the print: about V + A o (the lattice's own quadrature gives its volume)
+            box, solid = printed.bounds(bounds), max(solid + float(mesh.area) * o, 0.05 * solid)
+        choice = choose(evaluate, box, solid, float(mesh.area), tolerance=tolerance,
                         max_points=max_points, source=source, say=progress)
         h = choice.spacing_mm
         lattice = choice.reason
-    released, error, total = found[h]
+    released, error, total, volume, unsure = found[h]
     if tau_mm is None:
         tau, released = _until_dissolved(tau, released, volume)
     seconds = time.perf_counter() - began
-    method = ("exact-distance-voids" if n_voids else "exact-distance") + (f", anisotropy {a:g}" if a != 1.0 else "")
+    method = ("exact-distance-voids" if n_voids else "exact-distance") + (f", anisotropy {a:g}" if a != 1.0 else "") \
+        + (f", surface offset {o:+g} mm" if o != 0.0 else "")
     log.debug("reference release: %d faces, %d voids, h = %.4g mm, error %.3g mm^3 (%.3g%%), %.2f s",
               len(mesh.faces), n_voids, h, error, 100 * error / volume, seconds)
-    return ReferenceRelease(tau_mm=tau, released_mm3=released, volume_mm3=volume, error_mm3=error, method=method,
-                            cell_mm=check_positive("cell_mm", h), total_time_mm=total, seconds=seconds,
-                            lattice=lattice)
+    return ReferenceRelease(tau_mm=tau, released_mm3=released, volume_mm3=volume, error_mm3=error + unsure,
+                            method=method, cell_mm=check_positive("cell_mm", h), total_time_mm=total, seconds=seconds,
+                            lattice=lattice, offset_mm=o, unsure_mm3=unsure)
 
 
 def _until_dissolved(tau: np.ndarray, released: np.ndarray, volume: float) -> tuple[np.ndarray, np.ndarray]:

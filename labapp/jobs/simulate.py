@@ -6,10 +6,15 @@ Two models make ``release.csv``:
   (:mod:`design.forward.reference`): exact surface distances, sealed voids wetted when the front reaches them,
   a lattice sized by the solid's own thickness and refined until its stated error is within
   `design.forward.solid_lattice.DEFAULT_TOLERANCE` of the volume; the curve ends at the mesh's exact volume. A
-  part too thin for it is refused, naming its thickness. Anisotropy (a calibration's) is the evaluator's metric.
-- ``grid`` (the only one for a density array, and for a calibration's surface offset or swelling): first-order
-  fast marching on voxels (eqs. 5-7), at ``--resolution`` voxels along the longest side, with its error
-  estimated against the exact release (a mesh) or a grid twice as coarse (a density array).
+  part too thin for it is refused, naming its thickness. A calibration's print physics: anisotropy is the
+  evaluator's metric; a surface offset o releases the print {signed distance > -o}
+  (:mod:`design.forward.offset_lattice`; its volume the quadrature's); a swelling width w shuts the print's channels
+  narrower than w, which the exact model does not model: when the grid model's voxels of the print
+  (:func:`swelling_plug`) have none, swelling changes nothing and the release is the exact model's.
+- ``grid`` (the only one for a density array; the default fallback for a print whose swelling shuts a channel or
+  whose offset meets a sealed void): first-order fast marching on voxels (eqs. 5-7), at ``--resolution`` voxels
+  along the longest side, with its error estimated against the exact release (a mesh; with the print's offset) or
+  a grid twice as coarse (a density array).
 
 Every output is written atomically (``labapp.records.fileio.atomic_write``): a full disk leaves no partial file
 and is a :class:`labapp.records.fileio.StorageError` naming it.
@@ -117,9 +122,9 @@ def _source_mesh(source: str, units: str):
 
 
 def error_estimate(source: str, units: str, release, rho, dx_mm: float,
-                   mirror: tuple[bool, ...], anisotropy: float = 1.0) -> dict[str, Any]:
-    """How far a simulated release (at build-direction ``anisotropy``) is from the solid's physical release, mm^3
-    and as a fraction of its volume.
+                   mirror: tuple[bool, ...], anisotropy: float = 1.0, offset_mm: float = 0.0) -> dict[str, Any]:
+    """How far a simulated release (at build-direction ``anisotropy``, of the print with surface offset
+    ``offset_mm``) is from the solid's physical release, mm^3 and as a fraction of its volume.
 
     A mesh (or sample shape) is released by the reference evaluator (`design.forward.reference`, exact
     surface distances) on the same tau samples, on its lattice sized by the solid: the estimate is the largest
@@ -133,7 +138,8 @@ def error_estimate(source: str, units: str, release, rho, dx_mm: float,
 
     if not _is_density(source):
         try:
-            ref = reference_release(_source_mesh(source, units), release.tau_mm, anisotropy=anisotropy, source=source)
+            ref = reference_release(_source_mesh(source, units), release.tau_mm, anisotropy=anisotropy, source=source,
+                                    offset_mm=offset_mm)
         except DesignError as exc:  # a mesh the voxeliser takes but the evaluator does not (not closed)
             return {"error_mm3": None, "error_fraction": None, "method": f"not estimated: {exc}"}
         diff = float(np.abs(release.released_mm3 - ref.released_mm3).max())
@@ -157,8 +163,8 @@ def simulate(source: str, out: str | Path, *, resolution: int | None = None, vox
              symmetry: str = "", units: str = "mm", physics: dict | None = None,
              progress: Callable[[str], None] | None = None, model: str | None = None) -> SimulationOutputs:
     """Simulate the release of a mesh, ``sample:NAME`` or density array into ``out`` (release.csv,
-    summary.json, release.png). ``model`` ``exact`` (the default for a mesh) or ``grid`` (the default for a
-    density array, and for ``physics`` with a surface offset or swelling); see the module docstring. The
+    summary.json, release.png). ``model`` ``exact`` (the default for a mesh; a print it cannot model falls back to
+    ``grid`` with a warning) or ``grid`` (the default for a density array); see the module docstring. The
     summary's ``model``, ``method``, ``error`` and ``lattice`` (or grid) say what made release.csv, how far it is
     from the solid's physical release and why its resolution. ``physics`` (``anisotropy``, ``offset_mm``,
     ``swelling_mm``: a calibration's print physics) simulates the print instead of the mesh.
@@ -176,28 +182,66 @@ def simulate(source: str, out: str | Path, *, resolution: int | None = None, vox
     say = progress or (lambda message: None)
     out = check_out(out, FolderKind.SIMULATION, [source])
     physics = {"anisotropy": 1.0, "offset_mm": 0.0, **(physics or {})}
-    printed = physics["offset_mm"] != 0.0 or physics.get("swelling_mm", 0.0) != 0.0
-    chosen = model or ("grid" if _is_density(source) or printed else "exact")
+    chosen = model or ("grid" if _is_density(source) else "exact")
     if chosen not in MODELS:
         raise UsageError(f"model {chosen!r}: expected one of {', '.join(MODELS)}")
     if chosen == "exact":
         if _is_density(source):
             raise UsageError(f"{source}: a density array has no surface for the exact model; use --model grid")
-        if printed:
-            raise UsageError("the exact model has no surface offset or swelling (the calibration's print physics); "
-                             "use --model grid")
         given = [name for name, v in (("--resolution", resolution), ("--voxel-size", voxel_size_mm),
                                       ("--symmetry", symmetry)) if v]
         if given:
             raise UsageError(f"{', '.join(given)} set the grid model's voxels; the exact model sizes its lattice by "
                              "the solid: drop them or add --model grid")
-        release, summary, warnings = _simulate_exact(source, units, physics, say)
+        fallback = _exact_unmodelled(source, units, physics, say)
+        if fallback and model == "exact":
+            raise UsageError(f"{fallback}; use --model grid")
+        if fallback:
+            log.warning("%s: the grid model simulates it", fallback)
+            release, summary, warnings = _simulate_grid(source, units, physics, say, resolution=None,
+                                                        voxel_size_mm=None, symmetry="")
+            warnings.insert(0, f"{fallback}: simulated by the grid model (first order)")
+            summary["exact_model_not_used"] = fallback
+        else:
+            release, summary, warnings = _simulate_exact(source, units, physics, say)
     else:
         release, summary, warnings = _simulate_grid(source, units, physics, say, resolution=resolution,
                                                     voxel_size_mm=voxel_size_mm, symmetry=symmetry)
     say(f"[3/3] writing {out}/ ({summary['seconds']:.1f} s)")
     write_outputs(out, release.tau_mm, release.released_mm3, summary, source)
     return SimulationOutputs(release, summary, out, tuple(warnings))
+
+
+def swelling_plug(source: str, units: str, physics: dict) -> tuple[float, float]:
+    """The volume (mm^3) of the print's channels that its swelling width shuts, on the grid model's voxels of the print
+    at its default resolution (`design.forward.swelling.shut_channels`, the grid model's definition of a shut
+    channel), and that voxel edge (mm); (0, 0) without swelling."""
+    from design.forward.swelling import shut_channels
+
+    width = float(physics.get("swelling_mm", 0.0))
+    if width == 0.0:
+        return 0.0, 0.0
+    rho, dx, mirror, _ = simulation_grid(source, units=units, offset_mm=physics["offset_mm"])
+    return float(shut_channels(rho, dx, width, mirror).sum()) * dx ** 3 * 2 ** sum(mirror), dx
+
+
+def _exact_unmodelled(source: str, units: str, physics: dict, say: Callable[[str], None]) -> str:
+    """Why the exact model cannot release this print ('' when it can): a swelling width that shuts a channel of the
+    print (:func:`swelling_plug`), or a surface offset on a mesh with sealed voids."""
+    from design.forward.wetting import wetting
+
+    if physics.get("swelling_mm", 0.0):
+        say(f"      checking for channels narrower than the swelling width {physics['swelling_mm']:g} mm ...")
+        plug, dx = swelling_plug(source, units, physics)
+        if plug > 0.0:
+            return (f"{source}: the print's swelling width {physics['swelling_mm']:g} mm shuts {plug:.3g} mm^3 of "
+                    f"its channels (on {dx:.3g} mm voxels), which the exact model does not model")
+    if physics["offset_mm"]:
+        voids = wetting(_source_mesh(source, units))[1]
+        if voids:
+            return (f"{source}: a surface offset on a mesh with {voids} sealed void(s) is not modelled by the exact "
+                    "model")
+    return ""
 
 
 def _simulate_exact(source: str, units: str, physics: dict, say: Callable[[str], None]
@@ -214,7 +258,7 @@ def _simulate_exact(source: str, units: str, physics: dict, say: Callable[[str],
     say(f"[2/3] exact release by surface distances ({time.perf_counter() - start:.1f} s) ...")
     try:
         ref = reference_release(mesh, anisotropy=physics["anisotropy"], source=source,
-                                progress=lambda line: say(f"      {line}"))
+                                progress=lambda line: say(f"      {line}"), offset_mm=physics["offset_mm"])
     except TooThinError as exc:
         raise UsageError(str(exc)) from exc
     if ref.relative_error > DEFAULT_TOLERANCE:
@@ -226,10 +270,15 @@ def _simulate_exact(source: str, units: str, physics: dict, say: Callable[[str],
                "volume_mm3": ref.volume_mm3, "total_time_mm": release.total_time_mm, "dtau_mm": release.dtau_mm,
                "error": {"error_mm3": ref.error_mm3, "error_fraction": ref.relative_error,
                          "method": "stated by the reference evaluator: max |C_h - C_2h| against a lattice twice as "
-                                   "coarse (the curve's own error is about a third of it)"},
+                                   "coarse (the curve's own error is about a third of it)"
+                                   + (f", plus {ref.unsure_mm3:.3g} mm^3 whose arrival the grown surface may delay"
+                                      if ref.unsure_mm3 else "")},
                "lattice": {"spacing_mm": ref.cell_mm, "reason": ref.lattice},
                "bodies": len(mesh.split(only_watertight=False)),
                "seconds": seconds, "warnings": warnings, "physics": physics}
+    if physics.get("swelling_mm", 0.0):
+        summary["swelling"] = (f"no channel of the print is narrower than the swelling width {physics['swelling_mm']:g} "
+                               "mm on the grid model's voxels: swelling shuts none")
     return release, summary, warnings
 
 
@@ -245,11 +294,11 @@ def _simulate_grid(source: str, units: str, physics: dict, say: Callable[[str], 
     say(f"[2/3] fast marching {rho.size:,} voxels of {dx:.4g} mm ({time.perf_counter() - start:.1f} s) ...")
     release = forward(rho, dx, mirror=mirror, anisotropy=physics["anisotropy"], swelling_mm=physics.get("swelling_mm", 0.0))
     say(f"      estimating its error ({time.perf_counter() - start:.1f} s) ...")
-    if physics["offset_mm"] != 0.0 or physics.get("swelling_mm", 0.0) != 0.0:
+    if release.plug is not None:
         error = {"error_mm3": None, "error_fraction": None,
-                 "method": "not estimated: the reference evaluator has no surface offset or swelling"}
+                 "method": "not estimated: the reference evaluator does not shut channels (swelling)"}
     else:
-        error = error_estimate(source, units, release, rho, dx, mirror, physics["anisotropy"])
+        error = error_estimate(source, units, release, rho, dx, mirror, physics["anisotropy"], physics["offset_mm"])
     if error.get("error_fraction") is not None and error["error_fraction"] > GRID_WARN_FRACTION:
         warnings.append(f"{source}: the grid model's curve is {error['error_fraction']:.1%} of the volume off the "
                         f"solid's release ({error['method']}); raise --resolution, or use the exact model "

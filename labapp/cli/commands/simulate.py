@@ -119,8 +119,7 @@ def _run(args: argparse.Namespace) -> int:
     simcal, model = None, args.model
     if args.simcal:
         simcal = load_simcal(args.simcal)
-        printed = simcal.physics.get("offset_mm", 0.0) != 0.0 or simcal.physics.get("swelling_mm", 0.0) != 0.0
-        if model == "grid" or (model is None and printed):
+        if model == "grid":
             if args.voxel_size is not None:
                 print(f"sfr simulate: {args.simcal} holds for resolution {simcal.resolution}; drop --voxel-size",
                       file=sys.stderr)
