@@ -27,10 +27,11 @@ import numpy as np
 import trimesh
 
 from design.fabrication.extract import revoxelize
-from design.forward.reference import ReferenceRelease, design_lattice, reference_release
+from design.forward.reference import ReferenceRelease, design_lattice
 from design.forward.simulator import simulate
 from design.forward.swelling import shut_channels
 from design.inverse.objective import rel_rmse
+from design.inverse.release_cache import cached_reference_release
 
 
 def solid_release(solid: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], total_time_mm: float,
@@ -146,8 +147,8 @@ def print_release(problem, config, mesh: trimesh.Trimesh | None, solid: np.ndarr
         nan = np.full_like(binary_curve, np.nan)
         return PrintRelease(nan, binary_curve, None, float(mesh.volume) if mesh is not None else 0.0, np.nan, np.nan)
     modelled = config.swelling_mm > 0
-    printed = (reference_release(mesh, target.tau_mm, cells=design_lattice(config.resolution),
-                                 anisotropy=config.anisotropy)
+    printed = (cached_reference_release(mesh, target.tau_mm, cells=design_lattice(config.resolution),
+                                        anisotropy=config.anisotropy)  # the last round judged this print
                if mesh is not None and not modelled else None)
     if modelled:
         print_curve = fine_release(mesh, space.dx_mm, problem.origin_mm, problem.full_shape, space.mirror,

@@ -48,7 +48,7 @@ from typing import Callable, Protocol
 import numpy as np
 
 from design.fabrication.extract import count_pieces, density_mesh, mass_preserving_level, revoxelize
-from design.forward.reference import DEFAULT_CELLS, MIN_CELLS, reference_release
+from design.forward.reference import DEFAULT_CELLS, MIN_CELLS
 from design.forward.simulator import simulate
 from design.inverse.config import DesignConfig
 from design.inverse.objective import DesignObjective, rel_rmse
@@ -65,6 +65,7 @@ from design.inverse.optimize import (
     with_phase,
 )
 from design.inverse.problem import Problem
+from design.inverse.release_cache import cached_reference_release
 from design.inverse.status import DesignStatus
 from design.inverse.targets import Target
 
@@ -148,7 +149,7 @@ def check_print(objective: DesignObjective, problem: Problem, x: np.ndarray) -> 
     per_voxel = REFERENCE_PER_VOXEL.get(space.name, DEFAULT_REFERENCE_PER_VOXEL)
     cells = int(np.clip(np.ceil(per_voxel * float(np.max(mesh.extents)) / space.dx_mm), MIN_CELLS,
                         DEFAULT_CELLS))
-    printed = reference_release(mesh, target.tau_mm, cells=cells, anisotropy=anisotropy).released_mm3
+    printed = cached_reference_release(mesh, target.tau_mm, cells=cells, anisotropy=anisotropy).released_mm3
     pieces = count_pieces(revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape))
     return PrintCheck(rel_rmse(printed, target.released_mm3), pieces, grid, printed)
 

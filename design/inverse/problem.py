@@ -7,7 +7,6 @@ depends on the shape, and a print is judged against what the source itself relea
 """
 from __future__ import annotations
 
-import hashlib
 import logging
 from dataclasses import dataclass
 
@@ -18,13 +17,14 @@ from design._validate import MESH_SUFFIXES
 from design.errors import DesignError
 from design.fabrication.extract import count_pieces
 from design.fabrication.ico import IcoConfig
-from design.forward.reference import ReferenceRelease, design_lattice, reference_release
+from design.forward.reference import ReferenceRelease, design_lattice
 from design.forward.simulator import total_time
 from design.geometry.shapes import SAMPLE_SHAPES, sample_shape
 from design.geometry.voxelize import voxelize
 from design.inverse.config import DesignConfig
 from design.inverse.filters import MAX_RADIUS_VOX
 from design.inverse.rate import RATE_SPAN_MIN_VOX, middle_span_mm
+from design.inverse.release_cache import cached_reference_release
 from design.inverse.settings import DEFAULT_RADIUS_MM
 from design.inverse.spaces import BUILD_AXIS, DesignSpace, SpaceRequest, build_space
 from design.inverse.starts import start_regions
@@ -41,23 +41,11 @@ from design.inverse.targets import (
 
 log = logging.getLogger(__name__)
 
-SOURCE_RELEASES_KEPT = 4
-"""Source releases `source_release` keeps in the process."""
-_source_releases: dict[tuple[str, str, int], ReferenceRelease] = {}
-
-
 def source_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray, cells: int) -> ReferenceRelease:
     """The reference evaluator's release of a source mesh on a tau grid (`reference_release` at ``cells``), kept for
-    the process's later problems of the same mesh, tau grid and lattice: a multi-start's coarse starts prepare the
-    same target, each at a reference release's cost (`SOURCE_RELEASES_KEPT` are kept, the oldest dropped)."""
-    digest = hashlib.sha256(np.ascontiguousarray(mesh.vertices, float).tobytes())
-    digest.update(np.ascontiguousarray(mesh.faces, np.int64).tobytes())
-    key = (digest.hexdigest(), hashlib.sha256(np.ascontiguousarray(tau_mm, float).tobytes()).hexdigest(), int(cells))
-    if key not in _source_releases:
-        while len(_source_releases) >= SOURCE_RELEASES_KEPT:
-            _source_releases.pop(next(iter(_source_releases)))
-        _source_releases[key] = reference_release(mesh, tau_mm, cells=cells)
-    return _source_releases[key]
+    the process's later problems of the same mesh, tau grid and lattice (`design.inverse.release_cache`): a
+    multi-start's coarse starts prepare the same target, each at a reference release's cost."""
+    return cached_reference_release(mesh, tau_mm, cells=int(cells))
 
 DEFAULT_DOMAIN_MM = 20.0
 """Edge of the cubic domain used when the target has no source mesh and no --domain-mm, mm."""

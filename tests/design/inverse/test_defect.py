@@ -72,7 +72,7 @@ def _install_print(monkeypatch, problem, printed_of) -> None:
         return type("Reference", (), {"released_mm3": printed_of(grid, target.released_mm3)})()
 
     monkeypatch.setattr(defect, "printed_mesh", lambda objective, problem, x: DensityPrint(objective.density(x)))
-    monkeypatch.setattr(defect, "reference_release", release)
+    monkeypatch.setattr(defect, "cached_reference_release", release)
     monkeypatch.setattr(defect, "revoxelize", lambda mesh, *grid: space.unfold(mesh.rho) > 0.5)
 
 

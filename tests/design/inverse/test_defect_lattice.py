@@ -24,7 +24,7 @@ def test_rounds_release_the_print_at_the_space_lattice(monkeypatch, space, per_v
         seen.append((cells, float(np.max(mesh.extents))))
         return reference_release(mesh, tau_mm, cells=MIN_CELLS, anisotropy=anisotropy)
 
-    monkeypatch.setattr(defect, "reference_release", release)
+    monkeypatch.setattr(defect, "cached_reference_release", release)
     check = check_print(objective, problem, np.full(objective.space.var_shape, 0.9))
     (cells, extent), = seen
     expected = int(np.clip(np.ceil(per_voxel * extent / objective.space.dx_mm), MIN_CELLS, DEFAULT_CELLS))
