@@ -117,6 +117,7 @@ def _summary(problem: TwoMaterialProblem, pair: PrintablePair, release: TwoMater
         "barrier": {"volume_mm3": float(barrier_mesh.volume) if barrier_mesh is not None else 0.0,
                     "pieces": pair.pieces["barrier"], "mesh": "barrier.stl" if barrier_mesh is not None else None,
                     "min_wall_mm": pair.min_barrier_mm, "min_wall_required_mm": MIN_BARRIER_MM,
+                    "thin_mm3": pair.thin_barrier_mm3,
                     "cover_mm": cover, "release_starts_mm": (cover / s if s > 0 else None) if cover > 0.01 * dx else 0.0},
         "print_pieces": pair.pieces["print"], "piece_notes": list(pair.piece_notes),
         "extraction_level": pair.level, "thickened_voxels": pair.thickened_voxels, "dropped_voxels": pair.dropped_voxels,

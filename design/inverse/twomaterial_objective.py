@@ -20,8 +20,16 @@ weighs each voxel's ramp (eq. 6) by rho_d. k_d is the design's barrier slowness:
 far as the curve sees), which is what an insoluble barrier (s = 0) is designed with; the printed design
 is then judged by the forward model at the true s.
 
-Objective (eq. 4 in relative units): J = J_fit + w_b J_binary with
-``J_fit = (1/T) sum_k (C_k - C*_k)^2 dtau / C*_K^2`` and ``J_binary = mean_i [phi (1 - phi) + phi f (1 - f)]``.
+Objective (eq. 4 in relative units): J = J_fit + w_b J_binary + w_s J_skin with
+``J_fit = (1/T) sum_k (C_k - C*_k)^2 dtau / C*_K^2``, ``J_binary = mean_i [phi (1 - phi) + phi f (1 - f)]`` and
+
+    J_skin = sum_i rho_d,i g(c_i / w) / V*,    g(t) = t (1 - t) for t < 1, else 0,
+
+where c_i is the least barrier between the bath and voxel i (eq. 5 on the slowness ``rho_b + (1 - rho_b)
+n_min``, `design.forward.twomaterial.barrier_cover`'s field), w = `MIN_BARRIER_MM` (two print lines) and V*
+the target's volume in voxels. It is zero for drug open to the bath (c = 0) and for drug behind a printable
+barrier (c >= w), and positive for drug behind a skin thinner than a print holds: without it the optimiser
+tunes the release with such skins, which the print cannot keep (`design.fabrication.twomaterial_print`).
 The gradient runs through eq. (7), the adjoint sweep (eq. 10), the slowness law, the projection and the
 smoothing filter, exactly (checked against finite differences, tests/design/inverse/test_twomaterial_gradient.py).
 """
@@ -40,6 +48,8 @@ from design.inverse.twomaterial_targets import MIN_BARRIER_MM
 
 RAMP_Q = 3.0
 """q of the RAMP interpolation of the barrier share (module doc)."""
+W_SKIN = 0.1
+"""Weight w_s of J_skin (module doc)."""
 HOLD_FACTOR = 2.0
 """The design's barrier slowness is capped where a barrier `MIN_BARRIER_MM` thick holds this many horizons T."""
 
@@ -102,6 +112,19 @@ def composite_gradient(release: CompositeRelease, dj_dc: np.ndarray, dx_mm: floa
     return n_bar, weight_bar.reshape(shape) * release.scale
 
 
+def skin_term(drug: np.ndarray, barrier: np.ndarray, dx_mm: float, mirror: tuple[bool, ...], volume_vox: float
+              ) -> tuple[float, np.ndarray, np.ndarray]:
+    """J_skin of the module doc and its gradient with respect to the drug and the barrier density."""
+    marching = march(barrier + (1.0 - barrier) * N_MIN, dx_mm, mirror)
+    t = np.array(marching.interior(marching.u_pad)) / MIN_BARRIER_MM
+    inside = t < 1.0
+    g = np.where(inside, t * (1.0 - t), 0.0)
+    dg = np.where(inside, 1.0 - 2.0 * t, 0.0) / MIN_BARRIER_MM
+    value = float(np.sum(drug * g)) / volume_vox
+    n_bar = march_adjoint(marching, drug * dg / volume_vox)
+    return value, g / volume_vox, n_bar * (1.0 - N_MIN)
+
+
 @dataclass(frozen=True)
 class Fields:
     """One evaluation's fields on the simulation grid: material phi, drug share f, and the drug's curve."""
@@ -128,10 +151,11 @@ class TwoMaterialObjective:
     beta : float
         Projection steepness (changed by the continuation).
     w_binary : float
+    w_skin : float
     """
 
     def __init__(self, space, target_mm3: np.ndarray, total_time_mm: float, *, radius_vox: float, slowness: float,
-                 beta: float, w_binary: float) -> None:
+                 beta: float, w_binary: float, w_skin: float = W_SKIN) -> None:
         self.space = space
         self.target = np.asarray(target_mm3, float)
         if not self.target[-1] > 0:
@@ -141,6 +165,8 @@ class TwoMaterialObjective:
         self.slowness = float(slowness)
         self.beta = float(beta)
         self.w_binary = float(w_binary)
+        self.w_skin = float(w_skin)
+        self.volume_vox = self.target[-1] / (space.dx_mm ** 3 * 2 ** sum(space.mirror))
 
     @property
     def x_shape(self) -> tuple[int, ...]:
@@ -162,10 +188,15 @@ class TwoMaterialObjective:
         n_bar, drug_bar = composite_gradient(release, 2.0 * resid * dtau_t / final, space.dx_mm)
         size = phi.size
         j_bin = float(np.sum(phi * (1.0 - phi) + phi * f * (1.0 - f)) / size)
-        g_phi = n_bar * dn_dphi + drug_bar * f + self.w_binary * ((1.0 - 2.0 * phi) + f * (1.0 - f)) / size
-        g_f = n_bar * dn_df + drug_bar * phi + self.w_binary * phi * (1.0 - 2.0 * f) / size
+        j_skin, skin_d, skin_b = skin_term(drug, phi * (1.0 - f), space.dx_mm, space.mirror, self.volume_vox)
+        drug_bar = drug_bar + self.w_skin * skin_d
+        barrier_bar = self.w_skin * skin_b
+        g_phi = (n_bar * dn_dphi + drug_bar * f + barrier_bar * (1.0 - f)
+                 + self.w_binary * ((1.0 - 2.0 * phi) + f * (1.0 - f)) / size)
+        g_f = n_bar * dn_df + (drug_bar - barrier_bar) * phi + self.w_binary * phi * (1.0 - 2.0 * f) / size
         grad = np.stack([self.filter.adjoint(project_adjoint(smooth[0], self.beta, space.to_grid_adjoint(g_phi))),
                          self.filter.adjoint(project_adjoint(smooth[1], self.beta, space.drug_share_adjoint(g_f)))])
-        value = j_fit + self.w_binary * j_bin
-        terms = {"J": value, "J_fit": j_fit, "J_binary": j_bin, "rel_rmse": float(np.sqrt(np.mean(resid ** 2)))}
+        value = j_fit + self.w_binary * j_bin + self.w_skin * j_skin
+        terms = {"J": value, "J_fit": j_fit, "J_binary": j_bin, "J_skin": j_skin,
+                 "rel_rmse": float(np.sqrt(np.mean(resid ** 2)))}
         return value, grad, terms, Fields(phi, f, release.released_mm3)

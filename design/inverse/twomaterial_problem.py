@@ -58,7 +58,7 @@ class TwoMaterialSettings:
     domain_mm : float or None
         Edge of the square (nfc: cubic) domain, mm; None = `DOMAIN_PER_END` x the target's end.
     height_mm : float or None
-        Extrusion height (extruded), mm; None = `HEIGHT_FRACTION` of the domain's edge.
+        Extrusion height (extruded), mm, caps included; None = the caps and `_inner_height` between them.
     radius_mm : float
         Smoothing radius of both fields, mm: the minimum feature (default the thinnest barrier, two print lines).
     max_iter : int
@@ -83,7 +83,7 @@ class TwoMaterialSettings:
     max_iter: int = 150
     beta: float = 4.0
     beta_final: float = 32.0
-    w_binary: float = 0.02
+    w_binary: float = 0.5
     stages: int = 4
     samples: int = 501
 
@@ -241,25 +241,31 @@ def prepare_two(settings: TwoMaterialSettings, curve: tuple[np.ndarray, np.ndarr
     dx = edge / settings.resolution
     full = [settings.resolution] * 3
     s = settings.barrier_speed
+    target = (family_target(settings.target, t_total, settings.samples) if is_two_material_spec(settings.target)
+              else target_from_curve(*curve, t_total, settings.samples, source=settings.target))
+    phases = check_two_material_target(target, s, edge, dx_mm=dx)
     cap_vox = 0
     if settings.space == "extruded":
-        height = settings.height_mm or HEIGHT_FRACTION * edge
         cap_vox = max(1, math.ceil(max(MIN_BARRIER_MM, s * t_total) / dx - 1e-9))
+        height = settings.height_mm or 2 * cap_vox * dx + _inner_height(phases, edge)
         full[BUILD_AXIS] = max(2 * cap_vox + 2, int(round(height / dx)))
         base = extruded_space(SpaceRequest(tuple(full), dx, full[BUILD_AXIS]))
     else:
         base = nfc_space(SpaceRequest(tuple(full), dx))
     space = TwoMaterialSpace(base, cap_vox)
-    target = (family_target(settings.target, t_total, settings.samples) if is_two_material_spec(settings.target)
-              else target_from_curve(*curve, t_total, settings.samples, source=settings.target))
-    phases = check_two_material_target(target, s, edge if settings.space == "nfc" else min(edge, full[2] * dx),
-                                       dx_mm=dx)
     volume = float(np.prod(full)) * dx ** 3
     one = check_feasibility(target, volume, dx_mm=dx, domain_area_mm2=2 * (3 * edge * edge)).problems
     origin = np.array([-0.5 * full[0] * dx, -0.5 * full[1] * dx, 0.0])
     radius = max(1.0, settings.radius_mm / dx)
     return TwoMaterialProblem(settings, space, target, phases, tuple(barrier_needs(phases, s)), tuple(one),
                               design_slowness(s, t_total), radius, origin, edge)
+
+
+def _inner_height(phases: Phases, edge_mm: float) -> float:
+    """The default extrusion height between the caps, mm: a drug strip of the fastest phase's rate R, open at both
+    ends, is then as wide as it is high (R = 2 ends x width x height), at most `HEIGHT_FRACTION` of the edge."""
+    rate = max(v / (b - a) for a, b, v in phases.releases)
+    return min(HEIGHT_FRACTION * edge_mm, math.sqrt(rate / 2.0))
 
 
 def _centres(space: TwoMaterialSpace) -> list[np.ndarray]:
@@ -275,24 +281,28 @@ def _centres(space: TwoMaterialSpace) -> list[np.ndarray]:
     return out
 
 
-def _constant_phase(target: Target, phases: Phases) -> bool:
-    """Whether the target is one release phase at a near-constant rate."""
-    if len(phases.releases) != 1:
-        return False
-    a, b, _ = phases.releases[0]
-    at = np.interp([a, 0.5 * (a + b), b], target.tau_mm, target.released_mm3)
-    first, second = at[1] - at[0], at[2] - at[1]
-    return first > 0 and 1.0 / CONSTANT_RATE_RATIO <= second / first <= CONSTANT_RATE_RATIO
+def _phase_rates(target: Target, phases: Phases) -> list[float] | None:
+    """The rate of each release phase, mm^3/mm, if every phase releases at a near-constant rate, else None."""
+    rates = []
+    for a, b, volume in phases.releases:
+        at = np.interp([a, 0.5 * (a + b), b], target.tau_mm, target.released_mm3)
+        first, second = at[1] - at[0], at[2] - at[1]
+        if not (first > 0 and 1.0 / CONSTANT_RATE_RATIO <= second / first <= CONSTANT_RATE_RATIO):
+            return None
+        rates.append(volume / (b - a))
+    return rates
 
 
 def start_layout(problem: TwoMaterialProblem) -> np.ndarray:
     """Start variables (phi_hat, f_hat) built from the target's phases.
 
-    A single phase at a near-constant rate starts as a drug column open at both ends (zero order: the two
-    end faces recede at unit speed), whose walls hold for the whole release and whose end caps give the
-    delay; any other target starts as nested layers from the outside in: barrier cover (delay x s), the
-    first phase's drug, a barrier layer (pause x s), the next phase's drug. nfc layers are balls, extruded
-    ones cylinders between the caps. Drug 1, barrier 0 and void 0.5 in f_hat; material 1, void 0 in phi_hat.
+    When every release phase has a near-constant rate the start is a drug column open at both ends (zero
+    order: the two end faces recede at unit speed), built from the middle out: the last phase's drug, a
+    barrier plug (pause x s), the previous phase's drug, ..., and a barrier cap (delay x s); each drug
+    segment is as long as its phase lasts and as wide as its rate asks, and the column's walls hold for the
+    whole curve. Otherwise the start is nested layers from the outside in: barrier cover (delay x s), the
+    first phase's drug, a barrier layer (pause x s), the next phase's drug (nfc: balls; extruded: cylinders
+    between the caps). Drug 1, barrier 0 and void 0.5 in f_hat; material 1, void 0 in phi_hat.
     """
     space, phases, target = problem.space, problem.phases, problem.target
     s, dx = problem.settings.barrier_speed, space.dx_mm
@@ -300,30 +310,38 @@ def start_layout(problem: TwoMaterialProblem) -> np.ndarray:
     extruded = space.name == "extruded"
     h_in = (space.grid_shape[2] - 2 * space.cap_vox) * dx
     cover = max(phases.delay_mm * s, MIN_BARRIER_MM) if phases.delay_mm > dx else 0.0
-    if _constant_phase(target, phases):
-        a, b, volume = phases.releases[0]
-        rate = volume / (b - a)
-        wall = max(MIN_BARRIER_MM, 1.2 * s * b, 2 * dx)
-        along, across = (x, np.maximum(y, 0 * z)) if extruded else (z, np.maximum(x, y))
-        half = 0.5 * rate / (2.0 * h_in) if extruded else 0.5 * math.sqrt(rate / 2.0)
-        length = b - a
-        drug = (along <= length) & (across <= half)
-        material = (along <= length + cover) & (across <= half + wall)
+    rates = _phase_rates(target, phases)
+    drug = np.zeros(space.grid_shape, bool)
+    pos = 0.0
+    if rates is not None:
+        along, across = (x + 0 * z, y + 0 * z) if extruded else (z + 0 * x, np.maximum(x, y))
+        widest = 0.0
+        for i, ((a, b, _), rate) in enumerate(zip(reversed(phases.releases), reversed(rates))):
+            half = rate / (4.0 * h_in) if extruded else 0.5 * math.sqrt(rate / 2.0)
+            widest = max(widest, half)
+            drug |= (along >= pos) & (along <= pos + b - a) & (across <= half)
+            pos += (b - a) + _barrier_after(phases, i, s, cover)
+        material = (along <= pos) & (across <= widest + max(MIN_BARRIER_MM, 1.2 * s * phases.end_mm, 2 * dx))
     else:
-        radius = (lambda r: np.sqrt(x * x + y * y) + 0 * z) if extruded else (lambda r: np.sqrt(x * x + y * y + z * z))
-        r_field = radius(None)
-        r = 0.0
-        drug = np.zeros(space.grid_shape, bool)
+        r_field = np.sqrt(x * x + y * y) + 0 * z if extruded else np.sqrt(x * x + y * y + z * z)
         for i, (_, _, volume) in enumerate(reversed(phases.releases)):
-            r_out = (math.sqrt(r * r + volume / (math.pi * h_in)) if extruded
-                     else (r ** 3 + 3.0 * volume / (4.0 * math.pi)) ** (1.0 / 3.0))
-            drug |= (r_field >= r) & (r_field <= r_out)
-            gap = phases.pauses[-1 - i] if i < len(phases.pauses) else None
-            r = r_out + (max(MIN_BARRIER_MM, (gap[1] - gap[0]) * s) if gap else cover)
-        material = drug | (r_field <= r)
+            r_out = (math.sqrt(pos * pos + volume / (math.pi * h_in)) if extruded
+                     else (pos ** 3 + 3.0 * volume / (4.0 * math.pi)) ** (1.0 / 3.0))
+            drug |= (r_field >= pos) & (r_field <= r_out)
+            pos = r_out + _barrier_after(phases, i, s, cover)
+        material = drug | (r_field <= pos)
     phi = np.broadcast_to(material, space.grid_shape).astype(float)
-    f = np.where(np.broadcast_to(drug, space.grid_shape), 1.0, np.where(phi > 0, 0.0, 0.5))
+    f = np.where(drug, 1.0, np.where(phi > 0, 0.0, 0.5))
     if extruded:
         mid = space.grid_shape[2] // 2
         phi, f = phi[..., mid], f[..., mid]
     return np.stack([phi, f])
+
+
+def _barrier_after(phases: Phases, i: int, s: float, cover: float) -> float:
+    """Barrier outside the i-th phase from the last: the plug of the pause before it, or the cover, mm."""
+    k = len(phases.pauses) - 1 - i
+    if k >= 0:
+        a, b = phases.pauses[k]
+        return max(MIN_BARRIER_MM, (b - a) * s)
+    return cover

@@ -75,7 +75,8 @@ def summary_text(s: dict, out) -> list[str]:
              "  thinnest barrier wall in front of covered drug: "
              + ("none (no covered drug)" if b["min_wall_mm"] is None else f"{b['min_wall_mm']:.3g} mm")
              + f" (at least {b['min_wall_required_mm']:g} mm)"
-             + (f"; {s['thickened_voxels']} drug voxels made barrier to reach it" if s["thickened_voxels"] else ""),
+             + (f"; {s['thickened_voxels']} drug voxels made barrier to reach it" if s["thickened_voxels"] else "")
+             + (f"; {b['thin_mm3']:.3g} mm^3 of barrier elsewhere is thinner (rims, fins)" if b["thin_mm3"] else ""),
              f"  barrier cover {b['cover_mm']:.3g} mm: "
              + ("release starts at tau = 0" if b["release_starts_mm"] == 0.0 else "drug sealed" if b["release_starts_mm"]
                 is None else f"release starts at tau = {b['release_starts_mm']:.3g} mm")]
