@@ -143,3 +143,15 @@ def test_the_start_layout_holds_the_target_volume():
     drug = np.sum(x0[0] * (x0[1] == 1.0)) * p.space.dx_mm ** 3 * 8
     assert drug == pytest.approx(p.target.final_mm3, rel=0.25)    # the column's side rounded to whole voxels
     assert target_phases(p.target).delay_mm == pytest.approx(2.0, abs=0.02)
+
+
+def test_a_stopped_run_resumes_from_its_checkpoint(tmp_path, monkeypatch):
+    monkeypatch.setattr(twomaterial_outputs, "REFERENCE_MODULE", "design.forward.no_such_module")
+    settings = TwoMaterialSettings(DELAY, 0.25, resolution=16, max_iter=24, stages=2)
+    seen = []
+    stopped = run_two_material(settings, tmp_path, on_iteration=lambda k, t: seen.append(k),
+                               should_stop=lambda: len(seen) >= 5)
+    assert stopped.status == "stopped" and stopped.summary is None and not (tmp_path / "summary.json").exists()
+    resumed = run_two_material(None, tmp_path, resume=True, on_iteration=lambda k, t: seen.append(k))
+    assert resumed.summary is not None and seen[5] == 6          # evaluations count on from the checkpoint
+    assert resumed.summary["evaluations"] <= 24
