@@ -137,7 +137,7 @@ class SampleRelease:
 
 
 def sample_release(shape: str = "pill", index: int = 0, resolution: int = WORLD_RESOLUTION,
-                   material: Material | None = None) -> SampleRelease:
+                   material: Material | None = None, mesh=None) -> SampleRelease:
     """The ``index``-th print of a shipped sample object dissolving on the bench, in its hidden material.
 
     Parameters
@@ -153,20 +153,22 @@ def sample_release(shape: str = "pill", index: int = 0, resolution: int = WORLD_
         physics).
     material : Material, optional
         Default :meth:`Material.draw`.
+    mesh : trimesh.Trimesh, optional
+        The print's mesh, named ``shape`` (default: the sample ``shape``'s).
     """
     material = material or Material.draw()
+    mesh = sample_shape(shape) if mesh is None else mesh
     seconds_per_mm, g_per_mm3 = material.printed(index)
     physics = material.physics
     if physics is None:
         # the release the calibration's model gives with identity physics: the exact one (reference evaluator)
-        mesh = sample_shape(shape)
         end = 0.5 * float(np.max(mesh.extents))   # no point of the solid lies deeper
         model = reference_release(mesh, np.linspace(0.0, end, 801), cells=design_lattice(resolution))
         whole = min(int(np.searchsorted(model.tau_mm, model.total_time_mm)) + 1, model.tau_mm.size)   # to its end
         release = SampleRelease.from_simulation(shape, model.tau_mm[:whole], model.released_mm3[:whole], seconds_per_mm,
                                                 g_per_mm3)
     else:
-        world = cached_world_release(sample_shape(shape), physics, resolution=resolution)
+        world = cached_world_release(mesh, physics, resolution=resolution)
         release = SampleRelease.from_simulation(shape, world.tau_mm, world.released_mm3, seconds_per_mm, g_per_mm3,
                                                 lag_s=physics.wetting_lag_s)
         release.truth["physics"] = dataclasses.asdict(physics)

@@ -1,7 +1,9 @@
 """The headless demo: the whole measure -> calibrate -> design loop on the simulated bench, on an instant clock.
 
 1. a calibration series (bench calibration, paper section 4.2);
-2. short release runs of three sample objects (a frame a minute, bath already hot; one in 400 g of water);
+2. short release runs of the calibration prints (:data:`CALIBRATION_SHAPES`: a flat and a tall print that
+   ``calibrate-sim --plan`` proposes and three sample objects; a frame a minute, bath already hot; one in 400 g of
+   water);
 3. ``calibrate-sim`` on them: seconds per mm, grams per mm^3 and the leave-one-out table (section 4.3);
 4. a release run of a further object at the paper's 11 s per frame, with a camera-busy error, a corrupt
    frame and a hotplate link drop injected on purpose, and its offline analysis;
@@ -43,6 +45,7 @@ from labapp.jobs.calibrate_sim import MAX_RESOLUTION as MAX_SIMCAL_RESOLUTION
 from labapp.jobs.calibrate_sim import MIN_RESOLUTION as MIN_SIMCAL_RESOLUTION
 from labapp.jobs.calibrate_sim import SimCalRun, calibrate_sim
 from labapp.jobs.physical import design_from_target
+from labapp.jobs.plan import GENERATED
 from labapp.records.curvefiles import PhysicalCurve, read_physical_curve
 from labapp.records.fileio import StorageError, free_bytes
 from labapp.records.lock import folder_lock
@@ -52,9 +55,12 @@ from labapp.records.verification import verify_run
 
 CAL_MASSES_G = (0.25, 0.5, 0.875, 1.25, 1.75, 2.25)
 """Cumulative filament masses of the simulated calibration series, g (up to above a sample's ~1.8 g)."""
-CALIBRATION_SHAPES = ("sphere", "spinner_top", "csg")
-"""Sample objects of the simulation calibration set (the further object is any other)."""
-CALIBRATION_WATER_G = (WATER_G, 400.0, WATER_G)
+CALIBRATION_SHAPES = ("sphere", "spinner_top", "csg", "flat", "tall")
+"""The simulation calibration set: three sample objects and the flat slab and the tall column that
+``calibrate-sim --plan`` proposes first (:data:`labapp.jobs.plan.GENERATED`; round prints erode at a mix of the
+in-plane and build-direction rates and confound the anisotropy with the time scale, the flat and the tall print
+separate them). The further object is any other sample."""
+CALIBRATION_WATER_G = (WATER_G, 400.0, WATER_G, WATER_G, WATER_G)
 """Water of each calibration run, g: one run in less water shows that water masses may differ."""
 TRUTH_RESOLUTION = 80
 """Voxels along the longest side of the simulated bench's own (hidden) forward simulations."""
@@ -316,10 +322,15 @@ def _truth_like_the_model(truths: dict[str, dict], simcal: SimCalFile) -> dict:
     from labapp.jobs.printrelease import print_volume_mm3
 
     cal = {name: t for name, t in truths.items() if name in CALIBRATION_SHAPES}
-    modelled = sum(print_volume_mm3(sample_shape(name), simcal.physics["offset_mm"]) for name in cal)
+    modelled = sum(print_volume_mm3(calibration_mesh(name), simcal.physics["offset_mm"]) for name in cal)
     return {"seconds_per_mm": float(np.mean([t["seconds_per_mm"] for t in cal.values()])),
             "effective_density_g_per_cm3": 1000.0 * sum(t["mass_g"] for t in cal.values()) / modelled,
             "density_g_per_cm3": 1000.0 * float(np.mean([t["g_per_mm3"] for t in cal.values()]))}
+
+
+def calibration_mesh(name: str):
+    """The mesh of a print of `CALIBRATION_SHAPES`: a generated shape of ``calibrate-sim --plan`` or a sample's."""
+    return GENERATED[name][0]() if name in GENERATED else sample_shape(name)
 
 
 def _physics_line(physics: dict) -> str:
@@ -338,10 +349,12 @@ def _calibration_runs(out_dir: Path, clock: SteppedClock, calibration: BenchCali
     meshes = out_dir / "meshes"
     meshes.mkdir(exist_ok=True)
     set_rows = ["run,mesh,object_mass_g"]
-    progress(f"2. short runs of {len(CALIBRATION_SHAPES)} sample objects ({interval_s:g} s per frame) ...")
+    progress(f"2. short runs of {len(CALIBRATION_SHAPES)} calibration prints ({', '.join(CALIBRATION_SHAPES)}; "
+             f"{interval_s:g} s per frame) ...")
     for index, (shape, water) in enumerate(zip(CALIBRATION_SHAPES, CALIBRATION_WATER_G)):
-        release = sample_release(shape, index=index, resolution=TRUTH_RESOLUTION, material=material)
-        sample_shape(shape).export(meshes / f"{shape}.stl")
+        mesh = calibration_mesh(shape)
+        release = sample_release(shape, index=index, resolution=TRUTH_RESOLUTION, material=material, mesh=mesh)
+        mesh.export(meshes / f"{shape}.stl")
         run_dir = simulated_run(clock, calibration, release, out_dir / "runs", interval_s=interval_s,
                                 water_g=water, hotplate=False)
         truths[shape] = release.truth

@@ -19,7 +19,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="sfr-demo", help="output folder (default ./sfr-demo); a new "
                         "sub-folder per demo session")
     parser.add_argument("--sample", default="pill", help="the further object, whose measured curve is the design "
-                        "target (pill or polyhedron; sphere, spinner_top and csg are the calibration set)")
+                        "target (pill or polyhedron; sphere, spinner_top, csg and a flat and a tall print are the "
+                        "calibration set)")
+    parser.add_argument("--seed", type=int, default=None, help="seed of the simulated bench's hidden material: its "
+                        "rate, density and print physics (default: the demo's own material)")
     parser.add_argument("--interval", type=positive_float, default=11.0, help="frame interval of the further object's run, s "
                         "(default 11, the paper's)")
 
@@ -27,6 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the session, printing progress; end with where the results are."""
 
+    from labapp.acquisition.simbench import Material
     from labapp.cli import interrupt
     from labapp.jobs.demo import check_demo, run_demo
     from labapp.records.fileio import timestamp_name
@@ -48,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"operator: {operator}" + (" (built-in: records only on the simulated bench)"
                                      if operator == operators.DEMO_OPERATOR else ""), flush=True)
     with operators.acting_as(operator):
-        r = run_demo(out, sample=args.sample, interval_s=args.interval, progress=progress)
+        r = run_demo(out, sample=args.sample, interval_s=args.interval, progress=progress,
+                     material=None if args.seed is None else Material.draw(args.seed))
     print()
     print(f"done in {r.wall_s:.0f} s (wall)")
     print(f"  time scale            {r.seconds_per_mm:.1f} s/mm calibrated, {r.true_seconds_per_mm:.1f} s/mm the "

@@ -11,7 +11,9 @@ from labapp.jobs.printrelease import print_volume_mm3
 
 
 def _truths():
-    rates = {"sphere": 1400.0, "spinner_top": 1450.0, "csg": 1500.0, "pill": 1700.0}
+    """Each calibration print's rate 1400-1500 s/mm (mean 1450), the further print's (pill) 1700."""
+    n = len(demo.CALIBRATION_SHAPES)
+    rates = {**{name: 1400.0 + 100.0 * i / (n - 1) for i, name in enumerate(demo.CALIBRATION_SHAPES)}, "pill": 1700.0}
     return {name: {"seconds_per_mm": rate, "g_per_mm3": 1.4e-3 + 1e-5 * i, "mass_g": 2.0 + 0.1 * i}
             for i, (name, rate) in enumerate(rates.items())}
 
@@ -20,9 +22,22 @@ def _truths():
 def test_the_truth_is_taken_on_the_calibration_prints_and_the_modelled_volume(offset_mm):
     truth = demo._truth_like_the_model(_truths(), SimpleNamespace(physics={"offset_mm": offset_mm}))
     assert truth["seconds_per_mm"] == pytest.approx(1450.0)           # the further print (pill) is not one of them
-    volume = sum(print_volume_mm3(sample_shape(name), offset_mm) for name in demo.CALIBRATION_SHAPES)
-    assert truth["effective_density_g_per_cm3"] == pytest.approx(1000.0 * (2.0 + 2.1 + 2.2) / volume)
-    assert truth["density_g_per_cm3"] == pytest.approx(1.41)
+    volume = sum(print_volume_mm3(demo.calibration_mesh(name), offset_mm) for name in demo.CALIBRATION_SHAPES)
+    n = len(demo.CALIBRATION_SHAPES)
+    assert truth["effective_density_g_per_cm3"] == pytest.approx(1000.0 * sum(2.0 + 0.1 * i for i in range(n)) / volume)
+    assert truth["density_g_per_cm3"] == pytest.approx(1.4 + 0.01 * (n - 1) / 2)
+
+
+def test_the_calibration_set_has_the_flat_and_tall_prints_plan_proposes():
+    """Round prints alone confound the build-direction anisotropy with the time scale; the set has the flat and the
+    tall print ``calibrate-sim --plan`` proposes for it, and its meshes are the plan's and the samples'."""
+    assert {"flat", "tall"} <= set(demo.CALIBRATION_SHAPES)
+    assert len(demo.CALIBRATION_WATER_G) == len(demo.CALIBRATION_SHAPES)
+    x, y, z = demo.calibration_mesh("flat").extents
+    assert z < 0.5 * min(x, y)
+    x, y, z = demo.calibration_mesh("tall").extents
+    assert z > 2 * max(x, y)
+    assert demo.calibration_mesh("sphere").volume == pytest.approx(sample_shape("sphere").volume)
 
 
 def test_the_kept_physics_are_named_with_their_units():
