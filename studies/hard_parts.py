@@ -17,7 +17,14 @@ Prints one markdown row per part: RMS and max error over the curve and the final
 volume), wall and CPU time (s, the command as a child process, numba's cache warm), and the method and lattice
 (or grid) chosen.
 
-    python -m studies.hard_parts [--before /work/base] [--only NAME ...] [--work DIR]
+With ``--prints``, parts printed with a calibration's surface offset (and anisotropy) instead (:func:`print_parts`):
+each checkout's ``labapp.jobs.simulate.simulate(PART, physics=...)`` at its default model (what ``sfr simulate PART
+--simcal simcal.json`` runs for a calibration with that physics), against the print's exact release: analytic for a
+box (a box grown by o has rounded edges and Steiner's volume; shrunk, it is a smaller box, at any anisotropy), else
+Sobol points' exact signed distances s with T = s + o in the print {s > -o} (exact for a shrink, and for a convex
+solid or a smooth one of reach above o grown: `design.forward.offset_lattice`).
+
+    python -m studies.hard_parts [--before /work/base] [--only NAME ...] [--work DIR] [--prints]
 """
 from __future__ import annotations
 
@@ -143,6 +150,105 @@ def parts() -> list[tuple[str, str, trimesh.Trimesh, str, Callable | None]]:
     ]
 
 
+def _grown_box_release(dims, o: float) -> Callable[[np.ndarray], np.ndarray]:
+    """A box grown by o > 0 (isotropic): the shell first (Steiner's volume V(o) - V(o - tau)), then the box shrunk."""
+    dims = np.asarray(dims, float)
+
+    def steiner(r):
+        return (np.prod(dims) + 2 * (dims[0] * dims[1] + dims[1] * dims[2] + dims[0] * dims[2]) * r
+                + np.pi * dims.sum() * r ** 2 + 4 * np.pi / 3 * r ** 3)
+
+    def exact(t):
+        t = np.asarray(t, float)
+        inner = np.prod(np.clip(dims - 2 * (t - o)[:, None], 0, None), axis=1)
+        return np.where(t < o, steiner(o) - steiner(np.clip(o - t, 0, None)), steiner(o) - inner)
+
+    return exact
+
+
+def _shrunk_box_release(dims, o: float, a: float) -> Callable[[np.ndarray], np.ndarray]:
+    """A box shrunk by |o| released at anisotropy a: its metric copy (z / a) shrinking by tau, volumes times a."""
+    metric = (np.asarray(dims, float) + 2 * o) / np.array([1.0, 1.0, a])
+    return lambda t: a * (np.prod(metric) - np.prod(np.clip(metric - 2 * np.asarray(t)[:, None], 0, None), axis=1))
+
+
+def print_parts() -> list[tuple[str, str, trimesh.Trimesh, dict, Callable | None]]:
+    """(name, what, mesh, print physics, exact release in mm or None for Sobol with T = s + o)."""
+    torus = trimesh.creation.torus(major_radius=20.0, minor_radius=3.0, major_sections=256, minor_sections=64)
+    plate = _drilled(_box((60.0, 40.0, 1.0)), [(x, y, 5.0) for x in (-20, 20) for y in (-10, 10)], 1.0)
+
+    def physics(o, a=1.0):
+        return {"anisotropy": a, "offset_mm": o, "swelling_mm": 0.0}
+
+    return [
+        ("rod_5x5x61+0.1", "5 x 5 x 61 mm rod grown 0.1 mm", _box((5, 5, 61)), physics(0.1),
+         _grown_box_release((5, 5, 61), 0.1)),
+        ("cube_10-0.2_a0.7", "10 mm cube shrunk 0.2 mm, anisotropy 0.7", _box((10, 10, 10)), physics(-0.2, 0.7),
+         _shrunk_box_release((10, 10, 10), -0.2, 0.7)),
+        ("plate_1mm-0.1", "60 x 40 x 1 mm plate with holes shrunk 0.1 mm", plate, physics(-0.1), None),
+        ("sphere_r10+0.2", "ball r 10 mm grown 0.2 mm", analytic.sphere()[0], physics(0.2), None),
+        ("torus+0.15", "torus R 20, r 3 mm grown 0.15 mm", torus, physics(0.15), None),
+    ]
+
+
+def sobol_print_release(mesh: trimesh.Trimesh, offset_mm: float) -> Callable[[np.ndarray], np.ndarray]:
+    """released(tau) of a mesh's print {s > -o} with T = s + o, from 2^SOBOL_LOG2 quasi-random points' exact signed
+    distances s in the print's bounding box; its volume the points' share of the box."""
+    from scipy.stats import qmc
+
+    from design.forward.distance import Surface
+
+    grow = max(offset_mm, 0.0)
+    lo, hi = mesh.bounds[0] - grow, mesh.bounds[1] + grow
+    points = lo + (hi - lo) * qmc.Sobol(d=3, scramble=True, seed=7).random_base2(SOBOL_LOG2)
+    arrive = Surface(mesh).signed_distance(points)[0] + offset_mm
+    depth = np.sort(arrive[arrive > 0])
+    volume = float(np.prod(hi - lo)) * depth.size / len(points)
+    return lambda t: volume * np.searchsorted(depth, np.asarray(t), side="right") / depth.size
+
+
+def run_print(root: Path, part: Path, out: Path, physics: dict) -> tuple[dict, np.ndarray, float, float]:
+    """``labapp.jobs.simulate.simulate(part, out, physics=physics)`` of the checkout ``root`` as a child, at its
+    default model; (summary, release.csv rows, wall s, CPU s)."""
+    code = ("import json, sys; from labapp.jobs.simulate import simulate; "
+            "simulate(sys.argv[1], sys.argv[2], physics=json.loads(sys.argv[3]))")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    began = time.perf_counter()
+    done = subprocess.run([str(root / ".venv" / "bin" / "python"), "-c", code, str(part), str(out),
+                           json.dumps(physics)], cwd=root, capture_output=True, text=True, timeout=1800)
+    wall = time.perf_counter() - began
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    if done.returncode != 0:
+        return {"failed": done.stderr.strip().splitlines()[-1]}, np.zeros((0, 2)), wall, cpu
+    curve = np.loadtxt(out / "release.csv", delimiter=",", skiprows=1, usecols=(0, 1))
+    return json.loads((out / "summary.json").read_text()), curve, wall, cpu
+
+
+def main_prints(args: argparse.Namespace, work: Path) -> None:
+    """The ``--prints`` table: each print part by both checkouts' default model against its exact release."""
+    print("| print | exact by | after: RMS / max / end, % | after: wall / CPU s | after: method | "
+          "before: RMS / max / end, % | before: wall / CPU s | before: model |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name, what, mesh, physics, exact in print_parts():
+        if args.only and name not in args.only:
+            continue
+        path = work / f"{name}.stl"
+        mesh.export(path)
+        if exact is None:
+            exact, how = sobol_print_release(trimesh.load_mesh(path), physics["offset_mm"]), f"Sobol 2^{SOBOL_LOG2}"
+        else:
+            how = "analytic"
+        volume = float(exact(np.array([1e3]))[0])
+        cells = []
+        for label, root in (("after", args.after), ("before", args.before)):
+            out = Path(tempfile.mkdtemp(prefix=f"{name}_{label}_", dir=work)) / "sim"
+            summary, curve, wall, cpu = run_print(root, path, out, physics)
+            errs = "-" if not len(curve) else " / ".join(f"{e:.2f}" for e in errors(curve, exact, volume))
+            cells += [errs, f"{wall:.1f} / {cpu:.1f}", _how(summary)]
+        print(f"| {name}: {what} | {how} | " + " | ".join(cells) + " |", flush=True)
+
+
 def _solid_mm(mesh: trimesh.Trimesh, units: str) -> trimesh.Trimesh:
     """The solid the file describes, in mm: bodies that touch or overlap united (as ``sfr simulate`` reads it)."""
     from design.geometry.bodies import solid_mesh
@@ -211,7 +317,9 @@ def _how(summary: dict) -> str:
                   else "best of " + reason.split("the best of ")[-1].split(" lattices")[0] + ", over the aim")
         return (f"exact, h {summary['lattice']['spacing_mm']:.3g} mm (lattice {passes}), "
                 f"stated {100 * summary['error']['error_fraction']:.2f}%")
-    return f"grid {summary.get('voxels', 0):,} voxels of {summary.get('voxel_size_mm', 0):.3g} mm"
+    return f"grid {summary.get('voxels', 0):,} voxels of {summary.get('voxel_size_mm', 0):.3g} mm" + (
+        "" if summary.get("error", {}).get("error_fraction") is None else
+        f", stated {100 * summary['error']['error_fraction']:.2f}%")
 
 
 def main() -> None:
@@ -220,8 +328,12 @@ def main() -> None:
     parser.add_argument("--after", type=Path, default=Path(__file__).resolve().parents[1], help="checkout measured")
     parser.add_argument("--only", nargs="*", help="part names")
     parser.add_argument("--work", type=Path, help="folder for the parts and runs (default: a temporary one)")
+    parser.add_argument("--prints", action="store_true", help="the parts printed with a surface offset instead")
     args = parser.parse_args()
     work = args.work or Path(tempfile.mkdtemp(prefix="hard_parts_"))
+    if args.prints:
+        main_prints(args, work)
+        return
     print("| part | exact by | after: RMS / max / end, % | after: wall / CPU s | after: method, lattice | "
           "before: RMS / max / end, % | before: wall / CPU s | before: grid |")
     print("|---|---|---|---|---|---|---|---|")

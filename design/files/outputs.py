@@ -83,7 +83,7 @@ def write_outputs(out_dir: Path, problem, objective: DesignObjective, best_x: np
     density_mm3 = _density_release(problem, config, rho)
     warnings: list[str] = list(problem.warnings)
     printed = _write_print(out_dir, problem, config, rho, warnings)  # design.stl (+ formats)
-    release = print_release(problem, config, printed.mesh, printed.solid, judged)
+    release = print_release(problem, config, printed.mesh, printed.solid, judged, stl=printed.stl)
     checks = _check_print(problem, config, status, printed, release, warnings)
     _write_data(out_dir, problem, best_x, rho, printed, density_mm3, release, history)  # density.npz, csv, ini
     summary = _summary(problem, objective, config, status, history, session_seconds, rho, density_mm3, printed,
@@ -111,6 +111,8 @@ class _Print:
         The print, mm: ``design.stl`` grown by the print offset; None when no solid was extracted.
     solid : ndarray of bool, full grid
         The print re-voxelised on the design grid.
+    stl : trimesh.Trimesh or None
+        ``design.stl``, the file to print (the designed solid shrunk by the print offset).
     """
 
     rho_full: np.ndarray
@@ -118,6 +120,7 @@ class _Print:
     filled: int
     mesh: trimesh.Trimesh | None
     solid: np.ndarray
+    stl: trimesh.Trimesh | None = None
 
 
 @dataclass(frozen=True)
@@ -170,7 +173,7 @@ def _write_print(out_dir: Path, problem, config, rho: np.ndarray, warnings: list
         mesh = None
     solid = (revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape) if mesh is not None
              else np.zeros(problem.full_shape, dtype=bool))
-    return _Print(rho_full, level, filled, mesh, solid)
+    return _Print(rho_full, level, filled, mesh, solid, stl)
 
 
 def _check_print(problem, config, status: DesignStatus, printed: _Print, release: PrintRelease,

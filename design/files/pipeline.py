@@ -58,8 +58,13 @@ def offset_solid(mesh: trimesh.Trimesh, dx_mm: float, offset_mm: float, mirror: 
     inside = voxelize(mesh, dx_mm, origin_mm=origin, shape=shape)
     if offset_mm == 0.0:
         return inside
-    rough = np.where(inside, ndimage.distance_transform_edt(inside, sampling=dx_mm),
-                     -ndimage.distance_transform_edt(~inside, sampling=dx_mm))
+    # one voxel of bath around the grid (none across a mirror plane): a solid that fills its grid (a box shrunk by
+    # the offset) has outside voxels for the transform to measure from
+    pad = [(0 if m else 1, 1) for m in mirror]
+    core = tuple(slice(p[0], p[0] + n) for p, n in zip(pad, inside.shape))
+    padded = np.pad(inside, pad)
+    rough = np.where(inside, ndimage.distance_transform_edt(padded, sampling=dx_mm)[core],
+                     -ndimage.distance_transform_edt(~padded, sampling=dx_mm)[core])
     # a half grid's transform is exact: for a point on the kept side of a mirror plane the nearest voxel of
     # the other kind is never only across the plane, since its mirror image on this side is no farther
     band = np.abs(rough + offset_mm) <= OFFSET_BAND_VOXELS * dx_mm

@@ -11,9 +11,12 @@ Print physics (`DesignConfig` ``anisotropy``, ``print_offset_mm``, ``swelling_mm
 calibration): the optimised density is the solid that must come out of the printer. A print comes out
 ``print_offset_mm`` larger than its mesh, so ``design.stl`` is that solid shrunk by the offset (the file to
 print), and the print is ``design.stl`` grown by it again; every print figure (fit, volume, mass, channels,
-pieces) is the grown solid's. With anisotropy the reference evaluator releases the print at it (exact
-distances with z scaled by 1/a); with swelling the print's release is the forward model's with the print
-physics on voxels half the design grid's (the reference evaluator does not shut channels).
+pieces) is the grown solid's. The print's release is ``design.stl`` grown by the offset released by the reference
+evaluator itself (`design.forward.offset_lattice`: the print {signed distance to design.stl > -offset}, at the
+print's anisotropy, exact distances with z scaled by 1/a), not the extracted grown mesh's. With swelling that shuts
+a channel the print keeps (on the design grid, `design.forward.swelling.shut_channels`) the print's release is the
+forward model's with the print physics on voxels half the design grid's (the reference evaluator does not shut
+channels); swelling that shuts none changes nothing, and the reference evaluator releases the print.
 Channels narrower than ``swelling_mm`` are filled before extraction (`close_narrow_channels`), the minimum
 open channel width the print must keep, and ``summary.json`` says whether the print meets it and how many voxels
 the fill added (``channel_fill_voxels``: 0 when the objective's channel-width term, weight ``w_channel``, kept the
@@ -91,6 +94,22 @@ def channel_constraint(solid: np.ndarray, dx_mm: float, width_mm: float, filled:
             "filled_mm3": filled * dx_mm ** 3, "narrow_left_mm3": left * dx_mm ** 3}
 
 
+def _exact_print(mesh: trimesh.Trimesh, stl: trimesh.Trimesh | None, config, tau_mm: np.ndarray) -> ReferenceRelease:
+    """The print released by the reference evaluator: ``stl`` grown by the print offset
+    (`design.forward.offset_lattice`), or ``mesh`` (the extracted print; the one the last correction round judged)
+    without an offset, without ``stl``, or for a file with sealed voids (their wetting with an offset is not
+    modelled)."""
+    from design.errors import DesignError
+
+    cells, offset = design_lattice(config.resolution), float(config.print_offset_mm)
+    if stl is not None and offset != 0.0:
+        try:
+            return cached_reference_release(stl, tau_mm, cells=cells, anisotropy=config.anisotropy, offset_mm=offset)
+        except DesignError:
+            pass
+    return cached_reference_release(mesh, tau_mm, cells=cells, anisotropy=config.anisotropy)
+
+
 @dataclass(frozen=True)
 class PrintRelease:
     """The release of a design's print and its fit to the target.
@@ -103,9 +122,9 @@ class PrintRelease:
     binary_mm3 : (K,) ndarray of float, mm^3
         The print's re-voxelised solid's release on the design grid.
     reference : ReferenceRelease or None
-        The reference evaluator's release of the print (None with swelling or without a print).
+        The reference evaluator's release of the print (None with swelling that shuts a channel, or without a print).
     volume_mm3 : float
-        The print's volume, the mesh's own (0 without a print), mm^3.
+        The print's volume, the mesh's own or the reference evaluator's (0 without a print), mm^3.
     rel_rmse : float
         rel. RMSE of ``released_mm3`` against the target's release.
     rel_rmse_error : float
@@ -120,8 +139,8 @@ class PrintRelease:
     rel_rmse_error: float
 
 
-def print_release(problem, config, mesh: trimesh.Trimesh | None, solid: np.ndarray, judged: bool = True
-                  ) -> PrintRelease:
+def print_release(problem, config, mesh: trimesh.Trimesh | None, solid: np.ndarray, judged: bool = True,
+                  stl: trimesh.Trimesh | None = None) -> PrintRelease:
     """The release of a design's print and of its re-voxelised solid, and its fit to the target.
 
     Parameters
@@ -136,20 +155,21 @@ def print_release(problem, config, mesh: trimesh.Trimesh | None, solid: np.ndarr
     judged : bool
         Release the print (False: only its re-voxelised solid; the print's curve and fit NaN, its volume the
         mesh's). A coarse start of a multi-start, which its J alone ranks, is not judged.
+    stl : trimesh.Trimesh, optional
+        ``design.stl``, the file to print: with a print offset the reference evaluator releases it grown by the
+        offset exactly (None: ``mesh`` itself is released).
     """
     space, target = problem.space, problem.target
     physics = {"anisotropy": config.anisotropy, "swelling_mm": config.swelling_mm}
     dtau_mm = target.total_time_mm / (target.tau_mm.size - 1)
     binary_curve = solid_release(solid, space.dx_mm, space.mirror, target.total_time_mm, dtau_mm, **physics)
-    # the print: design.stl (grown by the offset) released by exact surface distances at the print's anisotropy,
-    # its volume the mesh's own; with swelling, by the forward model with the print physics on a finer grid
+    # the print: design.stl (grown by the offset) released by exact surface distances at the print's anisotropy;
+    # with swelling that shuts a channel, by the forward model with the print physics on a finer grid
     if not judged:
         nan = np.full_like(binary_curve, np.nan)
         return PrintRelease(nan, binary_curve, None, float(mesh.volume) if mesh is not None else 0.0, np.nan, np.nan)
-    modelled = config.swelling_mm > 0
-    printed = (cached_reference_release(mesh, target.tau_mm, cells=design_lattice(config.resolution),
-                                        anisotropy=config.anisotropy)  # the last round judged this print
-               if mesh is not None and not modelled else None)
+    modelled = config.swelling_mm > 0 and bool(shut_channels(solid.astype(float), space.dx_mm, config.swelling_mm).any())
+    printed = _exact_print(mesh, stl, config, target.tau_mm) if mesh is not None and not modelled else None
     if modelled:
         print_curve = fine_release(mesh, space.dx_mm, problem.origin_mm, problem.full_shape, space.mirror,
                                    target.total_time_mm, dtau_mm, PRINT_PHYSICS_FACTOR, **physics)

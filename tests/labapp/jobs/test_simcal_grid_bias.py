@@ -87,11 +87,12 @@ def test_identity_physics_release_is_the_reference_release():
     depths = np.linspace(0.0, 0.5 * max(mesh.extents), pr.BIAS_SAMPLES)   # the depths the reference is made at
     ref = reference_release(mesh, depths, cells=design_lattice(RESOLUTION))
     np.testing.assert_allclose(np.interp(depths, tau, vol), ref.released_mm3, rtol=0, atol=1e-9 * mesh.volume)
-    # with print physics: still monotone and ending at the print's exact volume (the offset's Steiner volume)
+    # with print physics: still monotone and ending at the print's volume, the evaluator's quadrature of the print:
+    # Steiner's volume of the grown convex mesh within its stated error (measured 0.015%)
     physics = dict(PHYSICS_IDENTITY, anisotropy=1.3, offset_mm=0.1)
     tau, vol, _ = pr.mesh_release(mesh, "sphere.stl", RESOLUTION, physics)
     assert np.all(np.diff(vol) >= 0) and vol[0] == 0.0
-    assert vol[-1] == pytest.approx(pr.print_volume_mm3(mesh, 0.1), rel=1e-12)
+    assert vol[-1] == pytest.approx(pr.print_volume_mm3(mesh, 0.1), rel=2e-3)
 
 
 def test_bias_is_computed_once_per_mesh_resolution_and_anisotropy(monkeypatch):

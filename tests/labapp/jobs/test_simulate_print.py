@@ -72,3 +72,14 @@ def test_the_cli_names_the_exact_model_of_a_print(tmp_path, capsys):
     assert main(["simulate", str(box), "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["model"] == "exact" and summary["physics"]["offset_mm"] == 0.0
+
+
+@pytest.mark.parametrize("symmetry", ["", "xyz"])
+def test_the_grid_model_shrinks_a_print_that_fills_its_grid(symmetry):
+    from design.files.pipeline import mesh_grid
+
+    # a 10 mm cube on 64 voxels of 0.15625 mm fills its grid: shrunk by 0.2 mm it keeps the voxels deeper than
+    # 0.2 mm, 62 per side (measured from a bath voxel around the grid)
+    rho, dx, mirror = mesh_grid(trimesh.creation.box((10.0, 10.0, 10.0)), resolution=64, offset_mm=-0.2,
+                                symmetry=symmetry)
+    assert rho.sum() * dx ** 3 * 2 ** sum(mirror) == pytest.approx((62 * 0.15625) ** 3, rel=1e-12)
