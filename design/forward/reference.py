@@ -216,68 +216,78 @@ def reference_release(mesh: trimesh.Trimesh, tau_mm: np.ndarray | None = None, *
     o = float(offset_mm)
     if not np.isfinite(o):
         raise DesignError(f"offset_mm must be a finite number of mm, got {offset_mm!r}")
-    checked = _check_mesh(mesh)
-    mesh = metric_mesh(checked, a)
-    surface = Surface(mesh)
-    wet, n_voids = wetting(mesh)
-    if o != 0.0 and n_voids:
-        raise DesignError(f"{source}: a surface offset with sealed voids ({n_voids}) is not modelled by the exact "
-                          "evaluator (their walls' wetting in a print that shrinks or closes them)")
-    printed = None if o == 0.0 else PrintLattice(surface, o, a, None if a == 1.0 else Surface(checked))
-    offset = surface.stored(wet)
-    bounds = np.asarray(mesh.bounds, dtype=np.float64)
-    volume = float(mesh.volume) * a  # mm^3 of the print: the scaled mesh's volume times a
-    found: dict[float, tuple] = {}
-
-    def quadrature(h: float, tau: np.ndarray) -> tuple[np.ndarray, float, float, float]:
-        """(curve in physical mm^3 before scaling, its volume, the latest arrival, the unsure volume)."""
-        if printed is None:
-            curve, est, end = lattice_curve(surface, offset, bounds, h, tau)
-            return curve * (volume / est), volume, end, 0.0
-        got = printed.curve(bounds, h, tau)
-        if not got.volume > 0.0:
-            raise DesignError(f"{source}: the print is empty: a surface offset of {o:g} mm removes all of it")
-        return got.curve * a, got.volume * a, got.end, got.unsure_mm3 * a
-
-    def evaluate(h: float) -> float:
-        nonlocal tau
-        if tau is None:  # a scout on the coarse lattice finds where the solid is gone
-            grow = 0.0 if printed is None else printed.grow
-            upper = 0.5 * float((bounds[1] - bounds[0]).min()) + 4.0 * h + grow
-            end = quadrature(2.0 * h, np.linspace(0.0, upper, 3))[2]
-            # the fine lattice's last ramp ends within 1.25 h of the coarse one's (a coarse cell's half-diagonal
-            # sqrt(3) h, less the coarse ramp's half-width h, plus the fine one's h / 2)
-            tau = np.linspace(0.0, end + 1.25 * h, SAMPLES)
-        fine, coarse = (quadrature(s, tau) for s in (h, 2.0 * h))
-        error = float(np.abs(fine[0] - coarse[0]).max()) if tau.size else 0.0
-        if found and tau.size:  # a refinement: also against the previous (coarser) lattice, if that is closer
-            error = min(error, float(np.abs(fine[0] - found[min(found)][0]).max()))
-        found[h] = (fine[0], error, fine[2], fine[1], fine[3])
-        return error / fine[1]
-
+    run = _Lattices(_check_mesh(mesh), a, o, source, tau)
     if cells is not None:
-        h = float((bounds[1] - bounds[0]).max()) / int(cells)
-        evaluate(h)
+        h = float((run.bounds[1] - run.bounds[0]).max()) / int(cells)
+        run.evaluate(h)
         lattice = f"{int(cells)} cells along the bounding box's longest side"
     else:
-        box, solid = bounds, float(mesh.volume)
-        if printed is not None:  # sized by the print: about V + A o (the lattice's own quadrature gives its volume)
-            box, solid = printed.bounds(bounds), max(solid + float(mesh.area) * o, 0.05 * solid)
-        choice = choose(evaluate, box, solid, float(mesh.area), tolerance=tolerance,
+        box, solid = run.bounds, float(run.mesh.volume)
+        if run.printed is not None:  # sized by the print: about V + A o (its own quadrature gives its volume)
+            box, solid = run.printed.bounds(run.bounds), max(solid + float(run.mesh.area) * o, 0.05 * solid)
+        choice = choose(run.evaluate, box, solid, float(run.mesh.area), tolerance=tolerance,
                         max_points=max_points, source=source, say=progress)
         h = choice.spacing_mm
         lattice = choice.reason
-    released, error, total, volume, unsure = found[h]
+    released, error, total, volume, unsure = run.found[h]
+    tau = run.tau
     if tau_mm is None:
         tau, released = _until_dissolved(tau, released, volume)
     seconds = time.perf_counter() - began
-    method = ("exact-distance-voids" if n_voids else "exact-distance") + (f", anisotropy {a:g}" if a != 1.0 else "") \
-        + (f", surface offset {o:+g} mm" if o != 0.0 else "")
+    method = ("exact-distance-voids" if run.n_voids else "exact-distance") \
+        + (f", anisotropy {a:g}" if a != 1.0 else "") + (f", surface offset {o:+g} mm" if o != 0.0 else "")
     log.debug("reference release: %d faces, %d voids, h = %.4g mm, error %.3g mm^3 (%.3g%%), %.2f s",
-              len(mesh.faces), n_voids, h, error, 100 * error / volume, seconds)
+              len(run.mesh.faces), run.n_voids, h, error, 100 * error / volume, seconds)
     return ReferenceRelease(tau_mm=tau, released_mm3=released, volume_mm3=volume, error_mm3=error + unsure,
                             method=method, cell_mm=check_positive("cell_mm", h), total_time_mm=total, seconds=seconds,
                             lattice=lattice, offset_mm=o, unsure_mm3=unsure)
+
+
+class _Lattices:
+    """The lattices of one reference release: the mesh in the metric of anisotropy a, its surface and wetting, the
+    print of offset o (None without one), and each lattice evaluated (``found``: spacing -> (curve, stated error,
+    latest arrival, volume, unsure volume)). ``tau`` is the requested depths, set by the first scout if None."""
+
+    def __init__(self, checked: trimesh.Trimesh, a: float, o: float, source: str, tau: np.ndarray | None) -> None:
+        self.a, self.o, self.source, self.tau = a, o, source, tau
+        self.mesh = metric_mesh(checked, a)
+        self.surface = Surface(self.mesh)
+        wet, self.n_voids = wetting(self.mesh)
+        if o != 0.0 and self.n_voids:
+            raise DesignError(f"{source}: a surface offset with sealed voids ({self.n_voids}) is not modelled by the "
+                              "exact evaluator (their walls' wetting in a print that shrinks or closes them)")
+        self.printed = None if o == 0.0 else PrintLattice(self.surface, o, a, None if a == 1.0 else Surface(checked))
+        self.offset = self.surface.stored(wet)
+        self.bounds = np.asarray(self.mesh.bounds, dtype=np.float64)
+        self.volume = float(self.mesh.volume) * a  # mm^3 of the print: the scaled mesh's volume times a
+        self.found: dict[float, tuple] = {}
+
+    def quadrature(self, h: float, tau: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+        """(curve in physical mm^3, its volume, the latest arrival, the unsure volume) on the lattice of spacing h."""
+        if self.printed is None:
+            curve, est, end = lattice_curve(self.surface, self.offset, self.bounds, h, tau)
+            return curve * (self.volume / est), self.volume, end, 0.0
+        got = self.printed.curve(self.bounds, h, tau)
+        if not got.volume > 0.0:
+            raise DesignError(f"{self.source}: the print is empty: a surface offset of {self.o:g} mm removes all of it")
+        return got.curve * self.a, got.volume * self.a, got.end, got.unsure_mm3 * self.a
+
+    def evaluate(self, h: float) -> float:
+        """Evaluate the lattice of spacing h and one twice as coarse; the stated error as a fraction of the volume."""
+        if self.tau is None:  # a scout on the coarse lattice finds where the solid is gone
+            grow = 0.0 if self.printed is None else self.printed.grow
+            upper = 0.5 * float((self.bounds[1] - self.bounds[0]).min()) + 4.0 * h + grow
+            end = self.quadrature(2.0 * h, np.linspace(0.0, upper, 3))[2]
+            # the fine lattice's last ramp ends within 1.25 h of the coarse one's (a coarse cell's half-diagonal
+            # sqrt(3) h, less the coarse ramp's half-width h, plus the fine one's h / 2)
+            self.tau = np.linspace(0.0, end + 1.25 * h, SAMPLES)
+        tau = self.tau
+        fine, coarse = (self.quadrature(s, tau) for s in (h, 2.0 * h))
+        error = float(np.abs(fine[0] - coarse[0]).max()) if tau.size else 0.0
+        if self.found and tau.size:  # a refinement: also against the previous (coarser) lattice, if that is closer
+            error = min(error, float(np.abs(fine[0] - self.found[min(self.found)][0]).max()))
+        self.found[h] = (fine[0], error, fine[2], fine[1], fine[3])
+        return error / fine[1]
 
 
 def _until_dissolved(tau: np.ndarray, released: np.ndarray, volume: float) -> tuple[np.ndarray, np.ndarray]:

@@ -16,7 +16,5 @@ def test_the_print_is_design_stl_grown_by_the_offset_released_exactly(tmp_path):
     exact = reference_release(stl, target.tau_mm, cells=design_lattice(22), anisotropy=0.8, offset_mm=offset)
     # the same release up to design.stl's single-precision vertices (read back from the file)
     assert summary["rel_rmse_print"] == pytest.approx(rel_rmse(exact.released_mm3, target.released_mm3), rel=1e-3)
-    assert summary["rel_rmse_print"] != pytest.approx(rel_rmse(reference_release(
-        stl, target.tau_mm, cells=design_lattice(22), anisotropy=0.8).released_mm3, target.released_mm3), rel=0.5)
     # the print fits its target to the design grid's error (observed 0.9%)
     assert summary["rel_rmse_print"] < 0.015
