@@ -275,8 +275,8 @@ def _summary(problem, objective: DesignObjective, config, status: DesignStatus, 
 
 def _reference_record(problem, config, printed: _Print, release: PrintRelease) -> dict | None:
     """How the print's release was computed, with the stated errors: by the forward model on a finer grid (with
-    swelling) or by the reference evaluator; None without a print."""
-    if config.swelling_mm > 0 and printed.mesh is not None:
+    swelling that shuts a channel) or by the reference evaluator; None without a print."""
+    if config.swelling_mm > 0 and printed.mesh is not None and release.reference is None:
         cell_mm = problem.space.dx_mm / PRINT_PHYSICS_FACTOR
         return {"method": f"forward model with the print physics on voxels of {cell_mm:.4g} mm",
                 "cell_mm": cell_mm, "seconds": None, "print_error_mm3": None,
