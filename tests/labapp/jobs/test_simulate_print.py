@@ -83,3 +83,27 @@ def test_the_grid_model_shrinks_a_print_that_fills_its_grid(symmetry):
     rho, dx, mirror = mesh_grid(trimesh.creation.box((10.0, 10.0, 10.0)), resolution=64, offset_mm=-0.2,
                                 symmetry=symmetry)
     assert rho.sum() * dx ** 3 * 2 ** sum(mirror) == pytest.approx((62 * 0.15625) ** 3, rel=1e-12)
+
+
+def test_simulate_with_a_calibration_s_offset_predicts_the_exact_print(tmp_path, capsys):
+    from labapp.jobs.printrelease import exact_print
+    from labapp.records.simcal import FORMAT, FORWARD_MODEL
+
+    physics = {"anisotropy": 1.3, "offset_mm": 0.1, "swelling_mm": 0.0}
+    simcal = tmp_path / "simcal.json"
+    simcal.write_text(json.dumps({"format": FORMAT, "forward_model": FORWARD_MODEL, "physics": physics,
+                                  "model": "constant", "seconds_per_mm": 1500.0, "g_per_mm3": 1.3e-3,
+                                  "resolution": 16, "voxel_size_mm": 1.0, "water_g": 500.0}))
+    box = tmp_path / "box.stl"
+    trimesh.creation.box((6.0, 4.0, 3.0)).export(box)
+    out = tmp_path / "sim"
+    assert main(["simulate", str(box), "--simcal", str(simcal), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["model"] == "exact" and summary["method"] == "exact-distance, anisotropy 1.3, surface offset +0.1 mm"
+    assert summary["warnings"] == [] and "warning" not in capsys.readouterr().err
+    # the predicted grams are the print's, released by the reference evaluator (its volume the quadrature's, to its
+    # stated error: the command reads the mesh through its own loader; the box grown 0.1 mm: Steiner 83.75 mm^3)
+    volume = exact_print(trimesh.load(box), 16, 1.3, 0.1)[2]
+    assert summary["physical"]["mass_g"] == pytest.approx(volume * 1.3e-3, rel=1e-3)
+    assert volume == pytest.approx(72 + 2 * 54 * 0.1 + np.pi * 13 * 0.01 + 4 * np.pi / 3 * 0.001, rel=2e-3)
+    assert volume == pytest.approx(summary["volume_mm3"], abs=summary["error"]["error_mm3"] + 0.01 * volume)
