@@ -17,13 +17,13 @@ def test_a_single_run_is_its_optimisation_its_rounds_and_its_outputs():
     assert [p.after for p in plan] == [PRINT_CHECK_EVALS, PRINT_CHECK_EVALS, PRINT_CHECK_EVALS + OUTPUTS_EVALS]
 
 
-def test_a_multistart_plan_has_its_coarse_starts_at_an_eighth_of_the_cost_then_the_refinement():
+def test_a_multistart_plan_has_its_coarse_starts_at_their_measured_cost_then_the_refinement():
     plan = run_plan(DesignConfig(target="sphere", resolution=128, max_iter=100))
     names = [p.name for p in plan]
     assert names[:4] == [f"coarse start {k} of 4 at resolution 64" for k in range(1, 5)]
     assert names[4:] == ["refinement at resolution 128", "refinement at resolution 128, physical correction round 1 of 2",
                          "refinement at resolution 128, physical correction round 2 of 2"]
-    assert [p.weight for p in plan] == [0.125] * 4 + [1.0] * 3
+    assert [p.weight for p in plan] == [progress.COARSE_EVAL_WEIGHT] * 4 + [1.0] * 3
     # each coarse start half the evaluations; the refinement a fifth (20) at its final beta, then its two rounds of 10
     assert [(p.end, p.limit or p.end) for p in plan] == [(50, 50)] * 4 + [(20, 40), (30, 40), (40, 40)]
 
