@@ -16,8 +16,9 @@ Isotropic (a = 1), T = s + o wherever the print is solid:
   certificate): y* is then in P's complement. It holds everywhere on a convex solid and fails in the concave creases
   and the gaps narrower than 2o that the grown surface fills, where T is larger. There y* is pushed off the mesh
   along its distance's gradient until it is o from it (`PUSHES` at most); that point bounds T from above (exactly
-  at a crease) and is the cell's arrival time. The curve at tau can then be off by at most the volume of the cells
-  with lower bound <= tau < upper bound: its maximum over tau (`OffsetCurve.unsure_mm3`) joins the stated error.
+  at a crease) and is the cell's arrival time. A cell's ramp moved by d changes the curve by at most min(d, h) h^2,
+  and only while it is under way at one of the two times: the largest sum of those over the cells at one depth
+  (`OffsetCurve.unsure_mm3`) bounds the curve's error from them and joins the stated error.
 
 Anisotropic (a != 1), a face with metric unit normal m (physical normal m with m_z scaled by 1 / a) moves
 k(m) = o |(m_x, m_y, m_z / a)| in the metric (o across a vertical face, o / a across a horizontal one). A point
@@ -254,7 +255,7 @@ class PrintLattice:
 
     def block_ramps(self, lattice: Lattice, block: np.ndarray, ramps: Ramps) -> np.ndarray:
         """Add one block's ramps to ``ramps``; returns (lower, upper, weight) rows of its cells whose certificate
-        failed (their arrival times lie in [lower, upper], weight their solid volume, metric mm^3)."""
+        failed: the depths over which the curve may be off by their weight (metric mm^3, :func:`_most_unsure`)."""
         h = lattice.h
         lo = np.maximum(block - 1, 0)
         hi = np.minimum(block + BLOCK + 1, lattice.n)
@@ -280,8 +281,11 @@ class PrintLattice:
         solid = np.flatnonzero(own & (arrive > -0.5 * h))
         upper = self.bounds_above(centres[solid], probe[solid], h)
         failed = ~np.isnan(upper)
-        unsure = np.column_stack([arrive[solid][failed], upper[failed],
-                                  np.clip(arrive[solid][failed] / h + 0.5, 0.0, 1.0) * h ** 3])
+        # a cell's ramp over [T - h/2, T + h/2] moved by d changes the curve by at most min(d, h) h^2, and only
+        # while the ramp at either arrival time is under way
+        low, high = arrive[solid][failed], upper[failed]
+        unsure = np.column_stack([low - 0.5 * h, high + 0.5 * h, np.clip(low / h + 0.5, 0.0, 1.0) * h * h
+                                  * np.minimum(high - low, h)])
         pushed = solid[failed & np.isfinite(upper)]
         arrive[pushed] = upper[failed & np.isfinite(upper)]  # the upper bound: exact at a crease
         plain = own & ~ridge & (arrive > -0.5 * h)
@@ -316,8 +320,8 @@ class PrintLattice:
 
 
 def _most_unsure(rows: np.ndarray) -> float:
-    """max over tau of the weight of the (lower, upper, weight) rows with lower <= tau < upper: the most volume
-    whose release time is uncertain at one depth, a bound on the curve's error from it."""
+    """max over tau of the weight of the (lower, upper, weight) rows with lower <= tau < upper: the most the curve
+    can be off at one depth from the cells whose arrival time is uncertain."""
     if not len(rows):
         return 0.0
     times = np.concatenate([rows[:, 0], rows[:, 1]])
