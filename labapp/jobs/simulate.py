@@ -221,8 +221,8 @@ def swelling_plug(source: str, units: str, physics: dict) -> tuple[float, float]
     width = float(physics.get("swelling_mm", 0.0))
     if width == 0.0:
         return 0.0, 0.0
-    rho, dx, mirror, _ = simulation_grid(source, units=units, offset_mm=physics["offset_mm"])
-    return float(shut_channels(rho, dx, width, mirror).sum()) * dx ** 3 * 2 ** sum(mirror), dx
+    rho, dx, _ = mesh_grid(_source_mesh(source, units), offset_mm=physics["offset_mm"])
+    return float(shut_channels(rho, dx, width).sum()) * dx ** 3, dx
 
 
 def _exact_unmodelled(source: str, units: str, physics: dict, say: Callable[[str], None]) -> str:
