@@ -11,10 +11,11 @@ Two models make ``release.csv``:
   (:mod:`design.forward.offset_lattice`; its volume the quadrature's); a swelling width w shuts the print's channels
   narrower than w, which the exact model does not model: when the grid model's voxels of the print
   (:func:`swelling_plug`) have none, swelling changes nothing and the release is the exact model's.
-- ``grid`` (the only one for a density array; the default fallback for a print whose swelling shuts a channel or
-  whose offset meets a sealed void): first-order fast marching on voxels (eqs. 5-7), at ``--resolution`` voxels
-  along the longest side, with its error estimated against the exact release (a mesh; with the print's offset) or
-  a grid twice as coarse (a density array).
+- ``grid`` (the only one for a density array; the default fallback, warned about, for a print whose offset meets a
+  sealed void, and for one whose swelling shuts a channel, where only the shut channels are the grid's: the exact
+  print's release plus the grid's release with swelling less without, :func:`_swelling_on_exact`): first-order fast
+  marching on voxels (eqs. 5-7), at ``--resolution`` voxels along the longest side, with its error estimated against
+  the exact release (a mesh; with the print's offset) or a grid twice as coarse (a density array).
 
 Every output is written atomically (``labapp.records.fileio.atomic_write``): a full disk leaves no partial file
 and is a :class:`labapp.records.fileio.StorageError` naming it.
@@ -193,14 +194,17 @@ def simulate(source: str, out: str | Path, *, resolution: int | None = None, vox
         if given:
             raise UsageError(f"{', '.join(given)} set the grid model's voxels; the exact model sizes its lattice by "
                              "the solid: drop them or add --model grid")
-        fallback = _exact_unmodelled(source, units, physics, say)
+        fallback, swelling = _exact_unmodelled(source, units, physics, say)
         if fallback and model == "exact":
             raise UsageError(f"{fallback}; use --model grid")
         if fallback:
             log.warning("%s: the grid model simulates it", fallback)
             release, summary, warnings = _simulate_grid(source, units, physics, say, resolution=None,
                                                         voxel_size_mm=None, symmetry="")
-            warnings.insert(0, f"{fallback}: simulated by the grid model (first order)")
+            if swelling:
+                release = _swelling_on_exact(source, units, physics, release, summary)
+            warnings.insert(0, f"{fallback}: simulated by the grid model (first order)"
+                            + (", added to the exact model's release of the print" if swelling else ""))
             summary["exact_model_not_used"] = fallback
         else:
             release, summary, warnings = _simulate_exact(source, units, physics, say)
@@ -225,23 +229,49 @@ def swelling_plug(source: str, units: str, physics: dict) -> tuple[float, float]
     return float(shut_channels(rho, dx, width).sum()) * dx ** 3, dx
 
 
-def _exact_unmodelled(source: str, units: str, physics: dict, say: Callable[[str], None]) -> str:
-    """Why the exact model cannot release this print ('' when it can): a swelling width that shuts a channel of the
-    print (:func:`swelling_plug`), or a surface offset on a mesh with sealed voids."""
+def _exact_unmodelled(source: str, units: str, physics: dict, say: Callable[[str], None]) -> tuple[str, bool]:
+    """Why the exact model cannot release this print alone ('' when it can), and whether that is a swelling width
+    that shuts a channel of the print (:func:`swelling_plug`; the grid model's share then is the shut channels only)
+    rather than a surface offset on a mesh with sealed voids."""
     from design.forward.wetting import wetting
 
+    if physics["offset_mm"]:
+        voids = wetting(_source_mesh(source, units))[1]
+        if voids:
+            return (f"{source}: a surface offset on a mesh with {voids} sealed void(s) is not modelled by the exact "
+                    "model"), False
     if physics.get("swelling_mm", 0.0):
         say(f"      checking for channels narrower than the swelling width {physics['swelling_mm']:g} mm ...")
         plug, dx = swelling_plug(source, units, physics)
         if plug > 0.0:
             return (f"{source}: the print's swelling width {physics['swelling_mm']:g} mm shuts {plug:.3g} mm^3 of "
-                    f"its channels (on {dx:.3g} mm voxels), which the exact model does not model")
-    if physics["offset_mm"]:
-        voids = wetting(_source_mesh(source, units))[1]
-        if voids:
-            return (f"{source}: a surface offset on a mesh with {voids} sealed void(s) is not modelled by the exact "
-                    "model")
-    return ""
+                    f"its channels (on {dx:.3g} mm voxels), which the exact model does not model"), True
+    return "", False
+
+
+def _swelling_on_exact(source: str, units: str, physics: dict, release, summary: dict[str, Any]) -> ExactRelease:
+    """The print's release with swelling that shuts a channel, as a calibration's predictions make it
+    (`labapp.jobs.printrelease.print_release`): the reference evaluator's release of the print (with its offset and
+    anisotropy) plus the grid model's shut channels, its release with swelling less its release without (both on
+    ``release``'s grid, at the print's volume), on uniform depths to where both are complete. Updates ``summary``."""
+    import numpy as np
+
+    from labapp.jobs.printrelease import print_release
+
+    mesh = _source_mesh(source, units)
+    grid = mesh_grid(mesh, offset_mm=physics["offset_mm"])
+    tau, released = print_release(mesh, grid, DEFAULT_RESOLUTION, {"swelling_mm": 0.0, **physics}, release)
+    done = float(tau[int(np.argmax(released >= released[-1] * (1.0 - 1e-12)))])
+    uniform = np.linspace(0.0, max(float(release.tau_mm[-1]), done), len(release.tau_mm))
+    curve = np.interp(uniform, tau, released)
+    summary.update({"method": "the exact model's release of the print with the grid model's shut channels added: "
+                              "first-order fast marching with swelling less without, on its voxels "
+                              "(labapp.jobs.printrelease.print_release, as a calibration's predictions)",
+                    "volume_mm3": float(curve[-1]), "total_time_mm": float(uniform[-1]),
+                    "dtau_mm": float(uniform[1] - uniform[0])})
+    summary["error"] = {"error_mm3": None, "error_fraction": None,
+                        "method": "not estimated: the shut channels' share is the grid model's (first order)"}
+    return ExactRelease(uniform, curve, float(curve[-1]), float(uniform[-1]), None)
 
 
 def _simulate_exact(source: str, units: str, physics: dict, say: Callable[[str], None]

@@ -47,6 +47,18 @@ def test_swelling_that_shuts_a_slot_is_the_grid_model_s_named_and_warned(tmp_pat
     outputs = simulate(str(part), tmp_path / "run", physics=physics)
     assert outputs.summary["model"] == "grid" and "shuts" in outputs.summary["exact_model_not_used"]
     assert "simulated by the grid model" in outputs.warnings[0]
+    # the grid model's share is the shut slot only: the curve is the exact model's release of the block plus the
+    # grid's difference with and without swelling, ending at the mesh's exact volume (the grid's own misses it)
+    volume = 400.0 - 0.4 * 10.0 * 2.5   # the slot cuts 2.5 mm deep into the 4 mm block
+    curve = np.loadtxt(outputs.out / "release.csv", delimiter=",", skiprows=1)
+    assert curve[-1, 1] == pytest.approx(volume, rel=1e-9) == outputs.summary["volume_mm3"]
+    grid = simulate(str(part), tmp_path / "grid", physics=physics, model="grid")
+    assert abs(grid.summary["volume_mm3"] - volume) > 0.01 * volume
+    # the shut slot delays the release as the grid model says: both are well below the open slot's exact release
+    from design.forward.reference import reference_release
+
+    open_slot = reference_release(trimesh.load(part), curve[:, 0], cells=64).released_mm3
+    assert np.all(curve[:, 1] <= open_slot + 0.01 * volume) and np.max(open_slot - curve[:, 1]) > 0.05 * volume
     with pytest.raises(UsageError, match="which the exact model does not model; use --model grid"):
         simulate(str(part), tmp_path / "exact", physics=physics, model="exact")
     assert not (tmp_path / "exact").exists()
