@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+from pathlib import Path
 
 from labapp.cli.argtypes import nonnegative_float
 
@@ -20,6 +22,19 @@ def add_barrier_design_arguments(parser: argparse.ArgumentParser) -> None:
                             "extruded; --target: delay-zero:delay=D,rate=R,volume=V, pulses:volume=V,width=W,gap=G, "
                             "constant:rate=R,volume=V (mm, mm^3) or a tau_mm,released_mm3 CSV; writes design.stl (drug), "
                             "barrier.stl and design.3mf (both)")
+
+
+def wants_barrier_design(args: argparse.Namespace) -> bool:
+    """Whether `sfr design` runs a two-material design: ``--barrier-speed`` given, or ``--resume`` of a two-material
+    run's folder."""
+    if args.barrier_speed is not None:
+        return True
+    if not args.resume:
+        return False
+    try:
+        return json.loads((Path(args.out) / "config.json").read_text()).get("kind") == "two-material"
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def _settings_options(args: argparse.Namespace, given: dict) -> dict:
@@ -76,7 +91,7 @@ def summary_text(s: dict, out) -> list[str]:
              + ("none (no covered drug)" if b["min_wall_mm"] is None else f"{b['min_wall_mm']:.3g} mm")
              + f" (at least {b['min_wall_required_mm']:g} mm)"
              + (f"; {s['thickened_voxels']} drug voxels made barrier to reach it" if s["thickened_voxels"] else "")
-             + (f"; {b['thin_mm3']:.3g} mm^3 of barrier elsewhere is thinner (rims, fins)" if b["thin_mm3"] else ""),
+             + (f"; {b['thin_mm3']:.3g} mm^3 of barrier elsewhere is thinner (rims, fins)" if b.get("thin_mm3") else ""),
              f"  barrier cover {b['cover_mm']:.3g} mm: "
              + ("release starts at tau = 0" if b["release_starts_mm"] == 0.0 else "drug sealed" if b["release_starts_mm"]
                 is None else f"release starts at tau = {b['release_starts_mm']:.3g} mm")]
@@ -95,16 +110,16 @@ def run_barrier_design(args: argparse.Namespace, given: dict) -> int:
     if not args.resume and not args.target:
         raise UsageError("--target is required (unless --resume)")
     settings = None if args.resume else TwoMaterialSettings(args.target, args.barrier_speed, **options)
-    interrupt.set_hint(f"the best design so far is saved in {args.out}; resume with: sfr design --resume "
-                       f"--barrier-speed {args.barrier_speed:g} --out {args.out}")
+    interrupt.set_hint(f"the best design so far is saved in {args.out}; resume with: sfr design --resume --out {args.out}")
     max_iter = settings.max_iter if settings else options.get("max_iter", 0)
     try:
-        result = design_barrier(settings, args.out, resume=args.resume, options=dict(options, barrier_speed=args.barrier_speed),
+        given = options if args.barrier_speed is None else dict(options, barrier_speed=args.barrier_speed)
+        result = design_barrier(settings, args.out, resume=args.resume, options=given,
                                 on_iteration=_progress(max_iter))
     finally:
         print(file=sys.stderr)
     if result.summary is None:
-        print(f"stopped: resume with sfr design --resume --barrier-speed {args.barrier_speed:g} --out {args.out}")
+        print(f"stopped: resume with sfr design --resume --out {args.out}")
         return 130
     if result.unchanged:
         print(f"already finished: nothing to do ({result.out} is left as it is)")

@@ -81,14 +81,14 @@ def run(args: argparse.Namespace) -> int:
     from design.files.summary_text import summary_lines
     from design.inverse.config import DesignConfig
     from design.inverse.status import DesignStatus
+    from labapp.cli.commands._design_barrier import run_barrier_design, wants_barrier_design
     from labapp.jobs.design import design as design_job
     from labapp.jobs.design import failed_design
     from labapp.jobs.physical import TARGET_CSV, adjustment_line, read_measured_target
     from labapp.records.lock import folder_lock
     from labapp.records.simcal import SimCalError, load_simcal
 
-    if args.barrier_speed is not None:     # two materials: labapp.cli.commands._design_barrier
-        from labapp.cli.commands._design_barrier import run_barrier_design
+    if wants_barrier_design(args):     # two materials: labapp.cli.commands._design_barrier
         return run_barrier_design(args, _given_options(args))
     try:
         options = _given_options(args)

@@ -54,6 +54,8 @@ def test_design_writes_both_materials_then_refuses_the_same_out_and_resumes_as_f
     assert "design run" in capsys.readouterr().err
     assert main(["design", "--resume", "--barrier-speed", "0.25", "--out", str(out)]) == 0
     assert "already finished" in capsys.readouterr().out
+    assert main(["design", "--resume", "--out", str(out)]) == 0      # the folder says it is a two-material run
+    assert "already finished" in capsys.readouterr().out
     assert main(["design", "--resume", "--barrier-speed", "0.5", "--out", str(out)]) == 2
     assert "barrier_speed = 0.5 differs" in capsys.readouterr().err
     assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before
