@@ -100,7 +100,13 @@ def narrowest_channel_mm(solid: np.ndarray, dx_mm: float, max_width_mm: float) -
                           f"{dx_mm}, {max_width_mm}")
     t_max = 0.5 * (max_width_mm + dx_mm)
     pad = int(np.ceil(t_max / dx_mm)) + 2
-    void = np.pad(~solid.astype(bool), pad, constant_values=True)
+    # the solid's bounding box: beyond it the void is the outside's, and the padding (wider than any level) joins it
+    # all around at every level, as the whole grid's void would
+    solid = np.asarray(solid, dtype=bool)
+    if solid.any():
+        spans = [np.flatnonzero(solid.any(axis=tuple(a for a in range(3) if a != ax))) for ax in range(3)]
+        solid = solid[tuple(slice(int(i[0]), int(i[-1]) + 1) for i in spans)]
+    void = np.pad(~solid, pad, constant_values=True)
     labels, _ = ndimage.label(void)
     outside = labels == labels[0, 0, 0]
     del labels, void
