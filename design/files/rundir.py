@@ -375,7 +375,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         start = _multistart(config, out_dir, on_iteration, should_stop)
         if isinstance(start, Checkpoint):  # the chosen start is the design
             return _rewrite_outputs(out_dir, config, start, coarse_start, problem)
-    optimised = refinement_config(config)  # a multi-start's refinement: at the final beta, its own evaluations
+    optimised = refinement_config(config)  # a multi-start's refinement: its own evaluations
     objective = build_objective(problem, optimised)
     if saved is not None:
         log.info("resuming %s at evaluation %d", out_dir, len(saved.history))

@@ -63,17 +63,15 @@ def coarse_config(config: DesignConfig) -> DesignConfig:
 
 
 def refinement_config(config: DesignConfig) -> DesignConfig:
-    """What the optimisation of a run of ``config`` runs with: for a refined multi-start (`refined`) ``config`` at its
-    final beta throughout (the coarse start went through the continuation) with `REFINE_EVALS_SHARE` of its
-    evaluations before the correction rounds, whose evaluations follow as configured (``max_iter`` is the refinement's
-    and its rounds'); else ``config`` itself."""
+    """What the optimisation of a run of ``config`` runs with: for a refined multi-start (`refined`) ``config`` with
+    `REFINE_EVALS_SHARE` of its evaluations before the correction rounds (its beta continuation over them), whose
+    evaluations follow as configured (``max_iter`` is the refinement's and its rounds'); else ``config`` itself."""
     if not refined(config):
         return config
     rounds, _ = correction_plan(config)
-    beta = float(config.beta if config.beta_final is None else config.beta_final)
     # at least the rounds' evaluations: correction_plan keeps as many rounds as fit in half the evaluations
     first = max(1, int(round(REFINE_EVALS_SHARE * config.max_iter)), rounds * config.correction_evals)
-    return replace(config, beta=beta, beta_final=beta, max_iter=first + rounds * config.correction_evals)
+    return replace(config, max_iter=first + rounds * config.correction_evals)
 
 
 def start_name(k: int) -> str:

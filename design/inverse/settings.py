@@ -57,8 +57,8 @@ starts only rank the outlines by J and give the refinement its start; past half 
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 REFINE_EVALS_SHARE = 0.2
 """Evaluations of a multi-start's refinement before its correction rounds, as a share of `DesignConfig.max_iter`
-(at least 1). The refinement starts from the best coarse design, which went through the beta continuation, and runs at
-the final beta; the rounds' evaluations follow as for a single run
+(at least 1), its beta continuation over them: from the best coarse design each beta stage settles within a few
+tens of evaluations; the rounds' evaluations follow as for a single run
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 CURVE_EXTRUDED_STARTS = 3
 """Default starts of an extruded design of a curve target (`DesignConfig.starts`): its three start outlines, a
