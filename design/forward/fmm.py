@@ -332,6 +332,18 @@ def _adjoint_coefficients(rec, i, ndim, strides, n_dx2, out, weights):
         w = (ui - a) * weights[d] if a < ui else 0.0  # exact for c_d = 1
         out[d] = w if upper < lower else -w
         total += w
+    if total == 0.0:
+        # u_i equals its upwind neighbours to float resolution (a huge slowness's step, e.g. an insoluble
+        # barrier's, below one ulp of the arrival time): u_i follows its smallest neighbour alone
+        best = 0
+        for d in range(ndim):
+            out[d] = 0.0
+            if min(rec[i - strides[d], 0], rec[i + strides[d], 0]) < min(rec[i - strides[best], 0],
+                                                                          rec[i + strides[best], 0]):
+                best = d
+        out[best] = 1.0 if rec[i + strides[best], 0] < rec[i - strides[best], 0] else -1.0
+        out[3] = 0.0
+        return
     inv = 1.0 / total
     for d in range(ndim):
         out[d] *= inv

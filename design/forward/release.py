@@ -53,6 +53,14 @@ def _second_differences(u, length, weight, dtau, k_count):
         if weight[i] == 0.0:
             continue
         t0 = _ramp_start(u[i], length[i])
+        if u[i] - t0 <= 0.0:
+            # a ramp below the float resolution of its time (a void's step far behind an insoluble barrier): a step
+            j = np.int64(np.floor(u[i] / dtau)) + 1
+            if 0 <= j < k_count:
+                acc[j] += weight[i]
+            if 0 <= j + 1 < k_count:
+                acc[j + 1] -= weight[i]
+            continue
         slope = weight[i] / (u[i] - t0)
         _add_kink(acc, t0, slope, dtau)
         _add_kink(acc, u[i], -slope, dtau)
@@ -104,6 +112,9 @@ def _vjp_kernel(u, length, weight, dtau, g):
         # samples on the ramp: t0 < tau_k <= u_i; after it the ramp is 1
         ka = min(max(np.int64(np.floor(t0 / dtau)) + 1, 0), k_count)
         kb = min(max(np.int64(np.floor(u[i] / dtau)) + 1, 0), k_count)
+        if span <= 0.0:
+            weight_bar[i] = p0[k_count] - p0[kb]  # a step (see _second_differences): flat in u_i and L_i
+            continue
         s0 = p0[kb] - p0[ka]
         s1 = p1[kb] - p1[ka]
         ramp = (dtau * s1 - t0 * s0) / span  # sum_k g_k s_k over the ramp
