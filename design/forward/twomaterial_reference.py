@@ -231,6 +231,41 @@ def _overlap(a: trimesh.Trimesh, b: trimesh.Trimesh) -> float:
     return float(both.volume) if len(both.faces) else 0.0
 
 
+class _Print:
+    """A drug and a barrier in the isotropic metric: the drug's release on a lattice, its interfaces cached per
+    spacing."""
+
+    def __init__(self, drug: trimesh.Trimesh, barrier: trimesh.Trimesh, s: float, anisotropy: float) -> None:
+        self.drug, self.barrier, self.s, self.a = drug, barrier, s, anisotropy
+        self.faces_at: dict[float, tuple[_Interfaces, list[np.ndarray]]] = {}
+
+    def state(self, h: float) -> tuple[_Interfaces, list[np.ndarray]]:
+        if h not in self.faces_at:
+            faces = _interfaces(self.drug, self.barrier, EDGE_CELLS * h)
+            self.faces_at[h] = (faces, wetting_times(faces, self.s))
+        return self.faces_at[h]
+
+    def sealed_regions(self) -> list[float]:
+        """Volumes of the drug bodies no path reaches, largest first, mm^3 (on the surfaces as meshed)."""
+        faces, times = self.state(float(np.linalg.norm(np.ptp(self.drug.bounds, axis=0))) / EDGE_CELLS)
+        return sorted((float(b.volume) * self.a for b, w in zip(faces.bodies, times) if np.all(w >= SEALED_MM)),
+                      reverse=True)
+
+    def curve(self, h: float, samples: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """(released drug at ``samples``, the latest arrival, the sealed volume) on a lattice of spacing h."""
+        faces, times = self.state(h)
+        total, end, sealed = np.zeros(samples.size), 0.0, 0.0
+        for body, source, w in zip(faces.bodies, faces.sources, times):
+            if np.all(w >= SEALED_MM):
+                sealed += float(body.volume) * self.a
+                continue
+            fronts = Surface(source)
+            c, est, last = front_curve(Surface(body), fronts, fronts.stored(w), np.asarray(body.bounds), h, samples)
+            total += c * (float(body.volume) * self.a / est)
+            end = max(end, last)
+        return total, end, sealed
+
+
 def two_material_reference_release(drug_mesh: trimesh.Trimesh, barrier_mesh: trimesh.Trimesh, barrier_speed: float,
                                    tau_mm: np.ndarray | None = None, *, anisotropy: float = 1.0,
                                    tolerance: float = DEFAULT_TOLERANCE, max_points: float = MAX_POINTS,
@@ -291,26 +326,7 @@ def two_material_reference_release(drug_mesh: trimesh.Trimesh, barrier_mesh: tri
     barrier_volume = (float(barrier.volume) - _overlap(barrier, drug)) * a
     straight = _straight_paths(whole, barrier, drug, s) * a
     found: dict[float, tuple] = {}
-    faces_at: dict[float, tuple[_Interfaces, list[np.ndarray]]] = {}
-
-    def state(edge: float):
-        if edge not in faces_at:
-            faces = _interfaces(drug, barrier, EDGE_CELLS * edge)
-            faces_at[edge] = (faces, wetting_times(faces, s))
-        return faces_at[edge]
-
-    def curve(h: float, samples: np.ndarray) -> tuple[np.ndarray, float, float]:
-        faces, times = state(h)
-        total, end, sealed = np.zeros(samples.size), 0.0, []
-        for body, source, w in zip(faces.bodies, faces.sources, times):
-            if np.all(w >= SEALED_MM):
-                sealed.append(float(body.volume) * a)
-                continue
-            fronts = Surface(source)
-            c, est, last = front_curve(Surface(body), fronts, fronts.stored(w), np.asarray(body.bounds), h, samples)
-            total += c * (float(body.volume) * a / est)
-            end = max(end, last)
-        return total, end, sum(sealed)
+    curve = _Print(drug, barrier, s, a).curve
 
     def evaluate(h: float) -> float:
         nonlocal tau
@@ -324,10 +340,7 @@ def two_material_reference_release(drug_mesh: trimesh.Trimesh, barrier_mesh: tri
         found[h] = (fine[0], error, fine[1], fine[2])
         return error / volume
 
-    faces0, times0 = state(float(np.linalg.norm(np.ptp(drug.bounds, axis=0))))
-    sealed_regions = sorted((float(b.volume) * a for b, w in zip(faces0.bodies, times0) if np.all(w >= SEALED_MM)),
-                            reverse=True)
-    faces_at.clear()
+    sealed_regions = _Print(drug, barrier, s, a).sealed_regions()
     open_volume = volume - sum(sealed_regions)
     if open_volume <= 1e-12 * volume:
         tau = np.zeros(1) if tau is None else tau
