@@ -114,19 +114,36 @@ def test_bad_inputs_are_refused_before_any_work(meshes, tmp_path):
 def test_the_command_simulates_the_drug_inside_the_barrier(meshes, tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["simulate", meshes["drug"], "--barrier", meshes["coat"], "--barrier-speed", "0",
-                 "--resolution", "24", "--out", str(out)]) == 0
+                 "--model", "grid", "--resolution", "24", "--out", str(out)]) == 0
     captured = capsys.readouterr().out
     assert "drug 64.0 mm^3 in 152.0 mm^3 of barrier at speed 0" in captured
     assert "barrier cover: at least 0.981 mm of barrier between the outside and the drug" in captured
     assert "the drug is sealed" in captured and "sealed: 64 mm^3 of drug in 1 region(s) never releases" in captured
     assert np.all(_curve(out)[:, 1] == 0.0)
     assert main(["simulate", meshes["drug"], "--barrier", meshes["cup"], "--barrier-speed", "0.5",
-                 "--resolution", "24", "--out", str(tmp_path / "open")]) == 0
+                 "--model", "grid", "--resolution", "24", "--out", str(tmp_path / "open")]) == 0
     assert "barrier cover: none, some drug is open to the bath" in capsys.readouterr().out
     # a second run into the same folder is refused: the record is kept
     assert main(["simulate", meshes["drug"], "--barrier", meshes["cup"], "--barrier-speed", "0",
-                 "--resolution", "24", "--out", str(out)]) == 2
+                 "--model", "grid", "--resolution", "24", "--out", str(out)]) == 2
     assert np.all(_curve(out)[:, 1] == 0.0)
+
+
+def test_the_exact_model_is_the_default(meshes, tmp_path, capsys):
+    # the 4 mm cube in the cup open at its top at s = 0.5: the top face releases 16 mm^3 per mm (its sides and bottom
+    # are behind 1 mm of barrier, crossed at tau = 2, from then the box's sides erode too): exact distances
+    out = tmp_path / "run"
+    assert main(["simulate", meshes["drug"], "--barrier", meshes["cup"], "--barrier-speed", "0.5",
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "exact model (exact-distance, two materials)" in printed and "error: within" in printed
+    curve = _curve(out)
+    tau = curve[:, 0]
+    late = np.clip(tau - 2.0, 0, None)
+    left = np.clip(4.0 - 2.0 * late, 0, None) ** 2 * np.clip(4.0 - tau - late, 0, None)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["model"] == "exact" and summary["error"]["error_fraction"] <= 0.004
+    assert np.abs(curve[:, 1] - (64.0 - left)).max() <= summary["error"]["error_mm3"]
 
 
 @pytest.mark.parametrize("extra, message", [
@@ -134,7 +151,7 @@ def test_the_command_simulates_the_drug_inside_the_barrier(meshes, tmp_path, cap
     (["--barrier-speed", "0.5"], "give --barrier MESH"),
     (["--barrier", "{cup}", "--barrier-speed", "0.5", "--simcal", "{npy}"], "does not take --simcal"),
     (["--barrier", "{cup}", "--barrier-speed", "0.5", "--model", "mc"], "does not take --model mc"),
-    (["--barrier", "{cup}", "--barrier-speed", "0.5", "--model", "exact"], "does not take --model exact"),
+    (["--barrier", "{cup}", "--barrier-speed", "0.5", "--resolution", "24"], "set the grid model's voxels"),
     (["--barrier", "{npy}", "--barrier-speed", "0.5"], "must be a mesh"),
 ])
 def test_the_command_refuses_what_does_not_apply(meshes, tmp_path, capsys, extra, message):

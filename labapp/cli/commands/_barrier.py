@@ -28,11 +28,13 @@ def run_barrier(args: argparse.Namespace, progress: Callable[[str], None]) -> in
         raise UsageError("--barrier-speed applies to a drug inside a barrier: give --barrier MESH")
     if args.barrier_speed is None:
         raise UsageError("--barrier needs --barrier-speed S (the barrier's erosion speed over the drug's; 0: insoluble)")
-    refused = [name for name, given in ((f"--model {args.model}", args.model not in (None, "grid")),
+    refused = [name for name, given in ((f"--model {args.model}", args.model == "mc"),
                                         ("--simcal", bool(args.simcal)), ("--water-g", args.water_g is not None)) if given]
     if refused:
-        raise UsageError(f"--barrier does not take {', '.join(refused)}: two materials are simulated by the grid "
-                         "model only, without a calibration")
+        raise UsageError(f"--barrier does not take {', '.join(refused)}: two materials are simulated by the exact "
+                         "model (the default) or the grid model, without a calibration")
+    if args.model in (None, "exact"):
+        return _run_exact(args, progress)
     result = simulate_barrier(args.input, args.barrier, args.out, barrier_speed=args.barrier_speed,
                               resolution=args.resolution, voxel_size_mm=args.voxel_size, symmetry=args.symmetry,
                               units=args.units, progress=progress)
@@ -52,4 +54,27 @@ def run_barrier(args: argparse.Namespace, progress: Callable[[str], None]) -> in
     if error["error_mm3"] is not None:
         print(f"error: the simulated curve is within about {error['error_mm3']:.3g} mm^3 "
               f"({error['error_fraction']:.2%} of the drug) of the physical release ({error['method']})")
+    return 0
+
+
+def _run_exact(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    """The default: the two-material reference evaluator, its summary printed."""
+    from labapp.errors import UsageError
+    from labapp.jobs.simulate_barrier import simulate_barrier_exact
+
+    given = [name for name, v in (("--resolution", args.resolution), ("--voxel-size", args.voxel_size),
+                                  ("--symmetry", args.symmetry)) if v]
+    if given:
+        raise UsageError(f"{', '.join(given)} set the grid model's voxels; the exact model sizes its lattice by the "
+                         "drug: drop them or add --model grid")
+    s = simulate_barrier_exact(args.input, args.barrier, args.out, barrier_speed=args.barrier_speed, units=args.units,
+                               progress=progress)
+    print(f"drug {s['volume_mm3']:.1f} mm^3 in {s['barrier_volume_mm3']:.1f} mm^3 of barrier at speed "
+          f"{s['barrier_speed']:g}: exact model ({s['method']}), lattice {s['lattice']['spacing_mm']:.4g} mm, "
+          f"{s['seconds']:.2f} s -> {args.out}")
+    if s["sealed_mm3"] > 0:
+        print(f"sealed: {s['sealed_mm3']:.4g} mm^3 of drug in {len(s['sealed_regions_mm3'])} region(s) never releases")
+    error = s["error"]
+    print(f"error: within {error['error_mm3']:.3g} mm^3 ({error['error_fraction']:.2%} of the drug), "
+          f"{error['method']}")
     return 0
