@@ -199,6 +199,12 @@ class DesignLauncher(QWidget):
                                "zero-order[:final=F,duration=D] or accel:q=Q[,final=F,duration=D]")
         self.space, self.resolution, self.max_iter, self.allow_infeasible = (
             setting_field(s) for s in (SPACE, RESOLUTION, MAX_ITER, ALLOW_INFEASIBLE))
+        self.barrier_speed = QLineEdit("")
+        self.barrier_speed.setPlaceholderText("one material")
+        self.barrier_speed.setToolTip("a second material, a placebo barrier eroding at S times the drug's rate (0: "
+                                      "insoluble): sfr design --barrier-speed S, in the nfc or extruded space, for "
+                                      "the targets one material cannot give (delay-zero:, pulses:, constant: or a "
+                                      "CSV); empty: one material")
         self.allow_infeasible.setToolTip("the check's report is kept as feasibility.txt in the design folder; "
                                          "a measured target is optimised whatever its report says, since its "
                                          "noise alone can put short stretches under the isoperimetric bound")
@@ -279,6 +285,8 @@ class DesignLauncher(QWidget):
         for setting, w in ((SPACE, self.space), (RESOLUTION, self.resolution), (MAX_ITER, self.max_iter)):
             settings.addWidget(QLabel(setting.label))
             settings.addWidget(w)
+        settings.addWidget(QLabel("barrier speed"))
+        settings.addWidget(self.barrier_speed)
         settings.addStretch(1)
         form.addLayout(settings, 2, 1, 1, 3)
         form.addWidget(self.allow_infeasible, 3, 1, 1, 3)
@@ -408,6 +416,9 @@ class DesignLauncher(QWidget):
         """Run the design in the background (a measured target is converted through the simulation calibration)."""
         text = self.source.text().strip()
         source = Path(text)
+        if self.barrier_speed.text().strip():
+            self._start_barrier(text)
+            return
         named = text in SAMPLE_SHAPES or text.startswith(("zero-order", "accel:"))
         if not text or (not named and not source.exists()):
             self.status.setText(f"{text or 'the target'} does not exist: choose a run, a CSV, a mesh, a sample "
@@ -421,6 +432,70 @@ class DesignLauncher(QWidget):
         self.out_dir = design_folder(self.data_dir, name)
         config = DesignConfig(target=str(source) if source.exists() else text, **self.settings())
         self._run(config, self.out_dir, resume=False)
+
+    def barrier_settings(self, target: str):
+        """The two-material design settings of the form (``sfr design --barrier-speed``), checked.
+
+        Raises
+        ------
+        design.DesignError
+            For a barrier speed that is not a number >= 0, or a space, resolution or iteration count a
+            two-material design does not take."""
+        from design.forward.twomaterial import check_barrier_speed
+        from design.inverse.twomaterial_problem import TwoMaterialSettings
+
+        form = self.settings()
+        return TwoMaterialSettings(target=target, barrier_speed=check_barrier_speed(self.barrier_speed.text().strip()),
+                                   space=form["space"], resolution=int(form["resolution"]),
+                                   max_iter=int(form["max_iter"]))
+
+    def _start_barrier(self, target: str) -> None:
+        """Run a two-material design (`labapp.jobs.design_barrier.design_barrier`, as ``sfr design --barrier-speed``)."""
+        from design.errors import DesignError
+        from design.inverse.twomaterial_targets import is_two_material_spec
+        from labapp.jobs.design_barrier import design_barrier
+
+        if not is_two_material_spec(target) and not Path(target).is_file():
+            self.status.setText(f"{target or 'the target'}: a two-material design takes delay-zero:, pulses:, "
+                                "constant: or a tau_mm,released_mm3 CSV")
+            return
+        wrong = problems([self.resolution, self.max_iter])
+        try:
+            settings = None if wrong else self.barrier_settings(target)
+        except DesignError as exc:
+            wrong = [f"barrier: {exc}"]
+        if wrong:
+            self.status.setText("\n".join(wrong))
+            return
+        if self.busy:
+            self.status.setText("a design is running; stop it first")
+            return
+        self._stop.clear()
+        self.out_dir = design_folder(self.data_dir, Path(target).stem if Path(target).exists()
+                                     else target.replace(":", "_").replace("=", "").replace(",", "_"))
+        self._max_iter, out_dir = settings.max_iter, self.out_dir
+
+        def work(progress):
+            return design_barrier(settings, out_dir, on_iteration=lambda k, terms: progress((k, terms, None)),
+                                  should_stop=self._stop.is_set)
+        self.task = BackgroundTask(work, self)
+        self.task.progress.connect(self._progress)
+        self.task.finished.connect(self._barrier_finished)
+        self.task.failed.connect(self._failed)
+        self.task.start()
+        for button, enabled in ((self.start_button, False), (self.resume_button, False), (self.stop_button, True)):
+            button.setEnabled(enabled)
+        self.progress.setRange(0, max(1, self._max_iter))
+        self.progress.setValue(0)
+        self.progress.setFormat("starting ...")
+        self.status.setText(f"designing drug and barrier (barrier speed {settings.barrier_speed:g}) into {out_dir} ...")
+
+    def _barrier_finished(self, result) -> None:
+        for button, enabled in ((self.start_button, True), (self.resume_button, True), (self.stop_button, False)):
+            button.setEnabled(enabled)
+        self.progress.setFormat(f"two-material design {result.status}")
+        self.status.setText(f"two-material design {result.status}: design.stl (drug), barrier.stl and the two-object "
+                            f"3MF in {result.out}")
 
     def resume(self, folder: str | Path | None = None) -> None:
         """Continue a stopped design (``sfr design --resume``): ``folder``, or one chosen in a dialog."""
