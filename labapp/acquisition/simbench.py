@@ -48,6 +48,8 @@ SCENE = BenchScene(width=960, height=640, water_g=WATER_G)
 of its 1200 x 800 default; the analysis works in full-resolution px either way)."""
 MATERIAL_SEED = 20221206
 """Seed of the simulated bench's material draw."""
+BARRIER_STREAM = 47
+"""Second seed word of the barrier speed's own draw (so that the drug material's draw is unchanged)."""
 
 
 @dataclass(frozen=True)
@@ -62,6 +64,9 @@ class Material:
         Print density.
     rate_spread, density_spread : float
         Relative standard deviation of each printed object's rate and density around the material's.
+    barrier_speed : float
+        The clear barrier material's erosion speed over the drug material's (two-material prints; it absorbs no
+        light, so the camera sees only the drug).
     physics : PrintPhysics or None
         How its prints dissolve (:mod:`labapp.acquisition.printworld`). None: exactly as the isotropic
         forward model computes at the sample's resolution, for tests of the calibration's arithmetic,
@@ -73,14 +78,16 @@ class Material:
     rate_spread: float = 0.015
     density_spread: float = 0.02
     physics: PrintPhysics | None = None
+    barrier_speed: float = 0.35
 
     @classmethod
     def draw(cls, seed: int = MATERIAL_SEED) -> Material:
         """A material with a rate of 1000-2400 s/mm (a ~1.7 g object dissolves in 1.5-3.5 h), a print
         density of 1.15-1.45 g/cm^3 and print physics drawn by :meth:`PrintPhysics.draw`."""
         rng = np.random.default_rng(seed)
+        barrier = float(np.random.default_rng([seed, BARRIER_STREAM]).uniform(0.2, 0.6))
         return cls(float(rng.uniform(1000.0, 2400.0)), float(rng.uniform(1.15, 1.45)),
-                   physics=PrintPhysics.draw(seed))
+                   physics=PrintPhysics.draw(seed), barrier_speed=barrier)
 
     def printed(self, index: int, seed: int = MATERIAL_SEED) -> tuple[float, float]:
         """The ``index``-th printed object's own (seconds_per_mm, g_per_mm3)."""
@@ -137,7 +144,7 @@ class SampleRelease:
 
 
 def sample_release(shape: str = "pill", index: int = 0, resolution: int = WORLD_RESOLUTION,
-                   material: Material | None = None, mesh=None) -> SampleRelease:
+                   material: Material | None = None, mesh=None, barrier=None) -> SampleRelease:
     """The ``index``-th print of a shipped sample object dissolving on the bench, in its hidden material.
 
     Parameters
@@ -155,11 +162,17 @@ def sample_release(shape: str = "pill", index: int = 0, resolution: int = WORLD_
         Default :meth:`Material.draw`.
     mesh : trimesh.Trimesh, optional
         The print's mesh, named ``shape`` (default: the sample ``shape``'s).
+    barrier : trimesh.Trimesh, optional
+        A clear barrier printed with it (the drug wins where they overlap), eroding at the material's
+        ``barrier_speed``: the drug's release by the two-material reference evaluator, with the print physics'
+        build-direction anisotropy and wetting lag (its offset and swelling are one material's).
     """
     material = material or Material.draw()
     mesh = sample_shape(shape) if mesh is None else mesh
     seconds_per_mm, g_per_mm3 = material.printed(index)
     physics = material.physics
+    if barrier is not None:
+        return _barrier_release(shape, mesh, barrier, material, seconds_per_mm, g_per_mm3)
     if physics is None:
         # the release the calibration's model gives with identity physics: the exact one (reference evaluator)
         end = 0.5 * float(np.max(mesh.extents))   # no point of the solid lies deeper
@@ -173,6 +186,22 @@ def sample_release(shape: str = "pill", index: int = 0, resolution: int = WORLD_
                                                 lag_s=physics.wetting_lag_s)
         release.truth["physics"] = dataclasses.asdict(physics)
     log.info("sample %s #%d: %.3f g, dissolves in %.0f s", shape, index, release.mass_g, release.duration_s)
+    return release
+
+
+def _barrier_release(shape: str, mesh, barrier, material: Material, seconds_per_mm: float,
+                     g_per_mm3: float) -> SampleRelease:
+    """A drug print with a clear barrier dissolving on the bench: only the drug darkens the water."""
+    from design.forward.twomaterial_reference import two_material_reference_release
+
+    physics = material.physics
+    model = two_material_reference_release(mesh, barrier, material.barrier_speed,
+                                           anisotropy=1.0 if physics is None else physics.anisotropy)
+    release = SampleRelease.from_simulation(shape, model.tau_mm, model.released_mm3, seconds_per_mm, g_per_mm3,
+                                            lag_s=0.0 if physics is None else physics.wetting_lag_s)
+    release.truth["barrier_speed"] = material.barrier_speed
+    log.info("sample %s with a barrier (speed %g): %.3f g, dissolves in %.0f s", shape, material.barrier_speed,
+             release.mass_g, release.duration_s)
     return release
 
 

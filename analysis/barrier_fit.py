@@ -1,0 +1,119 @@
+"""The barrier's relative speed s from runs of coated prints: each run's delay behind the drug's own curve.
+
+A drug body inside a barrier coat of uniform thickness c (every point of the drug's surface c from the coat's
+outer surface, as a box grown by c on every face or a convex body offset by c) releases exactly the uncoated
+drug's curve delayed by c / s in tau (mm of drug): every straight path from the bath crosses at least c of barrier
+at speed s, and c / s + (the drug's own distance) is reached along the coat's normal (paper eq. 5 with the
+barrier's slowness 1 / s; docs/materials.md). On the bench, with the drug calibrated (seconds per mm k, density rho,
+wetting lag), a coated print's measured mass is
+
+    m(t) = rho_r C((t - lag) / k_r - c / s),
+
+C the drug's simulated release (mm^3 against tau). Each run's print deviates a little from the material, so each run
+is fitted for its own (k_r, rho_r, D_r) by least squares, and s_r = c / D_r. The barrier speed is the mean of the
+runs' s_r, its uncertainty the standard error of that mean (the runs' spread over sqrt(n), which holds the prints'
+scatter and the fit's noise alike); one run gives the fit's own standard error (from its Jacobian).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from analysis.errors import AnalysisError
+
+ONSET_FRACTION = 0.02
+"""A run's release starts, for the delay's first guess, where it passes this fraction of its final mass."""
+
+
+@dataclass(frozen=True)
+class BarrierFit:
+    """The fitted barrier speed.
+
+    Attributes
+    ----------
+    speed : float
+        s, the barrier's erosion speed over the drug's.
+    error : float
+        Its standard uncertainty (standard error of the runs' mean; one run: the fit's own).
+    per_run : tuple of float
+        Each run's s_r.
+    delays_mm : tuple of float
+        Each run's delay D_r = c / s_r, mm of drug.
+    rms_g : tuple of float
+        Each run's RMS residual, g.
+    """
+
+    speed: float
+    error: float
+    per_run: tuple[float, ...]
+    delays_mm: tuple[float, ...]
+    rms_g: tuple[float, ...]
+
+
+def _fit_run(t_s: np.ndarray, mass_g: np.ndarray, tau: np.ndarray, curve: np.ndarray, k0: float, rho0: float,
+             lag_s: float) -> tuple[np.ndarray, float, float]:
+    """(k, rho, D), the delay's standard error and the RMS residual of one run."""
+    final = float(mass_g.max())
+    onset = float(t_s[np.argmax(mass_g > ONSET_FRACTION * final)])
+    d0 = max((onset - lag_s) / k0, 0.0)
+
+    def residual(p):
+        k, rho, d = p
+        return rho * np.interp((t_s - lag_s) / k - d, tau, curve, left=0.0, right=curve[-1]) - mass_g
+
+    fit = least_squares(residual, [k0, rho0, d0], x_scale=[k0, rho0, max(d0, 1e-3)],
+                        bounds=([0.5 * k0, 0.5 * rho0, 0.0], [2.0 * k0, 2.0 * rho0, np.inf]))
+    dof = max(t_s.size - 3, 1)
+    sigma2 = float(np.sum(fit.fun ** 2)) / dof
+    try:
+        cov = np.linalg.inv(fit.jac.T @ fit.jac) * sigma2
+        d_err = float(np.sqrt(max(cov[2, 2], 0.0)))
+    except np.linalg.LinAlgError:
+        d_err = float("inf")
+    return fit.x, d_err, float(np.sqrt(np.mean(fit.fun ** 2)))
+
+
+def fit_barrier_speed(runs: list[tuple[np.ndarray, np.ndarray]], coat_mm: float, tau_mm: np.ndarray,
+                      released_mm3: np.ndarray, seconds_per_mm: float, g_per_mm3: float, lag_s: float = 0.0
+                      ) -> BarrierFit:
+    """Fit s from runs of the same drug body in a uniform coat (module docstring).
+
+    Parameters
+    ----------
+    runs : list of (t_s, released_g)
+        Each run's measured drug mass against time since the drop.
+    coat_mm : float
+        The coat's thickness c, mm (as printed: the barrier mesh grown from the drug's).
+    tau_mm, released_mm3 : ndarray
+        The uncoated drug body's simulated release (the calibration's model).
+    seconds_per_mm, g_per_mm3, lag_s : float
+        The drug's calibration: the runs start from these.
+
+    Raises
+    ------
+    AnalysisError
+        Without runs, for a coat <= 0 or a run that releases nothing.
+    """
+    if not runs:
+        raise AnalysisError("barrier fit: no runs of coated prints")
+    if not coat_mm > 0:
+        raise AnalysisError(f"barrier fit: coat thickness must be > 0 mm, got {coat_mm!r}")
+    tau, curve = np.asarray(tau_mm, float), np.asarray(released_mm3, float)
+    speeds, delays, rms, errors = [], [], [], []
+    for i, (t_s, mass) in enumerate(runs):
+        t_s, mass = np.asarray(t_s, float), np.asarray(mass, float)
+        if t_s.size < 5 or not np.any(mass > 0):
+            raise AnalysisError(f"barrier fit: run {i} has {t_s.size} samples and {mass.max(initial=0):g} g released; "
+                                "a coated print's run must release")
+        (_, _, delay), d_err, r = _fit_run(t_s, mass, tau, curve, seconds_per_mm, g_per_mm3, lag_s)
+        if delay <= 0:
+            raise AnalysisError(f"barrier fit: run {i} shows no delay; its print releases at once (no coat?)")
+        speeds.append(coat_mm / delay)
+        errors.append(coat_mm * d_err / delay ** 2)
+        delays.append(delay)
+        rms.append(r)
+    s = np.asarray(speeds)
+    error = float(s.std(ddof=1) / np.sqrt(s.size)) if s.size > 1 else errors[0]
+    return BarrierFit(float(s.mean()), error, tuple(speeds), tuple(delays), tuple(rms))
