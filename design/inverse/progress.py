@@ -26,24 +26,24 @@ from design.inverse.optimize import IterationCallback
 PRINT_CHECK_EVALS = {"extruded": 110.0}
 """The time of a correction round's print check (extraction, the reference evaluator's release, the design grid's
 release) in evaluations of the run's grid, per design space (`DEFAULT_PRINT_CHECK_EVALS` for the others): default
-designs at resolution 128 took 20 nfc evaluations at a load of 12 and 40-100 at a load of 22 (the check's release
+designs at resolution 128 took 12 nfc evaluations at a load of 5, 20 at 12 and 40-100 at 22 (the check's release
 runs in threads of its own, an nfc evaluation solves J_conn's distances in threads) and 110 extruded ones, whose
 evaluations are ten times cheaper while the print is the same kind of solid
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
-DEFAULT_PRINT_CHECK_EVALS = 25.0
+DEFAULT_PRINT_CHECK_EVALS = 15.0
 """`PRINT_CHECK_EVALS` of the spaces it does not name."""
 OUTPUTS_EVALS = {"extruded": 700.0}
 """The time of the outputs (the print's extraction and release on the full lattice, the binary solid's release,
-the report) in evaluations of the run's grid, per design space (`DEFAULT_OUTPUTS_EVALS` for the others): 10-25 nfc
+the report) in evaluations of the run's grid, per design space (`DEFAULT_OUTPUTS_EVALS` for the others): 22-25 nfc
 evaluations at resolution 128, where the last round judged the print on the outputs' lattice and its release is
 kept (`design.inverse.release_cache`), and 700 extruded ones, whose rounds judge it on a coarser lattice
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
-DEFAULT_OUTPUTS_EVALS = 25.0
+DEFAULT_OUTPUTS_EVALS = 22.0
 """`OUTPUTS_EVALS` of the spaces it does not name."""
 COARSE_EVAL_WEIGHT = 0.12
 """The cost of an evaluation of a multi-start's coarse start (half the resolution) in evaluations of the run's grid:
 an eighth of the voxels, but fixed costs per evaluation and J_conn's threads, which a small grid keeps less busy,
-make it dearer (0.075-0.3 of a full-resolution one measured at 128 at loads of 12-22;
+make it dearer (0.15 of a full-resolution one measured at 128 at a load of 5, 0.075-0.3 at loads of 12-22;
 docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 RATE_MIN_EVALS = 3
 """Evaluations of a phase after which its own rate replaces the one carried from the phase before."""
