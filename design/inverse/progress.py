@@ -35,8 +35,8 @@ DEFAULT_PRINT_CHECK_EVALS = 15.0
 OUTPUTS_EVALS = {"extruded": 700.0}
 """The time of the outputs (the print's extraction and release on the full lattice, the binary solid's release,
 the report) in evaluations of the run's grid, per design space (`DEFAULT_OUTPUTS_EVALS` for the others): 22-25 nfc
-evaluations at resolution 128, where the last round judged the print on the outputs' lattice and its release is
-kept (`design.inverse.release_cache`), and 700 extruded ones, whose rounds judge it on a coarser lattice
+evaluations at resolution 128 (the print's release kept from the last round's check when that judged it on the
+outputs' lattice, `design.inverse.release_cache`), and 700 extruded ones, whose rounds judge it on a coarser lattice
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 DEFAULT_OUTPUTS_EVALS = 22.0
 """`OUTPUTS_EVALS` of the spaces it does not name."""
