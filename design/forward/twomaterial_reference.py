@@ -65,6 +65,9 @@ EDGE_CELLS = 0.5
 (its centroid's), so where the wetting time varies along a face it is resolved to within h/2."""
 SHRINK = 1e-9
 """Covered triangles shrunk by this about their centroids are the point sources of the fixed-point iteration."""
+CHUNK = 256
+"""Points per search of the fixed-point iteration (points of similar wetting time share a cap that prunes the
+search)."""
 SETTLED_MM = 1e-7
 """The fixed-point iteration stops when no wetting time falls by more than this, mm (each pass through a shrunk
 triangle can gain its size, about 1e-9 of a triangle's)."""
@@ -165,9 +168,19 @@ def _distance(mesh: trimesh.Trimesh | None, points: np.ndarray) -> np.ndarray:
     return Surface(mesh).nearest_stored(np.ascontiguousarray(points), np.zeros(len(mesh.faces)))[0]
 
 
-def _huygens(surface: Surface, points: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """min_t (offset_t + |p - t|) per point (offsets per face of the surface's mesh)."""
-    return surface.nearest_stored(np.ascontiguousarray(points), surface.stored(offset))[0]
+def _huygens(surface: Surface, points: np.ndarray, offset: np.ndarray, below: np.ndarray | None = None) -> np.ndarray:
+    """min_t (offset_t + |p - t|) per point (offsets per face of the surface's mesh), or ``below`` where that is
+    not less: the points are searched in chunks of similar ``below``, each with its largest as the search's cap."""
+    stored = surface.stored(offset)
+    if below is None:
+        return surface.nearest_stored(np.ascontiguousarray(points), stored)[0]
+    out = np.array(below, dtype=np.float64)
+    order = np.argsort(out, kind="stable")
+    for chunk in np.array_split(order, max(1, order.size // CHUNK)):
+        cap = float(out[chunk].max())
+        value, tri = surface.nearest_stored(np.ascontiguousarray(points[chunk]), stored, cap)
+        out[chunk] = np.where(tri >= 0, np.minimum(value, out[chunk]), out[chunk])
+    return out
 
 
 def wetting_times(faces: _Interfaces, s: float) -> list[np.ndarray]:
@@ -192,9 +205,10 @@ def wetting_times(faces: _Interfaces, s: float) -> list[np.ndarray]:
         before = w.copy()
         for piece, surface in zip(pieces, points):
             if surface is not None:
-                w[piece] = np.minimum(w[piece], _huygens(surface, centres[piece], w[piece]))
+                w[piece] = _huygens(surface, centres[piece], w[piece], w[piece])
         if s > 0.0:
-            w = np.minimum(w, _huygens(every, centres, np.where(np.isfinite(w), s * w, np.inf)) / s)
+            sw = np.where(np.isfinite(w), s * w, np.inf)
+            w = _huygens(every, centres, sw, sw) / s
         with np.errstate(invalid="ignore"):  # inf - inf where a triangle stays unreached
             if np.all((w == before) | (before - w <= SETTLED_MM)):
                 break
