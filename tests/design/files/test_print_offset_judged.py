@@ -8,6 +8,7 @@ from design.inverse.objective import rel_rmse
 from tests.design.files.test_print_physics_design import _outputs
 
 
+@pytest.mark.slow
 def test_the_print_is_design_stl_grown_by_the_offset_released_exactly(tmp_path):
     offset = 0.4
     problem, summary, stl = _outputs(tmp_path, trimesh.creation.icosphere(4, radius=5.0), print_offset_mm=offset,

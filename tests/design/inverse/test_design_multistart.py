@@ -116,6 +116,7 @@ def test_multistart_is_the_default_at_fine_resolutions_only():
     assert DesignConfig(target="zero-order", space="extruded", resolution=200).starts == 3
 
 
+@pytest.mark.slow
 def test_whole_starts_from_every_outline_keep_the_best_print(tmp_path):
     # a curve target whose solid square would release its core late: a square, a cross and a ring start, each a
     # whole run with its print corrected; the design is the start whose print fits best, as it is

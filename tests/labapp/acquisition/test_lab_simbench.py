@@ -48,6 +48,7 @@ def test_the_shipped_sample_dissolves_in_hours():
     assert np.all(np.diff(release.released_g) >= -1e-9)
 
 
+@pytest.mark.slow
 def test_faults_during_a_simulated_run_are_logged_and_the_run_goes_on(tmp_path, sim_calibration):
     calibration, _ = sim_calibration
     clock = SteppedClock()

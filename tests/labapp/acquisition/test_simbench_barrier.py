@@ -29,6 +29,7 @@ def test_a_coated_print_releases_its_drug_only_after_the_coat():
     assert coated.duration_s == pytest.approx(plain.duration_s + k * COAT_MM / 0.3, rel=0.01)
 
 
+@pytest.mark.slow
 def test_the_barrier_speed_is_recovered_from_three_coated_prints():
     drug, coat = _prints()
     rng = np.random.default_rng(3)

@@ -89,6 +89,7 @@ def test_the_default_keeps_the_hidden_anisotropy_it_earns(tmp_path):
     assert kept < 0.5 * iso
 
 
+@pytest.mark.slow
 def test_identity_physics_keeps_the_isotropic_model(tmp_path, capsys):
     set_csv = _bench_set(tmp_path / "set", PrintPhysics(), BUILD_DIRECTION)
     assert main(["calibrate-sim", str(set_csv), "--out", str(tmp_path / "cal"), "--resolution", str(COARSE),
@@ -200,6 +201,7 @@ def test_hidden_swelling_is_bracketed_by_the_slots_it_shuts_and_opens(tmp_path, 
     assert load_simcal(run.path).simulate_options()["swelling_mm"] == pytest.approx(physics["swelling_mm"])
 
 
+@pytest.mark.slow
 def test_a_physics_block_without_the_swelling_width_reads_as_none(tmp_path):
     set_csv = _bench_set(tmp_path / "set", PrintPhysics())
     run = calibrate_sim(set_csv, None, tmp_path / "cal", resolution=16, model="constant")
@@ -222,6 +224,7 @@ def test_a_physics_block_without_the_swelling_width_reads_as_none(tmp_path):
         load_simcal(run.path)
 
 
+@pytest.mark.slow
 def test_hidden_wetting_lag_is_recovered_and_delays_predictions_and_targets(tmp_path):
     """A 400 s wetting lag on the bench (isotropic otherwise): ``--physics lag`` recovers it within one 30 s frame
     and within 3 of its stated standard errors, leave-one-out falls, and every use of the calibration carries it:
