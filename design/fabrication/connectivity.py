@@ -55,7 +55,6 @@ plane p's face.
 from __future__ import annotations
 
 import os
-import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
@@ -79,19 +78,6 @@ OPENING_SLOWNESS = 1e-6
 SEED_WORKERS = max(1, min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1))
 """Threads that solve the seeds' distances at the same time (`Connectivity.submit`): the cores this process may
 use, at most 4 (one per seed of a 3D design with three mirror planes). The result does not depend on it."""
-
-_POOL: ThreadPoolExecutor | None = None
-_POOL_LOCK = threading.Lock()
-
-
-def _executor() -> ThreadPoolExecutor:
-    """The seeds' worker threads, shared by every `Connectivity` of the process (created on first use)."""
-    global _POOL
-    with _POOL_LOCK:
-        if _POOL is None:
-            _POOL = ThreadPoolExecutor(max_workers=SEED_WORKERS, thread_name_prefix="connectivity")
-        return _POOL
-
 
 def _pool(x: np.ndarray, c: int) -> np.ndarray:
     """Mean over blocks of ``c`` voxels per axis, blocks starting at index 0; the high end is zero-padded."""
@@ -162,7 +148,7 @@ class Connectivity:
         self._openings = [tuple(core)] + faces
         self._weights = [1.0] + [1.0 / len(faces) for _ in faces]
         self._buffers = [MarchBuffers(gated) for _ in self._openings]  # one per seed: the seeds solve in parallel
-        self._tasks: list[Future] = []
+        self._pool: ThreadPoolExecutor | None = None
         # all solid: every path inside is shorter than the gate's 10 (1 + sum of the gated sizes) voxels
         solid = np.ones(self.coarse_shape)
         self._d0 = [self._distance(solid, opening, gate=10.0 * (1.0 + sum(gated)))[0] for opening in self._openings]
@@ -211,10 +197,15 @@ class Connectivity:
         rc = _pool(rho, c)
         s = self.slowness(rc)
         cell = cell_mm3 * c ** len(self.shape)
-        for task in self._tasks:  # a call whose result was never taken (its caller raised) still holds the buffers
-            task.exception()
-        self._tasks = [_executor().submit(self._seed, seed, rc, s, cell) for seed in range(len(self._openings))]
-        return PendingConnectivity(self, rc, cell, self._tasks)
+        if self._pool is not None:  # a call whose result was never taken (its caller raised) still holds the buffers
+            self._pool.shutdown(wait=True)
+        # threads of this call only, joined when its result is taken: no thread outlives an evaluation (a process
+        # that forks afterwards copies no worker holding a lock)
+        self._pool = ThreadPoolExecutor(max_workers=min(SEED_WORKERS, len(self._openings)),
+                                        thread_name_prefix="connectivity")
+        tasks = [self._pool.submit(self._seed, seed, rc, s, cell) for seed in range(len(self._openings))]
+        self._pool.shutdown(wait=False)
+        return PendingConnectivity(self, rc, cell, tasks, self._pool)
 
     def _seed(self, seed: int, rc: np.ndarray, s: np.ndarray, cell: float):
         """One seed's part of J_conn: its weighted h, its tail (the core's; value, gradient by rc) and its share of
@@ -259,8 +250,9 @@ class Connectivity:
 class PendingConnectivity:
     """J_conn being computed in the worker threads (`Connectivity.submit`); `result` waits for it."""
 
-    def __init__(self, term: Connectivity, rc: np.ndarray, cell: float, tasks: list[Future]) -> None:
-        self.term, self.rc, self.cell, self.tasks = term, rc, cell, tasks
+    def __init__(self, term: Connectivity, rc: np.ndarray, cell: float, tasks: list[Future],
+                 pool: ThreadPoolExecutor) -> None:
+        self.term, self.rc, self.cell, self.tasks, self.pool = term, rc, cell, tasks, pool
 
     def result(self) -> tuple[float, np.ndarray]:
         """J_conn and dJ_conn/drho, as `Connectivity.__call__` returns them: the seeds' parts summed in seed order,
@@ -276,6 +268,7 @@ class PendingConnectivity:
                 value_tail += tail[0]
                 g_tail += tail[1]
             s_bar += s_bar_seed
+        self.pool.shutdown(wait=True)  # every task is done: its threads end now
         value = float(np.sum(rc ** 2 * h_sum) * self.cell) + value_tail
         ds_drho = -2.0 * (term.s_void - 1.0) * (1.0 - rc)
         g_coarse = 2.0 * rc * h_sum * self.cell + s_bar * ds_drho + g_tail
