@@ -18,8 +18,8 @@ INJECT = {10: "camera", 30: "link", 60: "excursion"}
 """Frame index after which each fault is injected."""
 COLD_FRAMES = 12
 """Cold water keeps coming for at least this many frames (24 min) after the excursion starts, and on until the
-excursion's alarm is raised: the plate's monitor polls on the wall clock, so at an unbounded clock speed a brief
-dip could fall between two of its readings."""
+excursion's alarm is raised, each frame until then waiting up to 0.5 wall seconds for it: the plate's monitor
+polls on the wall clock, so at an unbounded clock speed a dip could otherwise fall between two of its readings."""
 
 
 @pytest.mark.slow
@@ -38,6 +38,8 @@ def test_four_hours_with_faults_through_the_gui(qtbot, tmp_path, sim_calibration
             return
         if INJECT[60] in injected and (event.index < 60 + COLD_FRAMES or not excursion_raised.is_set()):
             win.simulated.bench.cool_bath(6.0)    # more cold water: the bath stays below the band
+            if not excursion_raised.is_set():     # and the next frame waits up to 0.5 s for the monitor's poll
+                excursion_raised.wait(0.5)
         if event.index not in INJECT:
             return
         what = INJECT[event.index]
