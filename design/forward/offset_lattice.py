@@ -45,7 +45,7 @@ import numpy as np
 from numba import njit
 
 from design.forward.distance import Surface, closest_on_triangle, inside_sign, sign_and_direction
-from design.forward.quadrature import BAND, BLOCK, RIDGE_ANGLE_DEG, SPLIT, Lattice, Ramps
+from design.forward.quadrature import BAND, BLOCK, RIDGE_ANGLE_DEG, SPLIT, Lattice, Ramps, neighbour_candidates
 
 CERTIFICATE_TOLERANCE = 1e-7
 """A certificate point y* may lie this fraction of a lattice spacing closer than the offset to the mesh (round-off)."""
@@ -87,7 +87,6 @@ def _subcell_ramps(cells, base, tri_a, tri_b, first, h, split, vx, vx_phys, k_fa
     cell `base`), by exact distances to the triangles closest to the cell and its 26 neighbours (`tri_a`: by
     distance, `tri_b`: by arrival time): T as :meth:`PrintLattice.arrival` gives it (``vx_phys`` the triangles in
     physical mm, ``k_face`` their metric offsets)."""
-    nx, ny, nz = tri_a.shape
     hs = h / split
     per = split ** 3
     start = np.zeros(cells.shape[0] * per)
@@ -95,19 +94,7 @@ def _subcell_ramps(cells, base, tri_a, tri_b, first, h, split, vx, vx_phys, k_fa
     cand = np.empty(54, dtype=np.int64)
     for c in range(cells.shape[0]):
         ci, cj, ck = cells[c, 0], cells[c, 1], cells[c, 2]
-        n_cand = 0
-        for i in range(max(ci - 1, 0), min(ci + 2, nx)):
-            for j in range(max(cj - 1, 0), min(cj + 2, ny)):
-                for k in range(max(ck - 1, 0), min(ck + 2, nz)):
-                    for t in (tri_a[i, j, k], tri_b[i, j, k]):
-                        seen = t < 0
-                        for m in range(n_cand):
-                            if cand[m] == t:
-                                seen = True
-                                break
-                        if not seen:
-                            cand[n_cand] = t
-                            n_cand += 1
+        n_cand = neighbour_candidates(tri_a, tri_b, ci, cj, ck, cand)
         s = c * per
         for a in range(split):
             px = first[0] + (ci + base[0]) * h + (a + 0.5) * hs - 0.5 * h

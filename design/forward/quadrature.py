@@ -29,6 +29,27 @@ BLOCK = 32
 """Lattice cells per axis of a block, the unit of evaluation: only blocks that meet the solid are evaluated."""
 
 
+@njit(cache=True, nogil=True, inline="always")
+def neighbour_candidates(tri_a, tri_b, ci, cj, ck, cand):
+    """The distinct triangles of ``tri_a`` and ``tri_b`` (closest triangles per lattice cell, -1 for none) over
+    cell (ci, cj, ck) and its 26 neighbours, written to the front of ``cand``; returns how many."""
+    nx, ny, nz = tri_a.shape
+    n_cand = 0
+    for i in range(max(ci - 1, 0), min(ci + 2, nx)):
+        for j in range(max(cj - 1, 0), min(cj + 2, ny)):
+            for k in range(max(ck - 1, 0), min(ck + 2, nz)):
+                for t in (tri_a[i, j, k], tri_b[i, j, k]):
+                    seen = t < 0  # a cell far outside has none
+                    for m in range(n_cand):
+                        if cand[m] == t:
+                            seen = True
+                            break
+                    if not seen:
+                        cand[n_cand] = t
+                        n_cand += 1
+    return n_cand
+
+
 @njit(cache=True, nogil=True)
 def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_n, edge_n, vert_n, faces):
     """Ramps of the split^3 sub-cells of each listed lattice cell, by exact distances to the triangles
@@ -43,7 +64,6 @@ def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_
     sub-cell (equal when the sub-cell lies outside the solid). `cells` index the arrays `tri_u`, `tri_t` of a
     block whose cell (0, 0, 0) is the lattice's cell `base`.
     """
-    nx, ny, nz = tri_u.shape
     hs = h / split
     per = split ** 3
     start = np.zeros(cells.shape[0] * per)
@@ -52,19 +72,7 @@ def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_
     value = np.empty(54)
     for c in range(cells.shape[0]):
         ci, cj, ck = cells[c, 0], cells[c, 1], cells[c, 2]
-        n_cand = 0
-        for i in range(max(ci - 1, 0), min(ci + 2, nx)):
-            for j in range(max(cj - 1, 0), min(cj + 2, ny)):
-                for k in range(max(ck - 1, 0), min(ck + 2, nz)):
-                    for t in (tri_u[i, j, k], tri_t[i, j, k]):
-                        seen = t < 0  # a cell far outside has none
-                        for m in range(n_cand):
-                            if cand[m] == t:
-                                seen = True
-                                break
-                        if not seen:
-                            cand[n_cand] = t
-                            n_cand += 1
+        n_cand = neighbour_candidates(tri_u, tri_t, ci, cj, ck, cand)
         s = c * per
         for a in range(split):
             px = first[0] + (ci + base[0]) * h + (a + 0.5) * hs - 0.5 * h
