@@ -75,10 +75,69 @@ def _fit_run(t_s: np.ndarray, mass_g: np.ndarray, tau: np.ndarray, curve: np.nda
     return fit.x, d_err, float(np.sqrt(np.mean(fit.fun ** 2)))
 
 
+@dataclass(frozen=True)
+class CoatedRun:
+    """One run of a coated print, with its drug body's simulated release.
+
+    Attributes
+    ----------
+    t_s, released_g : (K,) ndarray of float
+        The measured drug mass against time since the drop, s and g.
+    coat_mm : float
+        The coat's thickness c, mm (as printed: every point of the drug's surface c from the bath).
+    tau_mm, released_mm3 : (M,) ndarray of float
+        The uncoated drug body's simulated release (the calibration's model), mm and mm^3.
+    """
+
+    t_s: np.ndarray
+    released_g: np.ndarray
+    coat_mm: float
+    tau_mm: np.ndarray
+    released_mm3: np.ndarray
+
+
+def fit_barrier_runs(runs: list[CoatedRun], seconds_per_mm: float, g_per_mm3: float, lag_s: float = 0.0
+                     ) -> BarrierFit:
+    """Fit s from runs of coated prints, each with its own coat and drug body (module docstring).
+
+    Parameters
+    ----------
+    runs : list of CoatedRun
+    seconds_per_mm, g_per_mm3, lag_s : float
+        The drug's calibration: each run's fit starts from these.
+
+    Raises
+    ------
+    AnalysisError
+        Without runs, for a coat <= 0, a run that releases nothing or one that shows no delay.
+    """
+    if not runs:
+        raise AnalysisError("barrier fit: no runs of coated prints")
+    speeds, delays, rms, errors = [], [], [], []
+    for i, run in enumerate(runs):
+        if not run.coat_mm > 0:
+            raise AnalysisError(f"barrier fit: run {i}: coat thickness must be > 0 mm, got {run.coat_mm!r}")
+        t_s, mass = np.asarray(run.t_s, float), np.asarray(run.released_g, float)
+        if t_s.size < 5 or not np.any(mass > 0):
+            raise AnalysisError(f"barrier fit: run {i} has {t_s.size} samples and {mass.max(initial=0):g} g released; "
+                                "a coated print's run must release")
+        (_, _, delay), d_err, r = _fit_run(t_s, mass, np.asarray(run.tau_mm, float),
+                                           np.asarray(run.released_mm3, float), seconds_per_mm, g_per_mm3, lag_s)
+        if delay <= 0:
+            raise AnalysisError(f"barrier fit: run {i} shows no delay; its print releases at once (no coat?)")
+        speeds.append(run.coat_mm / delay)
+        errors.append(run.coat_mm * d_err / delay ** 2)
+        delays.append(delay)
+        rms.append(r)
+    s = np.asarray(speeds)
+    error = float(s.std(ddof=1) / np.sqrt(s.size)) if s.size > 1 else errors[0]
+    return BarrierFit(float(s.mean()), error, tuple(speeds), tuple(delays), tuple(rms))
+
+
 def fit_barrier_speed(runs: list[tuple[np.ndarray, np.ndarray]], coat_mm: float, tau_mm: np.ndarray,
                       released_mm3: np.ndarray, seconds_per_mm: float, g_per_mm3: float, lag_s: float = 0.0
                       ) -> BarrierFit:
-    """Fit s from runs of the same drug body in a uniform coat (module docstring).
+    """Fit s from runs of the same drug body in one uniform coat (:func:`fit_barrier_runs` with a shared body).
 
     Parameters
     ----------
@@ -96,24 +155,5 @@ def fit_barrier_speed(runs: list[tuple[np.ndarray, np.ndarray]], coat_mm: float,
     AnalysisError
         Without runs, for a coat <= 0 or a run that releases nothing.
     """
-    if not runs:
-        raise AnalysisError("barrier fit: no runs of coated prints")
-    if not coat_mm > 0:
-        raise AnalysisError(f"barrier fit: coat thickness must be > 0 mm, got {coat_mm!r}")
-    tau, curve = np.asarray(tau_mm, float), np.asarray(released_mm3, float)
-    speeds, delays, rms, errors = [], [], [], []
-    for i, (t_s, mass) in enumerate(runs):
-        t_s, mass = np.asarray(t_s, float), np.asarray(mass, float)
-        if t_s.size < 5 or not np.any(mass > 0):
-            raise AnalysisError(f"barrier fit: run {i} has {t_s.size} samples and {mass.max(initial=0):g} g released; "
-                                "a coated print's run must release")
-        (_, _, delay), d_err, r = _fit_run(t_s, mass, tau, curve, seconds_per_mm, g_per_mm3, lag_s)
-        if delay <= 0:
-            raise AnalysisError(f"barrier fit: run {i} shows no delay; its print releases at once (no coat?)")
-        speeds.append(coat_mm / delay)
-        errors.append(coat_mm * d_err / delay ** 2)
-        delays.append(delay)
-        rms.append(r)
-    s = np.asarray(speeds)
-    error = float(s.std(ddof=1) / np.sqrt(s.size)) if s.size > 1 else errors[0]
-    return BarrierFit(float(s.mean()), error, tuple(speeds), tuple(delays), tuple(rms))
+    return fit_barrier_runs([CoatedRun(t, m, coat_mm, tau_mm, released_mm3) for t, m in runs], seconds_per_mm,
+                            g_per_mm3, lag_s)

@@ -13,7 +13,9 @@ import dataclasses
 import datetime as _dt
 import json
 import logging
+import os
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,6 +47,7 @@ from analysis.simcal import MODELS
 from analysis.simcal_fit import DEFAULT_MAX_OFFSET_S
 from design.geometry.voxelize import DEFAULT_RESOLUTION
 from labapp.figures.loo_plot import plot_loo
+from labapp.jobs.calibrate_barrier import barrier_block, split_coated
 from labapp.jobs.printrelease import mesh_release
 from labapp.records import operators
 from labapp.records.audit import Action
@@ -58,6 +61,8 @@ from labapp.records.simcalset import SetRow, read_set
 
 MIN_RESOLUTION, MAX_RESOLUTION = 8, 512
 """The resolutions a calibration accepts, voxels along each mesh's longest side."""
+ROW_WORKERS = max(os.cpu_count() or 1, 1)
+"""Meshes released at once when a print physics value is tried (:meth:`_Simulations.simulate_rows`)."""
 Progress = Callable[[float, str], None]
 
 log = logging.getLogger(__name__)
@@ -191,10 +196,11 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
         except (AnalysisError, OSError, ValueError, KeyError) as exc:
             raise SimCalError(f"{bench_calibration}: not a bench calibration ({exc})") from exc
     meshes = _check_inputs(set_csv, rows, bench)
+    rows, coated = split_coated(set_csv, rows)     # coated prints (a barrier_mesh) give the barrier's speed
     with folder_lock(out_dir):      # one writer (sfr calibrate-sim, the GUI's wizard); made here, after the checks
         _make_out(out_dir)
         return _fit_and_write(set_csv, rows, bench, bench_calibration, meshes, out_dir, model, resolution,
-                              max_offset_s, say, operator, physics, second)
+                              max_offset_s, say, operator, physics, second, coated)
 
 
 def _has_channels(grid: tuple) -> bool:
@@ -244,8 +250,22 @@ class _Simulations:
                                                interpolated=True)
         return self.simulated[key]
 
+    def simulate_rows(self, values: dict) -> None:
+        """Every row's mesh not yet simulated at print physics ``values``, up to `ROW_WORKERS` meshes at a time
+        (their kernels release the GIL; each release is the same whichever thread makes it)."""
+        todo: dict[tuple, SetRow] = {}
+        for row in self.rows:
+            key = (row.mesh, *(round(values[p], 9) for p in PHYSICS_PARAMETERS))
+            if key not in self.simulated:
+                todo.setdefault(key, row)
+        if len(todo) < 2:
+            return
+        with ThreadPoolExecutor(max_workers=min(len(todo), ROW_WORKERS)) as pool:
+            list(pool.map(lambda row: self.simulation(row, values), todo.values()))
+
     def shapes_at(self, values: dict) -> list[ShapeRun]:
         """Every run with its mesh's release at print physics ``values``."""
+        self.simulate_rows(values)
         out = []
         for row, (where, t, g, mass, water) in zip(self.rows, self.measured):
             tau, vol, _ = self.simulation(row, values)
@@ -259,12 +279,11 @@ class _Simulations:
 
 
 def _read_runs(set_csv: Path, bench, sims: _Simulations, physics: str, say: Progress) -> None:
-    """Every run's measured curve into ``sims.measured``, each mesh simulated as designed after its run."""
+    """Every run's measured curve into ``sims.measured``, then every mesh simulated as designed."""
     n = len(sims.rows)
     for k, row in enumerate(sims.rows):
         where = f"{set_csv.name} row {row.row}"
-        say(0.6 * k / n if physics == "none" else 0.1 * k / n,
-            f"{where}: reading {row.run.name} and simulating {row.mesh.name} ...")
+        say(0.3 * k / n if physics == "none" else 0.05 * k / n, f"{where}: reading {row.run.name} ...")
         try:
             curve = read_physical_curve(row.run, calibration=bench)
         except CurveFileError as exc:
@@ -278,6 +297,9 @@ def _read_runs(set_csv: Path, bench, sims: _Simulations, physics: str, say: Prog
                               "the bench calibration")
         keep = curve.t_s >= 0
         sims.measured.append((where, curve.t_s[keep], curve.released_g[keep], float(mass), float(water)))
+    say(0.3 if physics == "none" else 0.05, f"simulating the {len({r.mesh for r in sims.rows})} meshes as designed ...")
+    sims.simulate_rows(PHYSICS_IDENTITY)
+    for row in sims.rows:
         sims.simulation(row, PHYSICS_IDENTITY)
 
 
@@ -433,7 +455,7 @@ def _write_outputs(out_dir: Path, doc: dict, rows: list[SetRow], models: _ModelF
 
 def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, meshes: dict, out_dir: Path,
                    model: str, resolution: int, max_offset_s: float, say: Progress, operator,
-                   physics: str = "none", second_resolution: int = 0) -> SimCalRun:
+                   physics: str = "none", second_resolution: int = 0, coated: list | None = None) -> SimCalRun:
     """The work of :func:`calibrate_sim` on checked inputs, into the locked ``out_dir``."""
     n = len(rows)
     sims = _Simulations(rows, meshes, resolution)
@@ -458,6 +480,9 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
     doc["band"] = band_block(honest.loo if honest else models.loos[chosen], shapes,
                              honest.loo_values if honest else None, doc["physics"]["uncertainty"],
                              lambda i, values: sims.simulation(rows[i], values)[:2])
+    if coated:
+        doc["barrier"] = barrier_block(set_csv, coated, lambda row: sims.simulation(row, values), models.fits[chosen].cal,
+                                       doc["physics"], bench, say)
     say(0.96, f"writing {out_dir} ...")
     _write_outputs(out_dir, doc, rows, models)
     cal = models.fits[chosen].cal

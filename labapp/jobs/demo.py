@@ -1,13 +1,15 @@
 """The headless demo: the whole measure -> calibrate -> design loop on the simulated bench, on an instant clock.
 
 1. a calibration series (bench calibration, paper section 4.2);
-2. short release runs of the calibration prints (:data:`CALIBRATION_SHAPES`: a flat and a tall print that
-   ``calibrate-sim --plan`` proposes and three sample objects; a frame a minute, bath already hot; one in 400 g of
+2. short release runs of the calibration prints (:data:`CALIBRATION_SHAPES`: three sample objects and a flat, a
+   tall and a lying print that ``calibrate-sim --plan`` proposes; a frame a minute, bath already hot; one in 400 g of
    water);
 3. ``calibrate-sim`` on them: seconds per mm, grams per mm^3 and the leave-one-out table (section 4.3);
 4. a release run of a further object at the paper's 11 s per frame, with a camera-busy error, a corrupt
-   frame and a hotplate link drop injected on purpose, and its offline analysis;
-5. an inverse design whose target is that object's measured curve, predicted in grams over hours;
+   frame and a hotplate link drop injected on purpose, and its offline analysis (beside step 3, on another thread:
+   neither needs the other; its progress lines follow step 3's);
+5. an inverse design whose target is that object's measured curve, predicted in grams over hours (the object's
+   prediction from its mesh is made beside it);
 6. one picture: the leave-one-out predictions, and the further object measured, predicted from its mesh
    and designed, each prediction with its error band (:mod:`labapp.jobs.bands`).
 
@@ -18,8 +20,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,13 +59,18 @@ from labapp.records.verification import verify_run
 
 CAL_MASSES_G = (0.25, 0.5, 0.875, 1.25, 1.75, 2.25)
 """Cumulative filament masses of the simulated calibration series, g (up to above a sample's ~1.8 g)."""
-CALIBRATION_SHAPES = ("sphere", "spinner_top", "csg", "flat", "tall")
-"""The simulation calibration set: three sample objects and the flat slab and the tall column that
-``calibrate-sim --plan`` proposes first (:data:`labapp.jobs.plan.GENERATED`; round prints erode at a mix of the
-in-plane and build-direction rates and confound the anisotropy with the time scale, the flat and the tall print
-separate them). The further object is any other sample."""
-CALIBRATION_WATER_G = (WATER_G, 400.0, WATER_G, WATER_G, WATER_G)
+CALIBRATION_SHAPES = ("sphere", "spinner_top", "csg", "flat", "tall", "bar")
+"""The simulation calibration set: three sample objects and three generated prints of ``calibrate-sim --plan``
+(:data:`labapp.jobs.plan.GENERATED`): the flat slab and the tall column it proposes first and a bar lying down.
+Round prints erode at a mix of the in-plane and build-direction rates and confound the anisotropy with the time
+scale; the flat and the tall print separate them, and the bar keeps them separated in each leave-one-out refit
+that lacks one of the two. The further object is any other sample."""
+CALIBRATION_WATER_G = (WATER_G, 400.0, WATER_G, WATER_G, WATER_G, WATER_G)
 """Water of each calibration run, g: one run in less water shows that water masses may differ."""
+PRINT_INDEX = {"sphere": 0, "spinner_top": 1, "csg": 2, "flat": 3, "tall": 4, "bar": 6}
+"""Each calibration print's index of the bench's per-print draws (:meth:`Material.printed`)."""
+FURTHER_INDEX = 5
+"""The further object's index of the bench's per-print draws."""
 TRUTH_RESOLUTION = 80
 """Voxels along the longest side of the simulated bench's own (hidden) forward simulations."""
 CALIBRATION_INTERVAL_S = 60.0
@@ -70,11 +79,14 @@ SIMCAL_RESOLUTION, DESIGN_RESOLUTION = 48, 40
 """The demo's simulation-calibration resolution and design grid."""
 DESIGN_ITERATIONS = MAX_ITER.default
 """The demo design's evaluation budget: `sfr design`'s own default (at 40 voxels its evaluations take seconds)."""
+LINK_DROP_S = 120.0
+"""How long the further object's run loses its hotplate link, simulated s: a few frames, so that the driver's
+reconnects, which back off in wall seconds, find the link back however fast the frames render."""
 DEMO_DESIGN_PLACEHOLDER = "zero-order"
 """The target the design settings are checked with before the measured curve that replaces it exists."""
 DEMO_FREE_BYTES = 200_000_000
-"""Free disk space a demo needs before it starts, bytes: a session's folder holds about 70 MB (the frames of its
-five runs), with a margin for the file system's blocks and the analysis caches."""
+"""Free disk space a demo needs before it starts, bytes: a session's folder holds about 95 MB (the frames of its
+seven runs), with a margin for the file system's blocks and the analysis caches."""
 
 
 @dataclass(frozen=True)
@@ -178,14 +190,17 @@ def _inject_faults(sim: SimulatedBench) -> Callable[[EngineEvent], None]:
         elif index == 120:
             sim.corrupt_frames(1)
         elif index == 180:
-            sim.drop_hotplate_link(900.0)
+            sim.drop_hotplate_link(LINK_DROP_S)
     return on_event
 
 
 def simulated_run(clock: SteppedClock, calibration: BenchCalibration, release: SampleRelease, data_dir: Path,
                   *, interval_s: float, water_g: float = WATER_G, faults: bool = False, hotplate: bool = True,
-                  progress: Callable[[str], None] = lambda text: None) -> Path:
+                  progress: Callable[[str], None] = lambda text: None, min_duration_s: float | None = None) -> Path:
     """One release run of a simulated object until steady state; returns its run folder.
+
+    The run is not stopped as steady before ``min_duration_s`` (default: half the object's dissolution; a print
+    that releases nothing for longer, behind a barrier, needs more).
 
     The run records the object's weighed mass (its true mass to 0.1 mg) and the water, as an operator would.
     Without ``hotplate`` the bath is taken as already at temperature (no emulator, no heating phase).
@@ -195,7 +210,7 @@ def simulated_run(clock: SteppedClock, calibration: BenchCalibration, release: S
     try:
         config = RunConfig(name=f"demo-{release.name}", interval_s=interval_s,
                            max_duration_s=release.duration_s + 3600.0, stop_on_steady=True,
-                           min_duration_s=0.5 * release.duration_s,
+                           min_duration_s=0.5 * release.duration_s if min_duration_s is None else min_duration_s,
                            object_mass_g=round(release.mass_g, 4), object_name=release.name, auto_drop=True,
                            notes="sfr demo: simulated bench", bath=BathSettings(water_g=water_g, stable_step_s=60.0))
         proc = RunProcedure(config, sim.bench(), data_dir, calibration)
@@ -290,14 +305,23 @@ def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interva
     progress(f"   {cal_path}")
     truths: dict[str, dict] = {}
     set_csv = _calibration_runs(out_dir, clock, calibration, calibration_interval_s, material, truths, progress)
-    cal_run, simcal, loo = _calibrate_simulation(set_csv, cal_path, out_dir / "simcal", resolution, progress)
-    run_dir, curve, faults = _further_run(out_dir, clock, calibration, sample, interval_s, material, truths, progress)
+    held = _HeldProgress(progress)
+    with ThreadPoolExecutor(max_workers=1) as pool:   # the further object's run goes on while calibrate-sim fits
+        further = pool.submit(_further_run, out_dir, clock, calibration, sample, interval_s, material, truths, held)
+        cal_run, simcal, loo = _calibrate_simulation(set_csv, cal_path, out_dir / "simcal", resolution, progress)
+        held.release()
+        run_dir, curve, faults = further.result()
     curve_csv = out_dir / "analysis" / "curve.csv"
 
     progress(f"5. design from the measured curve (nfc, {design.resolution}^3, {design.max_iter} evaluations) ...")
     design_dir = out_dir / "design"
-    result, physical = design_from_target(dataclasses.replace(design, target=str(curve_csv)), design_dir, simcal=simcal)
-    prediction = _predict_further(curve_csv, sample, simcal, cal_run, progress)
+    held = _HeldProgress(progress)
+    with ThreadPoolExecutor(max_workers=1) as pool:   # the further object predicted from its mesh beside the design
+        predicted = pool.submit(_predict_further, curve_csv, sample, simcal, cal_run, held)
+        result, physical = design_from_target(dataclasses.replace(design, target=str(curve_csv)), design_dir,
+                                              simcal=simcal)
+        held.release()
+        prediction = predicted.result()
     figure = out_dir / "demo.png"
     designed = np.genfromtxt(design_dir / "curves_physical.csv", delimiter=",", names=True)
     _plot(cal_run, prediction.measured, prediction.predicted, designed, sample, figure, prediction.band)
@@ -312,6 +336,28 @@ def _run_demo(out_dir: Path, sample: str, interval_s: float, calibration_interva
                          material.seconds_per_mm)
     _write_summary(result_, result.status, physical, cal_run, prediction)
     return result_
+
+
+class _HeldProgress:
+    """Progress lines of a step that runs beside another: held back until :meth:`release`, then passed on in order
+    and as they come."""
+
+    def __init__(self, progress: Callable[[str], None]) -> None:
+        self.progress, self.lines, self.held, self.lock = progress, [], True, threading.Lock()
+
+    def __call__(self, text: str) -> None:
+        with self.lock:
+            if self.held:
+                self.lines.append(text)
+            else:
+                self.progress(text)
+
+    def release(self) -> None:
+        """Pass on the lines held so far, and every later line as it comes."""
+        with self.lock:
+            for text in self.lines:
+                self.progress(text)
+            self.lines, self.held = [], False
 
 
 def _truth_like_the_model(truths: dict[str, dict], simcal: SimCalFile) -> dict:
@@ -351,9 +397,10 @@ def _calibration_runs(out_dir: Path, clock: SteppedClock, calibration: BenchCali
     set_rows = ["run,mesh,object_mass_g"]
     progress(f"2. short runs of {len(CALIBRATION_SHAPES)} calibration prints ({', '.join(CALIBRATION_SHAPES)}; "
              f"{interval_s:g} s per frame) ...")
-    for index, (shape, water) in enumerate(zip(CALIBRATION_SHAPES, CALIBRATION_WATER_G)):
+    for shape, water in zip(CALIBRATION_SHAPES, CALIBRATION_WATER_G):
         mesh = calibration_mesh(shape)
-        release = sample_release(shape, index=index, resolution=TRUTH_RESOLUTION, material=material, mesh=mesh)
+        release = sample_release(shape, index=PRINT_INDEX[shape], resolution=TRUTH_RESOLUTION, material=material,
+                                 mesh=mesh)
         mesh.export(meshes / f"{shape}.stl")
         run_dir = simulated_run(clock, calibration, release, out_dir / "runs", interval_s=interval_s,
                                 water_g=water, hotplate=False)
@@ -387,7 +434,7 @@ def _further_run(out_dir: Path, clock: SteppedClock, calibration: BenchCalibrati
     ``cells.csv``); returns the run folder, the measured curve and the warnings in its event log."""
     progress(f"4. release run of a further object, '{sample}' ({interval_s:g} s per frame; faults injected: "
              "camera busy, corrupt frame, hotplate link drop) ...")
-    release = sample_release(sample, index=len(CALIBRATION_SHAPES), resolution=TRUTH_RESOLUTION, material=material)
+    release = sample_release(sample, index=FURTHER_INDEX, resolution=TRUTH_RESOLUTION, material=material)
     truths[sample] = release.truth
     sample_shape(sample).export(out_dir / "meshes" / f"{sample}.stl")
     run_dir = simulated_run(clock, calibration, release, out_dir / "runs", interval_s=interval_s, faults=True,

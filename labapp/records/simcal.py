@@ -64,6 +64,9 @@ class SimCalFile:
     release_method : str
         How the calibration made each mesh's release (:data:`RELEASE_METHODS`), and so how its predictions do: a
         file without the field was made by the grid alone (:data:`OLD_RELEASE_METHOD`).
+    barrier : dict or None
+        The file's ``barrier`` block (``speed``, ``error``: the barrier's relative speed fitted from coated prints,
+        :mod:`labapp.jobs.calibrate_barrier`); None for a calibration without coated prints.
     """
 
     cal: SimCal
@@ -74,6 +77,7 @@ class SimCalFile:
     physics: dict = dataclasses.field(default_factory=lambda: dict(PHYSICS_IDENTITY))
     band: dict | None = None
     release_method: str = RELEASE_METHOD
+    barrier: dict | None = None
 
     def describe(self) -> str:
         """One line for reports and GUI labels."""
@@ -146,7 +150,15 @@ def load_simcal(path: str | Path) -> SimCalFile:
             float(band["seconds_per_mm_rel_sd"]), float(band["g_per_mm3_rel_sd"]), float(band["level"])
         except (KeyError, TypeError, ValueError) as exc:
             raise SimCalError(f"{path}: bad band block ({exc}); recalibrate with sfr calibrate-sim") from exc
-    return SimCalFile(cal, resolution, dx, water, path, physics, band, method)
+    barrier = doc.get("barrier")
+    if barrier is not None:
+        try:
+            speed, error = float(barrier["speed"]), float(barrier["error"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise SimCalError(f"{path}: bad barrier block ({exc}); expected speed and error") from exc
+        if not (math.isfinite(speed) and speed >= 0 and error >= 0):
+            raise SimCalError(f"{path}: barrier.speed must be a number >= 0 with an error >= 0, got {speed}, {error}")
+    return SimCalFile(cal, resolution, dx, water, path, physics, band, method, barrier)
 
 
 def check_resolution(simcal: SimCalFile, resolution: int | None) -> int:

@@ -17,7 +17,7 @@ from labapp.records.manifests import FRAMES_CSV
 from labapp.records.simcal import SimCalError
 
 SET_COLUMNS = ("run", "mesh", "object_mass_g")
-"""The columns a set file must have (``water_g`` is optional)."""
+"""The columns a set file must have (``water_g`` and ``barrier_mesh`` are optional)."""
 
 
 @dataclass(frozen=True)
@@ -29,11 +29,13 @@ class SetRow:
     mesh: Path
     object_mass_g: float | None
     water_g: float | None = None
+    barrier_mesh: Path | None = None
+    """A clear barrier printed around the drug ``mesh`` (a coated print, :mod:`labapp.jobs.calibrate_barrier`)."""
 
 
 def read_set(path: str | Path) -> list[SetRow]:
-    """Read a calibration set file: columns ``run,mesh,object_mass_g`` (and optionally ``water_g``), paths
-    relative to the file.
+    """Read a calibration set file: columns ``run,mesh,object_mass_g`` (and optionally ``water_g`` and
+    ``barrier_mesh``, a coated print's barrier), paths relative to the file.
 
     Raises
     ------
@@ -58,6 +60,10 @@ def read_set(path: str | Path) -> list[SetRow]:
         for what, p in (("run", run), ("mesh", mesh)):
             if not row[what] or not p.exists():
                 raise SimCalError(f"{path}: row {i}: {what} {row[what]!r} does not exist (looked for {p})")
+        barrier = path.parent / row["barrier_mesh"] if row.get("barrier_mesh") else None
+        if barrier is not None and not barrier.is_file():
+            raise SimCalError(f"{path}: row {i}: barrier_mesh {row['barrier_mesh']!r} does not exist (looked for "
+                              f"{barrier})")
         grams = {}
         for column in ("object_mass_g", "water_g"):
             text = row.get(column, "")
@@ -69,7 +75,7 @@ def read_set(path: str | Path) -> list[SetRow]:
                 grams[column] = math.nan
             if not (math.isfinite(grams[column]) and grams[column] > 0):
                 raise SimCalError(f"{path}: row {i}: {column} {text!r} is not a positive number of grams")
-        out.append(SetRow(i, run, mesh, grams.get("object_mass_g"), grams.get("water_g")))
+        out.append(SetRow(i, run, mesh, grams.get("object_mass_g"), grams.get("water_g"), barrier))
     if len(out) < 2:
         raise SimCalError(f"{path}: {len(out)} runs; a calibration needs at least 2 (4 or more recommended)")
     _refuse_repeated_runs(path, out)

@@ -14,14 +14,26 @@ TAKEN = {"space": "space", "resolution": "resolution", "domain_mm": "domain_mm",
 """The `sfr design` settings a two-material design takes: setting -> `TwoMaterialSettings` field."""
 
 
+CALIBRATED = "calibrated"
+"""``--barrier-speed`` without a number: the --simcal calibration's barrier speed
+(:data:`labapp.jobs.design_barrier_measured.CALIBRATED`, kept here so that `sfr --help` loads no job)."""
+
+
+def _barrier_speed(text: str) -> float | str:
+    """A barrier speed >= 0, or the word ``calibrated``."""
+    return CALIBRATED if text == CALIBRATED else nonnegative_float(text)
+
+
 def add_barrier_design_arguments(parser: argparse.ArgumentParser) -> None:
     """The two-material option of `sfr design`."""
     group = parser.add_argument_group("two materials (a drug and a placebo barrier)")
-    group.add_argument("--barrier-speed", type=nonnegative_float, metavar="S",
+    group.add_argument("--barrier-speed", type=_barrier_speed, metavar="S", nargs="?", const=CALIBRATED,
                        help="design a drug and a barrier eroding at S times the drug's rate (0: insoluble), in nfc or "
-                            "extruded; --target: delay-zero:delay=D,rate=R,volume=V, pulses:volume=V,width=W,gap=G, "
-                            "constant:rate=R,volume=V (mm, mm^3) or a tau_mm,released_mm3 CSV; writes design.stl (drug), "
-                            "barrier.stl and design.3mf (both)")
+                            "extruded; without S: the --simcal calibration's barrier speed (fitted from coated prints); "
+                            "--target: delay-zero:delay=D,rate=R,volume=V, pulses:volume=V,width=W,gap=G, "
+                            "constant:rate=R,volume=V (mm, mm^3), a tau_mm,released_mm3 CSV or, with --simcal, a measured "
+                            "curve (a run folder or a t_s,released_g CSV); writes design.stl (drug), barrier.stl and "
+                            "design.3mf (both)")
 
 
 def wants_barrier_design(args: argparse.Namespace) -> bool:
@@ -42,12 +54,13 @@ def _settings_options(args: argparse.Namespace, given: dict) -> dict:
     from labapp.errors import UsageError
 
     refused = [name for name in given if name != "target" and name not in TAKEN]
-    refused += [flag for flag, value in (("--simcal", args.simcal), ("--calibration", args.calibration),
-                                         ("--units", args.units)) if value]
+    refused += [flag for flag, value in (("--simcal", args.resume and args.simcal),
+                                         ("--calibration", args.resume and args.calibration), ("--units", args.units))
+                if value]
     if refused:
         raise UsageError(f"--barrier-speed does not take {', '.join(sorted(refused))}: a two-material design takes "
                          "--space (nfc, extruded), --resolution, --domain-mm, --height, --radius-mm, --max-iter, --beta, "
-                         "--beta-final and --w-binary")
+                         "--beta-final, --w-binary, and --simcal and --calibration when it starts")
     options = {TAKEN[k]: v for k, v in given.items() if k in TAKEN}
     if "domain_mm" in options:
         x, y, z = options["domain_mm"]
@@ -101,21 +114,25 @@ def summary_text(s: dict, out) -> list[str]:
 
 def run_barrier_design(args: argparse.Namespace, given: dict) -> int:
     """Run `sfr design` given ``--barrier-speed``: check the options, design, print the summary."""
-    from design.inverse.twomaterial_problem import TwoMaterialSettings
     from labapp.cli import interrupt
-    from labapp.errors import UsageError
     from labapp.jobs.design_barrier import design_barrier
+    from labapp.jobs.design_barrier_measured import design_barrier_measured, write_physical
 
     options = _settings_options(args, given)
-    if not args.resume and not args.target:
-        raise UsageError("--target is required (unless --resume)")
-    settings = None if args.resume else TwoMaterialSettings(args.target, args.barrier_speed, **options)
+    settings, simcal, source = _start(args, options)
     interrupt.set_hint(f"the best design so far is saved in {args.out}; resume with: sfr design --resume --out {args.out}")
     max_iter = settings.max_iter if settings else options.get("max_iter", 0)
     try:
-        given = options if args.barrier_speed is None else dict(options, barrier_speed=args.barrier_speed)
-        result = design_barrier(settings, args.out, resume=args.resume, options=given,
-                                on_iteration=_progress(max_iter))
+        if settings is not None and simcal is not None and _is_measured(args.target):
+            from analysis import BenchCalibration
+
+            bench = BenchCalibration.load(args.calibration) if args.calibration else None
+            result = design_barrier_measured(settings, args.out, simcal, bench_calibration=bench, speed_source=source,
+                                             on_iteration=_progress(max_iter))
+        else:
+            given = options if args.barrier_speed is None else dict(options, barrier_speed=args.barrier_speed)
+            result = design_barrier(settings, args.out, resume=args.resume, options=given,
+                                    on_iteration=_progress(max_iter))
     finally:
         print(file=sys.stderr)
     if result.summary is None:
@@ -125,4 +142,45 @@ def run_barrier_design(args: argparse.Namespace, given: dict) -> int:
         print(f"already finished: nothing to do ({result.out} is left as it is)")
     for line in summary_text(result.summary, result.out):
         print(line)
+    physical = write_physical(result.out) if not result.unchanged else None
+    if physical is not None:
+        print(f"  measured target: the print's predicted release is {physical['rel_rmse_physical']:.2%} RMS of the "
+              f"measured final release off the measured curve (curves_physical.csv; barrier speed "
+              f"{physical['barrier_speed']:.4g}, {physical['speed_source']})")
     return 0
+
+
+def _is_measured(target: str) -> bool:
+    from labapp.jobs.physical import is_physical
+
+    return is_physical(target)
+
+
+def _start(args: argparse.Namespace, options: dict):
+    """The settings of a new run (None for a resume), its calibration (None without --simcal) and where its barrier
+    speed came from (``given`` or ``calibrated``)."""
+    from design.inverse.twomaterial_problem import TwoMaterialSettings
+    from labapp.errors import UsageError
+    from labapp.jobs.design_barrier_measured import barrier_speed_of
+    from labapp.records.simcal import load_simcal
+
+    if args.resume:
+        if args.barrier_speed == CALIBRATED:
+            raise UsageError("--barrier-speed without a number takes the --simcal calibration's speed when a run starts; "
+                             "drop it to resume")
+        return None, None, "given"
+    if not args.target:
+        raise UsageError("--target is required (unless --resume)")
+    simcal = load_simcal(args.simcal) if args.simcal else None
+    speed, source = args.barrier_speed, "given"
+    if speed == CALIBRATED:
+        if simcal is None:
+            raise UsageError("--barrier-speed without a number takes the barrier speed of the --simcal calibration; "
+                             "give --simcal SIMCAL.json (calibrated with coated prints) or a speed")
+        speed, source = barrier_speed_of(simcal)[0], "calibrated"
+    if simcal is None and _is_measured(args.target):
+        raise UsageError(f"--target {args.target} is a measured curve (grams over seconds): give --simcal SIMCAL.json to "
+                         "map it to simulation units")
+    if args.calibration and not (simcal is not None and _is_measured(args.target)):
+        raise UsageError("--calibration with --barrier-speed analyses a measured run-folder target; give one with --simcal")
+    return TwoMaterialSettings(args.target, speed, **options), simcal, source
