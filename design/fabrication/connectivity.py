@@ -44,7 +44,7 @@ such changes, as the marcher's is between changes of its upwind choices.
 
 Cost. The distances are solved on the density averaged over blocks of ``coarsen^D`` voxels (a
 geodesic needs no more detail than the smoothing filter leaves: bridges are at least a filter radius
-wide), so each solve costs about ``1 / coarsen^D`` of the release solve.
+wide), so each solve costs about ``1 / coarsen^D`` of the release solve (`block_edge`: half the radius).
 
 Seeding. The marcher (`design.forward.fmm.march`) starts fronts from the grid's ordinary faces. The field is
 flipped along its mirrored axes so that the mirror planes sit at the high faces, every low face is
@@ -78,6 +78,38 @@ OPENING_SLOWNESS = 1e-6
 SEED_WORKERS = max(1, min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1))
 """Threads that solve the seeds' distances at the same time (`Connectivity.submit`): the cores this process may
 use, at most 4 (one per seed of a 3D design with three mirror planes). The result does not depend on it."""
+
+BLOCK_PER_RADIUS = 0.5
+"""Block edge of the distance grid per smoothing radius in 3D (`block_edge`)."""
+
+
+def block_edge(radius_vox: float, ndim: int) -> int:
+    """The block edge of J_conn's distance grid for a smoothing radius, voxels (the ``coarsen`` of `Connectivity`).
+
+    In 3D half the radius, rounded to the nearest whole voxel (at least 1): a bridge is at least a radius wide, so a
+    block of half of it still sees every one, and the four distance solves of a 3D design cost ``1 / coarsen^3`` of
+    the release's each (at resolution 128, radius 3.7 voxels: blocks of 2, each solve an eighth of the release's). In
+    2D half the radius rounded down: the solves cost N^2 beside the release's N^3, so the full detail is kept.
+
+    Parameters
+    ----------
+    radius_vox : float
+        Smoothing radius, voxels of the design grid.
+    ndim : int
+        Dimensions of the design variables' grid (2 or 3).
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> block_edge(3.69, 3), block_edge(3.69, 2), block_edge(1.85, 3)
+    (2, 1, 1)
+    """
+    half = BLOCK_PER_RADIUS * radius_vox
+    return max(1, int(np.floor(half + 0.5)) if ndim == 3 else int(np.floor(half)))
+
 
 def _pool(x: np.ndarray, c: int) -> np.ndarray:
     """Mean over blocks of ``c`` voxels per axis, blocks starting at index 0; the high end is zero-padded."""

@@ -34,7 +34,7 @@ import numpy as np
 
 from design.errors import DesignError
 from design.fabrication.channels import NarrowVoids
-from design.fabrication.connectivity import TAIL_SLOPE, Connectivity
+from design.fabrication.connectivity import TAIL_SLOPE, Connectivity, block_edge
 from design.forward.fmm import MarchBuffers
 from design.forward.simulator import Release, release_gradient, simulate
 from design.geometry.shapes import PRINT_MASS_G
@@ -104,7 +104,7 @@ class DesignObjective:
     w_conn : float
         Weight of the connectivity penalty J_conn (0 = off), evaluated on the nominal design.
     conn_coarsen : int or None
-        Block edge of J_conn's distance grid, voxels; None = half the smoothing radius (at least 1).
+        Block edge of J_conn's distance grid, voxels; None = `design.fabrication.connectivity.block_edge`.
     conn_planes : bool
         J_conn's plane term (`design.fabrication.connectivity.Connectivity`); False = the core term alone.
     conn_tail : float
@@ -175,7 +175,7 @@ class DesignObjective:
         if self.w_fab > 0:  # J_fab is divided by its value at the start design (design.fabrication.ico)
             space.fab_term.normalise_at(self.density(self.uniform_start()))
         self.w_conn = float(w_conn)
-        coarsen = max(1, int(radius_vox // 2)) if conn_coarsen is None else int(conn_coarsen)
+        coarsen = block_edge(radius_vox, len(space.var_shape)) if conn_coarsen is None else int(conn_coarsen)
         self.connectivity = (Connectivity(space.var_shape, space.var_mirror, space.dx_mm, coarsen,
                                           planes=conn_planes, tail_slope=conn_tail)
                              if self.w_conn > 0 else None)

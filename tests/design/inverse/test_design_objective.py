@@ -131,3 +131,18 @@ def test_connectivity_term_is_the_weighted_penalty_of_the_nominal_design():
     a, b = plain.evaluate(x), connected.evaluate(x)
     assert b.terms["J_conn"] > 0 and a.terms["J_conn"] == 0.0
     assert b.value == pytest.approx(a.value + 30.0 * b.terms["J_conn"], rel=1e-12)
+
+
+def test_a_3d_design_solves_j_conn_on_blocks_of_half_the_radius_with_an_exact_gradient():
+    # radius 3 voxels: J_conn's distances on blocks of 2 (an eighth of the release's grid), 2D designs keep blocks of 1
+    space = build_space("nfc", SpaceRequest((16, 16, 16), 0.5))
+    big_t = total_time(space.grid_shape, space.dx_mm, space.mirror)
+    target = simulate(np.full(space.grid_shape, 0.4), space.dx_mm, mirror=space.mirror, total_time_mm=big_t).released_mm3
+    objective = DesignObjective(space, target, big_t, radius_vox=3.0, beta=3.0, w_binary=20.0, w_conn=30.0)
+    assert objective.connectivity.coarsen == 2
+    assert _objective("extruded", SpaceRequest((12, 10, 8), 0.5, 5), w_conn=30.0).connectivity.coarsen == 1
+    rng = np.random.default_rng(5)
+    x = rng.uniform(0.2, 0.8, space.var_shape)
+    ev = objective.evaluate(x)
+    assert ev.terms["J_conn"] > 0
+    assert_gradient_matches_fd(objective, x, ev.grad, rng, entries=5)
