@@ -10,8 +10,12 @@ print checks and the outputs cost a fixed number of the run's evaluations (`PRIN
 measured, docs/benchmarks.md#the-stages-of-a-design).
 
 `RunClock` wraps the run's progress callback: at every evaluation it measures the seconds per weighted evaluation of
-the phase in progress and sets ``eta_s`` to what is left of it and of every later phase at that rate. A phase that
-ends early (an optimisation that converges or stalls before its limit) makes the estimate fall at once. It also sets
+the phase in progress and sets ``eta_s`` to what is left of it and of every later phase at that rate. The work between
+two phases (a coarse start's outputs, a print check) is timed too, from the previous phase's last evaluation to the
+next one's first, and from then on what is left of that work (the later checks and the outputs) is estimated at the
+seconds per weighted evaluation it took there: a print check's release and an evaluation's solves do not keep the
+same ratio on every shape and machine load. A phase that ends early (an optimisation that converges or stalls before
+its limit) makes the estimate fall at once. It also sets
 ``terms["limit"]``, the evaluations of the run the phase is part of (a coarse start's, or the optimisation's and its
 rounds').
 """
@@ -25,25 +29,24 @@ from design.inverse.optimize import IterationCallback
 
 PRINT_CHECK_EVALS = {"extruded": 110.0}
 """The time of a correction round's print check (extraction, the reference evaluator's release, the design grid's
-release) in evaluations of the run's grid, per design space (`DEFAULT_PRINT_CHECK_EVALS` for the others): default
-designs at resolution 128 took 12 nfc evaluations at a load of 5, 20 at 12 and 40-100 at 22 (the check's release
-runs in threads of its own, an nfc evaluation solves J_conn's distances in threads) and 110 extruded ones, whose
-evaluations are ten times cheaper while the print is the same kind of solid
+release) in evaluations of the run's grid, per design space (`DEFAULT_PRINT_CHECK_EVALS` for the others), until the
+run has timed one (`RunClock`): 110 extruded evaluations, whose 2D design is cheap beside the print's release
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
-DEFAULT_PRINT_CHECK_EVALS = 15.0
-"""`PRINT_CHECK_EVALS` of the spaces it does not name."""
+DEFAULT_PRINT_CHECK_EVALS = 25.0
+"""`PRINT_CHECK_EVALS` of the spaces it does not name: an nfc print check at resolution 128 takes about 25 of its
+evaluations (J_conn's distances on blocks of 2, `design.fabrication.connectivity.block_edge`)."""
 OUTPUTS_EVALS = {"extruded": 700.0}
 """The time of the outputs (the print's extraction and release on the full lattice, the binary solid's release,
-the report) in evaluations of the run's grid, per design space (`DEFAULT_OUTPUTS_EVALS` for the others): 22-25 nfc
-evaluations at resolution 128 (the print's release kept from the last round's check when that judged it on the
-outputs' lattice, `design.inverse.release_cache`), and 700 extruded ones, whose rounds judge it on a coarser lattice
+the report) in evaluations of the run's grid, per design space (`DEFAULT_OUTPUTS_EVALS` for the others): about 65
+nfc evaluations at resolution 128 (less when the last round's check judged the print on the outputs' lattice,
+`design.inverse.release_cache`), and 700 extruded ones, whose rounds judge it on a coarser lattice
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
-DEFAULT_OUTPUTS_EVALS = 22.0
+DEFAULT_OUTPUTS_EVALS = 65.0
 """`OUTPUTS_EVALS` of the spaces it does not name."""
-COARSE_EVAL_WEIGHT = 0.12
+COARSE_EVAL_WEIGHT = 0.18
 """The cost of an evaluation of a multi-start's coarse start (half the resolution) in evaluations of the run's grid:
-an eighth of the voxels, but fixed costs per evaluation and J_conn's threads, which a small grid keeps less busy,
-make it dearer (0.15 of a full-resolution one measured at 128 at a load of 5, 0.075-0.3 at loads of 12-22;
+an eighth of the voxels, but fixed costs per evaluation, and J_conn's distances solved on the full coarse grid there
+(blocks of 1, on blocks of 2 at the full resolution), make it dearer (0.18 measured for nfc at 128;
 docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 RATE_MIN_EVALS = 3
 """Evaluations of a phase after which its own rate replaces the one carried from the phase before."""
@@ -143,8 +146,9 @@ class RunClock:
         self.on_iteration = on_iteration
         self.rate: float | None = None  # seconds per evaluation of the run's grid
         self.outputs = outputs
+        self.after_rate: float | None = None  # seconds per evaluation of the run's grid of the work between phases
         self.current: int | None = None
-        self.t0 = self.k0 = 0.0
+        self.t0 = self.k0 = self.last = 0.0
 
     def _index(self, name: str | None, k: int) -> int | None:
         """The phase of an evaluation: the first of that name that has not ended before ``k``."""
@@ -159,20 +163,30 @@ class RunClock:
         i = self._index(name, k)
         if i is None:
             return None
-        if i != self.current:
-            self.current, self.t0, self.k0 = i, now, k
         phase = self.plan[i]
+        if i != self.current:
+            self._time_between(i, now - self.last - (self.rate or 0.0) * phase.weight)
+            self.current, self.t0, self.k0 = i, now, k
+        self.last = now
         if k - self.k0 >= RATE_MIN_EVALS:
             self.rate = (now - self.t0) / (k - self.k0) / phase.weight
         if self.rate is None:
             return None
-        left = (phase.end - k) * phase.weight + phase.after
-        left += sum(p.evals * p.weight + p.after for p in self.plan[i + 1:])
-        return self.rate * left
+        evals = (phase.end - k) * phase.weight + sum(p.evals * p.weight for p in self.plan[i + 1:])
+        after = phase.after + sum(p.after for p in self.plan[i + 1:])
+        return self.rate * evals + (self.after_rate or self.rate) * after
+
+    def _time_between(self, i: int, seconds: float) -> None:
+        """Set `after_rate` from the ``seconds`` between the phase before phase ``i`` and its first evaluation."""
+        before = self.current
+        if before is None or i != before + 1 or self.rate is None or not self.plan[before].after > 0 or seconds <= 0:
+            return
+        self.after_rate = seconds / self.plan[before].after
 
     def outputs_s(self) -> float | None:
-        """The estimated seconds of the outputs (``outputs`` at the last rate); None before a rate is known."""
-        return None if self.rate is None else self.rate * self.outputs
+        """The estimated seconds of the outputs (``outputs`` at the rate of the work between phases, else of the
+        evaluations); None before a rate is known."""
+        return None if self.rate is None else (self.after_rate or self.rate) * self.outputs
 
     def __call__(self, k: int, x, terms: dict) -> None:
         eta = self.eta_s(terms.get("phase"), k)

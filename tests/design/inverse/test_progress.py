@@ -7,6 +7,7 @@ from design.inverse.config import DesignConfig
 from design.inverse.progress import DEFAULT_OUTPUTS_EVALS as OUTPUTS_EVALS
 from design.inverse.progress import DEFAULT_PRINT_CHECK_EVALS as PRINT_CHECK_EVALS
 from design.inverse.progress import RunClock, run_plan
+from design.inverse.settings import COARSE_EVALS_SHARE
 
 
 def test_a_single_run_is_its_optimisation_its_rounds_and_its_outputs():
@@ -24,8 +25,9 @@ def test_a_multistart_plan_has_its_coarse_starts_at_their_measured_cost_then_the
     assert names[4:] == ["refinement at resolution 128", "refinement at resolution 128, physical correction round 1 of 2",
                          "refinement at resolution 128, physical correction round 2 of 2"]
     assert [p.weight for p in plan] == [progress.COARSE_EVAL_WEIGHT] * 4 + [1.0] * 3
-    # each coarse start half the evaluations; the refinement a fifth (20) at its final beta, then its two rounds of 10
-    assert [(p.end, p.limit or p.end) for p in plan] == [(50, 50)] * 4 + [(20, 40), (30, 40), (40, 40)]
+    # each coarse start COARSE_EVALS_SHARE of the evaluations; the refinement a fifth (20), then its two rounds of 10
+    coarse = round(100 * COARSE_EVALS_SHARE)
+    assert [(p.end, p.limit or p.end) for p in plan] == [(coarse, coarse)] * 4 + [(20, 40), (30, 40), (40, 40)]
 
 
 def test_the_progress_line_counts_the_evaluations_of_the_run_of_its_phase():
@@ -34,7 +36,7 @@ def test_the_progress_line_counts_the_evaluations_of_the_run_of_its_phase():
     clock = RunClock(plan, lambda k, x, terms: seen.append(terms.get("limit")))
     clock(1, None, {"phase": "coarse start 1 of 4 at resolution 64"})
     clock(25, None, {"phase": "refinement at resolution 128, physical correction round 1 of 2"})
-    assert seen == [50, 40]
+    assert seen == [round(100 * COARSE_EVALS_SHARE), 40]
 
 
 def test_the_time_left_is_the_plan_left_at_the_phase_rate(monkeypatch):
@@ -42,19 +44,22 @@ def test_the_time_left_is_the_plan_left_at_the_phase_rate(monkeypatch):
     monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
     plan = run_plan(DesignConfig(target="sphere", resolution=32, max_iter=100))
     seen = []
-    clock = RunClock(plan, lambda k, x, terms: seen.append(terms.get("eta_s")))
+    clock = RunClock(plan, lambda k, x, terms: seen.append(terms.get("eta_s")), OUTPUTS_EVALS)
     for k in range(1, 11):  # 2 s per evaluation
         now[0] += 2.0
         clock(k, None, {"eta_s": -1.0})
     assert seen[0] == -1.0  # no rate yet: the optimiser's own bound is kept
     left = (80 - 10) + PRINT_CHECK_EVALS + 2 * (10 + PRINT_CHECK_EVALS) + OUTPUTS_EVALS
     assert seen[-1] == pytest.approx(2.0 * left)
-    now[0] += 50.0  # the print check
+    now[0] += 50.0  # the print check, 48 s, and the round's first evaluation, 2 s at the rate so far
     clock(81, None, {"phase": "physical correction round 1 of 2"})
     for k in range(82, 86):  # 1 s per evaluation in the round
         now[0] += 1.0
         clock(k, None, {"phase": "physical correction round 1 of 2"})
-    assert seen[-1] == pytest.approx(1.0 * ((90 - 85) + PRINT_CHECK_EVALS + 10 + PRINT_CHECK_EVALS + OUTPUTS_EVALS))
+    # the evaluations at the round's rate, the checks and the outputs at the measured check's 48 s / PRINT_CHECK_EVALS
+    after_rate = 48.0 / PRINT_CHECK_EVALS
+    assert seen[-1] == pytest.approx(1.0 * ((90 - 85) + 10) + after_rate * (2 * PRINT_CHECK_EVALS + OUTPUTS_EVALS))
+    assert clock.outputs_s() == pytest.approx(after_rate * OUTPUTS_EVALS)
 
 
 def test_every_evaluation_of_a_run_names_a_phase_of_its_plan(tmp_path):
