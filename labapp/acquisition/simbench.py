@@ -67,6 +67,9 @@ class Material:
     barrier_speed : float
         The clear barrier material's erosion speed over the drug material's (two-material prints; it absorbs no
         light, so the camera sees only the drug).
+    seed : int
+        The bench's seed: its printed objects' own deviations (:meth:`printed`) are drawn from it, so that each
+        bench is one lab with its own prints.
     physics : PrintPhysics or None
         How its prints dissolve (:mod:`labapp.acquisition.printworld`). None: exactly as the isotropic
         forward model computes at the sample's resolution, for tests of the calibration's arithmetic,
@@ -79,6 +82,7 @@ class Material:
     density_spread: float = 0.02
     physics: PrintPhysics | None = None
     barrier_speed: float = 0.35
+    seed: int = MATERIAL_SEED
 
     @classmethod
     def draw(cls, seed: int = MATERIAL_SEED) -> Material:
@@ -87,11 +91,11 @@ class Material:
         rng = np.random.default_rng(seed)
         barrier = float(np.random.default_rng([seed, BARRIER_STREAM]).uniform(0.2, 0.6))
         return cls(float(rng.uniform(1000.0, 2400.0)), float(rng.uniform(1.15, 1.45)),
-                   physics=PrintPhysics.draw(seed), barrier_speed=barrier)
+                   physics=PrintPhysics.draw(seed), barrier_speed=barrier, seed=seed)
 
-    def printed(self, index: int, seed: int = MATERIAL_SEED) -> tuple[float, float]:
-        """The ``index``-th printed object's own (seconds_per_mm, g_per_mm3)."""
-        rng = np.random.default_rng([seed, index])
+    def printed(self, index: int) -> tuple[float, float]:
+        """The ``index``-th printed object's own (seconds_per_mm, g_per_mm3), drawn from the bench's seed."""
+        rng = np.random.default_rng([self.seed, index])
         rate, dens = rng.standard_normal(2)
         return (float(self.seconds_per_mm * (1.0 + self.rate_spread * rate)),
                 float(self.density_g_per_cm3 * 1e-3 * (1.0 + self.density_spread * dens)))

@@ -64,6 +64,10 @@ def _tall() -> trimesh.Trimesh:
     return trimesh.creation.cylinder(radius=4.5, height=20.0, sections=48)
 
 
+def _bar() -> trimesh.Trimesh:
+    return trimesh.creation.box((22.0, 6.0, 6.0))
+
+
 def _channelled() -> trimesh.Trimesh:
     """A 16 x 16 x 6 mm slab cut by three vertical slots of 0.5 mm (narrower than a swollen material keeps open)."""
     slab = trimesh.creation.box((16.0, 16.0, 6.0))
@@ -74,6 +78,7 @@ def _channelled() -> trimesh.Trimesh:
 
 GENERATED = {"flat": (_flat, "flat slab, 18 x 18 x 4 mm: erodes mostly along the build direction"),
              "tall": (_tall, "tall column, 9 mm across, 20 mm high: erodes mostly in the plane"),
+             "bar": (_bar, "bar lying down, 22 x 6 x 6 mm: erodes along the build direction and in the plane alike"),
              "channelled": (_channelled, "16 x 16 x 6 mm slab with three 0.5 mm slots: opens only if they do")}
 """Generated calibration shapes: name -> (mesh maker, description)."""
 

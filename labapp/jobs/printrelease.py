@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -58,12 +59,14 @@ SHELL_SAMPLES = 33
 _REFERENCE_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray, object]] = {}
 _BIAS_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 _CACHE_SIZE = 256
+_CACHE_LOCK = threading.Lock()   # the meshes of a calibration are released on several threads
 
 
 def _remember(cache: dict, key: tuple, value):
-    if len(cache) >= _CACHE_SIZE:
-        cache.pop(next(iter(cache)))
-    cache[key] = value
+    with _CACHE_LOCK:
+        if len(cache) >= _CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+        cache[key] = value
     return value
 
 
@@ -113,12 +116,13 @@ def _reference(mesh, resolution: int, anisotropy: float, interpolated: bool = Fa
         return _interpolated_reference(mesh, resolution, a)
     cells = design_lattice(resolution)
     key = (_mesh_digest(mesh), int(cells), round(a, 9), BIAS_SAMPLES)
-    if key not in _REFERENCE_CACHE:
+    hit = _REFERENCE_CACHE.get(key)
+    if hit is None:
         scaled = metric_mesh(mesh, a)
         tau = np.linspace(0.0, 0.5 * float(np.max(scaled.extents)), BIAS_SAMPLES)
         ref = reference_release(scaled, tau, cells=cells)
-        _remember(_REFERENCE_CACHE, key, (tau, np.asarray(ref.released_mm3, float), scaled))
-    return _REFERENCE_CACHE[key]
+        hit = _remember(_REFERENCE_CACHE, key, (tau, np.asarray(ref.released_mm3, float), scaled))
+    return hit
 
 
 def _off_grid(anisotropy: float) -> bool:
@@ -161,13 +165,14 @@ def exact_print(mesh, resolution: int, anisotropy: float, offset_mm: float) -> t
     a, o = float(anisotropy), float(offset_mm)
     cells = design_lattice(resolution)
     key = (_mesh_digest(mesh), int(cells), round(a, 9), round(o, 9), BIAS_SAMPLES, "print")
-    if key not in _REFERENCE_CACHE:
+    hit = _REFERENCE_CACHE.get(key)
+    if hit is None:
         end = 0.5 * float(np.max(metric_mesh(mesh, a).extents)) + largest_offset(o, a)
         tau = np.linspace(0.0, end, BIAS_SAMPLES)
         ref = reference_release(mesh, tau, cells=cells, anisotropy=a, offset_mm=o)
         released = np.maximum.accumulate(np.asarray(ref.released_mm3, float))
-        _remember(_REFERENCE_CACHE, key, (tau, released, float(released[-1])))
-    return _REFERENCE_CACHE[key]
+        hit = _remember(_REFERENCE_CACHE, key, (tau, released, float(released[-1])))
+    return hit
 
 
 def reference_fraction(mesh, resolution: int, anisotropy: float = 1.0, offset_mm: float = 0.0,
@@ -240,8 +245,9 @@ def grid_bias(mesh, grid: tuple, resolution: int, anisotropy: float = 1.0, offse
     rho, dx, mirror = grid
     key = (_mesh_digest(mesh), _digest(np.asarray(rho, np.float64)), round(float(dx), 12),
            tuple(bool(m) for m in mirror), int(resolution), round(anisotropy, 9), round(offset_mm, 9), interpolated)
-    if key in _BIAS_CACHE:
-        return _BIAS_CACHE[key]
+    hit = _BIAS_CACHE.get(key)
+    if hit is not None:
+        return hit
     grid_release = simulate(rho, dx, mirror=mirror, anisotropy=anisotropy)
     g_tau, g_vol = np.asarray(grid_release.tau_mm, float), np.asarray(grid_release.released_mm3, float)
     if not (g_vol.size and g_vol[-1] > 0):

@@ -6,6 +6,7 @@ import pytest
 
 from analysis.physics_grid import LAG
 from design.geometry.shapes import sample_shape
+from labapp.acquisition.simbench import MATERIAL_SEED, Material
 from labapp.jobs import demo
 from labapp.jobs.printrelease import print_volume_mm3
 
@@ -28,16 +29,28 @@ def test_the_truth_is_taken_on_the_calibration_prints_and_the_modelled_volume(of
     assert truth["density_g_per_cm3"] == pytest.approx(1.4 + 0.01 * (n - 1) / 2)
 
 
-def test_the_calibration_set_has_the_flat_and_tall_prints_plan_proposes():
+def test_the_calibration_set_has_the_flat_tall_and_lying_prints_plan_proposes():
     """Round prints alone confound the build-direction anisotropy with the time scale; the set has the flat and the
-    tall print ``calibrate-sim --plan`` proposes for it, and its meshes are the plan's and the samples'."""
-    assert {"flat", "tall"} <= set(demo.CALIBRATION_SHAPES)
+    tall print ``calibrate-sim --plan`` proposes for it and a bar lying down, and its meshes are the plan's and the
+    samples'."""
+    assert {"flat", "tall", "bar"} <= set(demo.CALIBRATION_SHAPES)
     assert len(demo.CALIBRATION_WATER_G) == len(demo.CALIBRATION_SHAPES)
     x, y, z = demo.calibration_mesh("flat").extents
     assert z < 0.5 * min(x, y)
     x, y, z = demo.calibration_mesh("tall").extents
     assert z > 2 * max(x, y)
+    x, y, z = demo.calibration_mesh("bar").extents
+    assert x > 3 * z and y == pytest.approx(z)
     assert demo.calibration_mesh("sphere").volume == pytest.approx(sample_shape("sphere").volume)
+
+
+def test_every_print_has_its_own_draw_and_each_bench_seed_its_own_prints():
+    indices = [demo.PRINT_INDEX[name] for name in demo.CALIBRATION_SHAPES] + [demo.FURTHER_INDEX]
+    assert len(set(indices)) == len(indices)
+    default, other = Material.draw(), Material.draw(11)
+    assert default.printed(0) == Material.draw(MATERIAL_SEED).printed(0)
+    rates = [m.printed(i)[0] / m.seconds_per_mm for m in (default, other) for i in range(2)]
+    assert len(set(rates)) == 4            # another print, another bench: another draw
 
 
 def test_the_kept_physics_are_named_with_their_units():
