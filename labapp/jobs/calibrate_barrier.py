@@ -33,9 +33,9 @@ COAT_SAMPLES = 4000
 """Points sampled on the drug's surface (besides its vertices) to measure the coat."""
 MIN_UNCOATED = 2
 """Uncoated rows a set with coated prints needs: the drug's calibration is fitted on them."""
-METHOD = ("each coated run fitted for its own rate, density and delay D against its drug's simulated release "
-          "through the calibration (analysis.barrier_fit); s = mean of c / D, error = standard error of the mean "
-          "(one run: the fit's own)")
+METHOD = ("each coated run fitted for its own rate k_r, density and delay D against its drug's simulated release "
+          "through the calibration (analysis.barrier_fit); s = mean of c / D; error = the runs' standard error (one "
+          "run: the fit's own) and half the difference from speed_at_calibrated_rate (c k / (k_r D)), in quadrature")
 
 
 @dataclass(frozen=True)
@@ -168,7 +168,8 @@ def barrier_block(set_csv: Path, coated: list[CoatedRow], simulate: Callable[[Se
         log.warning("%s: the calibration's anisotropy is %.3g: a coat's faces along the build direction are crossed "
                     "at another time than the others, and the barrier speed is their mix", set_csv, anisotropy)
     say(0.955, f"barrier speed {fit.speed:.4f} +- {fit.error:.4f} from {len(runs)} coated prints")
-    return {"speed": fit.speed, "error": fit.error, "method": METHOD, "anisotropy": anisotropy,
+    return {"speed": fit.speed, "error": fit.error, "standard_error": fit.standard_error,
+            "speed_at_calibrated_rate": fit.speed_at_calibrated_rate, "method": METHOD, "anisotropy": anisotropy,
             "runs": [{"run": str(c.row.run), "mesh": str(c.row.mesh), "barrier_mesh": str(c.row.barrier_mesh),
                       "coat_mm": c.coat_mm, "speed": s, "delay_mm": d, "rms_g": r}
                      for c, s, d, r in zip(coated, fit.per_run, fit.delays_mm, fit.rms_g)],

@@ -196,17 +196,19 @@ def _inject_faults(sim: SimulatedBench) -> Callable[[EngineEvent], None]:
 
 def simulated_run(clock: SteppedClock, calibration: BenchCalibration, release: SampleRelease, data_dir: Path,
                   *, interval_s: float, water_g: float = WATER_G, faults: bool = False, hotplate: bool = True,
-                  progress: Callable[[str], None] = lambda text: None, min_duration_s: float | None = None) -> Path:
+                  progress: Callable[[str], None] = lambda text: None, min_duration_s: float | None = None,
+                  seed: int = 0) -> Path:
     """One release run of a simulated object until steady state; returns its run folder.
 
     The run is not stopped as steady before ``min_duration_s`` (default: half the object's dissolution; a print
-    that releases nothing for longer, behind a barrier, needs more).
+    that releases nothing for longer, behind a barrier, needs more). ``seed`` seeds the bench's image noise and
+    intrusions (runs meant to be independent measurements take different seeds).
 
     The run records the object's weighed mass (its true mass to 0.1 mg) and the water, as an operator would.
     Without ``hotplate`` the bath is taken as already at temperature (no emulator, no heating phase).
     """
     sim = SimulatedBench(clock, release=release, scene=dataclasses.replace(SCENE, water_g=water_g),
-                         with_hotplate=hotplate)
+                         with_hotplate=hotplate, seed=seed)
     try:
         config = RunConfig(name=f"demo-{release.name}", interval_s=interval_s,
                            max_duration_s=release.duration_s + 3600.0, stop_on_steady=True,

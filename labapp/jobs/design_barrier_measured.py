@@ -5,7 +5,8 @@ fitted from coated prints by :mod:`labapp.jobs.calibrate_barrier`; a number over
 
 - the measured curve (grams over seconds: a run folder, ``curve.csv`` or any ``t_s,released_g`` CSV) becomes a
   ``tau_mm,released_mm3`` target through the calibration (:func:`write_barrier_target`): its monotone
-  least-squares fit, nothing before the release rises out of the measurement's noise, mapped by the calibration's
+  least-squares fit, nothing before the release rises out of the measurement's error, then smoothed over 5 % of the
+  release's span (`SMOOTH_FRACTION`), mapped by the calibration's
   rate, density and wetting lag. It is not projected onto one material's isoperimetric bound: a delay or a pause
   is what the barrier is for;
 - the two-material design (:func:`labapp.jobs.design_barrier.design_barrier`) runs on it;
@@ -34,8 +35,17 @@ from labapp.records.simcal import SimCalError, SimCalFile, curve_of, load_simcal
 CALIBRATED = "calibrated"
 """``--barrier-speed`` without a number (or with this word): the calibration's barrier speed."""
 NOISE_FLOOR = 3.0
-"""A measured target releases nothing until its monotone fit exceeds this many noise standard deviations: below
-that, the fit of a flat noisy start is noise, and a trace of release there would shorten the delay asked."""
+START_FRACTION = END_FRACTION = 0.05
+"""A measured target releases nothing until its monotone fit exceeds NOISE_FLOOR noise standard deviations and
+START_FRACTION of its final release, and all of it once within END_FRACTION of its final level: there the fit of a
+flat stretch is the measurement's error (white noise, and level shifts that last minutes, such as an intrusion in
+the crop: 0.01-0.015 g on the simulated bench, 2-3 % of a 0.6 g print), which would shorten the delay asked or add a
+pause and a last pulse at the end. The start found is late, and the end early, by the time the release takes to
+cover that level (5 % of its span for a constant rate)."""
+SMOOTH_FRACTION = 0.05
+"""After its start, a measured target is the moving average of its monotone fit over this fraction of the release's
+span: a monotone fit turns each dip of the measurement (its error, about 1 % of a sub-gram print on the simulated
+bench) into a flat step, which the two-material design would read as a pause to build a barrier layer for."""
 MEASURED_JSON = "measured_target.json"
 """The design folder's record of a measured target: the calibration, the curve and what was changed."""
 PHYSICAL_CSV, PHYSICAL_JSON = "curves_physical.csv", "physical.json"
@@ -73,8 +83,10 @@ def write_barrier_target(curve: PhysicalCurve, simcal: SimCalFile, out_csv: Path
     measured = np.concatenate([[0.0], np.asarray(curve.released_g, float)[keep]])
     fitted = np.concatenate([[0.0], np.clip(isotonic_fit(measured[1:], END_SAMPLES), 0.0, None)])
     noise = noise_sd(measured[1:])
-    floor = fitted < NOISE_FLOOR * noise
+    floor = fitted < max(NOISE_FLOOR * noise, START_FRACTION * fitted[-1])
     fitted[floor] = 0.0
+    fitted[fitted > (1.0 - END_FRACTION) * fitted[-1]] = fitted[-1]     # the end, as the start, within the error
+    fitted = _smoothed(t, fitted, int(np.count_nonzero(floor)))
     water = curve.water_g or simcal.water_g
     tau, vol = simcal.cal.to_simulation(t, fitted, water)
     rows = "tau_mm,released_mm3,t_s,target_g\n" + "".join(
@@ -84,6 +96,18 @@ def write_barrier_target(curve: PhysicalCurve, simcal: SimCalFile, out_csv: Path
             "zeroed_until_s": float(t[floor][-1]) if floor.any() else None,
             "fit_max_g": float(np.max(np.abs(fitted - measured))),
             "t_s": t.tolist(), "measured_g": measured.tolist(), "target_g": fitted.tolist()}
+
+
+def _smoothed(t: np.ndarray, fitted: np.ndarray, start: int) -> np.ndarray:
+    """``fitted`` from sample ``start`` on, averaged over `SMOOTH_FRACTION` of the span after it (monotone stays
+    monotone; the samples at the ends average what they have)."""
+    span = t[-1] - t[min(start, t.size - 1)]
+    half = 0.5 * SMOOTH_FRACTION * span
+    out = fitted.copy()
+    for i in range(start, t.size):
+        window = (t >= t[i] - half) & (t <= t[i] + half) & (np.arange(t.size) >= start)
+        out[i] = float(np.mean(fitted[window]))
+    return out
 
 
 def design_barrier_measured(settings: TwoMaterialSettings, out: str | Path, simcal: SimCalFile, *,
