@@ -45,7 +45,7 @@ import numpy as np
 from numba import njit
 
 from design.forward.distance import Surface, closest_on_triangle, inside_sign, sign_and_direction
-from design.forward.quadrature import BAND, BLOCK, RIDGE_ANGLE_DEG, SPLIT, Lattice, Ramps, neighbour_candidates
+from design.forward.quadrature import BAND, BLOCK, SPLIT, Lattice, Ramps, neighbour_candidates, ridge_cells
 
 CERTIFICATE_TOLERANCE = 1e-7
 """A certificate point y* may lie this fraction of a lattice spacing closer than the offset to the mesh (round-off)."""
@@ -249,17 +249,7 @@ class PrintLattice:
         shape = tuple(int(v) for v in hi - lo)
         centres = lattice.centres(lo, hi)
         arrive, grad, tri, by, probe = self.arrival(centres, shape, h)
-        grad3 = grad.reshape(shape + (3,))
-        ridge = np.zeros(shape, dtype=bool)
-        cos_max = np.cos(np.radians(RIDGE_ANGLE_DEG))
-        for a in range(3):
-            below = [slice(None)] * 3
-            above = [slice(None)] * 3
-            below[a] = slice(0, -1)
-            above[a] = slice(1, None)
-            bent = np.einsum("...k,...k->...", grad3[tuple(below)], grad3[tuple(above)]) < cos_max
-            ridge[tuple(below)] |= bent
-            ridge[tuple(above)] |= bent
+        ridge = ridge_cells(grad.reshape(shape + (3,)))
         own = np.zeros(shape, dtype=bool)
         own[tuple(slice(int(block[a] - lo[a]), int(min(block[a] + BLOCK, lattice.n[a]) - lo[a]))
                   for a in range(3))] = True

@@ -199,6 +199,36 @@ class Lattice:
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
+def ridge_cells(grad: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+    """The cells whose arrival-time gradient turns by more than `RIDGE_ANGLE_DEG` against a face neighbour: they
+    straddle a ridge of T (the medial axis, or where fronts meet), where T is not linear.
+
+    Parameters
+    ----------
+    grad : (I, J, K, 3) ndarray of float
+        Unit gradient of T per cell.
+    near : (I, J, K) ndarray of bool, optional
+        The cells whose gradient is known; a pair is compared only when both are (None: all).
+
+    Returns
+    -------
+    (I, J, K) ndarray of bool
+    """
+    ridge = np.zeros(grad.shape[:3], dtype=bool)
+    cos_max = np.cos(np.radians(RIDGE_ANGLE_DEG))
+    for a in range(3):
+        below = [slice(None)] * 3
+        above = [slice(None)] * 3
+        below[a] = slice(0, -1)
+        above[a] = slice(1, None)
+        bent = np.einsum("...k,...k->...", grad[tuple(below)], grad[tuple(above)]) < cos_max
+        if near is not None:
+            bent &= near[tuple(below)] & near[tuple(above)]
+        ridge[tuple(below)] |= bent
+        ridge[tuple(above)] |= bent
+    return ridge
+
+
 def solid_blocks(surface: Surface, lattice: Lattice) -> np.ndarray:
     """The blocks of `lattice` (their first cells) that hold a cell inside the solid or within BAND + 1 spacings
     of its surface: a block whose centre is outside and farther than its half-diagonal plus that has none."""
@@ -246,17 +276,7 @@ def block_ramps(surface: Surface, offset: np.ndarray, lattice: Lattice, block: n
     # a cell whose arrival-time gradient turns by more than RIDGE_ANGLE_DEG against a face neighbour
     # straddles a ridge of T (the medial axis, or where fronts meet): T is not linear there, so the
     # cell is split into SPLIT^3 sub-cells
-    grad = grad.reshape(shape + (3,))
-    ridge = np.zeros(shape, dtype=bool)
-    cos_max = np.cos(np.radians(RIDGE_ANGLE_DEG))
-    for a in range(3):
-        below = [slice(None)] * 3
-        above = [slice(None)] * 3
-        below[a] = slice(0, -1)
-        above[a] = slice(1, None)
-        bent = np.einsum("...k,...k->...", grad[tuple(below)], grad[tuple(above)]) < cos_max
-        ridge[tuple(below)] |= bent
-        ridge[tuple(above)] |= bent
+    ridge = ridge_cells(grad.reshape(shape + (3,)))
     own = np.zeros(shape, dtype=bool)  # the block's cells, without the halo
     own[tuple(slice(int(block[a] - lo[a]), int(min(block[a] + BLOCK, lattice.n[a]) - lo[a])) for a in range(3))] = True
     own = own.ravel()
