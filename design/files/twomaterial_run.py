@@ -57,6 +57,14 @@ def load_settings(out: Path) -> TwoMaterialSettings:
     return TwoMaterialSettings.from_dict(values)
 
 
+def is_two_material_run(out: str | Path) -> bool:
+    """Whether ``out`` holds a two-material run (a ``config.json`` of kind `KIND`), to resume as one."""
+    try:
+        return json.loads((Path(out) / "config.json").read_text()).get("kind") == KIND
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
 def save_settings(out: Path, settings: TwoMaterialSettings) -> None:
     """Write the run's ``config.json``."""
     (Path(out) / "config.json").write_text(json.dumps(dict(settings.to_dict(), kind=KIND), indent=2) + "\n")

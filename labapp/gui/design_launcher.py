@@ -453,7 +453,6 @@ class DesignLauncher(QWidget):
         """Run a two-material design (`labapp.jobs.design_barrier.design_barrier`, as ``sfr design --barrier-speed``)."""
         from design.errors import DesignError
         from design.inverse.twomaterial_targets import is_two_material_spec
-        from labapp.jobs.design_barrier import design_barrier
 
         if not is_two_material_spec(target) and not Path(target).is_file():
             self.status.setText(f"{target or 'the target'}: a two-material design takes delay-zero:, pulses:, "
@@ -467,17 +466,31 @@ class DesignLauncher(QWidget):
         if wrong:
             self.status.setText("\n".join(wrong))
             return
+        self._run_barrier(settings, design_folder(self.data_dir, Path(target).stem if Path(target).exists()
+                                                  else target.replace(":", "_").replace("=", "").replace(",", "_")))
+
+    def _run_barrier(self, settings, out_dir: Path) -> None:
+        """Start (``settings``) or resume (None) the two-material run in ``out_dir`` off the GUI thread, through the
+        job function ``sfr design --barrier-speed`` and ``sfr design --resume`` call."""
+        from design.errors import DesignError
+        from design.files.twomaterial_run import load_settings
+        from labapp.jobs.design_barrier import design_barrier
+
         if self.busy:
             self.status.setText("a design is running; stop it first")
             return
+        resume = settings is None
+        try:
+            stored = load_settings(out_dir) if resume else settings
+        except DesignError as exc:
+            self.status.setText(f"design failed: {exc}")
+            return
         self._stop.clear()
-        self.out_dir = design_folder(self.data_dir, Path(target).stem if Path(target).exists()
-                                     else target.replace(":", "_").replace("=", "").replace(",", "_"))
-        self._max_iter, out_dir = settings.max_iter, self.out_dir
+        self.out_dir, self._max_iter = out_dir, stored.max_iter
 
         def work(progress):
-            return design_barrier(settings, out_dir, on_iteration=lambda k, terms: progress((k, terms, None)),
-                                  should_stop=self._stop.is_set)
+            return design_barrier(settings, out_dir, resume=resume,
+                                  on_iteration=lambda k, terms: progress((k, terms, None)), should_stop=self._stop.is_set)
         self.task = BackgroundTask(work, self)
         self.task.progress.connect(self._progress)
         self.task.finished.connect(self._barrier_finished)
@@ -488,21 +501,34 @@ class DesignLauncher(QWidget):
         self.progress.setRange(0, max(1, self._max_iter))
         self.progress.setValue(0)
         self.progress.setFormat("starting ...")
-        self.status.setText(f"designing drug and barrier (barrier speed {settings.barrier_speed:g}) into {out_dir} ...")
+        self.status.setText(f"{'resuming' if resume else 'designing'} drug and barrier (barrier speed {stored.barrier_speed:g}) "
+                            f"{'in' if resume else 'into'} {out_dir} ...")
 
     def _barrier_finished(self, result) -> None:
         for button, enabled in ((self.start_button, True), (self.resume_button, True), (self.stop_button, False)):
             button.setEnabled(enabled)
+        if result.summary is None:
+            self.progress.setFormat("stopped: Resume... continues it")
+            self.status.setText(f"two-material design stopped: the best design so far is in {result.out}; Resume... "
+                                "continues it")
+            return
+        self.progress.setValue(self.progress.maximum())
         self.progress.setFormat(f"two-material design {result.status}")
         self.status.setText(f"two-material design {result.status}: design.stl (drug), barrier.stl and the two-object "
                             f"3MF in {result.out}")
 
     def resume(self, folder: str | Path | None = None) -> None:
-        """Continue a stopped design (``sfr design --resume``): ``folder``, or one chosen in a dialog."""
+        """Continue a stopped design, one-material or two-material (``sfr design --resume``): ``folder``, or one
+        chosen in a dialog."""
         if not folder:
             folder = QFileDialog.getExistingDirectory(self, "design folder to resume", str(self.data_dir / "designs"))
             if not folder:
                 return
+        from design.files.twomaterial_run import is_two_material_run
+
+        if is_two_material_run(folder):
+            self._run_barrier(None, Path(folder))
+            return
         self.out_dir = Path(folder)
         self._run(None, self.out_dir, resume=True)
 

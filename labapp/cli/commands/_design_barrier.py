@@ -2,9 +2,7 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from pathlib import Path
 
 from labapp.cli.argtypes import nonnegative_float
 
@@ -43,10 +41,9 @@ def wants_barrier_design(args: argparse.Namespace) -> bool:
         return True
     if not args.resume:
         return False
-    try:
-        return json.loads((Path(args.out) / "config.json").read_text()).get("kind") == "two-material"
-    except (OSError, ValueError, AttributeError):
-        return False
+    from design.files.twomaterial_run import is_two_material_run
+
+    return is_two_material_run(args.out)
 
 
 def _settings_options(args: argparse.Namespace, given: dict) -> dict:
