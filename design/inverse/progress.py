@@ -11,9 +11,9 @@ measured, docs/benchmarks.md#the-stages-of-a-design).
 
 `RunClock` wraps the run's progress callback: at every evaluation it measures the seconds per weighted evaluation of
 the phase in progress and sets ``eta_s`` to what is left of it and of every later phase at that rate. The work between
-two phases (a coarse start's outputs, a print check) is timed too, from the previous phase's last evaluation to the
-next one's first, and from then on what is left of that work (the later checks and the outputs) is estimated at the
-seconds per weighted evaluation it took there: a print check's release and an evaluation's solves do not keep the
+two phases (a print check, with the outputs after the last) is timed too, from the previous phase's last evaluation
+to the next one's first, and from then on what is left of that work (the later checks and the outputs) is estimated
+at the seconds per weighted evaluation it took there: a print check's release and an evaluation's solves do not keep the
 same ratio on every shape and machine load. A phase that ends early (an optimisation that converges or stalls before
 its limit) makes the estimate fall at once. It also sets
 ``terms["limit"]``, the evaluations of the run the phase is part of (a coarse start's, or the optimisation's and its
@@ -27,27 +27,31 @@ from dataclasses import dataclass
 from design.inverse.config import DesignConfig
 from design.inverse.optimize import IterationCallback
 
-PRINT_CHECK_EVALS = {"extruded": 110.0}
+PRINT_CHECK_EVALS = {"extruded": 16.0}
 """The time of a correction round's print check (extraction, the reference evaluator's release, the design grid's
 release) in evaluations of the run's grid, per design space (`DEFAULT_PRINT_CHECK_EVALS` for the others), until the
-run has timed one (`RunClock`): 110 extruded evaluations, whose 2D design is cheap beside the print's release
+run has timed one (`RunClock`), as measured in default designs at resolution 128
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 DEFAULT_PRINT_CHECK_EVALS = 25.0
-"""`PRINT_CHECK_EVALS` of the spaces it does not name: an nfc print check at resolution 128 takes about 25 of its
-evaluations (J_conn's distances on blocks of 2, `design.fabrication.connectivity.block_edge`)."""
-OUTPUTS_EVALS = {"extruded": 700.0}
+"""`PRINT_CHECK_EVALS` of the spaces it does not name (nfc, ico)."""
+OUTPUTS_EVALS = {"extruded": 77.0}
 """The time of the outputs (the print's extraction and release on the full lattice, the binary solid's release,
-the report) in evaluations of the run's grid, per design space (`DEFAULT_OUTPUTS_EVALS` for the others): about 65
-nfc evaluations at resolution 128 (less when the last round's check judged the print on the outputs' lattice,
-`design.inverse.release_cache`), and 700 extruded ones, whose rounds judge it on a coarser lattice
-(docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
+the report) in evaluations of the run's grid, per design space (`DEFAULT_OUTPUTS_EVALS` for the others), as measured
+in default designs at resolution 128 (less when the last round's check judged the print on the outputs' lattice,
+`design.inverse.release_cache`; docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 DEFAULT_OUTPUTS_EVALS = 65.0
 """`OUTPUTS_EVALS` of the spaces it does not name."""
-COARSE_EVAL_WEIGHT = 0.18
-"""The cost of an evaluation of a multi-start's coarse start (half the resolution) in evaluations of the run's grid:
-an eighth of the voxels, but fixed costs per evaluation, and J_conn's distances solved on the full coarse grid there
-(blocks of 1, on blocks of 2 at the full resolution), make it dearer (0.18 measured for nfc at 128;
-docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
+COARSE_EVAL_WEIGHT = {"extruded": 0.065}
+"""The cost of an evaluation of a multi-start's coarse start (half the resolution) in evaluations of the run's grid,
+per design space (`DEFAULT_COARSE_EVAL_WEIGHT` for the others), as measured at resolution 128: an eighth of the
+voxels, but fixed costs per evaluation and, in nfc, J_conn's distances solved on the full coarse grid there (blocks
+of 1, on blocks of 2 at the full resolution) make an nfc one dearer
+(docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
+DEFAULT_COARSE_EVAL_WEIGHT = 0.18
+"""`COARSE_EVAL_WEIGHT` of the spaces it does not name."""
+COARSE_OUTPUTS_EVALS = 6.0
+"""The time of a coarse start's outputs (ranked by J alone: no reference release of the print) in evaluations of the
+run's grid, measured at resolution 128 in nfc and extruded designs."""
 RATE_MIN_EVALS = 3
 """Evaluations of a phase after which its own rate replaces the one carried from the phase before."""
 
@@ -72,6 +76,9 @@ class Phase:
     limit : int
         The run-local evaluation count at which the run it is part of ends (a coarse start's, or the optimisation's
         and its rounds'): the progress line's "it k/limit". 0: ``end``.
+    checked : bool
+        What follows it is a print check or the outputs, whose measured pace `RunClock` applies to the later ones
+        (False: a coarse start's outputs, which release no print).
     """
 
     name: str | None
@@ -80,6 +87,7 @@ class Phase:
     weight: float
     after: float
     limit: int = 0
+    checked: bool = True
 
 
 def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bool) -> list[Phase]:
@@ -121,10 +129,10 @@ def run_plan(config: DesignConfig) -> list[Phase]:
         last = phases[-1]
         return phases[:-1] + [Phase(last.name, last.end, last.evals, last.weight, last.after + outputs_evals(config),
                                     last.limit)]
-    weight = COARSE_EVAL_WEIGHT
+    weight = COARSE_EVAL_WEIGHT.get(config.space, DEFAULT_COARSE_EVAL_WEIGHT)
     evals = coarse_config(config).max_iter
-    coarse = [Phase(coarse_phase(k, config.starts, resolution), evals, evals, weight,
-                    outputs_evals(config) * weight) for k in range(config.starts)]
+    coarse = [Phase(coarse_phase(k, config.starts, resolution), evals, evals, weight, COARSE_OUTPUTS_EVALS,
+                    checked=False) for k in range(config.starts)]
     return coarse + _single(refinement_config(config), refinement_phase(config.resolution), 1.0, True)
 
 
@@ -179,7 +187,9 @@ class RunClock:
     def _time_between(self, i: int, seconds: float) -> None:
         """Set `after_rate` from the ``seconds`` between the phase before phase ``i`` and its first evaluation."""
         before = self.current
-        if before is None or i != before + 1 or self.rate is None or not self.plan[before].after > 0 or seconds <= 0:
+        if before is None or i != before + 1 or self.rate is None or seconds <= 0:
+            return
+        if not (self.plan[before].checked and self.plan[before].after > 0):
             return
         self.after_rate = seconds / self.plan[before].after
 

@@ -24,7 +24,8 @@ def test_a_multistart_plan_has_its_coarse_starts_at_their_measured_cost_then_the
     assert names[:4] == [f"coarse start {k} of 4 at resolution 64" for k in range(1, 5)]
     assert names[4:] == ["refinement at resolution 128", "refinement at resolution 128, physical correction round 1 of 2",
                          "refinement at resolution 128, physical correction round 2 of 2"]
-    assert [p.weight for p in plan] == [progress.COARSE_EVAL_WEIGHT] * 4 + [1.0] * 3
+    assert [p.weight for p in plan] == [progress.DEFAULT_COARSE_EVAL_WEIGHT] * 4 + [1.0] * 3
+    assert [p.after for p in plan[:4]] == [progress.COARSE_OUTPUTS_EVALS] * 4
     # each coarse start COARSE_EVALS_SHARE of the evaluations; the refinement a fifth (20), then its two rounds of 10
     coarse = round(100 * COARSE_EVALS_SHARE)
     assert [(p.end, p.limit or p.end) for p in plan] == [(coarse, coarse)] * 4 + [(20, 40), (30, 40), (40, 40)]
@@ -70,3 +71,15 @@ def test_every_evaluation_of_a_run_names_a_phase_of_its_plan(tmp_path):
                                                                                           terms["eta_s"])))
     assert len(seen) == 20 and {name for name, _ in seen} == names
     assert all(eta > 0 for _, eta in seen)  # the last evaluation still has its print check and outputs ahead
+
+
+def test_a_coarse_starts_outputs_do_not_set_the_pace_of_the_print_checks(monkeypatch):
+    now = [0.0]
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
+    clock = RunClock(run_plan(DesignConfig(target="sphere", resolution=128, max_iter=100)), lambda k, x, terms: None)
+    for name in ("coarse start 1 of 4 at resolution 64", "coarse start 2 of 4 at resolution 64"):
+        for k in range(1, 6):
+            now[0] += 0.1
+            clock(k, None, {"phase": name})
+        now[0] += 30.0  # the outputs: no print released
+    assert clock.rate is not None and clock.after_rate is None
