@@ -121,6 +121,10 @@ def evaluate_models(set_csv: str | Path, bench_calibration: str | Path | None, o
     set_csv, out_dir = Path(set_csv), Path(out_dir)
     resolution = DEFAULT_RESOLUTION if resolution is None else int(resolution)
     rows = read_set(set_csv)
+    coated = [r.row for r in rows if r.barrier_mesh is not None]
+    if coated:
+        raise SimCalError(f"{set_csv}: rows {', '.join(map(str, coated))} name a barrier_mesh; an evaluation compares "
+                          "one-material predictions (calibrate the barrier with sfr calibrate-sim)")
     if len(rows) < 3:
         raise SimCalError(f"{set_csv}: {len(rows)} objects; a leave-one-out evaluation needs at least 3")
     out_dir = check_out(out_dir, FolderKind.EVALUATION, [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)],

@@ -110,6 +110,14 @@ def test_a_set_with_coated_rows_needs_two_uncoated_and_existing_barrier_meshes(t
         read_set(set_csv)
 
 
+def test_an_evaluation_refuses_coated_rows_before_any_work(calibrated, tmp_path):
+    from labapp.jobs.evaluate import evaluate_models
+
+    with pytest.raises(SimCalError, match="rows 3, 4, 5 name a barrier_mesh"):
+        evaluate_models(calibrated[0] / "set.csv", None, tmp_path / "evaluation")
+    assert not (tmp_path / "evaluation").exists()
+
+
 def _delayed_curve(tmp_path) -> PhysicalCurve:
     """A measured delay-then-constant-rate curve: nothing for 1.5 mm of drug, then 20 mm^3/mm for 1 mm."""
     rng = np.random.default_rng(2)
