@@ -38,8 +38,8 @@ NOISE_FLOOR = 3.0
 START_FRACTION = END_FRACTION = 0.05
 """A measured target releases nothing until its monotone fit exceeds NOISE_FLOOR noise standard deviations and
 START_FRACTION of its final release, and all of it once within END_FRACTION of its final level: there the fit of a
-flat stretch is the measurement's error (white noise, and level shifts that last minutes, such as an intrusion in
-the crop: 0.01-0.015 g on the simulated bench, 2-3 % of a 0.6 g print), which would shorten the delay asked or add a
+flat stretch is the measurement's error (white noise, and level shifts that last minutes: 0.01-0.015 g on the
+simulated bench, 2-3 % of a 0.6 g print), which would shorten the delay asked or add a
 pause and a last pulse at the end. The start found is late, and the end early, by the time the release takes to
 cover that level (5 % of its span for a constant rate)."""
 SMOOTH_FRACTION = 0.05
