@@ -23,7 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("set_csv", metavar="SET.csv", nargs="?",
                         help="columns run,mesh,object_mass_g; run = run folder or curve CSV, paths relative to "
-                             "the file; an empty mass is read from the run's run.json (not with --plan)")
+                             "the file; an empty mass is read from the run's run.json (not with --plan); an optional "
+                             "barrier_mesh column marks coated prints, which give the barrier's speed")
     _add_plan_arguments(parser)
     parser.add_argument("--calibration", help="bench calibration JSON for the run folders (default: each run's own)")
     parser.add_argument("--out", required=True, help="output folder (must not hold a calibration yet)")
@@ -136,4 +137,9 @@ def print_summary(doc: dict) -> None:
         print(f"error bands ({100 * band['level']:.0f}%): {cov['points_inside']} of {cov['points']} held-out points "
               f"({100 * cov['fraction']:.1f}%) inside the band from the other runs; per run "
               + ", ".join(f"{100 * c:.0f}%" for c in cov["per_run"]))
+    barrier = doc.get("barrier")
+    if barrier:
+        print(f"barrier speed {barrier['speed']:.4f} +- {barrier['error']:.4f} from {len(barrier['runs'])} coated prints "
+              f"(runs' standard error {barrier['standard_error']:.4f}; at the calibration's rate "
+              f"{barrier['speed_at_calibrated_rate']:.4f})")
 

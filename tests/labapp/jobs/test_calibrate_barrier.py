@@ -101,6 +101,14 @@ def test_calibrate_sim_fits_the_barrier_speed_from_the_coated_rows(calibrated):
     assert simcal.barrier["speed"] == b["speed"] and simcal.barrier["error"] == b["error"]
 
 
+def test_the_command_prints_the_barrier_speed(calibrated, capsys):
+    from labapp.cli.commands.calibrate_sim import print_summary
+
+    print_summary(calibrated[1].doc)
+    b = calibrated[1].doc["barrier"]
+    assert f"barrier speed {b['speed']:.4f} +- {b['error']:.4f} from 3 coated prints" in capsys.readouterr().out
+
+
 def test_a_set_with_coated_rows_needs_two_uncoated_and_existing_barrier_meshes(tmp_path):
     set_csv = _set(tmp_path, coated=2, uncoated=1)
     with pytest.raises(SimCalError, match="1 rows without a barrier_mesh"):
