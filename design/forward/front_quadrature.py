@@ -1,17 +1,18 @@
-"""Release of a closed body wetted at a different time on each face: the two-material reference's quadrature.
+"""Release of a closed body wetted at a different time at each point of its surface: the two-material reference's
+quadrature.
 
-Each face t of the body is wetted at w_t (0 where it faces the bath, later where a barrier covers it), and the front
-reaches a point x of the body at T(x) = min_t (w_t + |x - t|) (exact point-triangle distances over the body's
-bounding-volume hierarchy, :class:`design.forward.distance.Surface`). As in the one-material quadrature
-(:mod:`design.forward.quadrature`), each cell of a cubic lattice of spacing h spreads its solid volume over an
-interval of arrival times around T at its centre, with unit slope per h^2 of cross-section:
+The body's surface is wetted at w(p) (0 where it faces the bath, later where a barrier covers it; linear over each
+triangle of a subdivided copy of the surface, :class:`design.forward.linear_sources.LinearSources`), and the front
+reaches a point x of the body at T(x) = min_p (w(p) + |x - p|) (exact minima over the triangles' hierarchy). As in
+the one-material quadrature (:mod:`design.forward.quadrature`), each cell of a cubic lattice of spacing h spreads its
+solid volume over an interval of arrival times around T at its centre, with unit slope per h^2 of cross-section:
 
 * a cell inside the body by more than h/2: [T - h/2, T + h/2];
 * a cell cut by the surface (|f| < h/2, f its signed distance), solid thickness L = f + h/2, w the arrival time
   at its closest point of the surface: where that point's front arrives first (T = w + |f|), [max(w + f - h/2, w),
   w + f + h/2], the one-material cut cell started at the wall's own wetting time; where a front from elsewhere
-  arrives first (a covered face reached from the body's inside), an interval of length L centred on T at the
-  solid part's centre, T + (h - L)/2 (grad T . n), n the outward normal;
+  arrives first (a covered face reached from the body's inside, or a front tilted along the face), an interval of
+  length L centred on T at the solid part's centre, T + (h - L)/2 (grad T . n), n the outward normal;
 * a cell whose gradient of T turns by more than `RIDGE_ANGLE_DEG` against a face neighbour (two fronts meet, or
   the medial axis) is split into `SPLIT`^3 sub-cells treated the same way (without the shift).
 
@@ -25,18 +26,20 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from design.forward.distance import Surface, sign_and_direction
-from design.forward.quadrature import BAND, BLOCK, RIDGE_ANGLE_DEG, SPLIT, Lattice, Ramps, solid_blocks
+from design.forward.distance import Surface
+from design.forward.linear_sources import LinearSources
+from design.forward.quadrature import BAND, BLOCK, SPLIT, Lattice, Ramps, ridge_cells, solid_blocks
 
 FIRST_SLACK = 1e-9
 """A cell's closest face's front arrives first when T >= w + |f| - this x h (round-off of the two sums)."""
 
 
-def _front_direction(surface: Surface, points: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Unit grad T at each point: from the closest point of its arrival triangle towards the point (outside the body,
-    where only a cut cell's solid part arrives, its continuation: towards the closest point)."""
-    return sign_and_direction(points, tri, surface.vx, surface.face_n, surface.edge_n, surface.vert_n,
-                              surface.faces)[1]
+def _front_direction(points: np.ndarray, foot: np.ndarray, f: np.ndarray, n_in: np.ndarray) -> np.ndarray:
+    """Unit grad T at each point: from its minimiser p* on the surface towards the point (outside the body, where only
+    a cut cell's solid part arrives, its continuation: towards p*); the inward normal at p* itself."""
+    d = (points - foot) * np.where(f < 0.0, -1.0, 1.0)[:, None]
+    norm = np.linalg.norm(d, axis=1)
+    return np.where(norm[:, None] > 0.0, d / np.where(norm > 0.0, norm, 1.0)[:, None], n_in)
 
 
 def _cut_ramps(f, T, w, g, n_in, h, shift):
@@ -58,56 +61,41 @@ def _cut_ramps(f, T, w, g, n_in, h, shift):
     return start, end
 
 
-def _wall_time(source: Surface, offset: np.ndarray, points: np.ndarray, f: np.ndarray, n_in: np.ndarray) -> np.ndarray:
+def _wall_time(source: LinearSources, points: np.ndarray, f: np.ndarray, n_in: np.ndarray) -> np.ndarray:
     """The arrival time at each point's closest point of the surface (the point moved by f along the outward
     normal)."""
-    return source.nearest_stored(np.ascontiguousarray(points - f[:, None] * n_in), offset)[0]
+    return source.arrival(points - f[:, None] * n_in)[0]
 
 
-def _block_ramps(surface: Surface, source: Surface, offset: np.ndarray, lattice: Lattice, block: np.ndarray,
-                 ramps: Ramps) -> None:
+def _block_ramps(surface: Surface, source: LinearSources, lattice: Lattice, block: np.ndarray, ramps: Ramps) -> None:
     """Add one block's cells' ramps (the block with a halo of one cell, for the ridge test)."""
     h = lattice.h
     lo = np.maximum(block - 1, 0)
     hi = np.minimum(block + BLOCK + 1, lattice.n)
     shape = tuple(int(v) for v in hi - lo)
     centres = lattice.centres(lo, hi)
-    f, n_in, tri_u = surface.lattice_distance(centres, shape, BAND * h)
+    f, n_in, _ = surface.lattice_distance(centres, shape, BAND * h)
     near = f > -h
     T = np.full(f.shape, np.inf)
     g = np.zeros((f.size, 3))
-    tri_t = np.full(f.size, -1, dtype=np.int64)
     if near.any():
-        T[near], tri_t[near] = source.nearest_stored(centres[near], offset)
-        g[near] = _front_direction(source, centres[near], tri_t[near])
-    grid_g = g.reshape(shape + (3,))
-    grid_near = near.reshape(shape)
-    ridge = np.zeros(shape, dtype=bool)
-    cos_max = np.cos(np.radians(RIDGE_ANGLE_DEG))
-    for a in range(3):
-        below = [slice(None)] * 3
-        above = [slice(None)] * 3
-        below[a] = slice(0, -1)
-        above[a] = slice(1, None)
-        both = grid_near[tuple(below)] & grid_near[tuple(above)]
-        bent = both & (np.einsum("...k,...k->...", grid_g[tuple(below)], grid_g[tuple(above)]) < cos_max)
-        ridge[tuple(below)] |= bent
-        ridge[tuple(above)] |= bent
+        T[near], _, foot = source.arrival(centres[near])
+        g[near] = _front_direction(centres[near], foot, f[near], n_in[near])
+    ridge = ridge_cells(g.reshape(shape + (3,)), near.reshape(shape))
     own = np.zeros(shape, dtype=bool)
     own[tuple(slice(int(block[a] - lo[a]), int(min(block[a] + BLOCK, lattice.n[a]) - lo[a])) for a in range(3))] = True
     own = own.ravel() & near
     ridge = own & ridge.ravel()
     plain = own & ~ridge & (f > -0.5 * h)
     if plain.any():
-        w = _wall_time(source, offset, centres[plain], f[plain], n_in[plain])
+        w = _wall_time(source, centres[plain], f[plain], n_in[plain])
         start, end = _cut_ramps(f[plain], T[plain], w, g[plain], n_in[plain], h, True)
         ramps.add(start, end, h * h)
     if ridge.any():
-        _split_ramps(surface, source, offset, centres[ridge], h, ramps)
+        _split_ramps(surface, source, centres[ridge], h, ramps)
 
 
-def _split_ramps(surface: Surface, source: Surface, offset: np.ndarray, centres: np.ndarray, h: float,
-                 ramps: Ramps) -> None:
+def _split_ramps(surface: Surface, source: LinearSources, centres: np.ndarray, h: float, ramps: Ramps) -> None:
     """Ramps of the `SPLIT`^3 sub-cells of each cell centred at ``centres``."""
     hs = h / SPLIT
     axis = (np.arange(SPLIT) + 0.5) * hs - 0.5 * h
@@ -118,19 +106,19 @@ def _split_ramps(surface: Surface, source: Surface, offset: np.ndarray, centres:
     points, f, n_in = points[keep], f[keep], n_in[keep]
     if not len(points):
         return
-    T = source.nearest_stored(points, offset)[0]
+    T = source.arrival(points)[0]
     zero = np.zeros((len(points), 3))
-    start, end = _cut_ramps(f, T, _wall_time(source, offset, points, f, n_in), zero, zero, hs, False)
+    start, end = _cut_ramps(f, T, _wall_time(source, points, f, n_in), zero, zero, hs, False)
     ramps.add(start, end, hs * hs)
 
 
-def front_curve(surface: Surface, source: Surface, offset: np.ndarray, bounds: np.ndarray, h: float,
-                tau: np.ndarray, *, workers: int | None = None) -> tuple[np.ndarray, float, float]:
+def front_curve(surface: Surface, source: LinearSources, bounds: np.ndarray, h: float, tau: np.ndarray, *,
+                workers: int | None = None) -> tuple[np.ndarray, float, float]:
     """Quadrature on a lattice of spacing h: (unnormalised curve at tau, its volume, the largest arrival).
 
-    ``surface`` is the body (its signed distances); ``source`` the same surface subdivided, with ``offset`` each of
-    its stored triangles' wetting time, mm (:meth:`Surface.stored`): T(x) = min_t (offset_t + |x - t|). Only the
-    blocks that meet the body are evaluated, ``workers`` threads at a time; their ramps are summed in block order (deterministic).
+    ``surface`` is the body (its signed distances); ``source`` the same surface subdivided with its wetting times:
+    T(x) = min_p (w(p) + |x - p|). Only the blocks that meet the body are evaluated, ``workers`` threads at a
+    time; their ramps are summed in block order (deterministic).
     """
     lattice = Lattice.over(bounds, h)
     blocks = solid_blocks(surface, lattice)
@@ -138,7 +126,7 @@ def front_curve(surface: Surface, source: Surface, offset: np.ndarray, bounds: n
 
     def one(block: np.ndarray) -> Ramps:
         ramps = Ramps.empty(tau)
-        _block_ramps(surface, source, offset, lattice, block, ramps)
+        _block_ramps(surface, source, lattice, block, ramps)
         return ramps
 
     total = Ramps.empty(tau)

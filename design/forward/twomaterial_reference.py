@@ -5,19 +5,22 @@ The drug erodes at unit speed, the barrier at ``s`` times that (paper section 6;
 where the two meshes overlap, so the barrier's region is the barrier mesh less the drug. With two speeds the
 arrival time T is a refracted shortest path: straight within each material, bent where it crosses from one to
 the other. Every such path is a chain of straight pieces between points of the material interfaces, so T is the
-fixed point of two Huygens minima over the interface points (the drug's surface subdivided to edges no longer than
-`EDGE_CELLS` lattice spacings h of the quadrature, each triangle represented by its centroid c_t):
+fixed point of two Huygens minima over the interface (the drug's surface subdivided to edges no longer than
+`EDGE_CELLS` lattice spacings h of the quadrature; the wetting time w is linear over each triangle, given at its
+vertices v, and each minimum over the triangles is exact for that w, :mod:`design.forward.linear_sources`):
 
-    w_t = min( min_{q in B_bath} |c_t - q| / s,  min_{t' covered} (w_t' + |c_t - c_t'| / s),    (through barrier)
-               min_{q open in its body} |c_t - q|,  min_{t' covered in its body} (w_t' + |c_t - c_t'|) )  (through drug)
+    w_v = min( min_{q in B_bath} |v - q| / s,  min_{p covered} (w(p) + |v - p| / s),    (through barrier)
+               min_{q open in its body} |v - q|,  min_{p covered in its body} (w(p) + |v - p|) )  (through drug)
 
-for every drug triangle t covered by barrier (the point just outside it lies in the barrier), where B_bath are the
-barrier's triangles facing the bath and "open" the drug's triangles facing the bath (w = 0). The iteration starts
-from w = inf and decreases to the fixed point in one pass per crossing of an interface. Inside the drug,
-T(x) = min_t (w_t + |x - t|) over the triangles of x's own body: the exact reference evaluator's quadrature with
-per-triangle wetting times (:mod:`design.forward.front_quadrature`: second order where T is smooth, sub-cells at
-ridges). An insoluble barrier (s = 0) is never crossed: T is the distance through drug
-and void, and a drug body with no open face is *sealed* (it never releases).
+for every vertex v whose triangles barrier covers (the point just outside each lies in the barrier), where B_bath
+are the barrier's triangles facing the bath and "open" the drug's triangles facing the bath (w = 0 at their
+vertices). The iteration starts from the straight paths and decreases to the fixed point in one pass per crossing
+of an interface. Inside the drug, T(x) = min_p (w(p) + |x - p|) over the surface of x's own body: the exact
+reference evaluator's quadrature with these wetting times (:mod:`design.forward.front_quadrature`: second order
+where T is smooth, sub-cells at ridges). Linear wetting times are second order in the triangles' size where w
+varies along a face (a constant time per triangle is first order, and early): a coat of varying thickness, or a
+covered face wetted from an opening, needs no finer surface than the lattice. An insoluble barrier (s = 0) is
+never crossed: T is the distance through drug and void, and a drug body with no open face is *sealed* (it never releases).
 
 Straight pieces are exact where they stay in their material. A drug piece that crosses barrier inside its own
 body's convex hull, or (s > 1) a barrier piece that crosses drug, would be faster than the true path; the result
@@ -45,6 +48,7 @@ from design._validate import check_positive
 from design.errors import DesignError
 from design.forward.distance import Surface
 from design.forward.front_quadrature import front_curve
+from design.forward.linear_sources import LinearSources
 from design.forward.reference import SAMPLES, ReferenceRelease, _check_mesh, _until_dissolved, metric_mesh
 from design.forward.solid_lattice import DEFAULT_TOLERANCE, MAX_POINTS, choose
 from design.forward.twomaterial import check_barrier_speed
@@ -52,25 +56,21 @@ from design.forward.twomaterial import check_barrier_speed
 log = logging.getLogger(__name__)
 
 SEALED_MM = 1e12
-"""Wetting time given to a drug triangle that no path reaches (behind an insoluble barrier), mm."""
+"""Wetting time given to a drug vertex that no path reaches (behind an insoluble barrier), mm."""
 QUANTUM_MM = 1e-9
-"""Wetting times are rounded to this, so that a face of uniform cover carries one time (the quadrature treats
-neighbouring triangles with different times as different fronts)."""
+"""Wetting times are rounded to this, so that a face of uniform cover carries one time exactly."""
 PROBE = 1e-7
 """Step off a triangle, as a fraction of the bounding box's diagonal, to see which material lies beyond it."""
 MAX_SWEEPS = 200
 """Passes of the fixed-point iteration at most (one per crossing of an interface along the slowest path)."""
-EDGE_CELLS = 0.5
-"""The drug's surface is subdivided to edges of this many lattice spacings h: each triangle carries one wetting time
-(its centroid's), so where the wetting time varies along a face it is resolved to within h/2."""
-SHRINK = 1e-9
-"""Covered triangles shrunk by this about their centroids are the point sources of the fixed-point iteration."""
-CHUNK = 256
-"""Points per search of the fixed-point iteration (points of similar wetting time share a cap that prunes the
-search)."""
+EDGE_CELLS = 1.0
+"""The drug's surface is subdivided to edges of this many lattice spacings h (the wetting time is linear over each
+triangle: its error, second order in the edge, is then of the lattice's order and within the stated error, which
+doubles both)."""
 SETTLED_MM = 1e-7
-"""The fixed-point iteration stops when no wetting time falls by more than this, mm (each pass through a shrunk
-triangle can gain its size, about 1e-9 of a triangle's)."""
+"""The fixed-point iteration looks only for wetting times that fall by more than this, and stops when none does, mm
+(a path that gains less is no other path: without the margin, the sources along a straight path to an opening all
+bound a vertex's time exactly and none of them is pruned)."""
 HULL_SLACK = 1e-6
 """Barrier volume inside a drug body's convex hull (beyond the body) under this fraction of the body's volume is
 none (round-off of the boolean)."""
@@ -120,13 +120,6 @@ def _subdivided(mesh: trimesh.Trimesh, edge: float) -> trimesh.Trimesh:
     return trimesh.Trimesh(v, f, process=False)
 
 
-def _shrunk(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """The triangles shrunk by `SHRINK` about their centroids: Huygens sources at the centroids."""
-    centre = mesh.triangles_center[:, None, :]
-    vx = centre + SHRINK * (mesh.triangles - centre)
-    return trimesh.Trimesh(vx.reshape(-1, 3), np.arange(3 * len(vx)).reshape(-1, 3), process=False)
-
-
 def _bodies(drug: trimesh.Trimesh) -> list[trimesh.Trimesh]:
     bodies = drug.split(only_watertight=False) if drug.body_count > 1 else [drug]
     for b in bodies:
@@ -168,57 +161,62 @@ def _distance(mesh: trimesh.Trimesh | None, points: np.ndarray) -> np.ndarray:
     return Surface(mesh).nearest_stored(np.ascontiguousarray(points), np.zeros(len(mesh.faces)))[0]
 
 
-def _huygens(surface: Surface, points: np.ndarray, offset: np.ndarray, below: np.ndarray | None = None) -> np.ndarray:
-    """min_t (offset_t + |p - t|) per point (offsets per face of the surface's mesh), or ``below`` where that is
-    not less: the points are searched in chunks of similar ``below``, each with its largest as the search's cap."""
-    stored = surface.stored(offset)
-    if below is None:
-        return surface.nearest_stored(np.ascontiguousarray(points), stored)[0]
-    out = np.array(below, dtype=np.float64)
-    order = np.argsort(out, kind="stable")
-    for chunk in np.array_split(order, max(1, order.size // CHUNK)):
-        cap = float(out[chunk].max())
-        value, tri = surface.nearest_stored(np.ascontiguousarray(points[chunk]), stored, cap)
-        out[chunk] = np.where(tri >= 0, np.minimum(value, out[chunk]), out[chunk])
-    return out
+def _covered_mesh(sources: list[trimesh.Trimesh], covered: list[np.ndarray]) -> trimesh.Trimesh:
+    """The covered triangles of every body as one mesh on all the bodies' vertices (in body order)."""
+    first = np.cumsum([0] + [len(m.vertices) for m in sources])
+    faces = np.vstack([m.faces[c] + first[k] for k, (m, c) in enumerate(zip(sources, covered))])
+    return trimesh.Trimesh(np.vstack([m.vertices for m in sources]), faces, process=False)
 
 
 def wetting_times(faces: _Interfaces, s: float) -> list[np.ndarray]:
-    """Per body, per source face, when the front reaches it: 0 open, the fixed point of the module docstring at its
-    centroid where barrier covers it, `SEALED_MM` where nothing reaches it."""
+    """Per body, per vertex of its subdivided surface, when the front reaches it: 0 on an open face, the fixed point
+    of the module docstring where barrier covers every face around it, `SEALED_MM` where nothing reaches it."""
     sources, covered = faces.sources, faces.covered
-    counts = np.cumsum([0] + [int(c.sum()) for c in covered])
-    if not counts[-1]:
-        return [np.zeros(len(m.faces)) for m in sources]
-    centres = np.vstack([m.triangles_center[c] for m, c in zip(sources, covered)])
-    pieces = [slice(counts[k], counts[k + 1]) for k in range(len(sources))]
+    times = []
+    for m, c in zip(sources, covered):
+        w = np.full(len(m.vertices), SEALED_MM)
+        w[m.faces[~c].ravel()] = 0.0
+        times.append(w)
+    todo = [np.flatnonzero(w > 0.0) for w in times]
+    if not sum(t.size for t in todo):
+        return times
     # paths straight from the bath: through the body's open faces, or through the barrier
-    w = np.concatenate([_distance(m.submesh([np.flatnonzero(~c)], append=True) if (~c).any() else None,
-                                  centres[piece]) for m, c, piece in zip(sources, covered, pieces)])
-    if s > 0.0:
-        w = np.minimum(w, _distance(faces.bath_barrier, centres) / s)
-    points = [Surface(_shrunk(m.submesh([np.flatnonzero(c)], append=True))) if c.any() else None
-              for m, c in zip(sources, covered)]
-    every = Surface(_shrunk(trimesh.util.concatenate([m.submesh([np.flatnonzero(c)], append=True)
-                                                      for m, c in zip(sources, covered) if c.any()])))
-    for sweep in range(MAX_SWEEPS):  # refracted paths: from covered point to covered point, through drug or barrier
-        before = w.copy()
-        for piece, surface in zip(pieces, points):
-            if surface is not None:
-                w[piece] = _huygens(surface, centres[piece], w[piece], w[piece])
+    for m, c, w, k in zip(sources, covered, times, todo):
+        straight = _distance(trimesh.Trimesh(m.vertices, m.faces[~c], process=False) if (~c).any() else None,
+                             m.vertices[k])
         if s > 0.0:
-            sw = np.where(np.isfinite(w), s * w, np.inf)
-            w = _huygens(every, centres, sw, sw) / s
-        with np.errstate(invalid="ignore"):  # inf - inf where a triangle stays unreached
-            if np.all((w == before) | (before - w <= SETTLED_MM)):
-                break
-    log.debug("wetting times: %d covered triangles, %d sweeps", counts[-1], sweep + 1)
-    out = []
-    for m, c, piece in zip(sources, covered, pieces):
-        times = np.zeros(len(m.faces))
-        times[c] = np.where(np.isfinite(w[piece]), w[piece], SEALED_MM)
-        out.append(np.round(times / QUANTUM_MM) * QUANTUM_MM)
-    return out
+            straight = np.minimum(straight, _distance(faces.bath_barrier, m.vertices[k]) / s)
+        w[k] = np.minimum(straight, SEALED_MM)
+    bodies = [LinearSources(trimesh.Trimesh(m.vertices, m.faces[c], process=False), w) if c.any() else None
+              for m, c, w in zip(sources, covered, times)]
+    every = _covered_mesh(sources, covered)
+    through = LinearSources(every, s * np.concatenate(times)) if s > 0.0 else None
+    points = np.vstack([m.vertices[k] for m, k in zip(sources, todo)])
+    for sweep in range(MAX_SWEEPS):  # refracted paths: from covered face to covered face, through drug or barrier
+        before = np.concatenate([w[k] for w, k in zip(times, todo)])
+        for m, w, k, body in zip(sources, times, todo, bodies):
+            if body is not None and k.size:
+                body.geometry(w)
+                better, tri, _ = body.arrival(m.vertices[k], w[k] - SETTLED_MM)
+                w[k] = np.where(tri >= 0, better, w[k])
+        if through is not None:
+            through.geometry(s * np.concatenate(times))
+            now = np.concatenate([w[k] for w, k in zip(times, todo)])
+            better, tri, _ = through.arrival(points, s * (now - SETTLED_MM))
+            now = np.where(tri >= 0, better / s, now)
+            for w, k, lo, hi in zip(times, todo, *_pieces([k.size for k in todo])):
+                w[k] = now[lo:hi]
+        after = np.concatenate([w[k] for w, k in zip(times, todo)])
+        if np.all(before - after <= SETTLED_MM):
+            break
+    log.debug("wetting times: %d covered vertices, %d sweeps", points.shape[0], sweep + 1)
+    return [np.where(w >= SEALED_MM, SEALED_MM, np.round(w / QUANTUM_MM) * QUANTUM_MM) for w in times]
+
+
+def _pieces(sizes: list[int]) -> tuple[list[int], list[int]]:
+    """Start and end of consecutive pieces of the given sizes."""
+    ends = np.cumsum(sizes).tolist()
+    return [e - n for e, n in zip(ends, sizes)], ends
 
 
 def _straight_paths(bodies: list[trimesh.Trimesh], barrier: trimesh.Trimesh, drug: trimesh.Trimesh, s: float
@@ -273,8 +271,7 @@ class _Print:
             if np.all(w >= SEALED_MM):
                 sealed += float(body.volume) * self.a
                 continue
-            fronts = Surface(source)
-            c, est, last = front_curve(Surface(body), fronts, fronts.stored(w), np.asarray(body.bounds), h, samples)
+            c, est, last = front_curve(Surface(body), LinearSources(source, w), np.asarray(body.bounds), h, samples)
             total += c * (float(body.volume) * self.a / est)
             end = max(end, last)
         return total, end, sealed

@@ -14,6 +14,7 @@ import numpy as np
 from design.errors import DesignError
 from design.files.pipeline import SAMPLE_PREFIX
 from design.files.twogrid import two_material_grid, union_bounds
+from design.forward.solid_lattice import DEFAULT_TOLERANCE, TooThinError
 from design.forward.twomaterial import TwoMaterialRelease, barrier_cover, check_barrier_speed, simulate_two
 from design.geometry.shapes import sample_shape
 from design.geometry.voxelize import DEFAULT_RESOLUTION
@@ -92,8 +93,10 @@ def simulate_barrier_exact(source: str, barrier: str, out: str | Path, *, barrie
     ------
     UsageError
         As :func:`simulate_barrier`.
+        For drug too thin for the evaluator within its lattice budget
+        (:class:`design.forward.solid_lattice.TooThinError`'s message: use the grid model).
     design.DesignError
-        For an invalid mesh, or drug too thin for the evaluator (`TooThinError`: use the grid model).
+        For an invalid mesh.
     """
     from design.forward.twomaterial_reference import two_material_reference_release
 
@@ -107,9 +110,15 @@ def simulate_barrier_exact(source: str, barrier: str, out: str | Path, *, barrie
     say(f"[1/3] loading {source} and the barrier {barrier} ...")
     drug_mesh, barrier_mesh = _mesh(source, units, "drug"), _mesh(barrier, units, "barrier")
     say(f"[2/3] exact refracted distances, barrier speed {s:g} ...")
-    ref = two_material_reference_release(drug_mesh, barrier_mesh, s, source=source,
-                                         progress=lambda line: say(f"      {line}"))
+    try:
+        ref = two_material_reference_release(drug_mesh, barrier_mesh, s, source=source,
+                                             progress=lambda line: say(f"      {line}"))
+    except TooThinError as exc:
+        raise UsageError(str(exc)) from exc
     warnings = []
+    if ref.relative_error > DEFAULT_TOLERANCE:
+        warnings.append(f"{source}: the exact model's stated error is {ref.relative_error:.2%} of the drug volume, above "
+                        f"the {DEFAULT_TOLERANCE:.2%} it aims at ({ref.lattice})")
     if ref.sealed_mm3 > 0:
         warnings.append(f"{ref.sealed_mm3:.4g} mm^3 of drug ({ref.sealed_mm3 / ref.volume_mm3:.1%}) is sealed inside "
                         f"the insoluble barrier in {len(ref.sealed_regions_mm3)} region(s) and never releases; open the "

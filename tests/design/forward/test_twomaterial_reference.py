@@ -45,6 +45,18 @@ def test_slab_coated_on_its_z_faces_with_anisotropy():
     assert np.abs(ref.released_mm3 - (4.608 - left)).max() <= ref.error_mm3 <= 0.01 * 4.608
 
 
+def test_capped_column_releases_from_its_ends_after_the_caps():
+    # a 1.2 x 1.2 x 1.6 mm drug column in a barrier box: 0.2 mm caps (0.8 mm of time at s = 0.25), 0.6 mm walls
+    # (2.4 mm): each end face recedes from 0.8 on, and the sides are wetted through the drug (T = 0.8 + depth, linear
+    # along them) before the walls are crossed: C = 2 x 1.44 x (tau - 0.8) until the ends meet at 1.6
+    tau = np.linspace(0.0, 1.8, 37)
+    ref = two_material_reference_release(box([-0.6, -0.6, -0.8], [0.6, 0.6, 0.8]), box([-1.2, -1.2, -1.0], [1.2, 1.2, 1.0]),
+                                         0.25, tau, tolerance=0.01)
+    exact = 2.0 * 1.44 * np.clip(tau - 0.8, 0.0, 0.8)
+    assert np.abs(ref.released_mm3[tau < 0.8]).max() == 0.0
+    assert np.abs(ref.released_mm3 - exact).max() <= ref.error_mm3 <= 0.01 * 2.304
+
+
 def test_insoluble_barrier_seals_or_opens():
     drug = box([-1, -1, -1], [1, 1, 0])
     sealed = two_material_reference_release(drug, box([-1.5] * 3, [1.5] * 3), 0.0, [0.0, 1.0, 100.0])
