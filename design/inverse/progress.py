@@ -37,7 +37,7 @@ DEFAULT_PRINT_CHECK_EVALS = 25.0
 OUTPUTS_EVALS = {"extruded": 77.0}
 """The time of the outputs (the print's extraction and release on the full lattice, the binary solid's release,
 the report) in evaluations of the run's grid, per design space (`DEFAULT_OUTPUTS_EVALS` for the others), as measured
-in default designs at resolution 128: in nfc 0.8-2 print checks (its release is on the full lattice, the checks' on
+in default designs at resolution 128: in nfc 0.7-2 print checks (its release is on the full lattice, the checks' on
 2 cells per voxel), a few seconds when the last check judged the print on the outputs' lattice and the outputs reuse
 its release (`design.inverse.release_cache`; docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 DEFAULT_OUTPUTS_EVALS = 35.0
