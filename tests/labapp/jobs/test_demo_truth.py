@@ -57,3 +57,14 @@ def test_the_kept_physics_are_named_with_their_units():
     physics = {"fitted": ["anisotropy", LAG], "anisotropy": 0.71357, "offset_mm": 0.0, LAG: 564.58}
     assert demo._physics_line(physics) == "anisotropy 0.714, wetting lag 565 s"
     assert demo._physics_line({"fitted": []}) == "none (isotropic)"
+
+
+def test_a_step_beside_another_prints_its_lines_after_it_in_order():
+    seen = []
+    held = demo._HeldProgress(seen.append)
+    held("4. further run")
+    held("   frame 0")
+    seen.append("3. calibrate-sim done")
+    held.release()
+    held("   frame 100")
+    assert seen == ["3. calibrate-sim done", "4. further run", "   frame 0", "   frame 100"]
