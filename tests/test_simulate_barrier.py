@@ -6,6 +6,7 @@ import pytest
 import trimesh
 
 from design.errors import DesignError
+from design.forward.solid_lattice import TooThinError
 from labapp.cli.main import main
 from labapp.errors import UsageError
 from labapp.jobs.simulate_barrier import simulate_barrier
@@ -144,6 +145,21 @@ def test_the_exact_model_is_the_default(meshes, tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["model"] == "exact" and summary["error"]["error_fraction"] <= 0.004
     assert np.abs(curve[:, 1] - (64.0 - left)).max() <= summary["error"]["error_mm3"]
+
+
+def test_a_part_over_the_exact_models_budget_is_refused_naming_the_grid_model(meshes, tmp_path, monkeypatch, capsys):
+    # the two-material evaluator refuses a part whose stated error needs more than its lattice budget
+    # (design.forward.twomaterial_reference.MAX_POINTS): exit 2, the spacing it needs and --model grid, no folder
+    import design.forward.twomaterial_reference as reference
+
+    def refuse(*args, **kwargs):
+        raise TooThinError("too many points", 4.0, 0.0889, 2.1e6)
+    monkeypatch.setattr(reference, "two_material_reference_release", refuse)
+    out = tmp_path / "run"
+    assert main(["simulate", meshes["drug"], "--barrier", meshes["coat"], "--barrier-speed", "1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "needs a lattice of about 0.0889 mm" in err and "about 2.1 million points, over the 0.15 million" in err
+    assert "--model grid" in err and not out.exists()
 
 
 @pytest.mark.parametrize("extra, message", [

@@ -98,6 +98,7 @@ def simulate_barrier_exact(source: str, barrier: str, out: str | Path, *, barrie
     design.DesignError
         For an invalid mesh.
     """
+    from design.forward.twomaterial_reference import MAX_POINTS as TWO_MATERIAL_POINTS
     from design.forward.twomaterial_reference import two_material_reference_release
 
     say = progress or (lambda message: None)
@@ -114,7 +115,11 @@ def simulate_barrier_exact(source: str, barrier: str, out: str | Path, *, barrie
         ref = two_material_reference_release(drug_mesh, barrier_mesh, s, source=source,
                                              progress=lambda line: say(f"      {line}"))
     except TooThinError as exc:
-        raise UsageError(str(exc)) from exc
+        raise UsageError(f"{source} in {barrier}: the exact two-material model needs a lattice of about "
+                         f"{exc.spacing_mm:.3g} mm for an error within {DEFAULT_TOLERANCE:.2%} of the drug volume, about "
+                         f"{exc.points / 1e6:.2g} million points, over the {TWO_MATERIAL_POINTS / 1e6:.2g} million it "
+                         "evaluates within a minute; simulate it with the grid model (--model grid, first order, its "
+                         "error stated)") from exc
     warnings = []
     if ref.relative_error > DEFAULT_TOLERANCE:
         warnings.append(f"{source}: the exact model's stated error is {ref.relative_error:.2%} of the drug volume, above "
