@@ -188,6 +188,16 @@ class LinearSources:
         The wetted triangles, mm (need not be closed).
     vertex_time : (V,) ndarray of float, mm
         w at each vertex of ``mesh`` (finite; a large value stands for never).
+
+    Examples
+    --------
+    A square wetted at w = 0.6 y: below it, a plane front w(x0) + 0.8 |z|.
+
+    >>> import trimesh
+    >>> square = trimesh.Trimesh([[-5, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0]], [[0, 1, 2], [0, 2, 3]])
+    >>> T, _, _ = LinearSources(square, 0.6 * square.vertices[:, 1]).arrival(np.array([[0.0, 1.0, -2.0]]))
+    >>> round(float(T[0]), 6)
+    2.2
     """
 
     def __init__(self, mesh: trimesh.Trimesh, vertex_time: np.ndarray) -> None:
