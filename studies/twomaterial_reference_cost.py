@@ -14,6 +14,7 @@ import time
 import numpy as np
 import trimesh
 
+from design.forward.solid_lattice import TooThinError
 from design.forward.twomaterial_reference import two_material_reference_release
 from design.geometry.shapes import sample_shape
 
@@ -76,7 +77,12 @@ def main(argv: list[str] | None = None) -> None:
     for name, (drug, barrier, s) in parts.items():
         if name.startswith("pill") or name in cases:
             c, w = time.process_time(), time.perf_counter()
-            ref = two_material_reference_release(drug, barrier, s)
+            try:
+                ref = two_material_reference_release(drug, barrier, s)
+            except TooThinError as exc:
+                print(f"| {name} | {s:g} | refused: {exc.spacing_mm:.3g} mm needed | - | - | "
+                      f"{time.process_time() - c:.1f} | {time.perf_counter() - w:.1f} |", flush=True)
+                continue
             print(f"| {name} | {s:g} | {ref.cell_mm:.3g} | {100 * ref.relative_error:.3g} | {ref.sealed_mm3:.4g} | "
                   f"{time.process_time() - c:.1f} | {time.perf_counter() - w:.1f} |", flush=True)
 

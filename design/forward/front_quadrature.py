@@ -31,7 +31,10 @@ from design.forward.linear_sources import LinearSources
 from design.forward.quadrature import BAND, BLOCK, SPLIT, Lattice, Ramps, ridge_cells, solid_blocks
 
 FIRST_SLACK = 1e-9
-"""A cell's closest face's front arrives first when T >= w + |f| - this x h (round-off of the two sums)."""
+"""A cell's closest face's front arrives first when T >= w + |f| (1 - `FIRST_TILT`) - this x h (round-off)."""
+FIRST_TILT = 0.02
+"""A front tilted against the face by its wetting time's slope g arrives at w + |f| sqrt(1 - g^2): up to g = 0.2 it
+is the face's own front, and the cell's solid part starts at the face's time."""
 
 
 def _front_direction(points: np.ndarray, foot: np.ndarray, f: np.ndarray, n_in: np.ndarray) -> np.ndarray:
@@ -47,7 +50,7 @@ def _cut_ramps(f, T, w, g, n_in, h, shift):
     closest-face wetting time w. Where that face's front is the first (T = w + |f|), the cell's solid part arrives
     from that face: T is taken as w + f, also for a centre outside. Otherwise grad T ``g`` and the inward normal
     ``n_in`` shift the interval to the solid part's centre when ``shift``."""
-    first = T >= w + np.abs(f) - FIRST_SLACK * h
+    first = T >= w + np.abs(f) * (1.0 - FIRST_TILT) - FIRST_SLACK * h
     T = np.where(first, w + f, T)
     inside = f >= 0.5 * h
     solid = np.clip(f + 0.5 * h, 0.0, h)
