@@ -42,13 +42,14 @@ in default designs at resolution 128: in nfc 0.7-2 print checks (its release is 
 its release (`design.inverse.release_cache`; docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 DEFAULT_OUTPUTS_EVALS = 35.0
 """`OUTPUTS_EVALS` of the spaces it does not name."""
-COARSE_EVAL_WEIGHT = {"extruded": 0.065}
+COARSE_EVAL_WEIGHT = {"extruded": 0.16}
 """The cost of an evaluation of a multi-start's coarse start (half the resolution) in evaluations of the run's grid,
-per design space (`DEFAULT_COARSE_EVAL_WEIGHT` for the others), as measured at resolution 128: an eighth of the
-voxels, but fixed costs per evaluation and, in nfc, J_conn's distances solved on the full coarse grid there (blocks
-of 1, on blocks of 2 at the full resolution) make an nfc one dearer
+per design space (`DEFAULT_COARSE_EVAL_WEIGHT` for the others), as measured in default designs at resolution 128 on
+an idle 2-core machine: extruded 0.16 (spinner_top), nfc 0.24 (pill) and 0.17 (spinner_top). An eighth of the voxels,
+but fixed costs per evaluation, J_conn's distances on finer blocks at the coarse grid (nfc), and full-grid solves
+that share the two cores where coarse ones are too small to
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
-DEFAULT_COARSE_EVAL_WEIGHT = 0.18
+DEFAULT_COARSE_EVAL_WEIGHT = 0.22
 """`COARSE_EVAL_WEIGHT` of the spaces it does not name."""
 COARSE_OUTPUTS_EVALS = 6.0
 """The time of a coarse start's outputs (ranked by J alone: no reference release of the print) in evaluations of the
