@@ -205,4 +205,5 @@ class RunClock:
         if self.current is not None:  # the evaluations of the run this phase is part of (``terms["limit"]``)
             phase = self.plan[self.current]
             terms = dict(terms, limit=phase.limit or phase.end)
-        self.on_iteration(k, x, terms if eta is None else dict(terms, eta_s=eta))
+        # before the phase's rate is measured no estimate is given: the optimiser's own covers its run alone
+        self.on_iteration(k, x, dict(terms, eta_s=eta))

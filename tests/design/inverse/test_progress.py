@@ -49,7 +49,7 @@ def test_the_time_left_is_the_plan_left_at_the_phase_rate(monkeypatch):
     for k in range(1, 11):  # 2 s per evaluation
         now[0] += 2.0
         clock(k, None, {"eta_s": -1.0})
-    assert seen[0] == -1.0  # no rate yet: the optimiser's own bound is kept
+    assert seen[0] is None  # no rate yet: no estimate (the optimiser's own covers its run alone)
     left = (80 - 10) + PRINT_CHECK_EVALS + 2 * (10 + PRINT_CHECK_EVALS) + OUTPUTS_EVALS
     assert seen[-1] == pytest.approx(2.0 * left)
     now[0] += 50.0  # the print check, 48 s, and the round's first evaluation, 2 s at the rate so far
@@ -70,7 +70,10 @@ def test_every_evaluation_of_a_run_names_a_phase_of_its_plan(tmp_path):
     run_design(config, tmp_path / "run", on_iteration=lambda k, x, terms: seen.append((terms.get("phase"),
                                                                                           terms["eta_s"])))
     assert len(seen) == 20 and {name for name, _ in seen} == names
-    assert all(eta > 0 for _, eta in seen)  # the last evaluation still has its print check and outputs ahead
+    # no estimate before the run has measured its pace (RATE_MIN_EVALS evaluations), then always time ahead: the
+    # last evaluation still has its print check and outputs to come
+    assert [eta is None for _, eta in seen[:progress.RATE_MIN_EVALS]] == [True] * progress.RATE_MIN_EVALS
+    assert all(eta > 0 for _, eta in seen[progress.RATE_MIN_EVALS:])
 
 
 def test_a_coarse_starts_outputs_do_not_set_the_pace_of_the_print_checks(monkeypatch):
