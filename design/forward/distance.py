@@ -219,7 +219,8 @@ def _nearest(points, vx, offset, lo, hi, nrm, smin, smax, left, start, count, no
 
 @njit(cache=True, nogil=True)
 def _node_floor(offset, start, count, left):
-    """Smallest triangle offset under each node (children have larger indices than their parent)."""
+    """Smallest per-triangle value ``offset`` (an offset, a least vertex time) under each node (children have larger
+    indices than their parent)."""
     floor = np.empty(start.shape[0])
     for node in range(start.shape[0] - 1, -1, -1):
         if count[node] > 0:

@@ -22,7 +22,7 @@ import numpy as np
 import trimesh
 from numba import njit
 
-from design.forward.distance import Surface, _lower_bound
+from design.forward.distance import Surface, _lower_bound, _node_floor
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -162,21 +162,6 @@ def _nearest_linear(points, vx, wv, face_n, grad, dual, lo, hi, nrm, smin, smax,
         if tri_best >= 0:
             seed = tri_best
     return value, best_tri, foot
-
-
-@njit(cache=True, nogil=True)
-def _node_floor(least, start, count, left):
-    """Smallest vertex time under each node (children have larger indices than their parent)."""
-    floor = np.empty(start.shape[0])
-    for node in range(start.shape[0] - 1, -1, -1):
-        if count[node] > 0:
-            f = np.inf
-            for t in range(start[node], start[node] + count[node]):
-                f = min(f, least[t])
-            floor[node] = f
-        else:
-            floor[node] = min(floor[left[node]], floor[left[node] + 1])
-    return floor
 
 
 class LinearSources:

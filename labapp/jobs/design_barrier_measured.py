@@ -23,14 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from design.inverse.targets import isotonic_fit
 from design.inverse.twomaterial_problem import TwoMaterialSettings
 from labapp.errors import UsageError
-from labapp.jobs.physical import END_SAMPLES, noise_sd
+from labapp.jobs.physical import after_lag, noise_sd
 from labapp.records.curvefiles import PhysicalCurve
 from labapp.records.fileio import atomic_write
 from labapp.records.outpaths import FolderKind, check_out
-from labapp.records.simcal import SimCalError, SimCalFile, curve_of, load_simcal
+from labapp.records.simcal import SimCalFile, curve_of, load_simcal
 
 CALIBRATED = "calibrated"
 """``--barrier-speed`` without a number (or with this word): the calibration's barrier speed."""
@@ -73,15 +72,7 @@ def write_barrier_target(curve: PhysicalCurve, simcal: SimCalFile, out_csv: Path
     SimCalError
         Fewer than 2 samples after the calibration's wetting lag.
     """
-    lag = simcal.cal.lag_s
-    t = np.asarray(curve.t_s, float)
-    keep = t > lag
-    if np.count_nonzero(keep) < 2:
-        raise SimCalError(f"{curve.source}: fewer than 2 samples after the calibration's wetting lag of {lag:.0f} s; "
-                          "a design target needs the measured release")
-    t = np.concatenate([[lag], t[keep]])
-    measured = np.concatenate([[0.0], np.asarray(curve.released_g, float)[keep]])
-    fitted = np.concatenate([[0.0], np.clip(isotonic_fit(measured[1:], END_SAMPLES), 0.0, None)])
+    t, measured, fitted = after_lag(curve, simcal)
     noise = noise_sd(measured[1:])
     floor = fitted < max(NOISE_FLOOR * noise, START_FRACTION * fitted[-1])
     fitted[floor] = 0.0

@@ -157,6 +157,27 @@ def noise_sd(values: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0)) if d2.size else 0.0
 
 
+def after_lag(curve: PhysicalCurve, simcal: SimCalFile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A measured curve from the end of the calibration's wetting lag, where the model's clock starts: ``(t_s,
+    measured_g, fitted_g)`` starting at (lag, 0), ``fitted_g`` the monotone least-squares fit of the grams
+    (:func:`design.inverse.targets.isotonic_fit`, the last `END_SAMPLES` as one level).
+
+    Raises
+    ------
+    SimCalError
+        Fewer than 2 samples after the lag.
+    """
+    lag = simcal.cal.lag_s
+    t = np.asarray(curve.t_s, float)
+    keep = t > lag
+    if np.count_nonzero(keep) < 2:
+        raise SimCalError(f"{curve.source}: fewer than 2 samples after the calibration's wetting lag of {lag:.0f} s; "
+                          "a design target needs the measured release")
+    t = np.concatenate([[lag], t[keep]])
+    measured = np.concatenate([[0.0], np.asarray(curve.released_g, float)[keep]])
+    return t, measured, np.concatenate([[0.0], np.clip(isotonic_fit(measured[1:], END_SAMPLES), 0.0, None)])
+
+
 def write_target_csv(curve: PhysicalCurve, simcal: SimCalFile, out_csv: Path) -> MeasuredTarget:
     """Write a measured curve as a feasible ``tau_mm,released_mm3`` target through the calibration.
 
@@ -170,15 +191,7 @@ def write_target_csv(curve: PhysicalCurve, simcal: SimCalFile, out_csv: Path) ->
     """
     # the model's clock starts when the calibrated wetting lag ends: the simulated print's release is compared with
     # the measured curve delayed by the lag (what the bench measures before it is nothing a design can shape)
-    lag = simcal.cal.lag_s
-    t = np.asarray(curve.t_s, float)
-    keep = t > lag
-    if np.count_nonzero(keep) < 2:
-        raise SimCalError(f"{curve.source}: fewer than 2 samples after the calibration's wetting lag of {lag:.0f} s; "
-                          "a design target needs the measured release")
-    t = np.concatenate([[lag], t[keep]])
-    measured = np.concatenate([[0.0], np.asarray(curve.released_g, float)[keep]])
-    fitted = np.concatenate([[0.0], np.clip(isotonic_fit(measured[1:], END_SAMPLES), 0.0, None)])
+    t, measured, fitted = after_lag(curve, simcal)
     water = curve.water_g or simcal.water_g
     tau_knots, vol_knots = simcal.cal.to_simulation(t, fitted, water)
     # the monotone fit between the samples as the design reads a curve (PCHIP), on a grid REFINE times finer,
