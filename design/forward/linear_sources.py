@@ -186,26 +186,29 @@ class LinearSources:
     """
 
     def __init__(self, mesh: trimesh.Trimesh, vertex_time: np.ndarray) -> None:
-        self.surface = Surface(mesh)
-        self.geometry(np.asarray(vertex_time, dtype=np.float64))
-
-    def geometry(self, vertex_time: np.ndarray) -> None:
-        """Set the vertex times (the triangles' gradients and the hierarchy's floors)."""
-        s = self.surface
+        self.surface = s = Surface(mesh)
         vx = s.vx
         e1, e2 = vx[:, 1] - vx[:, 0], vx[:, 2] - vx[:, 0]
         normal = np.cross(e1, e2)
         n2 = np.einsum("ij,ij->i", normal, normal)
-        n2 = np.where(n2 > 0.0, n2, np.inf)   # a degenerate triangle: no interior, its edges only
-        dual = np.stack([np.cross(e2, normal) / n2[:, None], np.cross(normal, e1) / n2[:, None]], axis=1)
-        wv = np.ascontiguousarray(vertex_time[s.faces])
-        grad = (wv[:, 1] - wv[:, 0])[:, None] * dual[:, 0] + (wv[:, 2] - wv[:, 0])[:, None] * dual[:, 1]
-        self.wv, self.dual = wv, np.ascontiguousarray(dual)
-        self.grad = np.ascontiguousarray(np.where(np.isfinite(n2)[:, None], grad, np.inf))
+        self.flat = n2 > 0.0                    # a degenerate triangle: no interior, its edges only
+        n2 = np.where(self.flat, n2, np.inf)
+        self.dual = np.ascontiguousarray(np.stack([np.cross(e2, normal) / n2[:, None],
+                                                   np.cross(normal, e1) / n2[:, None]], axis=1))
         self.unit_n = np.ascontiguousarray(np.nan_to_num(normal / np.sqrt(n2)[:, None]))
+        self.area = 0.5 * np.sqrt(np.einsum("ij,ij->i", normal, normal))
+        self.set_times(np.asarray(vertex_time, dtype=np.float64))
+
+    def set_times(self, vertex_time: np.ndarray) -> None:
+        """Set the vertex times, mm (the triangles' gradients of w and the hierarchy's bounds; the geometry stays)."""
+        s = self.surface
+        wv = np.ascontiguousarray(vertex_time[s.faces])
+        dual = self.dual
+        grad = (wv[:, 1] - wv[:, 0])[:, None] * dual[:, 0] + (wv[:, 2] - wv[:, 0])[:, None] * dual[:, 1]
+        self.wv = wv
+        self.grad = np.ascontiguousarray(np.where(self.flat[:, None], grad, np.inf))
         self.floor = _node_floor(wv.min(axis=1), s.start, s.count, s.left)
-        area = 0.5 * np.sqrt(np.einsum("ij,ij->i", normal, normal))
-        self.plane = _node_planes(vx, wv, self.grad, area, s.start, s.count, s.left)
+        self.plane = _node_planes(s.vx, wv, self.grad, self.area, s.start, s.count, s.left)
 
     def arrival(self, points: np.ndarray, cap: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """T at each point, its triangle (stored order; -1 where T >= the point's ``cap``, then T = cap) and the

@@ -202,11 +202,11 @@ def wetting_times(faces: _Interfaces, s: float) -> list[np.ndarray]:
         before = np.concatenate([w[k] for w, k in zip(times, todo)])
         for m, w, k, body in zip(sources, times, todo, bodies):
             if body is not None and k.size:
-                body.geometry(w)
+                body.set_times(w)
                 better, tri, _ = body.arrival(m.vertices[k], w[k] - SETTLED_MM)
                 w[k] = np.where(tri >= 0, better, w[k])
         if through is not None:
-            through.geometry(s * np.concatenate(times))
+            through.set_times(s * np.concatenate(times))
             now = np.concatenate([w[k] for w, k in zip(times, todo)])
             better, tri, _ = through.arrival(points, s * (now - SETTLED_MM))
             now = np.where(tri >= 0, better / s, now)

@@ -22,7 +22,7 @@ from analysis.barrier_fit import CoatedRun, fit_barrier_runs
 from labapp.records.curvefiles import CurveFileError, read_physical_curve
 from labapp.records.fileio import sha256_file
 from labapp.records.simcal import SimCalError
-from labapp.records.simcalset import SetRow
+from labapp.records.simcalset import SetRow, row_inputs
 
 log = logging.getLogger(__name__)
 
@@ -156,9 +156,7 @@ def barrier_block(set_csv: Path, coated: list[CoatedRow], simulate: Callable[[Se
         keep = curve.t_s >= 0
         tau, vol = simulate(c.row)[:2]
         runs.append(CoatedRun(curve.t_s[keep], curve.released_g[keep], c.coat_mm, tau, vol))
-        files = [c.row.mesh, c.row.barrier_mesh] + ([c.row.run] if c.row.run.is_file() else [
-            p for p in (c.row.run / "frames.csv", c.row.run / "run.json", c.row.run / "calibration.json") if p.is_file()])
-        hashes.update({str(p): sha256_file(p) for p in files})
+        hashes.update({str(p): sha256_file(p) for p in row_inputs(c.row)})
     try:
         fit = fit_barrier_runs(runs, cal.seconds_per_mm, cal.g_per_mm3, cal.lag_s)
     except AnalysisError as exc:

@@ -57,7 +57,7 @@ from labapp.records.fileio import atomic_write, sha256_file
 from labapp.records.lock import folder_lock
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.simcal import FORMAT, FORWARD_MODEL, RELEASE_METHOD, SimCalError
-from labapp.records.simcalset import SetRow, read_set
+from labapp.records.simcalset import SetRow, read_set, row_inputs
 
 MIN_RESOLUTION, MAX_RESOLUTION = 8, 512
 """The resolutions a calibration accepts, voxels along each mesh's longest side."""
@@ -186,7 +186,7 @@ def calibrate_sim(set_csv: str | Path, bench_calibration: str | Path | None, out
                           f"{MAX_RESOLUTION} voxels (0: no discretisation term)")
     set_csv, out_dir = Path(set_csv), Path(out_dir)
     rows = read_set(set_csv)
-    check_out(out_dir, FolderKind.SIMCAL, [set_csv, bench_calibration] + [p for r in rows for p in (r.run, r.mesh)],
+    check_out(out_dir, FolderKind.SIMCAL, [set_csv, bench_calibration] + [p for r in rows for p in (r.run, *row_inputs(r))],
               replace=False)
     operator = operators.require(f"calibrating the simulator into {out_dir}")
     bench = None
@@ -258,7 +258,9 @@ class _Simulations:
             key = (row.mesh, *(round(values[p], 9) for p in PHYSICS_PARAMETERS))
             if key not in self.simulated:
                 todo.setdefault(key, row)
-        if len(todo) < 2:
+        if len(todo) < 2 or ROW_WORKERS < 2:
+            for row in todo.values():
+                self.simulation(row, values)
             return
         with ThreadPoolExecutor(max_workers=min(len(todo), ROW_WORKERS)) as pool:
             list(pool.map(lambda row: self.simulation(row, values), todo.values()))
@@ -299,8 +301,6 @@ def _read_runs(set_csv: Path, bench, sims: _Simulations, physics: str, say: Prog
         sims.measured.append((where, curve.t_s[keep], curve.released_g[keep], float(mass), float(water)))
     say(0.3 if physics == "none" else 0.05, f"simulating the {len({r.mesh for r in sims.rows})} meshes as designed ...")
     sims.simulate_rows(PHYSICS_IDENTITY)
-    for row in sims.rows:
-        sims.simulation(row, PHYSICS_IDENTITY)
 
 
 def _fit_print_physics(set_csv: Path, sims: _Simulations, physics: str, max_offset_s: float, say: Progress
@@ -495,10 +495,4 @@ def _fit_and_write(set_csv: Path, rows: list[SetRow], bench, bench_calibration, 
 
 def _input_hashes(set_csv: Path, bench_calibration, rows: list[SetRow]) -> dict[str, str]:
     files = [set_csv] + ([Path(bench_calibration)] if bench_calibration is not None else [])
-    for r in rows:
-        files.append(r.mesh)
-        if r.run.is_dir():
-            files += [p for p in (r.run / "frames.csv", r.run / "run.json", r.run / "calibration.json") if p.is_file()]
-        else:
-            files.append(r.run)
-    return {str(p): sha256_file(p) for p in files}
+    return {str(p): sha256_file(p) for p in files + [p for r in rows for p in row_inputs(r)]}

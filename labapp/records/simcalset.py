@@ -82,6 +82,15 @@ def read_set(path: str | Path) -> list[SetRow]:
     return out
 
 
+def row_inputs(row: SetRow) -> list[Path]:
+    """The files a row's calibration reads: its mesh, its barrier mesh if any, and its run (a curve file, or a run
+    folder's ``frames.csv``, ``run.json`` and ``calibration.json`` where present)."""
+    files = [row.mesh] + ([row.barrier_mesh] if row.barrier_mesh is not None else [])
+    if not row.run.is_dir():
+        return files + [row.run]
+    return files + [p for p in (row.run / FRAMES_CSV, row.run / "run.json", row.run / "calibration.json") if p.is_file()]
+
+
 def run_identity(run: Path) -> str:
     """SHA-256 of what identifies a run's measurement: a run folder's manifest (``frames.csv``, which lists every
     frame with its own SHA-256), for a folder without one all its files, for a curve file its bytes. Two copies
