@@ -146,28 +146,3 @@ def fit_barrier_runs(runs: list[CoatedRun], seconds_per_mm: float, g_per_mm3: fl
     rate_term = 0.5 * abs(float(s.mean()) - float(np.mean(at_k)))
     return BarrierFit(float(s.mean()), float(np.hypot(standard, rate_term)), tuple(speeds), tuple(delays), tuple(rms),
                       standard, float(np.mean(at_k)))
-
-
-def fit_barrier_speed(runs: list[tuple[np.ndarray, np.ndarray]], coat_mm: float, tau_mm: np.ndarray,
-                      released_mm3: np.ndarray, seconds_per_mm: float, g_per_mm3: float, lag_s: float = 0.0
-                      ) -> BarrierFit:
-    """Fit s from runs of the same drug body in one uniform coat (:func:`fit_barrier_runs` with a shared body).
-
-    Parameters
-    ----------
-    runs : list of (t_s, released_g)
-        Each run's measured drug mass against time since the drop.
-    coat_mm : float
-        The coat's thickness c, mm (as printed: the barrier mesh grown from the drug's).
-    tau_mm, released_mm3 : ndarray
-        The uncoated drug body's simulated release (the calibration's model).
-    seconds_per_mm, g_per_mm3, lag_s : float
-        The drug's calibration: the runs start from these.
-
-    Raises
-    ------
-    AnalysisError
-        Without runs, for a coat <= 0 or a run that releases nothing.
-    """
-    return fit_barrier_runs([CoatedRun(t, m, coat_mm, tau_mm, released_mm3) for t, m in runs], seconds_per_mm,
-                            g_per_mm3, lag_s)

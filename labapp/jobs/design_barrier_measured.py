@@ -31,8 +31,6 @@ from labapp.records.fileio import atomic_write
 from labapp.records.outpaths import FolderKind, check_out
 from labapp.records.simcal import SimCalFile, curve_of, load_simcal
 
-CALIBRATED = "calibrated"
-"""``--barrier-speed`` without a number (or with this word): the calibration's barrier speed."""
 NOISE_FLOOR = 3.0
 START_FRACTION = END_FRACTION = 0.05
 """A measured target releases nothing until its monotone fit exceeds NOISE_FLOOR noise standard deviations and

@@ -13,8 +13,7 @@ TAKEN = {"space": "space", "resolution": "resolution", "domain_mm": "domain_mm",
 
 
 CALIBRATED = "calibrated"
-"""``--barrier-speed`` without a number: the --simcal calibration's barrier speed
-(:data:`labapp.jobs.design_barrier_measured.CALIBRATED`, kept here so that `sfr --help` loads no job)."""
+"""``--barrier-speed`` without a number (or with this word): the --simcal calibration's barrier speed."""
 
 
 def _barrier_speed(text: str) -> float | str:

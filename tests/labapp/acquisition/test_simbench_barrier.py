@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from analysis.barrier_fit import fit_barrier_speed
+from analysis.barrier_fit import CoatedRun, fit_barrier_runs
 from analysis.errors import AnalysisError
 from design.forward.reference import reference_release
 from labapp.acquisition.simbench import Material, sample_release
@@ -40,9 +40,10 @@ def test_the_barrier_speed_is_recovered_from_three_coated_prints():
         mass = np.interp(t, run.t_s, run.released_g) + rng.normal(0.0, 0.002 * run.mass_g, t.size)
         runs.append((t, mass))
     model = reference_release(drug, np.linspace(0.0, 1.2, 241))
+    runs = [CoatedRun(t, m, COAT_MM, model.tau_mm, model.released_mm3) for t, m in runs]
     seconds_per_mm, g_per_mm3 = MATERIAL.seconds_per_mm, MATERIAL.density_g_per_cm3 * 1e-3
-    fit = fit_barrier_speed(runs, COAT_MM, model.tau_mm, model.released_mm3, seconds_per_mm, g_per_mm3)
+    fit = fit_barrier_runs(runs, seconds_per_mm, g_per_mm3)
     assert abs(fit.speed - 0.3) <= 3 * fit.error and fit.error < 0.01
     assert len(fit.per_run) == 3 and all(abs(s - 0.3) < 0.01 for s in fit.per_run)
     with pytest.raises(AnalysisError, match="no runs"):
-        fit_barrier_speed([], COAT_MM, model.tau_mm, model.released_mm3, seconds_per_mm, g_per_mm3)
+        fit_barrier_runs([], seconds_per_mm, g_per_mm3)
