@@ -15,17 +15,23 @@ two phases (a print check, with the outputs after the last) is timed too, from t
 to the next one's first, and from then on what is left of that work (the later checks and the outputs) is estimated
 at the seconds per weighted evaluation it took there: a print check's release and an evaluation's solves do not keep the
 same ratio on every shape and machine load. A phase that ends early (an optimisation that converges or stalls before
-its limit) makes the estimate fall at once. It also sets
+its limit) makes the estimate fall at once. A coarse start's weight is measured too when the run gives the clock the
+seconds of one evaluation at its own resolution (`evaluation_seconds`, timed before the starts): through the first
+coarse start it is that start's seconds per evaluation over them, so that the refinement is estimated at the cost of
+its own grid's evaluations, which against the coarse grid's moves with the source (J_conn's blocks) and with the
+load (the full grid's solves share both cores). It also sets
 ``terms["limit"]``, the evaluations of the run the phase is part of (a coarse start's, or the optimisation's and its
 rounds').
 """
 from __future__ import annotations
 
+import copy
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from design.inverse.config import DesignConfig
-from design.inverse.optimize import IterationCallback
+from design.inverse.optimize import IterationCallback, build_objective
+from design.inverse.problem import Problem
 
 PRINT_CHECK_EVALS = {"extruded": 16.0}
 """The time of a correction round's print check (extraction, the reference evaluator's release, the design grid's
@@ -50,12 +56,16 @@ but fixed costs per evaluation, J_conn's distances on finer blocks at the coarse
 that share the two cores where coarse ones are too small to
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 DEFAULT_COARSE_EVAL_WEIGHT = 0.22
-"""`COARSE_EVAL_WEIGHT` of the spaces it does not name."""
+"""`COARSE_EVAL_WEIGHT` of the spaces it does not name; both stand until the run has timed its first coarse start
+against `evaluation_seconds`."""
 COARSE_OUTPUTS_EVALS = 6.0
 """The time of a coarse start's outputs (ranked by J alone: no reference release of the print) in evaluations of the
 run's grid, measured at resolution 128 in nfc and extruded designs."""
 RATE_MIN_EVALS = 3
 """Evaluations of a phase after which its own rate replaces the one carried from the phase before."""
+PROBE_EVALS = 3
+"""Evaluations of the run's objective that `evaluation_seconds` times (the median counts: the first one's
+allocations are no evaluation's cost)."""
 
 
 @dataclass(frozen=True)
@@ -78,9 +88,9 @@ class Phase:
     limit : int
         The run-local evaluation count at which the run it is part of ends (a coarse start's, or the optimisation's
         and its rounds'): the progress line's "it k/limit". 0: ``end``.
-    checked : bool
-        What follows it is a print check or the outputs, whose measured pace `RunClock` applies to the later ones
-        (False: a coarse start's outputs, which release no print).
+    coarse : bool
+        A coarse start of a multi-start: its weight is measured (`RunClock`), and what follows it (its outputs, which
+        release no print) does not set the pace of the print checks.
     """
 
     name: str | None
@@ -89,7 +99,7 @@ class Phase:
     weight: float
     after: float
     limit: int = 0
-    checked: bool = True
+    coarse: bool = False
 
 
 def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bool) -> list[Phase]:
@@ -134,8 +144,22 @@ def run_plan(config: DesignConfig) -> list[Phase]:
     weight = COARSE_EVAL_WEIGHT.get(config.space, DEFAULT_COARSE_EVAL_WEIGHT)
     evals = coarse_config(config).max_iter
     coarse = [Phase(coarse_phase(k, config.starts, resolution), evals, evals, weight, COARSE_OUTPUTS_EVALS,
-                    checked=False) for k in range(config.starts)]
+                    coarse=True) for k in range(config.starts)]
     return coarse + _single(refinement_config(config), refinement_phase(config.resolution), 1.0, True)
+
+
+def evaluation_seconds(problem: Problem, config: DesignConfig) -> float:
+    """Wall seconds of one evaluation of the objective of ``config`` on ``problem`` (J and its gradient at the start
+    design; the median of `PROBE_EVALS`), for `RunClock.full_eval_s`. It evaluates a copy of the design space, whose
+    fabrication term keeps warm starts and counters, so that the run does not depend on the timing."""
+    objective = build_objective(replace(problem, space=copy.deepcopy(problem.space)), config)
+    x = objective.uniform_start(problem.start_regions[0])
+    seconds = []
+    for _ in range(PROBE_EVALS):
+        t0 = time.perf_counter()
+        objective.evaluate(x)
+        seconds.append(time.perf_counter() - t0)
+    return sorted(seconds)[len(seconds) // 2]
 
 
 class RunClock:
@@ -149,11 +173,18 @@ class RunClock:
         The callback it wraps.
     outputs : float
         The outputs' cost in evaluations of the run's grid (`outputs_evals`), for `outputs_s`.
+
+    Attributes
+    ----------
+    full_eval_s : float or None
+        Seconds of one evaluation of the run's grid (`evaluation_seconds`), set by the run before its coarse starts:
+        the first coarse start's pace against it weighs every coarse start. None: `COARSE_EVAL_WEIGHT`.
     """
 
     def __init__(self, plan: list[Phase], on_iteration: IterationCallback, outputs: float = 0.0) -> None:
         self.plan = plan
         self.on_iteration = on_iteration
+        self.full_eval_s: float | None = None
         self.rate: float | None = None  # seconds per evaluation of the run's grid
         self.outputs = outputs
         self.after_rate: float | None = None  # seconds per evaluation of the run's grid of the work between phases
@@ -179,19 +210,28 @@ class RunClock:
             self.current, self.t0, self.k0 = i, now, k
         self.last = now
         if k - self.k0 >= RATE_MIN_EVALS:
-            self.rate = (now - self.t0) / (k - self.k0) / phase.weight
+            per_eval = (now - self.t0) / (k - self.k0)
+            if i == 0 and phase.coarse and self.full_eval_s:
+                phase = self._weigh_coarse(per_eval / self.full_eval_s)
+            self.rate = per_eval / phase.weight
         if self.rate is None:
             return None
         evals = (phase.end - k) * phase.weight + sum(p.evals * p.weight for p in self.plan[i + 1:])
         after = phase.after + sum(p.after for p in self.plan[i + 1:])
         return self.rate * evals + (self.after_rate or self.rate) * after
 
+    def _weigh_coarse(self, weight: float) -> Phase:
+        """Give every coarse start of the plan ``weight`` (at most 1); returns the first phase."""
+        weight = min(weight, 1.0)
+        self.plan = [replace(p, weight=weight) if p.coarse else p for p in self.plan]
+        return self.plan[0]
+
     def _time_between(self, i: int, seconds: float) -> None:
         """Set `after_rate` from the ``seconds`` between the phase before phase ``i`` and its first evaluation."""
         before = self.current
         if before is None or i != before + 1 or self.rate is None or seconds <= 0:
             return
-        if not (self.plan[before].checked and self.plan[before].after > 0):
+        if self.plan[before].coarse or not self.plan[before].after > 0:
             return
         self.after_rate = seconds / self.plan[before].after
 

@@ -86,3 +86,40 @@ def test_a_coarse_starts_outputs_do_not_set_the_pace_of_the_print_checks(monkeyp
             clock(k, None, {"phase": name})
         now[0] += 30.0  # the outputs: no print released
     assert clock.rate is not None and clock.after_rate is None
+
+
+def test_the_first_coarse_start_weighs_every_coarse_start_against_the_runs_own_evaluation(monkeypatch):
+    now = [0.0]
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
+    seen = []
+    clock = RunClock(run_plan(DesignConfig(target="sphere", resolution=128, max_iter=100)),
+                     lambda k, x, terms: seen.append(terms["eta_s"]))
+    clock.full_eval_s = 2.0  # one evaluation of the run's grid
+    for k in range(1, 7):  # 0.5 s per coarse evaluation: a weight of 0.25, not the constant's
+        now[0] += 0.5
+        clock(k, None, {"phase": "coarse start 1 of 4 at resolution 64"})
+    assert [p.weight for p in clock.plan] == [0.25] * 4 + [1.0] * 3
+    assert clock.rate == pytest.approx(2.0)
+    coarse = round(100 * COARSE_EVALS_SHARE)
+    left = ((coarse - 6) + 3 * coarse) * 0.25 + 4 * progress.COARSE_OUTPUTS_EVALS + 40 + 3 * PRINT_CHECK_EVALS + OUTPUTS_EVALS
+    assert seen[-1] == pytest.approx(2.0 * left)
+    for k in range(1, 5):  # a later start, under more load: its own pace, the weight kept
+        now[0] += 1.0
+        clock(k, None, {"phase": "coarse start 2 of 4 at resolution 64"})
+    assert [p.weight for p in clock.plan] == [0.25] * 4 + [1.0] * 3 and clock.rate == pytest.approx(4.0)
+
+
+def test_timing_an_evaluation_leaves_the_runs_fabrication_term_as_it_was():
+    from design.files.targets_io import load_problem
+    from design.inverse.optimize import build_objective
+
+    config = DesignConfig(target="sphere", space="ico", resolution=16, radius_vox=2.0, max_iter=5, layers=4)
+    problem = load_problem(config, False)
+    objective = build_objective(problem, config)
+    objective.evaluate(objective.uniform_start(problem.start_regions[0]))  # warm starts to keep
+    fab = problem.space.fab_term
+    before = {key: value.copy() for key, value in fab.state().items()}, fab.reference
+    assert progress.evaluation_seconds(problem, config) > 0
+    after = fab.state()
+    assert after.keys() == before[0].keys() and all((after[key] == before[0][key]).all() for key in after)
+    assert fab.reference == before[1]
