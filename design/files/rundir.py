@@ -39,7 +39,7 @@ from design.files.rounds import ROUNDS, RoundFile
 from design.files.targets_io import load_problem
 from design.inverse.config import DesignConfig
 from design.inverse.defect import optimise_physical
-from design.inverse.multistart import coarse_start, refine_start, refined, refinement_config, refinement_phase, start_name
+from design.inverse.multistart import coarse_start, refine_start, refinement_config, refinement_phase, start_name
 from design.inverse.optimize import (
     Checkpoint,
     IterationCallback,
@@ -49,7 +49,7 @@ from design.inverse.optimize import (
     with_phase,
 )
 from design.inverse.problem import Problem
-from design.inverse.progress import RunClock, evaluation_seconds, outputs_evals, run_plan
+from design.inverse.progress import RunClock, evaluation_seconds, run_plan, stage_costs
 from design.inverse.status import FINISHED, DesignStatus
 
 log = logging.getLogger(__name__)
@@ -370,10 +370,10 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
         _check_size(saved, problem, out_dir)
     clock = None
     if on_iteration is not None and not coarse_start:  # the whole run's time left; a start's is part of it
-        on_iteration = clock = RunClock(run_plan(config), on_iteration, outputs_evals(config))
+        full_eval_s = evaluation_seconds(problem, refinement_config(config))
+        costs = stage_costs(config, full_eval_s, problem.target_release_s)
+        on_iteration = clock = RunClock(run_plan(config, costs), on_iteration, costs.outputs, full_eval_s)
     if saved is None and start is None and config.starts > 1:  # multi-start
-        if clock is not None and refined(config):  # the coarse starts weighed against the run's own evaluations
-            clock.full_eval_s = evaluation_seconds(problem, refinement_config(config))
         start = _multistart(config, out_dir, on_iteration, should_stop)
         if isinstance(start, Checkpoint):  # the chosen start is the design
             return _rewrite_outputs(out_dir, config, start, coarse_start, problem)

@@ -82,6 +82,9 @@ class Problem:
     target_error_mm3 : float or None
         The stated error of a mesh target's release by the reference evaluator
         (`design.forward.reference.ReferenceRelease.error_mm3`), mm^3; None for other targets.
+    target_release_s : float or None
+        Wall seconds the reference evaluator took for a mesh target's release (its cost, which a print check and
+        the outputs repeat on the print: `design.inverse.progress.stage_costs`); None for other targets.
     """
 
     space: DesignSpace
@@ -96,6 +99,7 @@ class Problem:
     warnings: tuple[str, ...] = ()
     source_mesh: trimesh.Trimesh | None = None
     target_error_mm3: float | None = None
+    target_release_s: float | None = None
 
     @property
     def start_region(self) -> np.ndarray | None:
@@ -268,13 +272,13 @@ def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
     t_total = total_time(space.grid_shape, dx, space.mirror, config.anisotropy)
     domain_volume = float(np.prod(sim_full)) * dx ** 3
     source_solid = None
-    target_error = None
+    target_error = target_seconds = None
     if mesh is not None:
         # the source's physical release (exact surface distances), not its release on the design grid
         grid_tau = tau_grid(t_total, config.samples)
         reference = source_release(mesh, grid_tau, design_lattice(config.resolution))
         target = Target(grid_tau, reference.released_mm3, f"mesh:{config.target}")
-        target_error = reference.error_mm3
+        target_error, target_seconds = reference.error_mm3, reference.seconds
         source_solid = voxelize(mesh, dx, origin_mm=origin, shape=sim_full) > 0.5
     else:
         target = _curve_target(config, analytic, curve, t_total, box_volume, box_time)
@@ -291,4 +295,4 @@ def prepare(config: DesignConfig, *, mesh: trimesh.Trimesh | None = None,
     for warning in warnings:
         (log.warning if announce else log.debug)("%s", warning)
     return Problem(space, target, feasibility, dx, origin, sim_full, source_solid, radius_vox,
-                   start_regions(space, target, half_mm, radius_vox * dx), warnings, mesh, target_error)
+                   start_regions(space, target, half_mm, radius_vox * dx), warnings, mesh, target_error, target_seconds)

@@ -6,8 +6,9 @@ rounds (`design.inverse.defect`), each after a check of the current design's pri
 is extracted and released by the reference evaluator (`design.files.outputs`). Each phase is named as the progress
 line names it (``terms["phase"]``) and costs a number of objective evaluations, each weighted by the size of its
 grid against the run's (an evaluation is a fast-marching solve and its adjoint, whose cost follows the voxels); the
-print checks and the outputs cost a fixed number of the run's evaluations (`PRINT_CHECK_EVALS`, `OUTPUTS_EVALS`,
-measured, docs/benchmarks.md#the-stages-of-a-design).
+print checks and the outputs cost what `stage_costs` says in the run's evaluations: for a mesh target from what the
+reference evaluator took for the target's release and what one evaluation of the run's objective takes (both timed
+before the run's first evaluation), else measured constants (`PRINT_CHECK_EVALS`, `OUTPUTS_EVALS`).
 
 `RunClock` wraps the run's progress callback: at every evaluation it measures the seconds per weighted evaluation of
 the phase in progress and sets ``eta_s`` to what is left of it and of every later phase at that rate. The work between
@@ -16,8 +17,8 @@ to the next one's first, and from then on what is left of that work (the later c
 at the seconds per weighted evaluation it took there: a print check's release and an evaluation's solves do not keep the
 same ratio on every shape and machine load. A phase that ends early (an optimisation that converges or stalls before
 its limit) makes the estimate fall at once. A coarse start's weight is measured too when the run gives the clock the
-seconds of one evaluation at its own resolution (`evaluation_seconds`, timed before the starts): through the first
-coarse start it is that start's seconds per evaluation over them, so that the refinement is estimated at the cost of
+seconds of one evaluation at its own resolution (`evaluation_seconds`): through the first coarse start it times, it
+is that start's seconds per evaluation over them, so that the refinement is estimated at the cost of
 its own grid's evaluations, which against the coarse grid's moves with the source (J_conn's blocks) and with the
 load (the full grid's solves share both cores). It also sets
 ``terms["limit"]``, the evaluations of the run the phase is part of (a coarse start's, or the optimisation's and its
@@ -48,6 +49,21 @@ in default designs at resolution 128: in nfc 0.7-2 print checks (its release is 
 its release (`design.inverse.release_cache`; docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 DEFAULT_OUTPUTS_EVALS = 35.0
 """`OUTPUTS_EVALS` of the spaces it does not name."""
+CHECK_PER_REFERENCE = {"extruded": 1.0}
+"""The time of a print check over the time of the target's reference release (`Problem.target_release_s`), per
+design space (`DEFAULT_CHECK_PER_REFERENCE` for the others): the check releases a print of the target's size on a
+lattice of 2 cells per voxel (nfc: the target's 160 cells at 128; extruded, 1 per voxel: about 86), a mesh of many
+more triangles, after extracting it. Measured in default designs at resolution 128 on an idle 2-core machine: nfc
+3.9-5.7 (pill 5.7, torus 4.2, spinner_top 4.0, polyhedron 4.6, csg 3.9), extruded 0.7 (spinner_top) and 1.3
+(cone on its tip) (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
+DEFAULT_CHECK_PER_REFERENCE = 4.5
+"""`CHECK_PER_REFERENCE` of the spaces it does not name."""
+OUTPUTS_PER_CHECK = {"extruded": 3.7}
+"""The time of the outputs over a print check's, per design space (`DEFAULT_OUTPUTS_PER_CHECK` for the others), in
+the same designs: nfc 1.2-2.1 (0.2 where the outputs reuse the last check's release: the csg), extruded 3.4-4.1 (the
+outputs release the print on the full lattice, the checks on 1 cell per voxel)."""
+DEFAULT_OUTPUTS_PER_CHECK = 1.5
+"""`OUTPUTS_PER_CHECK` of the spaces it does not name."""
 COARSE_EVAL_WEIGHT = {"extruded": 0.16}
 """The cost of an evaluation of a multi-start's coarse start (half the resolution) in evaluations of the run's grid,
 per design space (`DEFAULT_COARSE_EVAL_WEIGHT` for the others), as measured in default designs at resolution 128 on
@@ -102,56 +118,73 @@ class Phase:
     coarse: bool = False
 
 
-def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bool) -> list[Phase]:
+@dataclass(frozen=True)
+class StageCosts:
+    """What a print check and the outputs cost, in evaluations of the run's grid."""
+
+    check: float
+    outputs: float
+
+
+def stage_costs(config: DesignConfig, full_eval_s: float | None = None, reference_s: float | None = None) -> StageCosts:
+    """The costs of a run of ``config``: from the seconds of one evaluation of its objective (``full_eval_s``,
+    `evaluation_seconds`) and of its target's reference release (``reference_s``, `Problem.target_release_s`) by
+    `CHECK_PER_REFERENCE` and `OUTPUTS_PER_CHECK` when both are known, else `PRINT_CHECK_EVALS` and `OUTPUTS_EVALS`."""
+    if full_eval_s and reference_s:
+        check = CHECK_PER_REFERENCE.get(config.space, DEFAULT_CHECK_PER_REFERENCE) * reference_s / full_eval_s
+        return StageCosts(check, OUTPUTS_PER_CHECK.get(config.space, DEFAULT_OUTPUTS_PER_CHECK) * check)
+    return StageCosts(PRINT_CHECK_EVALS.get(config.space, DEFAULT_PRINT_CHECK_EVALS),
+                      OUTPUTS_EVALS.get(config.space, DEFAULT_OUTPUTS_EVALS))
+
+
+def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bool, costs: StageCosts
+            ) -> list[Phase]:
     """The phases of one run of ``config`` (no multi-start): its optimisation, its rounds, its outputs."""
     from design.inverse.defect import correction_plan, round_phase
 
     rounds, first = correction_plan(config)
-    check = PRINT_CHECK_EVALS.get(config.space, DEFAULT_PRINT_CHECK_EVALS)
 
     def named(name: str | None) -> str | None:
         return prefix if name is None else name if prefix is None else f"{prefix}, {name}"
 
-    tail = outputs_evals(config) * weight if outputs else 0.0
+    check = costs.check * weight
+    tail = costs.outputs * weight if outputs else 0.0
     limit = first + rounds * config.correction_evals
-    phases = [Phase(named(None), first, first, weight, (check * weight if rounds else 0.0)
-                    + (tail if not rounds else 0.0), limit)]
+    phases = [Phase(named(None), first, first, weight, (check if rounds else 0.0) + (tail if not rounds else 0.0),
+                    limit)]
     for r in range(1, rounds + 1):
         end = first + r * config.correction_evals
-        after = check * weight + (tail if r == rounds else 0.0)
+        after = check + (tail if r == rounds else 0.0)
         phases.append(Phase(named(round_phase(r, rounds)), end, config.correction_evals, weight, after, limit))
     return phases
 
 
-def outputs_evals(config: DesignConfig) -> float:
-    """`OUTPUTS_EVALS` of the space of ``config``."""
-    return OUTPUTS_EVALS.get(config.space, DEFAULT_OUTPUTS_EVALS)
-
-
-def run_plan(config: DesignConfig) -> list[Phase]:
-    """The phases of a design run of ``config`` in order (module doc)."""
+def run_plan(config: DesignConfig, costs: StageCosts | None = None) -> list[Phase]:
+    """The phases of a design run of ``config`` in order (module doc), its checks and outputs at ``costs`` (default
+    `stage_costs` of ``config``'s measured constants)."""
     from design.inverse.multistart import coarse_config, coarse_phase, coarse_resolution, refinement_config, refinement_phase
 
+    costs = costs or stage_costs(config)
     if config.starts <= 1:
-        return _single(config, None, 1.0, True)
+        return _single(config, None, 1.0, True, costs)
     resolution = coarse_resolution(config.resolution)
     if resolution == config.resolution:  # every start a whole run; the chosen one's outputs written again
         phases = [p for k in range(config.starts)
-                  for p in _single(config, coarse_phase(k, config.starts, resolution, coarse=False), 1.0, True)]
+                  for p in _single(config, coarse_phase(k, config.starts, resolution, coarse=False), 1.0, True, costs)]
         last = phases[-1]
-        return phases[:-1] + [Phase(last.name, last.end, last.evals, last.weight, last.after + outputs_evals(config),
-                                    last.limit)]
+        return phases[:-1] + [replace(last, after=last.after + costs.outputs)]
     weight = COARSE_EVAL_WEIGHT.get(config.space, DEFAULT_COARSE_EVAL_WEIGHT)
     evals = coarse_config(config).max_iter
     coarse = [Phase(coarse_phase(k, config.starts, resolution), evals, evals, weight, COARSE_OUTPUTS_EVALS,
                     coarse=True) for k in range(config.starts)]
-    return coarse + _single(refinement_config(config), refinement_phase(config.resolution), 1.0, True)
+    return coarse + _single(refinement_config(config), refinement_phase(config.resolution), 1.0, True, costs)
 
 
 def evaluation_seconds(problem: Problem, config: DesignConfig) -> float:
     """Wall seconds of one evaluation of the objective of ``config`` on ``problem`` (J and its gradient at the start
-    design; the median of `PROBE_EVALS`), for `RunClock.full_eval_s`. It evaluates a copy of the design space, whose
-    fabrication term keeps warm starts and counters, so that the run does not depend on the timing."""
+    design; the median of `PROBE_EVALS`), for `RunClock.full_eval_s` and `stage_costs`. It evaluates a copy of the
+    design space, whose fabrication term keeps warm starts and counters, so that the run does not depend on the
+    timing."""
     objective = build_objective(replace(problem, space=copy.deepcopy(problem.space)), config)
     x = objective.uniform_start(problem.start_regions[0])
     seconds = []
@@ -172,19 +205,18 @@ class RunClock:
     on_iteration : callable
         The callback it wraps.
     outputs : float
-        The outputs' cost in evaluations of the run's grid (`outputs_evals`), for `outputs_s`.
-
-    Attributes
-    ----------
-    full_eval_s : float or None
-        Seconds of one evaluation of the run's grid (`evaluation_seconds`), set by the run before its coarse starts:
-        the first coarse start's pace against it weighs every coarse start. None: `COARSE_EVAL_WEIGHT`.
+        The outputs' cost in evaluations of the run's grid (`StageCosts.outputs`), for `outputs_s`.
+    full_eval_s : float, optional
+        Seconds of one evaluation of the run's grid (`evaluation_seconds`): the first coarse start the clock times,
+        against it, weighs every coarse start. None: `COARSE_EVAL_WEIGHT`.
     """
 
-    def __init__(self, plan: list[Phase], on_iteration: IterationCallback, outputs: float = 0.0) -> None:
+    def __init__(self, plan: list[Phase], on_iteration: IterationCallback, outputs: float = 0.0,
+                 full_eval_s: float | None = None) -> None:
         self.plan = plan
         self.on_iteration = on_iteration
-        self.full_eval_s: float | None = None
+        self.full_eval_s = full_eval_s
+        self.weighing: int | None = None  # the coarse start whose pace weighs them all
         self.rate: float | None = None  # seconds per evaluation of the run's grid
         self.outputs = outputs
         self.after_rate: float | None = None  # seconds per evaluation of the run's grid of the work between phases
@@ -211,8 +243,9 @@ class RunClock:
         self.last = now
         if k - self.k0 >= RATE_MIN_EVALS:
             per_eval = (now - self.t0) / (k - self.k0)
-            if i == 0 and phase.coarse and self.full_eval_s:
-                phase = self._weigh_coarse(per_eval / self.full_eval_s)
+            if phase.coarse and self.full_eval_s and self.weighing in (None, i):
+                self.weighing = i
+                phase = self._weigh_coarse(i, per_eval / self.full_eval_s)
             self.rate = per_eval / phase.weight
         if self.rate is None:
             return None
@@ -220,11 +253,11 @@ class RunClock:
         after = phase.after + sum(p.after for p in self.plan[i + 1:])
         return self.rate * evals + (self.after_rate or self.rate) * after
 
-    def _weigh_coarse(self, weight: float) -> Phase:
-        """Give every coarse start of the plan ``weight`` (at most 1); returns the first phase."""
+    def _weigh_coarse(self, i: int, weight: float) -> Phase:
+        """Give every coarse start of the plan ``weight`` (at most 1); returns phase ``i``."""
         weight = min(weight, 1.0)
         self.plan = [replace(p, weight=weight) if p.coarse else p for p in self.plan]
-        return self.plan[0]
+        return self.plan[i]
 
     def _time_between(self, i: int, seconds: float) -> None:
         """Set `after_rate` from the ``seconds`` between the phase before phase ``i`` and its first evaluation."""

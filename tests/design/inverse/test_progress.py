@@ -31,6 +31,16 @@ def test_a_multistart_plan_has_its_coarse_starts_at_their_measured_cost_then_the
     assert [(p.end, p.limit or p.end) for p in plan] == [(coarse, coarse)] * 4 + [(20, 40), (30, 40), (40, 40)]
 
 
+def test_a_mesh_targets_checks_and_outputs_cost_its_timed_reference_release_in_timed_evaluations():
+    config = DesignConfig(target="sphere", resolution=32, max_iter=100)
+    costs = progress.stage_costs(config, full_eval_s=0.1, reference_s=1.0)
+    assert costs.check == pytest.approx(progress.DEFAULT_CHECK_PER_REFERENCE * 10)
+    assert costs.outputs == pytest.approx(progress.DEFAULT_OUTPUTS_PER_CHECK * costs.check)
+    assert [p.after for p in run_plan(config, costs)] == [costs.check, costs.check, costs.check + costs.outputs]
+    # without either timing (a curve target has no reference release): the measured constants
+    assert progress.stage_costs(config, 0.1, None) == progress.StageCosts(PRINT_CHECK_EVALS, OUTPUTS_EVALS)
+
+
 def test_the_progress_line_counts_the_evaluations_of_the_run_of_its_phase():
     plan = run_plan(DesignConfig(target="sphere", resolution=128, max_iter=100))
     seen = []
@@ -93,8 +103,7 @@ def test_the_first_coarse_start_weighs_every_coarse_start_against_the_runs_own_e
     monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
     seen = []
     clock = RunClock(run_plan(DesignConfig(target="sphere", resolution=128, max_iter=100)),
-                     lambda k, x, terms: seen.append(terms["eta_s"]))
-    clock.full_eval_s = 2.0  # one evaluation of the run's grid
+                     lambda k, x, terms: seen.append(terms["eta_s"]), full_eval_s=2.0)  # an evaluation of its grid
     for k in range(1, 7):  # 0.5 s per coarse evaluation: a weight of 0.25, not the constant's
         now[0] += 0.5
         clock(k, None, {"phase": "coarse start 1 of 4 at resolution 64"})
@@ -123,3 +132,14 @@ def test_timing_an_evaluation_leaves_the_runs_fabrication_term_as_it_was():
     after = fab.state()
     assert after.keys() == before[0].keys() and all((after[key] == before[0][key]).all() for key in after)
     assert fab.reference == before[1]
+
+
+def test_timing_the_runs_evaluation_does_not_change_its_design(tmp_path):
+    import numpy as np
+
+    config = DesignConfig(target="sphere", space="ico", resolution=16, radius_vox=2.0, max_iter=12, layers=4,
+                          checkpoint_every=4)
+    timed = run_design(config, tmp_path / "timed", on_iteration=lambda k, x, terms: None)
+    plain = run_design(config, tmp_path / "plain")
+    with np.load(timed.out_dir / "density.npz") as a, np.load(plain.out_dir / "density.npz") as b:
+        assert np.array_equal(a["rho_hat"], b["rho_hat"])
