@@ -136,6 +136,14 @@ def printed_mesh(objective: DesignObjective, problem: Problem, x: np.ndarray):
     return density_mesh(rho_full, objective.space.dx_mm, problem.origin_mm, level=level)
 
 
+def check_cells(space: str, extent_mm: float, dx_mm: float) -> int:
+    """The lattice cells of a print check's reference release: `REFERENCE_PER_VOXEL` of design ``space`` per voxel
+    of ``dx_mm`` along the print's longest side ``extent_mm``, between the evaluator's `MIN_CELLS` and
+    `DEFAULT_CELLS`."""
+    per_voxel = REFERENCE_PER_VOXEL.get(space, DEFAULT_REFERENCE_PER_VOXEL)
+    return int(np.clip(np.ceil(per_voxel * extent_mm / dx_mm), MIN_CELLS, DEFAULT_CELLS))
+
+
 def check_print(objective: DesignObjective, problem: Problem, x: np.ndarray) -> PrintCheck:
     """Judge design variables ``x`` (variable shape) by their print: G(x), P(x), the print's fit and pieces."""
     space, target = objective.space, problem.target
@@ -146,9 +154,7 @@ def check_print(objective: DesignObjective, problem: Problem, x: np.ndarray) -> 
     mesh = printed_mesh(objective, problem, x)
     if mesh is None:
         return PrintCheck(np.inf, 0, grid, np.zeros_like(grid))
-    per_voxel = REFERENCE_PER_VOXEL.get(space.name, DEFAULT_REFERENCE_PER_VOXEL)
-    cells = int(np.clip(np.ceil(per_voxel * float(np.max(mesh.extents)) / space.dx_mm), MIN_CELLS,
-                        DEFAULT_CELLS))
+    cells = check_cells(space.name, float(np.max(mesh.extents)), space.dx_mm)
     printed = cached_reference_release(mesh, target.tau_mm, cells=cells, anisotropy=anisotropy).released_mm3
     pieces = count_pieces(revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape))
     return PrintCheck(rel_rmse(printed, target.released_mm3), pieces, grid, printed)

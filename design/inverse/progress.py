@@ -64,6 +64,9 @@ the same designs: nfc 1.2-2.1 (0.2 where the outputs reuse the last check's rele
 outputs release the print on the full lattice, the checks on 1 cell per voxel)."""
 DEFAULT_OUTPUTS_PER_CHECK = 1.5
 """`OUTPUTS_PER_CHECK` of the spaces it does not name."""
+REUSED_OUTPUTS_PER_CHECK = 0.2
+"""The time of the outputs over a print check's where the checks release the print on the outputs' lattice, whose
+release the outputs then reuse (`design.inverse.release_cache`): extraction and the report, measured 0.18 (csg)."""
 COARSE_EVAL_WEIGHT = {"extruded": 0.16}
 """The cost of an evaluation of a multi-start's coarse start (half the resolution) in evaluations of the run's grid,
 per design space (`DEFAULT_COARSE_EVAL_WEIGHT` for the others), as measured in default designs at resolution 128 on
@@ -126,15 +129,24 @@ class StageCosts:
     outputs: float
 
 
-def stage_costs(config: DesignConfig, full_eval_s: float | None = None, reference_s: float | None = None) -> StageCosts:
+def stage_costs(config: DesignConfig, full_eval_s: float | None = None, problem: Problem | None = None) -> StageCosts:
     """The costs of a run of ``config``: from the seconds of one evaluation of its objective (``full_eval_s``,
-    `evaluation_seconds`) and of its target's reference release (``reference_s``, `Problem.target_release_s`) by
-    `CHECK_PER_REFERENCE` and `OUTPUTS_PER_CHECK` when both are known, else `PRINT_CHECK_EVALS` and `OUTPUTS_EVALS`."""
-    if full_eval_s and reference_s:
-        check = CHECK_PER_REFERENCE.get(config.space, DEFAULT_CHECK_PER_REFERENCE) * reference_s / full_eval_s
-        return StageCosts(check, OUTPUTS_PER_CHECK.get(config.space, DEFAULT_OUTPUTS_PER_CHECK) * check)
-    return StageCosts(PRINT_CHECK_EVALS.get(config.space, DEFAULT_PRINT_CHECK_EVALS),
-                      OUTPUTS_EVALS.get(config.space, DEFAULT_OUTPUTS_EVALS))
+    `evaluation_seconds`) and of its mesh target's reference release (``problem.target_release_s``) by
+    `CHECK_PER_REFERENCE` and `OUTPUTS_PER_CHECK` (`REUSED_OUTPUTS_PER_CHECK` where the checks of a print of the
+    source's size release it on the outputs' lattice) when both are known, else `PRINT_CHECK_EVALS` and
+    `OUTPUTS_EVALS`."""
+    from design.forward.reference import design_lattice
+    from design.inverse.defect import check_cells
+
+    reference_s = None if problem is None else problem.target_release_s
+    if not (full_eval_s and reference_s):
+        return StageCosts(PRINT_CHECK_EVALS.get(config.space, DEFAULT_PRINT_CHECK_EVALS),
+                          OUTPUTS_EVALS.get(config.space, DEFAULT_OUTPUTS_EVALS))
+    check = CHECK_PER_REFERENCE.get(config.space, DEFAULT_CHECK_PER_REFERENCE) * reference_s / full_eval_s
+    cells = check_cells(config.space, float(max(problem.source_mesh.extents)), problem.space.dx_mm)
+    reused = cells >= design_lattice(config.resolution)
+    return StageCosts(check, check * (REUSED_OUTPUTS_PER_CHECK if reused
+                                      else OUTPUTS_PER_CHECK.get(config.space, DEFAULT_OUTPUTS_PER_CHECK)))
 
 
 def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bool, costs: StageCosts

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from labapp.cli import interrupt
 from labapp.cli.argtypes import add_design_option
+from labapp.cli.eta import eta_text
 from labapp.errors import EXIT_FAILED, UsageError
 from labapp.jobs.meshunits import MM_PER_UNIT
 
@@ -47,11 +48,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_barrier_design_arguments(parser)
 
 
-def _minutes(eta_s: float | None) -> str:
-    """The progress line's time left: minutes to 0.1, or "-" before the run has measured its pace."""
-    return "-" if eta_s is None else f"{eta_s / 60:.1f} min"
-
-
 def _progress(max_iter: int):
     """Live progress on stderr: one rewritten line on a terminal, otherwise a line every 10 evaluations
     and at the last."""
@@ -65,7 +61,7 @@ def _progress(max_iter: int):
         phase = f"{terms['phase']}: " if "phase" in terms else ""
         line = (f"{phase}it {k:4d}/{limit}  J {terms['J']:.5g}  fit {terms['J_fit']:.4g}"
                 f"  binary {terms['J_binary']:.4g}"
-                f"  |g| {terms['grad_norm']:.3g}  {terms['seconds']:.0f}s  ETA {_minutes(terms.get('eta_s'))}")
+                f"  |g| {terms['grad_norm']:.3g}  {terms['seconds']:.0f}s  {eta_text(terms.get('eta_s'))}")
         print(("\r" + line + "   ") if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
     return show
 

@@ -7,6 +7,7 @@ import sys
 
 from labapp.cli import interrupt
 from labapp.cli.argtypes import positive_int
+from labapp.cli.eta import eta_text
 from labapp.errors import EXIT_INTERRUPTED
 
 NAME = "sweep"
@@ -27,19 +28,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "with --scheduler: wait for N workers before starting")
 
 
-def _fmt_eta(seconds: float | None) -> str:
-    if seconds is None:
-        return "ETA -"
-    return f"ETA {seconds / 60:.1f} min" if seconds >= 60 else f"ETA {seconds:.0f} s"
-
-
 def progress_printer():
     """Progress on stderr: one rewritten line on a terminal, else a line whenever the counts change."""
     tty, last = sys.stderr.isatty(), [None]
 
     def show(p) -> None:
         counts = (p.done, p.failed, p.running, p.left)
-        line = (f"{p.done} done ({p.failed} failed), {p.running} running, {p.left} left, {_fmt_eta(p.eta_s)}")
+        line = (f"{p.done} done ({p.failed} failed), {p.running} running, {p.left} left, {eta_text(p.eta_s)}")
         if tty:
             print("\r" + line + "   ", end="", file=sys.stderr, flush=True)
         elif counts != last[0]:

@@ -32,11 +32,23 @@ def test_a_multistart_plan_has_its_coarse_starts_at_their_measured_cost_then_the
 
 
 def test_a_mesh_targets_checks_and_outputs_cost_its_timed_reference_release_in_timed_evaluations():
+    from types import SimpleNamespace
+
+    import numpy as np
+
     config = DesignConfig(target="sphere", resolution=32, max_iter=100)
-    costs = progress.stage_costs(config, full_eval_s=0.1, reference_s=1.0)
+
+    def problem(extent_mm):  # a source spanning extent_mm on voxels of 0.5 mm, its release timed at 1 s
+        return SimpleNamespace(target_release_s=1.0, source_mesh=SimpleNamespace(extents=np.array([extent_mm, 1.0, 1.0])),
+                               space=SimpleNamespace(dx_mm=0.5))
+
+    costs = progress.stage_costs(config, full_eval_s=0.1, problem=problem(10.0))  # checked on 40 cells of 128
     assert costs.check == pytest.approx(progress.DEFAULT_CHECK_PER_REFERENCE * 10)
     assert costs.outputs == pytest.approx(progress.DEFAULT_OUTPUTS_PER_CHECK * costs.check)
     assert [p.after for p in run_plan(config, costs)] == [costs.check, costs.check, costs.check + costs.outputs]
+    # a print checked on the outputs' own lattice (128 cells at resolution 32): the outputs reuse its release
+    reused = progress.stage_costs(config, full_eval_s=0.1, problem=problem(32.0))
+    assert reused.outputs == pytest.approx(progress.REUSED_OUTPUTS_PER_CHECK * reused.check)
     # without either timing (a curve target has no reference release): the measured constants
     assert progress.stage_costs(config, 0.1, None) == progress.StageCosts(PRINT_CHECK_EVALS, OUTPUTS_EVALS)
 
