@@ -372,7 +372,7 @@ def run_design(config: DesignConfig | None, out_dir: str | Path, *, on_iteration
     if on_iteration is not None and not coarse_start:  # the whole run's time left; a start's is part of it
         full_eval_s = evaluation_seconds(problem, refinement_config(config))
         costs = stage_costs(config, full_eval_s, problem)
-        on_iteration = clock = RunClock(run_plan(config, costs), on_iteration, costs.outputs, full_eval_s)
+        on_iteration = clock = RunClock(run_plan(config, costs), on_iteration, costs, full_eval_s)
     if saved is None and start is None and config.starts > 1:  # multi-start
         start = _multistart(config, out_dir, on_iteration, should_stop)
         if isinstance(start, Checkpoint):  # the chosen start is the design

@@ -48,7 +48,7 @@ from typing import Callable, Protocol
 import numpy as np
 
 from design.fabrication.extract import count_pieces, density_mesh, mass_preserving_level, revoxelize
-from design.forward.reference import DEFAULT_CELLS, MIN_CELLS
+from design.forward.reference import DEFAULT_CELLS, MIN_CELLS, design_lattice
 from design.forward.simulator import simulate
 from design.inverse.config import DesignConfig
 from design.inverse.objective import DesignObjective, rel_rmse
@@ -112,12 +112,15 @@ class PrintCheck:
         G(x): the design grid's release of the density J_fit sees, on the target's tau grid.
     print_mm3 : (K,) ndarray of float, mm^3
         P(x): the reference evaluator's release of the printed solid (zeros when nothing can be extracted).
+    cells : int
+        The lattice cells of that release (`check_cells`; 0 when nothing was released).
     """
 
     fit: float
     pieces: int
     grid_mm3: np.ndarray
     print_mm3: np.ndarray
+    cells: int = 0
 
     @property
     def bias_mm3(self) -> np.ndarray:
@@ -157,7 +160,7 @@ def check_print(objective: DesignObjective, problem: Problem, x: np.ndarray) -> 
     cells = check_cells(space.name, float(np.max(mesh.extents)), space.dx_mm)
     printed = cached_reference_release(mesh, target.tau_mm, cells=cells, anisotropy=anisotropy).released_mm3
     pieces = count_pieces(revoxelize(mesh, space.dx_mm, problem.origin_mm, problem.full_shape))
-    return PrintCheck(rel_rmse(printed, target.released_mm3), pieces, grid, printed)
+    return PrintCheck(rel_rmse(printed, target.released_mm3), pieces, grid, printed, cells)
 
 
 def retargeted(problem: Problem, config: DesignConfig, bias_mm3: np.ndarray) -> DesignObjective:
@@ -322,6 +325,19 @@ class _Running:
         self.store.wait()
 
 
+def _telling_reuse(on_iteration: IterationCallback | None, check: PrintCheck, config: DesignConfig
+                   ) -> IterationCallback | None:
+    """``on_iteration`` with ``terms["outputs_reuse"]``: whether ``check`` released its print as the outputs release
+    theirs (the same lattice, `design.forward.reference.design_lattice`, with no print offset or swelling), so that
+    the outputs will reuse the release of a checked print (`design.inverse.release_cache`), for the time left
+    (`design.inverse.progress.RunClock`)."""
+    if on_iteration is None:
+        return None
+    reuse = (check.cells == design_lattice(config.resolution) and config.print_offset_mm == 0.0
+             and config.swelling_mm == 0.0)
+    return lambda k, x, terms: on_iteration(k, x, dict(terms, outputs_reuse=reuse))
+
+
 def optimise_physical(objective: DesignObjective, problem: Problem, config: DesignConfig, store: CheckpointStore,
                       rounds: RoundStore, *, saved: Checkpoint | None = None, start: StartDesign | None = None,
                       on_iteration: IterationCallback | None = None,
@@ -363,12 +379,15 @@ def optimise_physical(objective: DesignObjective, problem: Problem, config: Desi
         if not outcome.status.finished:
             return replace(outcome, session_seconds=time.perf_counter() - t0), objective
         objective.beta = beta  # the prints are judged at the rounds' beta, as the outputs cut them
-        state = _judged(None, check_print(objective, problem, outcome.best_x), config, outcome, target_mm3, judge)
+        check = check_print(objective, problem, outcome.best_x)
+        state = _judged(None, check, config, outcome, target_mm3, judge)
         rounds.save(state)
+        told = _telling_reuse(on_iteration, check, config)
         history, saved, best_value = outcome.history, None, outcome.best_value
     else:
         history, best_value = [list(row) for row in saved.history], np.nan
         objective.beta = beta
+        told = on_iteration
     while state.round <= n_rounds or (len(history) < config.max_iter and state.status == DesignStatus.MAX_ITER):
         if state.round > n_rounds and state.end != config.max_iter:  # a resume raised the limit: one more round
             state = replace(state, end=config.max_iter)
@@ -380,13 +399,15 @@ def optimise_physical(objective: DesignObjective, problem: Problem, config: Desi
                                beta=beta)
         outcome = optimise(aimed, problem, replace(config, beta=beta, beta_final=beta, max_iter=state.end), running,
                            saved=saved, should_stop=should_stop,
-                           on_iteration=with_phase(on_iteration, round_phase(state.round, max(n_rounds, state.round))))
+                           on_iteration=with_phase(told, round_phase(state.round, max(n_rounds, state.round))))
         saved, history, best_value = None, outcome.history, outcome.best_value
         if not outcome.status.finished:
             return replace(outcome, session_seconds=time.perf_counter() - t0), aimed
         del aimed  # its fast-marching buffers
-        state = _judged(state, check_print(objective, problem, outcome.best_x), config, outcome, target_mm3, judge)
+        check = check_print(objective, problem, outcome.best_x)
+        state = _judged(state, check, config, outcome, target_mm3, judge)
         rounds.save(state)
+        told = _telling_reuse(on_iteration, check, config)
     log.info("physical correction: print fits %s; keeping %.3f%%, %d piece(s)",
              ", ".join(f"{100 * f:.3f}%" for f in state.fits), 100 * state.best_fit, state.best_pieces)
     status = DesignStatus.MAX_ITER if len(history) >= config.max_iter else DesignStatus(state.status)

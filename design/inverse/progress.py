@@ -123,30 +123,45 @@ class Phase:
 
 @dataclass(frozen=True)
 class StageCosts:
-    """What a print check and the outputs cost, in evaluations of the run's grid."""
+    """What a print check and the outputs cost, in evaluations of the run's grid.
+
+    Attributes
+    ----------
+    check : float
+    fresh_outputs, reused_outputs : float
+        The outputs when they release the print, and when they reuse the release of a checked print.
+    reused : bool
+        Which of the two is expected (until a check tells: ``terms["outputs_reuse"]``, `RunClock`).
+    """
 
     check: float
-    outputs: float
+    fresh_outputs: float
+    reused_outputs: float
+    reused: bool = False
+
+    @property
+    def outputs(self) -> float:
+        """The outputs' expected cost."""
+        return self.reused_outputs if self.reused else self.fresh_outputs
 
 
 def stage_costs(config: DesignConfig, full_eval_s: float | None = None, problem: Problem | None = None) -> StageCosts:
     """The costs of a run of ``config``: from the seconds of one evaluation of its objective (``full_eval_s``,
     `evaluation_seconds`) and of its mesh target's reference release (``problem.target_release_s``) by
-    `CHECK_PER_REFERENCE` and `OUTPUTS_PER_CHECK` (`REUSED_OUTPUTS_PER_CHECK` where the checks of a print of the
-    source's size release it on the outputs' lattice) when both are known, else `PRINT_CHECK_EVALS` and
-    `OUTPUTS_EVALS`."""
+    `CHECK_PER_REFERENCE` and `OUTPUTS_PER_CHECK` when both are known, else `PRINT_CHECK_EVALS` and `OUTPUTS_EVALS`;
+    reused outputs at `REUSED_OUTPUTS_PER_CHECK`, expected where a print of the source's size would be checked on the
+    outputs' lattice."""
     from design.forward.reference import design_lattice
     from design.inverse.defect import check_cells
 
     reference_s = None if problem is None else problem.target_release_s
     if not (full_eval_s and reference_s):
-        return StageCosts(PRINT_CHECK_EVALS.get(config.space, DEFAULT_PRINT_CHECK_EVALS),
-                          OUTPUTS_EVALS.get(config.space, DEFAULT_OUTPUTS_EVALS))
+        check = PRINT_CHECK_EVALS.get(config.space, DEFAULT_PRINT_CHECK_EVALS)
+        return StageCosts(check, OUTPUTS_EVALS.get(config.space, DEFAULT_OUTPUTS_EVALS), REUSED_OUTPUTS_PER_CHECK * check)
     check = CHECK_PER_REFERENCE.get(config.space, DEFAULT_CHECK_PER_REFERENCE) * reference_s / full_eval_s
     cells = check_cells(config.space, float(max(problem.source_mesh.extents)), problem.space.dx_mm)
-    reused = cells >= design_lattice(config.resolution)
-    return StageCosts(check, check * (REUSED_OUTPUTS_PER_CHECK if reused
-                                      else OUTPUTS_PER_CHECK.get(config.space, DEFAULT_OUTPUTS_PER_CHECK)))
+    return StageCosts(check, check * OUTPUTS_PER_CHECK.get(config.space, DEFAULT_OUTPUTS_PER_CHECK),
+                      check * REUSED_OUTPUTS_PER_CHECK, reused=cells >= design_lattice(config.resolution))
 
 
 def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bool, costs: StageCosts
@@ -216,21 +231,23 @@ class RunClock:
         `run_plan` of the run.
     on_iteration : callable
         The callback it wraps.
-    outputs : float
-        The outputs' cost in evaluations of the run's grid (`StageCosts.outputs`), for `outputs_s`.
+    costs : StageCosts, optional
+        The checks' and the outputs' costs of ``plan`` (`stage_costs`): the outputs' expected one, for `outputs_s`,
+        changes to the fresh or the reused outputs' when an evaluation's terms tell (``terms["outputs_reuse"]``, set
+        after each print check, `design.inverse.defect`). None: no outputs.
     full_eval_s : float, optional
         Seconds of one evaluation of the run's grid (`evaluation_seconds`): the first coarse start the clock times,
         against it, weighs every coarse start. None: `COARSE_EVAL_WEIGHT`.
     """
 
-    def __init__(self, plan: list[Phase], on_iteration: IterationCallback, outputs: float = 0.0,
+    def __init__(self, plan: list[Phase], on_iteration: IterationCallback, costs: StageCosts | None = None,
                  full_eval_s: float | None = None) -> None:
         self.plan = plan
         self.on_iteration = on_iteration
+        self.costs = costs
         self.full_eval_s = full_eval_s
         self.weighing: int | None = None  # the coarse start whose pace weighs them all
         self.rate: float | None = None  # seconds per evaluation of the run's grid
-        self.outputs = outputs
         self.after_rate: float | None = None  # seconds per evaluation of the run's grid of the work between phases
         self.current: int | None = None
         self.t0 = self.k0 = self.last = 0.0
@@ -281,11 +298,25 @@ class RunClock:
         self.after_rate = seconds / self.plan[before].after
 
     def outputs_s(self) -> float | None:
-        """The estimated seconds of the outputs (``outputs`` at the rate of the work between phases, else of the
-        evaluations); None before a rate is known."""
-        return None if self.rate is None else (self.after_rate or self.rate) * self.outputs
+        """The estimated seconds of the outputs (their expected cost at the rate of the work between phases, else of
+        the evaluations); None before a rate is known."""
+        if self.rate is None:
+            return None
+        return (self.after_rate or self.rate) * (self.costs.outputs if self.costs is not None else 0.0)
+
+    def _expect_outputs(self, reused: bool) -> None:
+        """Count the last phase's outputs as reused or fresh (`StageCosts`)."""
+        if self.costs is None or self.costs.reused == reused:
+            return
+        costs = replace(self.costs, reused=reused)
+        last = self.plan[-1]
+        self.plan = self.plan[:-1] + [replace(last, after=last.after - self.costs.outputs + costs.outputs)]
+        self.costs = costs
 
     def __call__(self, k: int, x, terms: dict) -> None:
+        if "outputs_reuse" in terms:
+            terms = dict(terms)
+            self._expect_outputs(bool(terms.pop("outputs_reuse")))
         eta = self.eta_s(terms.get("phase"), k)
         if self.current is not None:  # the evaluations of the run this phase is part of (``terms["limit"]``)
             phase = self.plan[self.current]

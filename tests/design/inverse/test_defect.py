@@ -283,3 +283,19 @@ def test_an_ico_design_runs_its_rounds_by_default_and_its_print_fits_better():
     # at least a third off is a margin against round-off in the elasticity solves
     assert state.best_pieces == 1
     assert state.best_fit < 0.67 * state.fits[0], state.fits
+
+
+@pytest.mark.parametrize("on_outputs_lattice", [False, True])
+def test_the_rounds_tell_their_progress_whether_the_outputs_reuse_a_checks_release(monkeypatch, on_outputs_lattice):
+    from design.forward.reference import design_lattice
+
+    config = DesignConfig(max_iter=30, correction_rounds=2, correction_evals=5, **SMALL)
+    if on_outputs_lattice:  # the print checked on the outputs' lattice, as a print spanning the domain is
+        monkeypatch.setattr(defect, "check_cells", lambda space, extent_mm, dx_mm: design_lattice(config.resolution))
+    problem = prepare(config)
+    seen = []
+    optimise_physical(build_objective(problem, config), problem, config, MemoryStore(), MemoryRounds(),
+                      on_iteration=lambda k, x, terms: seen.append((k, terms.get("outputs_reuse"))))
+    first = correction_plan(config)[1]
+    assert {reuse for k, reuse in seen if k <= first} == {None}  # no check yet
+    assert {reuse for k, reuse in seen if k > first} == {on_outputs_lattice}

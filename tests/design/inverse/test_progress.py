@@ -44,13 +44,31 @@ def test_a_mesh_targets_checks_and_outputs_cost_its_timed_reference_release_in_t
 
     costs = progress.stage_costs(config, full_eval_s=0.1, problem=problem(10.0))  # checked on 40 cells of 128
     assert costs.check == pytest.approx(progress.DEFAULT_CHECK_PER_REFERENCE * 10)
-    assert costs.outputs == pytest.approx(progress.DEFAULT_OUTPUTS_PER_CHECK * costs.check)
+    assert not costs.reused and costs.outputs == pytest.approx(progress.DEFAULT_OUTPUTS_PER_CHECK * costs.check)
     assert [p.after for p in run_plan(config, costs)] == [costs.check, costs.check, costs.check + costs.outputs]
-    # a print checked on the outputs' own lattice (128 cells at resolution 32): the outputs reuse its release
+    # a print of the source's size checked on the outputs' own lattice (128 cells at 32): its release reused
     reused = progress.stage_costs(config, full_eval_s=0.1, problem=problem(32.0))
-    assert reused.outputs == pytest.approx(progress.REUSED_OUTPUTS_PER_CHECK * reused.check)
+    assert reused.reused and reused.outputs == pytest.approx(progress.REUSED_OUTPUTS_PER_CHECK * reused.check)
     # without either timing (a curve target has no reference release): the measured constants
-    assert progress.stage_costs(config, 0.1, None) == progress.StageCosts(PRINT_CHECK_EVALS, OUTPUTS_EVALS)
+    fallback = progress.stage_costs(config, 0.1, None)
+    assert (fallback.check, fallback.outputs) == (PRINT_CHECK_EVALS, OUTPUTS_EVALS)
+
+
+def test_a_checks_lattice_tells_the_clock_whether_the_outputs_reuse_its_release(monkeypatch):
+    now = [0.0]
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
+    config = DesignConfig(target="sphere", resolution=32, max_iter=100)
+    costs = progress.StageCosts(check=20.0, fresh_outputs=30.0, reused_outputs=4.0, reused=True)
+    seen = []
+    clock = RunClock(run_plan(config, costs), lambda k, x, terms: seen.append(terms), costs)
+    for k in range(1, 6):  # 1 s per evaluation
+        now[0] += 1.0
+        clock(k, None, {})
+    assert seen[-1]["eta_s"] == pytest.approx((80 - 5) + 20 + 2 * (10 + 20) + 4)
+    now[0] += 1.0
+    clock(81, None, {"phase": "physical correction round 1 of 2", "outputs_reuse": False})
+    assert "outputs_reuse" not in seen[-1] and clock.costs.outputs == 30.0
+    assert clock.plan[-1].after == pytest.approx(20 + 30)
 
 
 def test_the_progress_line_counts_the_evaluations_of_the_run_of_its_phase():
@@ -65,9 +83,10 @@ def test_the_progress_line_counts_the_evaluations_of_the_run_of_its_phase():
 def test_the_time_left_is_the_plan_left_at_the_phase_rate(monkeypatch):
     now = [0.0]
     monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
-    plan = run_plan(DesignConfig(target="sphere", resolution=32, max_iter=100))
+    config = DesignConfig(target="sphere", resolution=32, max_iter=100)
+    plan = run_plan(config)
     seen = []
-    clock = RunClock(plan, lambda k, x, terms: seen.append(terms.get("eta_s")), OUTPUTS_EVALS)
+    clock = RunClock(plan, lambda k, x, terms: seen.append(terms.get("eta_s")), progress.stage_costs(config))
     for k in range(1, 11):  # 2 s per evaluation
         now[0] += 2.0
         clock(k, None, {"eta_s": -1.0})
