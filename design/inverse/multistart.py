@@ -27,7 +27,12 @@ from design.inverse.defect import correction_plan
 from design.inverse.objective import DesignObjective
 from design.inverse.optimize import IterationCallback, StartDesign, with_phase
 from design.inverse.problem import Problem
-from design.inverse.settings import COARSE_EVALS_SHARE, MULTISTART_MIN_RESOLUTION, REFINE_EVALS_SHARE
+from design.inverse.settings import (
+    COARSE_EVALS_SHARE,
+    DEFAULT_REFINE_EVALS_SHARE,
+    MULTISTART_MIN_RESOLUTION,
+    REFINE_EVALS_SHARE,
+)
 from design.inverse.status import DesignStatus
 
 log = logging.getLogger(__name__)
@@ -64,13 +69,14 @@ def coarse_config(config: DesignConfig) -> DesignConfig:
 
 def refinement_config(config: DesignConfig) -> DesignConfig:
     """What the optimisation of a run of ``config`` runs with: for a refined multi-start (`refined`) ``config`` with
-    `REFINE_EVALS_SHARE` of its evaluations before the correction rounds (its beta continuation over them), whose
+    `REFINE_EVALS_SHARE` of its space's evaluations before the correction rounds (its beta continuation over them), whose
     evaluations follow as configured (``max_iter`` is the refinement's and its rounds'); else ``config`` itself."""
     if not refined(config):
         return config
     rounds, _ = correction_plan(config)
     # at least the rounds' evaluations: correction_plan keeps as many rounds as fit in half the evaluations
-    first = max(1, int(round(REFINE_EVALS_SHARE * config.max_iter)), rounds * config.correction_evals)
+    share = REFINE_EVALS_SHARE.get(config.space, DEFAULT_REFINE_EVALS_SHARE)
+    first = max(1, int(round(share * config.max_iter)), rounds * config.correction_evals)
     return replace(config, max_iter=first + rounds * config.correction_evals)
 
 

@@ -55,11 +55,15 @@ COARSE_EVALS_SHARE = 0.5
 """Evaluations of each coarse start of a multi-start, as a share of `DesignConfig.max_iter` (at least 1): the coarse
 starts only rank the outlines by J and give the refinement its start; past half the budget their J moves little
 (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
-REFINE_EVALS_SHARE = 0.2
+REFINE_EVALS_SHARE = {"extruded": 0.5}
 """Evaluations of a multi-start's refinement before its correction rounds, as a share of `DesignConfig.max_iter`
-(at least 1), its beta continuation over them: from the best coarse design each beta stage settles within a few
-tens of evaluations; the rounds' evaluations follow as for a single run
-(docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
+(at least 1), its beta continuation over them, per design space (`DEFAULT_REFINE_EVALS_SHARE` for the others): from
+the best coarse design each beta stage settles within a few tens of evaluations; the rounds' evaluations follow as
+for a single run. An extruded evaluation at 128 costs a third of an nfc one (its density is 2D), and its longer
+refinement printed as well or better on six of seven sources at 128, within a minute each
+(docs/evidence/design.md#the-extruded-refinement)."""
+DEFAULT_REFINE_EVALS_SHARE = 0.2
+"""`REFINE_EVALS_SHARE` of the spaces it does not name (docs/evidence/design.md#a-default-design-at-128-in-two-minutes)."""
 CURVE_EXTRUDED_STARTS = 3
 """Default starts of an extruded design of a curve target (`DesignConfig.starts`): its three start outlines, a
 square, a cross and a ring (`design.inverse.starts.start_regions`; noisy squares in place of those that do not fit),
