@@ -174,3 +174,18 @@ def test_timing_the_runs_evaluation_does_not_change_its_design(tmp_path):
     plain = run_design(config, tmp_path / "plain")
     with np.load(timed.out_dir / "density.npz") as a, np.load(plain.out_dir / "density.npz") as b:
         assert np.array_equal(a["rho_hat"], b["rho_hat"])
+
+
+def test_a_run_resumed_in_a_later_coarse_start_weighs_them_by_the_first_it_times(monkeypatch):
+    now = [0.0]
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
+    clock = RunClock(run_plan(DesignConfig(target="sphere", resolution=128, max_iter=100)), lambda k, x, terms: None,
+                     full_eval_s=1.0)
+    for k in range(1, 5):  # the run resumed in its third start: 0.4 s per coarse evaluation
+        now[0] += 0.4
+        clock(k, None, {"phase": "coarse start 3 of 4 at resolution 64"})
+    assert [p.weight for p in clock.plan] == [pytest.approx(0.4)] * 4 + [1.0] * 3
+    for k in range(1, 5):  # the fourth start does not weigh them again
+        now[0] += 0.8
+        clock(k, None, {"phase": "coarse start 4 of 4 at resolution 64"})
+    assert [p.weight for p in clock.plan] == [pytest.approx(0.4)] * 4 + [1.0] * 3
