@@ -198,23 +198,31 @@ def _nearest(points, vx, offset, lo, hi, nrm, smin, smax, left, start, count, no
                         tri_best = t
                 continue
             a = left[node]
-            b = a + 1
             da = node_offset[a] + _lower_bound(px, py, pz, a, lo, hi, nrm, smin, smax)
-            db = node_offset[b] + _lower_bound(px, py, pz, b, lo, hi, nrm, smin, smax)
-            if da <= db:  # the nearer child is popped first
-                a, b = b, a
-                da, db = db, da
-            if da < best:
-                stack[top] = a
-                top += 1
-            if db < best:
-                stack[top] = b
-                top += 1
+            db = node_offset[a + 1] + _lower_bound(px, py, pz, a + 1, lo, hi, nrm, smin, smax)
+            top = _push_children(stack, top, a, da, db, best)
         value[i] = best
         best_tri[i] = tri_best
         if tri_best >= 0:
             seed = tri_best
     return value, best_tri
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _push_children(stack, top, a, da, db, best):
+    """Push the children ``a`` and ``a + 1`` of a search-tree node whose bounds ``da``, ``db`` are below ``best``, the
+    nearer last so that it is popped first; returns the stack's new top."""
+    b = a + 1
+    if da <= db:
+        a, b = b, a
+        da, db = db, da
+    if da < best:
+        stack[top] = a
+        top += 1
+    if db < best:
+        stack[top] = b
+        top += 1
+    return top
 
 
 @njit(cache=True, nogil=True)

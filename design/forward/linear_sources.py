@@ -22,7 +22,7 @@ import numpy as np
 import trimesh
 from numba import njit
 
-from design.forward.distance import Surface, _lower_bound, _node_floor
+from design.forward.distance import Surface, _lower_bound, _node_floor, _push_children
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -144,18 +144,9 @@ def _nearest_linear(points, vx, wv, face_n, grad, dual, lo, hi, nrm, smin, smax,
                         best, tri_best, fx, fy, fz = val, t, qx, qy, qz
                 continue
             a = left[node]
-            b = a + 1
             da = _bound(px, py, pz, a, lo, hi, nrm, smin, smax, floor, plane)
-            db = _bound(px, py, pz, b, lo, hi, nrm, smin, smax, floor, plane)
-            if da <= db:  # the nearer child is popped first
-                a, b = b, a
-                da, db = db, da
-            if da < best:
-                stack[top] = a
-                top += 1
-            if db < best:
-                stack[top] = b
-                top += 1
+            db = _bound(px, py, pz, a + 1, lo, hi, nrm, smin, smax, floor, plane)
+            top = _push_children(stack, top, a, da, db, best)
         value[i] = best
         best_tri[i] = tri_best
         foot[i, 0], foot[i, 1], foot[i, 2] = fx, fy, fz
