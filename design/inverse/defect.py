@@ -325,16 +325,20 @@ class _Running:
         self.store.wait()
 
 
+def outputs_reuse(cells: int, config: DesignConfig) -> bool:
+    """Whether the outputs of a run of ``config`` reuse the release of a print checked on ``cells`` lattice cells
+    (`design.inverse.release_cache`): the outputs' lattice (`design.forward.reference.design_lattice`), with no print
+    offset or swelling, which the outputs release otherwise."""
+    return cells == design_lattice(config.resolution) and config.print_offset_mm == 0.0 and config.swelling_mm == 0.0
+
+
 def _telling_reuse(on_iteration: IterationCallback | None, check: PrintCheck, config: DesignConfig
                    ) -> IterationCallback | None:
-    """``on_iteration`` with ``terms["outputs_reuse"]``: whether ``check`` released its print as the outputs release
-    theirs (the same lattice, `design.forward.reference.design_lattice`, with no print offset or swelling), so that
-    the outputs will reuse the release of a checked print (`design.inverse.release_cache`), for the time left
+    """``on_iteration`` with ``terms["outputs_reuse"]`` (`outputs_reuse` of ``check``'s lattice), for the time left
     (`design.inverse.progress.RunClock`)."""
     if on_iteration is None:
         return None
-    reuse = (check.cells == design_lattice(config.resolution) and config.print_offset_mm == 0.0
-             and config.swelling_mm == 0.0)
+    reuse = outputs_reuse(check.cells, config)
     return lambda k, x, terms: on_iteration(k, x, dict(terms, outputs_reuse=reuse))
 
 

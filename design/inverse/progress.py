@@ -151,8 +151,7 @@ def stage_costs(config: DesignConfig, full_eval_s: float | None = None, problem:
     `CHECK_PER_REFERENCE` and `OUTPUTS_PER_CHECK` when both are known, else `PRINT_CHECK_EVALS` and `OUTPUTS_EVALS`;
     reused outputs at `REUSED_OUTPUTS_PER_CHECK`, expected where a print of the source's size would be checked on the
     outputs' lattice."""
-    from design.forward.reference import design_lattice
-    from design.inverse.defect import check_cells
+    from design.inverse.defect import check_cells, outputs_reuse
 
     reference_s = None if problem is None else problem.target_release_s
     if not (full_eval_s and reference_s):
@@ -161,11 +160,10 @@ def stage_costs(config: DesignConfig, full_eval_s: float | None = None, problem:
     check = CHECK_PER_REFERENCE.get(config.space, DEFAULT_CHECK_PER_REFERENCE) * reference_s / full_eval_s
     cells = check_cells(config.space, float(max(problem.source_mesh.extents)), problem.space.dx_mm)
     return StageCosts(check, check * OUTPUTS_PER_CHECK.get(config.space, DEFAULT_OUTPUTS_PER_CHECK),
-                      check * REUSED_OUTPUTS_PER_CHECK, reused=cells >= design_lattice(config.resolution))
+                      check * REUSED_OUTPUTS_PER_CHECK, reused=outputs_reuse(cells, config))
 
 
-def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bool, costs: StageCosts
-            ) -> list[Phase]:
+def _single(config: DesignConfig, prefix: str | None, costs: StageCosts) -> list[Phase]:
     """The phases of one run of ``config`` (no multi-start): its optimisation, its rounds, its outputs."""
     from design.inverse.defect import correction_plan, round_phase
 
@@ -174,15 +172,12 @@ def _single(config: DesignConfig, prefix: str | None, weight: float, outputs: bo
     def named(name: str | None) -> str | None:
         return prefix if name is None else name if prefix is None else f"{prefix}, {name}"
 
-    check = costs.check * weight
-    tail = costs.outputs * weight if outputs else 0.0
     limit = first + rounds * config.correction_evals
-    phases = [Phase(named(None), first, first, weight, (check if rounds else 0.0) + (tail if not rounds else 0.0),
-                    limit)]
+    phases = [Phase(named(None), first, first, 1.0, costs.check if rounds else costs.outputs, limit)]
     for r in range(1, rounds + 1):
         end = first + r * config.correction_evals
-        after = check + (tail if r == rounds else 0.0)
-        phases.append(Phase(named(round_phase(r, rounds)), end, config.correction_evals, weight, after, limit))
+        after = costs.check + (costs.outputs if r == rounds else 0.0)
+        phases.append(Phase(named(round_phase(r, rounds)), end, config.correction_evals, 1.0, after, limit))
     return phases
 
 
@@ -193,18 +188,18 @@ def run_plan(config: DesignConfig, costs: StageCosts | None = None) -> list[Phas
 
     costs = costs or stage_costs(config)
     if config.starts <= 1:
-        return _single(config, None, 1.0, True, costs)
+        return _single(config, None, costs)
     resolution = coarse_resolution(config.resolution)
     if resolution == config.resolution:  # every start a whole run; the chosen one's outputs written again
         phases = [p for k in range(config.starts)
-                  for p in _single(config, coarse_phase(k, config.starts, resolution, coarse=False), 1.0, True, costs)]
+                  for p in _single(config, coarse_phase(k, config.starts, resolution, coarse=False), costs)]
         last = phases[-1]
         return phases[:-1] + [replace(last, after=last.after + costs.outputs)]
     weight = COARSE_EVAL_WEIGHT.get(config.space, DEFAULT_COARSE_EVAL_WEIGHT)
     evals = coarse_config(config).max_iter
     coarse = [Phase(coarse_phase(k, config.starts, resolution), evals, evals, weight, COARSE_OUTPUTS_EVALS,
                     coarse=True) for k in range(config.starts)]
-    return coarse + _single(refinement_config(config), refinement_phase(config.resolution), 1.0, True, costs)
+    return coarse + _single(refinement_config(config), refinement_phase(config.resolution), costs)
 
 
 def evaluation_seconds(problem: Problem, config: DesignConfig) -> float:
