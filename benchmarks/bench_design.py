@@ -57,6 +57,9 @@ from design.inverse.objective import DesignObjective
 from design.inverse.optimize import build_objective, optimise
 from design.inverse.problem import prepare
 
+ROUNDS = 5
+"""Alternating rounds per grid by default: the machine's speed drifts by a fifth from minute to minute, and the median
+of five rounds is not one slow minute's."""
 PARTS = ("evaluate", "gradient", "optimiser", "checkpoint", "writer")
 STAGE_EVALS = 80
 """Evaluations of the stages' design (64 of the optimisation, two correction rounds of 8): enough for a solid to
@@ -193,7 +196,7 @@ def stages(resolution: int) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="64^3 only, three short rounds; stages at 64")
-    parser.add_argument("--rounds", type=int, default=3, help="alternating rounds per grid (>= 3)")
+    parser.add_argument("--rounds", type=int, default=ROUNDS, help=f"alternating rounds per grid (>= 3, default {ROUNDS})")
     parser.add_argument("--optimizer", default=DesignConfig.optimizer, help="design optimiser (default: the default)")
     args = parser.parse_args()
     if args.rounds < 3:

@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from design.threads import in_parts
+
 
 @njit(cache=True, nogil=True)
 def _add_kink(acc, t, value, dtau):
@@ -95,23 +97,28 @@ def ramp_release(u_mm: np.ndarray, length_mm: np.ndarray, weight_mm3: np.ndarray
 
 
 @njit(cache=True, nogil=True)
-def _vjp_kernel(u, length, weight, dtau, g):
+def _prefix_sums(g):
+    """p0[k] = sum_{j<k} g_j and p1[k] = sum_{j<k} j g_j, k = 0..K."""
     k_count = g.shape[0]
     p0 = np.zeros(k_count + 1)
     p1 = np.zeros(k_count + 1)
     for k in range(k_count):
         p0[k + 1] = p0[k] + g[k]
         p1[k + 1] = p1[k] + k * g[k]
-    n = u.shape[0]
-    u_bar = np.zeros(n)
-    length_bar = np.zeros(n)
-    weight_bar = np.zeros(n)
-    for i in range(n):
+    return p0, p1
+
+
+@njit(cache=True, nogil=True)
+def _vjp_kernel(u, length, weight, dtau, p0, p1, u_bar, length_bar, weight_bar):
+    """The pullback at voxels ``0..len(u)-1`` of the given slices, written into the output slices."""
+    k_count = p0.shape[0] - 1
+    for i in range(u.shape[0]):
         t0 = _ramp_start(u[i], length[i])
         span = u[i] - t0
         # samples on the ramp: t0 < tau_k <= u_i; after it the ramp is 1
         ka = min(max(np.int64(np.floor(t0 / dtau)) + 1, 0), k_count)
         kb = min(max(np.int64(np.floor(u[i] / dtau)) + 1, 0), k_count)
+        u_bar[i] = length_bar[i] = 0.0
         if span <= 0.0:
             weight_bar[i] = p0[k_count] - p0[kb]  # a step (see _second_differences): flat in u_i and L_i
             continue
@@ -122,12 +129,10 @@ def _vjp_kernel(u, length, weight, dtau, g):
         if t0 == 0.0 and u[i] < length[i]:
             # s_k = tau_k / u_i on (0, u_i]: d s_k / d u_i = -s_k / u_i, independent of L_i
             u_bar[i] = -weight[i] / span * ramp
-            length_bar[i] = 0.0
         else:
             # d s_k / d u_i = -1 / L_i and d s_k / d L_i = (1 - s_k) / L_i on the ramp (eq. 6)
             u_bar[i] = -weight[i] / span * s0
             length_bar[i] = weight[i] / span * (s0 - ramp)
-    return u_bar, length_bar, weight_bar
 
 
 def ramp_release_vjp(u_mm: np.ndarray, length_mm: np.ndarray, weight_mm3: np.ndarray,
@@ -147,4 +152,13 @@ def ramp_release_vjp(u_mm: np.ndarray, length_mm: np.ndarray, weight_mm3: np.nda
     u_bar, length_bar, weight_bar : (N,) ndarray of float
         dJ/du_i, dJ/dL_i (per mm) and dJ/dw_i (per mm^3).
     """
-    return _vjp_kernel(u_mm, length_mm, weight_mm3, float(dtau_mm), np.asarray(curve_bar, dtype=np.float64))
+    u, length, weight = (np.ascontiguousarray(a, dtype=np.float64) for a in (u_mm, length_mm, weight_mm3))
+    p0, p1 = _prefix_sums(np.asarray(curve_bar, dtype=np.float64))
+    bars = np.empty((3, u.size))
+    dtau = float(dtau_mm)
+
+    def part(i: int, j: int) -> None:
+        _vjp_kernel(u[i:j], length[i:j], weight[i:j], dtau, p0, p1, bars[0, i:j], bars[1, i:j], bars[2, i:j])
+
+    in_parts(part, u.size)
+    return bars[0], bars[1], bars[2]

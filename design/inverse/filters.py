@@ -6,26 +6,16 @@ back to the design variables ``rho_hat``.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import fft as sfft
 
 from design.errors import DesignError
+from design.threads import in_parts, thread_count
 
 MAX_RADIUS_VOX = 64.0
 """The largest smoothing radius the filter takes, voxels (a cone kernel of up to 127 voxels a side)."""
-
-
-def fft_workers() -> int:
-    """Threads for the smoothing FFTs: ``OMP_NUM_THREADS`` when the process is granted a count (a Dask
-    worker's nanny sets it to 1, so that side-by-side designs do not oversubscribe the cores), else all
-    cores (-1, scipy.fft's convention)."""
-    try:
-        return max(1, int(os.environ["OMP_NUM_THREADS"]))
-    except (KeyError, ValueError):
-        return -1
 
 
 def cone_kernel(radius_vox: float, ndim: int) -> np.ndarray:
@@ -50,28 +40,29 @@ def cone_kernel(radius_vox: float, ndim: int) -> np.ndarray:
 
 
 def _pad(x: np.ndarray, half: int, mirror: tuple[bool, ...]) -> np.ndarray:
-    """Pad every axis by ``half``: reflected copy at a mirror plane (index-0 face), zeros elsewhere."""
+    """Pad every axis by ``half``: reflected copy at a mirror plane (index-0 face), zeros elsewhere.
+
+    Axis by axis, so that a corner band reflects the bands of the axes padded before it."""
+    out = np.zeros(tuple(n + 2 * half for n in x.shape))
+    out[tuple(slice(half, half + n) for n in x.shape)] = x
     for ax, mir in enumerate(mirror):
-        zeros_shape = list(x.shape)
-        zeros_shape[ax] = half
-        hi = np.zeros(zeros_shape)
-        lo = np.flip(np.take(x, np.arange(half), axis=ax), axis=ax) if mir else np.zeros(zeros_shape)
-        x = np.concatenate([lo, x, hi], axis=ax)
-    return x
+        if mir:
+            out[_band(ax, 0, half)] = np.flip(out[_band(ax, half, 2 * half)], axis=ax)
+    return out
 
 
 def _pad_adjoint(p: np.ndarray, half: int, mirror: tuple[bool, ...]) -> np.ndarray:
-    """Adjoint of `_pad`: crop, and fold the reflected band back onto the voxels it copied."""
+    """Adjoint of `_pad` (overwrites ``p``): fold the reflected bands back onto the voxels they copied, last axis
+    first, and crop."""
     for ax in reversed(range(len(mirror))):
-        n = p.shape[ax] - 2 * half
-        core = np.take(p, np.arange(half, half + n), axis=ax)
         if mirror[ax]:
-            band = np.flip(np.take(p, np.arange(half), axis=ax), axis=ax)
-            idx = [slice(None)] * p.ndim
-            idx[ax] = slice(0, half)
-            core[tuple(idx)] += band
-        p = core
-    return p
+            p[_band(ax, half, 2 * half)] += np.flip(p[_band(ax, 0, half)], axis=ax)
+    return np.ascontiguousarray(p[tuple(slice(half, n - half) for n in p.shape)])
+
+
+def _band(axis: int, start: int, stop: int) -> tuple[slice, ...]:
+    """Index of the slab ``start:stop`` of ``axis``, every index of the other axes."""
+    return (slice(None),) * axis + (slice(start, stop),)
 
 
 @dataclass(frozen=True)
@@ -121,7 +112,7 @@ class SmoothingFilter:
         object.__setattr__(self, "_weights", self._valid(_pad(np.ones(self.shape), half, self.mirror)))
 
     def _conv(self, x: np.ndarray) -> np.ndarray:
-        workers = fft_workers()
+        workers = thread_count()
         return sfft.irfftn(sfft.rfftn(x, self._fshape, workers=workers) * self._kernel_hat, self._fshape,
                            workers=workers)
 
@@ -162,14 +153,44 @@ def project(rho_tilde: np.ndarray, beta: float, eta: float = 0.5) -> np.ndarray:
         Threshold in (0, 1).
     """
     a, b = np.tanh(beta * eta), np.tanh(beta * (1.0 - eta))
-    # the clip only removes round-off (project(0) = -6e-17), the map itself stays in [0, 1]
-    return np.clip((a + np.tanh(beta * (rho_tilde - eta))) / (a + b), 0.0, 1.0)
+    x = np.asarray(rho_tilde, dtype=np.float64)
+    out = np.empty(x.shape)
+    flat_x, flat_out = x.reshape(-1), out.reshape(-1)
+
+    def part(i: int, j: int) -> None:  # (a + tanh(beta (x - eta))) / (a + b), in place
+        o = flat_out[i:j]
+        np.subtract(flat_x[i:j], eta, out=o)
+        np.multiply(beta, o, out=o)
+        np.tanh(o, out=o)
+        np.add(a, o, out=o)
+        np.divide(o, a + b, out=o)
+        # the clip only removes round-off (project(0) = -6e-17), the map itself stays in [0, 1]
+        np.clip(o, 0.0, 1.0, out=o)
+
+    in_parts(part, x.size)
+    return out
 
 
 def project_adjoint(rho_tilde: np.ndarray, beta: float, g: np.ndarray, eta: float = 0.5) -> np.ndarray:
     """Vector-Jacobian product of `project`: ``g * d project / d rho_tilde``."""
-    th = np.tanh(beta * (rho_tilde - eta))
-    return g * beta * (1.0 - th * th) / (np.tanh(beta * eta) + np.tanh(beta * (1.0 - eta)))
+    x, g = np.broadcast_arrays(np.asarray(rho_tilde, dtype=np.float64), np.asarray(g, dtype=np.float64))
+    out = np.empty(x.shape)
+    flat_x, flat_g, flat_out = x.reshape(-1), g.reshape(-1), out.reshape(-1)
+    scale = np.tanh(beta * eta) + np.tanh(beta * (1.0 - eta))
+
+    def part(i: int, j: int) -> None:  # g beta (1 - tanh(beta (x - eta))^2) / scale
+        th = np.subtract(flat_x[i:j], eta)
+        np.multiply(beta, th, out=th)
+        np.tanh(th, out=th)
+        np.multiply(th, th, out=th)
+        np.subtract(1.0, th, out=th)
+        o = flat_out[i:j]
+        np.multiply(flat_g[i:j], beta, out=o)
+        np.multiply(o, th, out=o)
+        np.divide(o, scale, out=o)
+
+    in_parts(part, x.size)
+    return out
 
 
 def project_inverse(rho: float, beta: float) -> float:

@@ -59,6 +59,7 @@ from design.inverse.objective import DesignObjective
 from design.inverse.problem import Problem
 from design.inverse.settings import BETA_STAGES
 from design.inverse.status import DesignStatus
+from design.threads import in_parts
 
 log = logging.getLogger(__name__)
 
@@ -201,7 +202,7 @@ class _Run:
 
     def to_x(self, z: np.ndarray) -> np.ndarray:
         """Design variables rho_hat from the optimiser's variables."""
-        return 0.5 * (1.0 - np.cos(z)) if self.cosine else z
+        return _cosine_map(z) if self.cosine else z
 
     def from_x(self, x: np.ndarray) -> np.ndarray:
         """The optimiser's variables of a new session from rho_hat, with the cosine map each at least the design
@@ -254,9 +255,8 @@ class _Run:
         ev = self.objective.evaluate(x.reshape(self.objective.space.var_shape))
         self.store.wait()  # the optimiser's update, after this returns, changes the saved arrays
         if grad.size:
-            if self.cosine:  # chain rule of to_x
-                np.multiply(ev.grad.ravel(), np.sin(z), out=grad)
-                grad *= 0.5
+            if self.cosine:
+                _cosine_map_adjoint(z, ev.grad.ravel(), grad)
             else:
                 grad[:] = ev.grad.ravel()
         self.k += 1
@@ -300,6 +300,31 @@ class _Run:
                                    history=np.array(self.history, dtype=float).reshape(-1, len(HISTORY_COLUMNS)),
                                    lbfgs=state, beta=float(self.objective.beta), status=status,
                                    fab={} if term is None else term.state()), wait=wait)
+
+
+def _cosine_map(z: np.ndarray) -> np.ndarray:
+    """rho_hat = (1 - cos z) / 2 of the cosine map (module doc), a new array."""
+    x = np.empty(z.shape)
+    flat_z, flat_x = z.reshape(-1), x.reshape(-1)
+
+    def part(i: int, j: int) -> None:
+        o = flat_x[i:j]
+        np.cos(flat_z[i:j], out=o)
+        np.subtract(1.0, o, out=o)
+        np.multiply(0.5, o, out=o)
+
+    in_parts(part, z.size)
+    return x
+
+
+def _cosine_map_adjoint(z: np.ndarray, grad_x: np.ndarray, out: np.ndarray) -> None:
+    """dJ/dz = dJ/drho_hat sin(z) / 2 of the cosine map, written into ``out`` (flat)."""
+    def part(i: int, j: int) -> None:
+        o = out[i:j]
+        np.multiply(grad_x[i:j], np.sin(z[i:j]), out=o)
+        o *= 0.5
+
+    in_parts(part, z.size)
 
 
 def _optimise(run: _Run, x0: np.ndarray, remaining: int) -> DesignStatus:

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from design.errors import DesignError
-from design.inverse.filters import SmoothingFilter, cone_kernel, fft_workers, project, project_adjoint, project_inverse
+from design.inverse.filters import SmoothingFilter, cone_kernel, project, project_adjoint, project_inverse
 
 
 def test_cone_kernel_decays_linearly_to_zero():
@@ -86,11 +86,18 @@ def test_smoothing_guards():
         SmoothingFilter((2, 8, 8), 5.0, (True, False, False))
 
 
-def test_fft_threads_follow_omp_num_threads(monkeypatch):
-    # a Dask worker's nanny sets OMP_NUM_THREADS=1: side-by-side designs then use one FFT thread each
+def test_smoothing_and_projection_are_the_same_in_parts_as_in_one_pass(monkeypatch):
+    # fields of 2^18 voxels are split over two threads (design.threads.MIN_PART); one thread gives the same values
+    rng = np.random.default_rng(5)
+    shape, mirror = (64, 64, 64), (True, False, True)
+    x, g = rng.random(shape), rng.standard_normal(shape)
+
+    def outputs():
+        f = SmoothingFilter(shape, 3.7, mirror)
+        return [f.apply(x), f.adjoint(g), project(x, 6.0, 0.4), project_adjoint(x, 6.0, g, 0.6)]
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    parts = outputs()
     monkeypatch.setenv("OMP_NUM_THREADS", "1")
-    assert fft_workers() == 1
-    monkeypatch.setenv("OMP_NUM_THREADS", "not a number")
-    assert fft_workers() == -1
-    monkeypatch.delenv("OMP_NUM_THREADS")
-    assert fft_workers() == -1
+    for split, whole in zip(parts, outputs()):
+        assert np.array_equal(split, whole)
