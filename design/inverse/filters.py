@@ -39,15 +39,17 @@ def cone_kernel(radius_vox: float, ndim: int) -> np.ndarray:
     return np.maximum(radius_vox - dist, 0.0)
 
 
-def _pad(x: np.ndarray, half: int, mirror: tuple[bool, ...]) -> np.ndarray:
-    """Pad every axis by ``half``: reflected copy at a mirror plane (index-0 face), zeros elsewhere.
+def _pad(x: np.ndarray, half: int, mirror: tuple[bool, ...], shape: tuple[int, ...]) -> np.ndarray:
+    """Pad every axis by ``half``: reflected copy at a mirror plane (index-0 face), zeros elsewhere; in the leading
+    corner of a zero array of ``shape`` (at least the padded size: the FFT's, so that it needs no copy).
 
     Axis by axis, so that a corner band reflects the bands of the axes padded before it."""
-    out = np.zeros(tuple(n + 2 * half for n in x.shape))
-    out[tuple(slice(half, half + n) for n in x.shape)] = x
+    out = np.zeros(shape)
+    padded = out[tuple(slice(0, n + 2 * half) for n in x.shape)]
+    padded[tuple(slice(half, half + n) for n in x.shape)] = x
     for ax, mir in enumerate(mirror):
         if mir:
-            out[_band(ax, 0, half)] = np.flip(out[_band(ax, half, 2 * half)], axis=ax)
+            padded[_band(ax, 0, half)] = np.flip(padded[_band(ax, half, 2 * half)], axis=ax)
     return out
 
 
@@ -109,12 +111,13 @@ class SmoothingFilter:
         object.__setattr__(self, "_half", half)
         object.__setattr__(self, "_fshape", fshape)
         object.__setattr__(self, "_kernel_hat", sfft.rfftn(kernel, fshape))
-        object.__setattr__(self, "_weights", self._valid(_pad(np.ones(self.shape), half, self.mirror)))
+        object.__setattr__(self, "_weights", self._valid(_pad(np.ones(self.shape), half, self.mirror, fshape)))
 
     def _conv(self, x: np.ndarray) -> np.ndarray:
         workers = thread_count()
-        return sfft.irfftn(sfft.rfftn(x, self._fshape, workers=workers) * self._kernel_hat, self._fshape,
-                           workers=workers)
+        spectrum = sfft.rfftn(x, self._fshape, workers=workers)
+        spectrum *= self._kernel_hat
+        return sfft.irfftn(spectrum, self._fshape, workers=workers)
 
     def _valid(self, padded: np.ndarray) -> np.ndarray:
         """'valid' convolution of a padded field, back on the original grid."""
@@ -127,11 +130,13 @@ class SmoothingFilter:
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         """Smoothed field ``(K * P x) / (K * P 1)``, same shape as ``x``."""
-        return self._valid(_pad(x, self._half, self.mirror)) / self._weights
+        return self._valid(_pad(x, self._half, self.mirror, self._fshape)) / self._weights
 
     def adjoint(self, g: np.ndarray) -> np.ndarray:
         """Vector-Jacobian product: gradient w.r.t. the input given ``g`` = gradient w.r.t. the output."""
-        return _pad_adjoint(self._valid_adjoint(g / self._weights), self._half, self.mirror)
+        y = np.zeros(self._fshape)  # zero-padded to the FFT's shape in place, so that it needs no copy
+        np.divide(g, self._weights, out=y[tuple(slice(0, n) for n in self.shape)])
+        return _pad_adjoint(self._valid_adjoint(y), self._half, self.mirror)
 
 
 def project(rho_tilde: np.ndarray, beta: float, eta: float = 0.5) -> np.ndarray:
