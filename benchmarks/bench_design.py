@@ -195,7 +195,7 @@ def stages(resolution: int) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="64^3 only, three short rounds; stages at 64")
+    parser.add_argument("--quick", action="store_true", help="64^3 only, short rounds; stages at 64")
     parser.add_argument("--rounds", type=int, default=ROUNDS, help=f"alternating rounds per grid (>= 3, default {ROUNDS})")
     parser.add_argument("--optimizer", default=DesignConfig.optimizer, help="design optimiser (default: the default)")
     args = parser.parse_args()
