@@ -16,8 +16,9 @@ from design.geometry.bodies import solid_mesh
 log = logging.getLogger(__name__)
 
 
-def load_mesh(path: str | Path) -> trimesh.Trimesh:
-    """Load a closed triangle mesh in mm (STL, OBJ, PLY, OFF, 3MF; multi-body files are merged).
+def load_mesh(path: str | Path, mm_per_unit: float = 1.0) -> trimesh.Trimesh:
+    """Load a closed triangle mesh (STL, OBJ, PLY, OFF, 3MF; multi-body files are merged), in mm: its coordinates
+    times ``mm_per_unit`` (25.4 for a file drawn in inches), before its bodies are checked and united.
 
     Raises
     ------
@@ -42,7 +43,7 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
                           f"{path}: not {a_kind} mesh (no triangles could be read from it); expected a closed "
                           f"triangle mesh in mm saved as {kind}")
     _check_finite(loaded.vertices, str(path), per_facet=path.suffix.lower() == ".stl")
-    return checked_mesh(trimesh.Trimesh(loaded.vertices, loaded.faces, process=True), str(path))
+    return checked_mesh(trimesh.Trimesh(loaded.vertices * mm_per_unit, loaded.faces, process=True), str(path))
 
 
 def _check_finite(vertices: np.ndarray, source: str, per_facet: bool = False) -> None:
@@ -66,11 +67,30 @@ def checked_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> trimesh.Trimesh
     """
     _check_finite(mesh.vertices, source)
     if not mesh.is_watertight:
-        raise DesignError(f"{source}: is not watertight (it has open edges), so its inside is undefined")
+        mesh = _bodies_apart(mesh, source)
     solid, notes = solid_mesh(mesh, source)
     for note in notes:
         log.warning("%s", note)
     return solid
+
+
+def _bodies_apart(mesh: trimesh.Trimesh, source: str) -> trimesh.Trimesh:
+    """A mesh that is not watertight only because closed bodies share an edge (touching parts of one file, whose
+    common edge then bounds four faces) as those bodies side by side, for `solid_mesh` to unite.
+
+    Raises
+    ------
+    DesignError
+        When a body is open, naming how many edges bound one face only (or more than two of one body).
+    """
+    bodies = mesh.split(only_watertight=False)
+    if len(bodies) > 1 and all(body.is_watertight for body in bodies):
+        return trimesh.util.concatenate(bodies)
+    uses = np.unique(mesh.edges_sorted, axis=0, return_counts=True)[1]
+    open_edges = int(np.count_nonzero(uses == 1))
+    what = (f"it has {open_edges} open edges" if open_edges else
+            f"{int(np.count_nonzero(uses > 2))} of its edges bound more than two faces of one body")
+    raise DesignError(f"{source}: is not watertight ({what}), so its inside is undefined")
 
 
 _UNREADABLE = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error)

@@ -11,15 +11,11 @@ refused with where it goes wrong.
 """
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 import trimesh
 
 from design.errors import DesignError
 from design.geometry.voxelize import grid_for, winding
-
-log = logging.getLogger(__name__)
 
 TOUCH_FRACTION = 1e-6
 """Two bodies closer than this fraction of their size touch: they are one solid (the surface they share is not
@@ -134,7 +130,6 @@ def solid_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> tuple[trimesh.Tri
     shared = sum(b.volume for b in solids) - sum(-c.volume for c in cavities) - united.volume
     note = (f"{source}: {len(solids)} {'overlapping' if high > 1 else 'touching'} bodies united into one solid of "
             f"{united.volume:.4g} mm^3 (they shared {shared:.4g} mm^3)")
-    log.info("%s", note)
     return united, [note]
 
 

@@ -62,11 +62,7 @@ def load_mesh_mm(path: str | Path, units: str = "mm"):
 
     if units not in MM_PER_UNIT:
         raise UsageError(f"--units {units!r}: expected one of {', '.join(MM_PER_UNIT)}")
-    mesh = load_mesh(path)
-    if units != "mm":
-        mesh = mesh.copy()
-        mesh.apply_scale(MM_PER_UNIT[units])
-    return mesh
+    return load_mesh(path, MM_PER_UNIT[units])
 
 
 def _likely_unit(volume_mm3: float) -> str:

@@ -26,6 +26,30 @@ def test_overlapping_bodies_in_one_file_are_united(tmp_path):
     assert len(mesh.split(only_watertight=False)) == 1
 
 
+def test_bodies_that_share_an_edge_are_united_and_the_note_is_in_mm(tmp_path, caplog):
+    # an L of two boxes drawn in inches whose corner edges coincide: once the file's vertices are merged that edge
+    # bounds four faces, which is closed bodies touching, not an open surface
+    a = trimesh.creation.box(extents=(2.0, 0.25, 1.0))
+    b = trimesh.creation.box(extents=(0.25, 1.5, 1.0))
+    b.apply_translation((-0.875, 0.625, 0.0))
+    path = tmp_path / "bracket.stl"
+    trimesh.util.concatenate([a, b]).export(path)
+    with caplog.at_level("WARNING"):
+        mesh = load_mesh(path, 25.4)
+    # 0.5 + 0.375 in^3 sharing 0.0625 in^3 (exact booleans on the STL's float32 coordinates in mm: to 1e-7)
+    assert mesh.volume == pytest.approx(0.8125 * 25.4 ** 3, rel=1e-7)
+    assert mesh.is_watertight and len(mesh.split(only_watertight=False)) == 1
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{path}: 2 overlapping bodies united into one solid of 1.331e+04 mm^3 (they shared 1024 mm^3)"]
+
+
+def test_an_open_surface_is_refused_with_its_open_edges(tmp_path):
+    box = trimesh.creation.box(extents=(10, 10, 10))
+    box.update_faces(np.arange(12) != 3)  # one triangle gone: its three edges bound one face each
+    with pytest.raises(DesignError, match=r"open\.stl: is not watertight \(it has 3 open edges\)"):
+        checked_mesh(box, "open.stl")
+
+
 def test_overlap_is_inside_on_the_voxel_grid():
     """Winding numbers, not ray parity: the shared cube counts once, not as outside."""
     two = _overlapping_boxes()
