@@ -132,6 +132,8 @@ def parts() -> list[tuple[str, str, trimesh.Trimesh, str, Callable | None]]:
         ("box_open", "50 x 40 x 30 mm open box, 1.5 mm walls", _open_box((50.0, 40.0, 30.0), 1.5), "mm", None),
         ("box_sealed", "40 x 30 x 20 mm closed box, 2 mm walls (sealed void)", sealed, "mm", sealed_exact),
         ("bracket_in", "angle bracket drawn in inches (--units in)", _bracket_in(), "in", None),
+        ("l_bodies_in", "an L of two bars drawn in inches whose corner edges coincide (--units in)",
+         trimesh.util.concatenate([_box((2.0, 0.25, 1.0)), _box((0.25, 1.5, 1.0), (-0.875, 0.625, 0.0))]), "in", None),
         ("torus", "torus R 20, r 3 mm", torus, "mm",
          lambda t: torus.volume - 2 * np.pi ** 2 * 20.0 * np.clip(r - np.asarray(t), 0, None) ** 2),
         ("torus_fat", "torus R 8, r 3 mm", analytic.torus()[0], "mm", analytic.torus()[2]),
@@ -249,14 +251,11 @@ def main_prints(args: argparse.Namespace, work: Path) -> None:
         print(f"| {name}: {what} | {how} | " + " | ".join(cells) + " |", flush=True)
 
 
-def _solid_mm(mesh: trimesh.Trimesh, units: str) -> trimesh.Trimesh:
+def _solid_mm(path: Path, units: str) -> trimesh.Trimesh:
     """The solid the file describes, in mm: bodies that touch or overlap united (as ``sfr simulate`` reads it)."""
-    from design.geometry.bodies import solid_mesh
+    from design.files.meshio import load_mesh
 
-    mesh = mesh.copy()
-    if units == "in":
-        mesh.apply_scale(INCH_MM)
-    return solid_mesh(mesh)[0]
+    return load_mesh(path, INCH_MM if units == "in" else 1.0)
 
 
 def sobol_release(mesh: trimesh.Trimesh) -> Callable[[np.ndarray], np.ndarray]:
@@ -342,7 +341,7 @@ def main() -> None:
             continue
         path = work / f"{name}.stl"
         mesh.export(path)
-        solid = _solid_mm(trimesh.load_mesh(path), units)
+        solid = _solid_mm(path, units)
         if exact is None:
             exact, how = sobol_release(solid), f"Sobol 2^{SOBOL_LOG2}"
         else:
