@@ -13,6 +13,8 @@ MIN_PART = 1 << 17
 """The fewest elements a thread gets, 2^17 (1 MB of doubles): below it starting a thread costs more than it saves."""
 
 _pools: dict[int, ThreadPoolExecutor] = {}
+if hasattr(os, "register_at_fork"):  # a forked child has none of its parent's threads: it starts its own pools
+    os.register_at_fork(after_in_child=_pools.clear)
 
 
 def thread_count() -> int:

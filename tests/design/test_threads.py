@@ -1,4 +1,9 @@
-"""Array work in parts: every index once, the thread count a process is granted, and the same values as one pass."""
+"""Array work in parts: every index once, the thread count a process is granted, the same values as one pass, and
+a forked child that does its own."""
+import os
+import signal
+import time
+
 import numpy as np
 
 from design.forward.release import ramp_release_vjp
@@ -51,3 +56,25 @@ def test_release_pullback_and_cosine_map_are_the_same_in_parts(monkeypatch):
         assert np.array_equal(split, whole)
     assert np.array_equal(parts[3], 0.5 * (1.0 - np.cos(z)))
     assert np.array_equal(parts[4], 0.5 * (g * np.sin(z)))
+
+
+def test_a_forked_child_starts_its_own_threads(monkeypatch):
+    # the parent's pool threads do not exist in a forked child: work handed to them there would never be done
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    in_parts(lambda i, j: None, 2 * MIN_PART)
+    pid = os.fork()
+    if pid == 0:  # the child: its exit code says whether every index was done once
+        hits = np.zeros(2 * MIN_PART, dtype=int)
+
+        def work(i, j):
+            hits[i:j] += 1
+
+        in_parts(work, hits.size)
+        os._exit(0 if np.all(hits == 1) else 1)
+    deadline = time.monotonic() + 60.0  # only a hung child waits this long
+    while (done := os.waitpid(pid, os.WNOHANG))[0] == 0 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    if done[0] == 0:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+    assert done[0] == pid and os.waitstatus_to_exitcode(done[1]) == 0
