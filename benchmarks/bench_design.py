@@ -58,7 +58,7 @@ from design.inverse.optimize import build_objective, optimise
 from design.inverse.problem import prepare
 
 ROUNDS = 5
-"""Alternating rounds per grid by default: the machine's speed drifts by a fifth from minute to minute, and the median
+"""Alternating rounds per grid by default: the machine's speed can drift by a fifth from minute to minute, and the median
 of five rounds is not one slow minute's."""
 PARTS = ("evaluate", "gradient", "optimiser", "checkpoint", "writer")
 STAGE_EVALS = 80

@@ -17,13 +17,18 @@ if hasattr(os, "register_at_fork"):  # a forked child has none of its parent's t
     os.register_at_fork(after_in_child=_pools.clear)
 
 
+def cores() -> int:
+    """The cores this process may use (its CPU affinity where the system tells it)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
 def thread_count() -> int:
     """Threads for a process's array work: ``OMP_NUM_THREADS`` when the process is granted a count (a Dask worker's
-    nanny sets it to 1, so that side-by-side designs do not oversubscribe the cores), else the cores it may use."""
+    nanny sets it to 1, so that side-by-side designs do not oversubscribe the cores), else `cores`."""
     try:
         return max(1, int(os.environ["OMP_NUM_THREADS"]))
     except (KeyError, ValueError):
-        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        return cores()
 
 
 def in_parts(work: Callable[[int, int], object], size: int) -> None:

@@ -41,10 +41,10 @@ import numpy as np
 import trimesh
 
 from benchmarks import analytic
+from labapp.jobs.meshunits import MM_PER_UNIT
 
 SOBOL_LOG2 = 20
 """2^20 quasi-random points per part without a closed form."""
-INCH_MM = 25.4
 
 
 def _box(dims, at=(0.0, 0.0, 0.0)) -> trimesh.Trimesh:
@@ -255,7 +255,7 @@ def _solid_mm(path: Path, units: str) -> trimesh.Trimesh:
     """The solid the file describes, in mm: bodies that touch or overlap united (as ``sfr simulate`` reads it)."""
     from design.files.meshio import load_mesh
 
-    return load_mesh(path, INCH_MM if units == "in" else 1.0)
+    return load_mesh(path, MM_PER_UNIT[units])
 
 
 def sobol_release(mesh: trimesh.Trimesh) -> Callable[[np.ndarray], np.ndarray]:

@@ -54,13 +54,13 @@ plane p's face.
 """
 from __future__ import annotations
 
-import os
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
 from design.errors import DesignError
 from design.forward.fmm import MarchBuffers, march, march_adjoint
+from design.threads import cores
 
 CORE_ALLOWANCE = 0.5
 """Free detour of a solid path to the core, as a fraction of the straight (all-solid) distance."""
@@ -75,7 +75,7 @@ SOLID_LEVEL = 0.5
 """Block-averaged density from which a coarse voxel counts as solid for the tail's reference."""
 OPENING_SLOWNESS = 1e-6
 """Slowness of the gate voxels that let the front in at a seed."""
-SEED_WORKERS = max(1, min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1))
+SEED_WORKERS = min(4, cores())
 """Threads that solve the seeds' distances at the same time (`Connectivity.submit`): the cores this process may
 use, at most 4 (one per seed of a 3D design with three mirror planes). The result does not depend on it."""
 
