@@ -45,7 +45,17 @@ import numpy as np
 from numba import njit
 
 from design.forward.distance import Surface, closest_on_triangle, inside_sign, sign_and_direction
-from design.forward.quadrature import BAND, BLOCK, SPLIT, Lattice, Ramps, neighbour_candidates, ridge_cells
+from design.forward.quadrature import (
+    BAND,
+    BLOCK,
+    SPLIT,
+    Lattice,
+    Ramps,
+    folded_ramps,
+    neighbour_candidates,
+    opposite_front,
+    ridge_cells,
+)
 
 CERTIFICATE_TOLERANCE = 1e-7
 """A certificate point y* may lie this fraction of a lattice spacing closer than the offset to the mesh (round-off)."""
@@ -54,7 +64,6 @@ PUSHES = 4
 ON_SURFACE = 1e-9
 """A lattice point within this fraction of a spacing of the surface is on it: its distance's gradient (the unit vector
 to its closest point) is round-off, and its face's normal is taken instead."""
-"""Most pushes of a failed certificate's probe towards the offset surface (:meth:`PrintLattice.bounds_above`)."""
 
 
 def metric_offsets(normals: np.ndarray, offset_mm: float, anisotropy: float) -> np.ndarray:
@@ -86,12 +95,17 @@ def _subcell_ramps(cells, base, tri_a, tri_b, first, h, split, vx, vx_phys, k_fa
     """Ramps (start, end) of the split^3 sub-cells of each listed cell of a block (cell (0, 0, 0) is the lattice's
     cell `base`), by exact distances to the triangles closest to the cell and its 26 neighbours (`tri_a`: by
     distance, `tri_b`: by arrival time): T as :meth:`PrintLattice.arrival` gives it (``vx_phys`` the triangles in
-    physical mm, ``k_face`` their metric offsets)."""
+    physical mm, ``k_face`` their metric offsets). A sub-cell inside the print where opposite fronts meet (a plate's
+    mid-plane) is two ramps (:func:`design.forward.quadrature.folded_ramps`), returned in (start2, end2)."""
     hs = h / split
     per = split ** 3
     start = np.zeros(cells.shape[0] * per)
     end = np.zeros(cells.shape[0] * per)
+    start2 = np.zeros(cells.shape[0] * per)
+    end2 = np.zeros(cells.shape[0] * per)
     cand = np.empty(54, dtype=np.int64)
+    value = np.empty(54)
+    toward = np.empty((54, 3))
     for c in range(cells.shape[0]):
         ci, cj, ck = cells[c, 0], cells[c, 1], cells[c, 2]
         n_cand = neighbour_candidates(tri_a, tri_b, ci, cj, ck, cand)
@@ -112,7 +126,12 @@ def _subcell_ramps(cells, base, tri_a, tri_b, first, h, split, vx, vx_phys, k_fa
                         if d < best_d:
                             best_d = d
                             near = t
-                        t_in = min(t_in, d + k_face[t])
+                        value[m] = d + k_face[t]
+                        if d > 0.0:
+                            toward[m, 0] = (px - qx) / d
+                            toward[m, 1] = (py - qy) / d
+                            toward[m, 2] = (pz - qz) / d
+                        t_in = min(t_in, value[m])
                     if near < 0:
                         s += 1
                         continue
@@ -133,11 +152,14 @@ def _subcell_ramps(cells, base, tri_a, tri_b, first, h, split, vx, vx_phys, k_fa
                                 if d > 0.0:
                                     gx, gy, gz = (qx - zx) / d, (qy - zy) / d, (qz - zz) / d
                         arrive = (o - dp) / np.sqrt(gx * gx + gy * gy + (aniso * gz) ** 2)
-                    if arrive > -0.5 * hs:
+                    other = opposite_front(value, toward, n_cand, hs) if sg > 0.0 and arrive > 0.5 * hs else -1
+                    if other >= 0:
+                        start[s], end[s], start2[s], end2[s] = folded_ramps(arrive, value[other], hs)
+                    elif arrive > -0.5 * hs:
                         start[s] = max(arrive - 0.5 * hs, 0.0)
                         end[s] = arrive + 0.5 * hs
                     s += 1
-    return start, end
+    return start, end, start2, end2
 
 
 class PrintLattice:
@@ -270,10 +292,13 @@ class PrintLattice:
         cells = np.argwhere(ridge.reshape(shape))
         if len(cells):
             s = self.surface
-            sub_start, sub_end = _subcell_ramps(cells, lo.astype(np.int64), tri.reshape(shape), by.reshape(shape),
-                                                lattice.first, h, SPLIT, s.vx, self.vx_phys, self.k_face, self.offset,
-                                                self.anisotropy, s.face_n, s.edge_n, s.vert_n, s.faces)
+            sub_start, sub_end, fold_start, fold_end = _subcell_ramps(
+                cells, lo.astype(np.int64), tri.reshape(shape), by.reshape(shape), lattice.first, h, SPLIT, s.vx,
+                self.vx_phys, self.k_face, self.offset, self.anisotropy, s.face_n, s.edge_n, s.vert_n, s.faces)
             ramps.add(sub_start, sub_end, (h / SPLIT) ** 2)
+            folded = fold_end > fold_start
+            if np.any(folded):
+                ramps.add(fold_start[folded], fold_end[folded], (h / SPLIT) ** 2)
         return unsure
 
     def curve(self, bounds: np.ndarray, h: float, tau: np.ndarray, workers: int | None = None) -> OffsetCurve:

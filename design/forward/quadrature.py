@@ -3,7 +3,8 @@
 Each cell of a cubic lattice of spacing h spreads its volume over arrival times [T_c - h/2, T_c + h/2] from its
 exact signed distance (:class:`design.forward.distance.Surface`) and its fluid region's wetting time
 (:mod:`design.forward.wetting`); a cell across a ridge of the arrival time or next to a void's wall is split
-into `SPLIT`^3 sub-cells (see :mod:`design.forward.reference` for the error analysis).
+into `SPLIT`^3 sub-cells, and a sub-cell where fronts from opposite sides meet is two ramps (:func:`folded_ramps`;
+see :mod:`design.forward.reference` for the error analysis).
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ RIDGE_ANGLE_DEG = 20.0
 a ridge of the arrival time and is split into sub-cells."""
 SPLIT = 4
 """Sub-cells per axis of a ridge cell."""
+OPPOSITE_COS = float(np.cos(np.radians(RIDGE_ANGLE_DEG)))
+"""Two fronts whose directions are within `RIDGE_ANGLE_DEG` of opposite (cosine below -this) meet at a flat ridge."""
 BAND = 2.0
 """Lattice spacings from the surface within which points outside are given exact distances; farther
 out, they release nothing and are only classified."""
@@ -50,6 +53,33 @@ def neighbour_candidates(tri_a, tri_b, ci, cj, ck, cand):
     return n_cand
 
 
+@njit(cache=True, nogil=True, inline="always")
+def opposite_front(value, toward, n_cand, hs):
+    """The candidate front that meets the leading one (least ``value``, arrival time at a sub-cell's centre) inside
+    the sub-cell of side hs from the opposite side (its direction ``toward`` the centre within 20 degrees of opposite,
+    its arrival within hs of the leader's): a flat ridge of T, such as a plate's mid-plane. -1 if none."""
+    lead = 0
+    for m in range(n_cand):
+        if value[m] < value[lead]:
+            lead = m
+    other = -1
+    for m in range(n_cand):
+        facing = toward[m, 0] * toward[lead, 0] + toward[m, 1] * toward[lead, 1] + toward[m, 2] * toward[lead, 2]
+        if facing < -OPPOSITE_COS and value[m] < value[lead] + hs and (other < 0 or value[m] < value[other]):
+            other = m
+    return other
+
+
+@njit(cache=True, nogil=True, inline="always")
+def folded_ramps(first, second, hs):
+    """The two ramps (start, end, start2, end2) of a sub-cell of side hs that opposite fronts reach at times ``first``
+    <= ``second`` at its centre: along their common normal T rises from each side to where they meet, so each side's
+    part is a ramp of the plain one's slope ending there, not one ramp spreading half the sub-cell past the ridge
+    (a first-order error in hs at a plate's mid-plane)."""
+    meet = min(0.5 * (second - first), 0.5 * hs)
+    return first - 0.5 * hs, first + meet, second - 0.5 * hs, second - meet
+
+
 @njit(cache=True, nogil=True)
 def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_n, edge_n, vert_n, faces):
     """Ramps of the split^3 sub-cells of each listed lattice cell, by exact distances to the triangles
@@ -60,16 +90,20 @@ def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_
     |p - t|): its solid fraction f / hs + 1/2 then releases around T. One as close to a void's wall (t its
     closest triangle, w = offset[t] > 0 the void's wetting time) releases its solid, f + hs/2 thick, from the
     wall's side at w + s and from the other side at (the other regions' T at its centre) + f - s, s the depth
-    from the wall, whichever is first. Deeper, it arrives at T. Returns (start, end) per
-    sub-cell (equal when the sub-cell lies outside the solid). `cells` index the arrays `tri_u`, `tri_t` of a
+    from the wall, whichever is first. Deeper, it arrives at T, as two ramps where a front from the opposite side
+    meets the first in it (:func:`folded_ramps`). Returns (start, end, start2, end2) per sub-cell (start == end
+    outside the solid; start2 == end2 but for the two ramps' second). `cells` index the arrays `tri_u`, `tri_t` of a
     block whose cell (0, 0, 0) is the lattice's cell `base`.
     """
     hs = h / split
     per = split ** 3
     start = np.zeros(cells.shape[0] * per)
     end = np.zeros(cells.shape[0] * per)
+    start2 = np.zeros(cells.shape[0] * per)
+    end2 = np.zeros(cells.shape[0] * per)
     cand = np.empty(54, dtype=np.int64)
     value = np.empty(54)
+    toward = np.empty((54, 3))
     for c in range(cells.shape[0]):
         ci, cj, ck = cells[c, 0], cells[c, 1], cells[c, 2]
         n_cand = neighbour_candidates(tri_u, tri_t, ci, cj, ck, cand)
@@ -88,6 +122,10 @@ def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_
                         qx, qy, qz, _ = closest_on_triangle(px, py, pz, t, vx)
                         d = np.sqrt((px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2)
                         value[m] = offset[t] + d
+                        if d > 0.0:
+                            toward[m, 0] = (px - qx) / d
+                            toward[m, 1] = (py - qy) / d
+                            toward[m, 2] = (pz - qz) / d
                         if d < best_d:
                             best_d = d
                             near = t
@@ -123,10 +161,14 @@ def _subcell_ramps(cells, base, tri_u, tri_t, first, h, split, vx, offset, face_
                         start[s] = max(offset[near] + f - 0.5 * hs, offset[near])
                         end[s] = offset[near] + f + 0.5 * hs
                     else:
-                        start[s] = best_t - 0.5 * hs
-                        end[s] = best_t + 0.5 * hs
+                        other = opposite_front(value, toward, n_cand, hs)
+                        if other < 0:
+                            start[s] = best_t - 0.5 * hs
+                            end[s] = best_t + 0.5 * hs
+                        else:
+                            start[s], end[s], start2[s], end2[s] = folded_ramps(best_t, value[other], hs)
                     s += 1
-    return start, end
+    return start, end, start2, end2
 
 
 @njit(cache=True, nogil=True)
@@ -285,10 +327,13 @@ def block_ramps(surface: Surface, offset: np.ndarray, lattice: Lattice, block: n
     ramps.add(np.maximum(arrive[plain] - 0.5 * h, floor[plain]), arrive[plain] + 0.5 * h, h * h)
     cells = np.argwhere(ridge.reshape(shape))
     if len(cells):
-        sub_start, sub_end = _subcell_ramps(cells, lo.astype(np.int64), tri_u.reshape(shape), tri_t.reshape(shape),
-                                            lattice.first, h, SPLIT, surface.vx, offset, surface.face_n,
-                                            surface.edge_n, surface.vert_n, surface.faces)
+        sub_start, sub_end, fold_start, fold_end = _subcell_ramps(
+            cells, lo.astype(np.int64), tri_u.reshape(shape), tri_t.reshape(shape), lattice.first, h, SPLIT, surface.vx,
+            offset, surface.face_n, surface.edge_n, surface.vert_n, surface.faces)
         ramps.add(sub_start, sub_end, (h / SPLIT) ** 2)
+        folded = fold_end > fold_start
+        if np.any(folded):
+            ramps.add(fold_start[folded], fold_end[folded], (h / SPLIT) ** 2)
 
 
 def lattice_curve(surface: Surface, offset: np.ndarray, bounds: np.ndarray, h: float, tau: np.ndarray, *,

@@ -25,7 +25,9 @@ wall, and negative signed distances outside the surface) is not solid and releas
 curve is therefore exactly 0 at tau = 0, and second-order in h where T is smooth: the first two
 moments of each cell's arrival times are right. Where T is not smooth (on the medial axis, where two
 fronts meet, next to a void's wall) a cell is split into SPLIT^3 sub-cells evaluated the same way; a
-flat ridge (the mid-plane of a plate) would otherwise cost a first-order error. The sum of the ramps
+sub-cell that fronts from opposite sides reach within its size (a flat ridge: the mid-plane of a plate) is
+two ramps, one per front, ending where they meet, since a ramp centred on its centre's T would spread up to
+half of it past the ridge's time (a first-order error). The sum of the ramps
 estimates the volume; the curve is scaled so that it ends at the mesh's exact volume (signed
 tetrahedra). Lattice points more than BAND cells outside the solid are only classified, not measured.
 
