@@ -18,7 +18,6 @@ design, so J_fab = 1 there at every resolution and domain size and w_f keeps its
 from __future__ import annotations
 
 import logging
-import os
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -38,6 +37,7 @@ from design.fabrication.elasticity import (
     self_weight_adjoint,
 )
 from design.fabrication.multigrid import PCG_TOL, Scratch, hierarchy, pcg
+from design.threads import thread_count
 
 log = logging.getLogger(__name__)
 
@@ -191,7 +191,7 @@ def _solve_concurrently(solve: Callable[[int, np.ndarray | None, Scratch], _Solv
                         warm: list[np.ndarray], memories: list[Scratch]) -> list[_Solved]:
     """Every layer from its warm start, independently: one thread per core, each with its share of the layers,
     largest first (the kernels release the GIL)."""
-    queues: list[list[int]] = [[] for _ in range(min(len(tops), os.cpu_count() or 1))]
+    queues: list[list[int]] = [[] for _ in range(min(len(tops), thread_count()))]
     for l in np.argsort(tops, kind="stable")[::-1]:
         min(queues, key=lambda q: sum(tops[i] for i in q)).append(int(l))
 
@@ -302,7 +302,7 @@ class IcoTerm:
         self.evaluations = 0
         self.iterations = np.zeros(config.layers, dtype=int)
         self._warm: list[np.ndarray] | None = None
-        self._scratch = [Scratch() for _ in range(min(config.layers, os.cpu_count() or 1))]
+        self._scratch = [Scratch() for _ in range(min(config.layers, thread_count()))]
 
     def evaluate(self, rho: np.ndarray) -> IcoResult:
         """Unnormalised J_fab and gradient; updates the warm-start solutions and the timing."""

@@ -21,7 +21,6 @@ is never missed), so the curve is second order in h where T is smooth, like the 
 """
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -29,6 +28,7 @@ import numpy as np
 from design.forward.distance import Surface
 from design.forward.linear_sources import LinearSources
 from design.forward.quadrature import BAND, BLOCK, SPLIT, Lattice, Ramps, ridge_cells, solid_blocks
+from design.threads import thread_count
 
 FIRST_SLACK = 1e-9
 """A cell's closest face's front arrives first when T >= w + |f| (1 - `FIRST_TILT`) - this x h (round-off)."""
@@ -133,7 +133,7 @@ def front_curve(surface: Surface, source: LinearSources, bounds: np.ndarray, h: 
         return ramps
 
     total = Ramps.empty(tau)
-    workers = workers or min(len(blocks), os.cpu_count() or 1) or 1
+    workers = workers or min(len(blocks), thread_count()) or 1
     with ThreadPoolExecutor(max_workers=workers) as pool:
         for ramps in (pool.map(one, blocks) if workers > 1 else map(one, blocks)):
             total.merge(ramps)

@@ -37,7 +37,6 @@ sub-cells. Every shell must face the bath (no sealed voids: their walls' wetting
 """
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -56,6 +55,7 @@ from design.forward.quadrature import (
     opposite_front,
     ridge_cells,
 )
+from design.threads import thread_count
 
 CERTIFICATE_TOLERANCE = 1e-7
 """A certificate point y* may lie this fraction of a lattice spacing closer than the offset to the mesh (round-off)."""
@@ -313,7 +313,7 @@ class PrintLattice:
 
         total = Ramps.empty(tau)
         unsure = []
-        workers = workers or min(len(blocks), os.cpu_count() or 1) or 1
+        workers = workers or min(len(blocks), thread_count()) or 1
         with ThreadPoolExecutor(max_workers=workers) as pool:
             for ramps, bad in (pool.map(one, blocks) if workers > 1 else map(one, blocks)):
                 total.merge(ramps)

@@ -8,7 +8,6 @@ see :mod:`design.forward.reference` for the error analysis).
 """
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -17,6 +16,7 @@ import numpy as np
 from numba import njit
 
 from design.forward.distance import Surface, closest_on_triangle, inside_sign, sign_and_direction
+from design.threads import thread_count
 
 RIDGE_ANGLE_DEG = 20.0
 """A lattice cell whose arrival-time gradient differs from a face neighbour's by more than this straddles
@@ -357,7 +357,7 @@ def lattice_curve(surface: Surface, offset: np.ndarray, bounds: np.ndarray, h: f
         return ramps
 
     total = Ramps.empty(tau)
-    workers = workers or min(len(blocks), os.cpu_count() or 1) or 1
+    workers = workers or min(len(blocks), thread_count()) or 1
     with ThreadPoolExecutor(max_workers=workers) as pool:
         for k, ramps in enumerate(pool.map(one, blocks) if workers > 1 else map(one, blocks), 1):
             total.merge(ramps)

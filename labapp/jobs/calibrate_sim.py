@@ -13,7 +13,6 @@ import dataclasses
 import datetime as _dt
 import json
 import logging
-import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -46,6 +45,7 @@ from analysis.physics_grid import (
 from analysis.simcal import MODELS
 from analysis.simcal_fit import DEFAULT_MAX_OFFSET_S
 from design.geometry.voxelize import DEFAULT_RESOLUTION
+from design.threads import thread_count
 from labapp.figures.loo_plot import plot_loo
 from labapp.jobs.calibrate_barrier import barrier_block, split_coated
 from labapp.jobs.printrelease import mesh_release
@@ -61,7 +61,7 @@ from labapp.records.simcalset import SetRow, read_set, row_inputs
 
 MIN_RESOLUTION, MAX_RESOLUTION = 8, 512
 """The resolutions a calibration accepts, voxels along each mesh's longest side."""
-ROW_WORKERS = max(os.cpu_count() or 1, 1)
+ROW_WORKERS = thread_count()
 """Meshes released at once when a print physics value is tried (:meth:`_Simulations.simulate_rows`)."""
 Progress = Callable[[float, str], None]
 

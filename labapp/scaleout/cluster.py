@@ -9,7 +9,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import os
 import signal
 import threading
 import warnings
@@ -17,6 +16,7 @@ from typing import Iterator
 
 import psutil
 
+from design.threads import cores as design_cores
 from labapp.errors import LabError
 from labapp.jobs.meshunits import BASE_MEMORY_BYTES, design_memory_bytes
 
@@ -41,7 +41,7 @@ def design_memory_gb(resolution: int, space: str = "nfc") -> float:
 def local_worker_count(task_memory_gb: float, *, cores: int | None = None, memory_gb: float | None = None) -> int:
     """Single-threaded workers this machine can run side by side: one per core, as many as the
     available memory holds at `task_memory_gb` each (at least one)."""
-    cores = cores or os.cpu_count() or 1
+    cores = cores or design_cores()
     if memory_gb is None:
         memory_gb = psutil.virtual_memory().available / 1e9
     return max(1, min(cores, math.floor(0.9 * memory_gb / task_memory_gb)))
