@@ -14,7 +14,8 @@ solid volume over an interval of arrival times around T at its centre, with unit
   arrives first (a covered face reached from the body's inside, or a front tilted along the face), an interval of
   length L centred on T at the solid part's centre, T + (h - L)/2 (grad T . n), n the outward normal;
 * a cell whose gradient of T turns by more than `RIDGE_ANGLE_DEG` against a face neighbour (two fronts meet, or
-  the medial axis) is split into `SPLIT`^3 sub-cells treated the same way (without the shift).
+  the medial axis) is split into `SPLIT`^3 sub-cells treated the same way (without the shift); one inside the body
+  where a front from the opposite side meets the first (a plate's mid-plane) is two ramps ending where they meet.
 
 T is evaluated exactly at every point used (the global minimum over all faces, so a front from a distant open face
 is never missed), so the curve is second order in h where T is smooth, like the one-material one.
@@ -27,7 +28,7 @@ import numpy as np
 
 from design.forward.distance import Surface
 from design.forward.linear_sources import LinearSources
-from design.forward.quadrature import BAND, BLOCK, SPLIT, Lattice, Ramps, ridge_cells, solid_blocks
+from design.forward.quadrature import BAND, BLOCK, OPPOSITE_COS, SPLIT, Lattice, Ramps, ridge_cells, solid_blocks
 from design.threads import thread_count
 
 FIRST_SLACK = 1e-9
@@ -109,10 +110,36 @@ def _split_ramps(surface: Surface, source: LinearSources, centres: np.ndarray, h
     points, f, n_in = points[keep], f[keep], n_in[keep]
     if not len(points):
         return
-    T = source.arrival(points)[0]
+    T, _, foot = source.arrival(points)
     zero = np.zeros((len(points), 3))
     start, end = _cut_ramps(f, T, _wall_time(source, points, f, n_in), zero, zero, hs, False)
+    inside = np.flatnonzero(f >= 0.5 * hs)
+    other = _opposite_arrival(source, points[inside], T[inside], foot[inside], hs)
+    fold = np.isfinite(other)
+    if fold.any():
+        first, second, inside = T[inside][fold], other[fold], inside[fold]
+        meet = np.minimum(0.5 * (second - first), 0.5 * hs)
+        start[inside], end[inside] = first - 0.5 * hs, first + meet
+        ramps.add(second - 0.5 * hs, second - meet, hs * hs)
     ramps.add(start, end, hs * hs)
+
+
+def _opposite_arrival(source: LinearSources, points: np.ndarray, T: np.ndarray, foot: np.ndarray, hs: float
+                      ) -> np.ndarray:
+    """Per sub-cell of side hs inside the body (centre ``points``, arrival ``T`` from ``foot``): the arrival time at
+    its centre of a front from the opposite side (within `RIDGE_ANGLE_DEG`) that meets the first inside it, as at a
+    plate's mid-plane, else inf. Probed one side's length along the first front's direction: there the other front
+    is first if they meet before, and its time is carried back to the centre along its own direction. Such a
+    sub-cell is two ramps ending where the fronts meet (`design.forward.quadrature.folded_ramps`)."""
+    ahead = points - foot
+    ahead /= np.maximum(np.linalg.norm(ahead, axis=1), 1e-300)[:, None]
+    probe = points + hs * ahead
+    T_probe, _, foot_probe = source.arrival(probe)
+    back = probe - foot_probe
+    back /= np.maximum(np.linalg.norm(back, axis=1), 1e-300)[:, None]
+    facing = np.einsum("ij,ij->i", ahead, back)
+    second = T_probe - hs * facing
+    return np.where((facing < -OPPOSITE_COS) & (second < T + hs), second, np.inf)
 
 
 def front_curve(surface: Surface, source: LinearSources, bounds: np.ndarray, h: float, tau: np.ndarray, *,
