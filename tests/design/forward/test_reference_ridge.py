@@ -8,7 +8,7 @@ from design.forward.front_quadrature import front_curve
 from design.forward.linear_sources import LinearSources
 from design.forward.offset_lattice import PrintLattice
 from design.forward.quadrature import lattice_curve
-from design.forward.reference import metric_mesh
+from design.forward.reference import metric_mesh, reference_release
 
 
 @pytest.mark.parametrize("shift", [0.0, 1 / 16, 1 / 8, 3 / 16])
@@ -62,3 +62,18 @@ def test_the_two_material_quadrature_meets_the_plate_s_closed_form_with_its_mid_
     released = curve * mesh.volume / volume
     exact = np.prod(dims) - np.prod(np.clip(dims - 2 * tau[:, None], 0.0, None), axis=1)
     assert np.abs(released - exact).max() <= 5e-4 * mesh.volume
+
+
+def test_a_tilted_plate_meets_its_stated_error():
+    """A 20 x 15 x 2 mm plate turned 30 degrees about x and 20 about y, at default flags (the lattice sized by the
+    plate): its mid-plane crosses the sub-cells anywhere, and the stated error bounds the curve's error against the
+    box's closed form (before the two ramps: 0.29 % off with 0.19 % stated, at its second lattice)."""
+    dims = np.array([20.0, 15.0, 2.0])
+    mesh = trimesh.creation.box(dims)
+    turn = trimesh.transformations.rotation_matrix
+    mesh.apply_transform(turn(np.radians(30.0), [1, 0, 0]) @ turn(np.radians(20.0), [0, 1, 0]))
+    ref = reference_release(mesh)
+    exact = np.prod(dims) - np.prod(np.clip(dims - 2 * ref.tau_mm[:, None], 0.0, None), axis=1)
+    error = np.abs(ref.released_mm3 - exact).max()
+    assert error <= ref.error_mm3
+    assert error <= 2e-3 * np.prod(dims)
