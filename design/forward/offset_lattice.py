@@ -295,10 +295,7 @@ class PrintLattice:
             sub_start, sub_end, fold_start, fold_end = _subcell_ramps(
                 cells, lo.astype(np.int64), tri.reshape(shape), by.reshape(shape), lattice.first, h, SPLIT, s.vx,
                 self.vx_phys, self.k_face, self.offset, self.anisotropy, s.face_n, s.edge_n, s.vert_n, s.faces)
-            ramps.add(sub_start, sub_end, (h / SPLIT) ** 2)
-            folded = fold_end > fold_start
-            if np.any(folded):
-                ramps.add(fold_start[folded], fold_end[folded], (h / SPLIT) ** 2)
+            ramps.add_sub_cells(sub_start, sub_end, fold_start, fold_end, (h / SPLIT) ** 2)
         return unsure
 
     def curve(self, bounds: np.ndarray, h: float, tau: np.ndarray, workers: int | None = None) -> OffsetCurve:

@@ -56,8 +56,8 @@ def neighbour_candidates(tri_a, tri_b, ci, cj, ck, cand):
 @njit(cache=True, nogil=True, inline="always")
 def opposite_front(value, toward, n_cand, hs):
     """The candidate front that meets the leading one (least ``value``, arrival time at a sub-cell's centre) inside
-    the sub-cell of side hs from the opposite side (its direction ``toward`` the centre within 20 degrees of opposite,
-    its arrival within hs of the leader's): a flat ridge of T, such as a plate's mid-plane. -1 if none."""
+    the sub-cell of side hs from the opposite side (its direction ``toward`` the centre within `RIDGE_ANGLE_DEG` of
+    opposite, its arrival within hs of the leader's): a flat ridge of T, such as a plate's mid-plane. -1 if none."""
     lead = 0
     for m in range(n_cand):
         if value[m] < value[lead]:
@@ -205,6 +205,14 @@ class Ramps:
         self.volume += float(np.sum(end - start)) * slope
         self.end = max(self.end, float(end.max(initial=0.0)))
 
+    def add_sub_cells(self, start: np.ndarray, end: np.ndarray, start2: np.ndarray, end2: np.ndarray,
+                      slope: float) -> None:
+        """Add sub-cells' ramps and, where ``start2 < end2``, their second ramps (:func:`folded_ramps`)."""
+        self.add(start, end, slope)
+        second = end2 > start2
+        if np.any(second):
+            self.add(start2[second], end2[second], slope)
+
     def merge(self, other: Ramps) -> None:
         self.count += other.count
         self.moment += other.moment
@@ -330,10 +338,7 @@ def block_ramps(surface: Surface, offset: np.ndarray, lattice: Lattice, block: n
         sub_start, sub_end, fold_start, fold_end = _subcell_ramps(
             cells, lo.astype(np.int64), tri_u.reshape(shape), tri_t.reshape(shape), lattice.first, h, SPLIT, surface.vx,
             offset, surface.face_n, surface.edge_n, surface.vert_n, surface.faces)
-        ramps.add(sub_start, sub_end, (h / SPLIT) ** 2)
-        folded = fold_end > fold_start
-        if np.any(folded):
-            ramps.add(fold_start[folded], fold_end[folded], (h / SPLIT) ** 2)
+        ramps.add_sub_cells(sub_start, sub_end, fold_start, fold_end, (h / SPLIT) ** 2)
 
 
 def lattice_curve(surface: Surface, offset: np.ndarray, bounds: np.ndarray, h: float, tau: np.ndarray, *,
