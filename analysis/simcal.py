@@ -34,6 +34,20 @@ MIN_RELEASE_FRACTION = 0.05
 """A run whose measured release never reaches this fraction of its weighed mass shows no release."""
 
 
+def check_weighed_run(name: str, mass_g: float, volume_mm3: float, released_g: np.ndarray, *,
+                      volume_of: str = "the simulated") -> None:
+    """Refuse a run whose weighed mass over ``volume_mm3`` (mm^3, ``volume_of`` names whose) is no plausible
+    density, or whose measured release (g) never reaches `MIN_RELEASE_FRACTION` of that mass."""
+    density = mass_g / volume_mm3 * 1000.0
+    lo, hi = DENSITY_RANGE_G_PER_CM3
+    if not lo <= density <= hi:
+        raise AnalysisError(f"{name}: weighed {mass_g:g} g over {volume_of} {volume_mm3:.1f} mm^3 means "
+                            f"{density:.3g} g/cm^3, outside {lo:g}-{hi:g} g/cm^3 (wrong mesh, mesh unit or mass?)")
+    if np.max(released_g) < MIN_RELEASE_FRACTION * mass_g:
+        raise AnalysisError(f"{name}: the run shows no release (at most {np.max(released_g):.3g} g of the weighed "
+                            f"{mass_g:g} g); was the object dropped, and is it the right run?")
+
+
 @dataclass(frozen=True, eq=False)
 class ShapeRun:
     """One calibration shape: its simulated release and its measured run.
@@ -78,15 +92,7 @@ class ShapeRun:
             value = getattr(self, field_name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise AnalysisError(f"{self.name}: {field_name} = {value!r} must be a positive number of grams")
-        density = self.mass_g / vol[-1] * 1000.0
-        lo, hi = DENSITY_RANGE_G_PER_CM3
-        if not lo <= density <= hi:
-            raise AnalysisError(f"{self.name}: weighed {self.mass_g:g} g over the simulated {vol[-1]:.1f} mm^3 "
-                                f"means {density:.3g} g/cm^3, outside {lo:g}-{hi:g} g/cm^3 (wrong mesh, mesh unit "
-                                "or mass?)")
-        if np.max(rel) < MIN_RELEASE_FRACTION * self.mass_g:
-            raise AnalysisError(f"{self.name}: the run shows no release (at most {np.max(rel):.3g} g of the weighed "
-                                f"{self.mass_g:g} g); was the object dropped, and is it the right run?")
+        check_weighed_run(self.name, self.mass_g, float(vol[-1]), rel)
 
     @property
     def volume_mm3(self) -> float:

@@ -42,7 +42,7 @@ from analysis.physics_grid import (
     PHYSICS_PARAMETERS,
     PHYSICS_SETS,
 )
-from analysis.simcal import MODELS
+from analysis.simcal import MODELS, check_weighed_run
 from analysis.simcal_fit import DEFAULT_MAX_OFFSET_S
 from design.geometry.voxelize import DEFAULT_RESOLUTION
 from design.threads import thread_count
@@ -298,6 +298,13 @@ def _read_runs(set_csv: Path, bench, sims: _Simulations, physics: str, say: Prog
             raise SimCalError(f"{where}: {row.run} records no water mass; give it in a water_g column or give "
                               "the bench calibration")
         keep = curve.t_s >= 0
+        mesh = sims.meshes[row.mesh]
+        if mesh.is_volume:      # refused before any mesh is simulated; the simulated volume is checked again
+            try:
+                check_weighed_run(f"{where} ({row.run.name}, {row.mesh.name})", float(mass), float(mesh.volume),
+                                  curve.released_g[keep], volume_of="the mesh's")
+            except AnalysisError as exc:
+                raise SimCalError(str(exc)) from exc
         sims.measured.append((where, curve.t_s[keep], curve.released_g[keep], float(mass), float(water)))
     say(0.3 if physics == "none" else 0.05, f"simulating the {len({r.mesh for r in sims.rows})} meshes as designed ...")
     sims.simulate_rows(PHYSICS_IDENTITY)
