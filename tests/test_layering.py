@@ -1,6 +1,7 @@
 """The import rules of docs/architecture.md, checked on the source: the four packages, the layers inside
 them, and no import cycle between any two modules (imports inside functions count)."""
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -42,8 +43,10 @@ def _modules() -> dict[str, Path]:
     return modules
 
 
+@functools.cache
 def import_graph() -> dict[str, set[str]]:
-    """Module -> the project modules it imports anywhere in its source (module level or inside functions)."""
+    """Module -> the project modules it imports anywhere in its source (module level or inside functions); parsed
+    once per test process (to be read only)."""
     modules = _modules()
 
     def owner(name: str) -> str | None:          # the module a dotted name lives in

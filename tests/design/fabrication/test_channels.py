@@ -165,15 +165,15 @@ def test_objective_and_config_guards():
         DesignConfig(target="sphere", w_channel=5.0)
 
 
-def test_summary_records_the_weight_and_the_voxels_the_fill_added(tmp_path):
-    from tests.design.files.test_print_physics_design import _chamber, _outputs
+def test_summary_records_the_weight_and_the_voxels_the_fill_added(tmp_path_factory):
+    from tests.design.files.test_print_physics_design import chamber_summaries
 
     # the source itself as the design: its 1 mm channel's two 3 mm arms are narrower than 1.5 mm
-    problem, held, _ = _outputs(tmp_path / "held", _chamber(), warn_channel_mm=2.0, swelling_mm=1.5)
+    outputs = chamber_summaries(tmp_path_factory)
+    held, free, voxel_mm3 = outputs["held"], outputs["free"], outputs["dx_mm"] ** 3
     assert held["w_channel"] == W_CHANNEL
-    assert held["channel_fill_voxels"] * problem.dx_mm ** 3 == pytest.approx(2 * 3.0 * 1.0 * 1.0)
-    assert held["channel_fill_voxels"] * problem.dx_mm ** 3 == held["min_channel_constraint"]["filled_mm3"]
-    _, free, _ = _outputs(tmp_path / "free", _chamber(), warn_channel_mm=2.0)
+    assert held["channel_fill_voxels"] * voxel_mm3 == pytest.approx(2 * 3.0 * 1.0 * 1.0)
+    assert held["channel_fill_voxels"] * voxel_mm3 == held["min_channel_constraint"]["filled_mm3"]
     assert free["w_channel"] == 0.0 and free["channel_fill_voxels"] is None
 
 

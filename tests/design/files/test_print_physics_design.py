@@ -15,6 +15,7 @@ from design.inverse.optimize import build_objective
 from design.inverse.problem import prepare
 from design.inverse.status import DesignStatus
 from tests.design.gradcheck import assert_gradient_matches_fd
+from tests.session_once import once_per_session
 
 
 @pytest.mark.parametrize("anisotropy, swelling_mm", [(1.5, 0.0), (0.7, 0.0), (1.3, 1.0)])
@@ -69,6 +70,7 @@ def _outputs(tmp_path, mesh, **physics):
     return problem, summary, trimesh.load(out / "design.stl")
 
 
+@pytest.mark.slow
 def test_the_stl_is_the_solid_to_print_shrunk_by_the_offset(tmp_path):
     offset = 0.4
     sphere = trimesh.creation.icosphere(4, radius=5.0)
@@ -96,9 +98,19 @@ def _chamber():
     return trimesh.boolean.difference([slab, cavity], engine="manifold")
 
 
-def test_the_minimum_open_channel_width_fills_narrower_channels(tmp_path):
-    _, free, _ = _outputs(tmp_path / "free", _chamber(), warn_channel_mm=2.0)
-    _, held, _ = _outputs(tmp_path / "held", _chamber(), warn_channel_mm=2.0, swelling_mm=1.5)
+def chamber_summaries(factory: pytest.TempPathFactory) -> dict:
+    """The chamber's outputs' summaries (computed once per test session): ``free`` warned of channels under 2 mm,
+    ``held`` also holding open the channels narrower than 1.5 mm of swelling; ``dx_mm`` their voxel size."""
+    def outputs(folder):
+        problem, free, _ = _outputs(folder / "free", _chamber(), warn_channel_mm=2.0)
+        _, held, _ = _outputs(folder / "held", _chamber(), warn_channel_mm=2.0, swelling_mm=1.5)
+        return {"free": free, "held": held, "dx_mm": problem.dx_mm}
+    return once_per_session(factory, "chamber-outputs", outputs)[1]
+
+
+def test_the_minimum_open_channel_width_fills_narrower_channels(tmp_path_factory):
+    outputs = chamber_summaries(tmp_path_factory)
+    free, held = outputs["free"], outputs["held"]
     assert free["min_channel_mm"] is not None and free["min_channel_mm"] < 1.5  # the 1 mm channel
     assert free["min_channel_constraint"] is None
     constraint = held["min_channel_constraint"]

@@ -116,6 +116,7 @@ def test_beta_continuation_defaults_and_stored_fixed_runs(tmp_path):
     assert resumed["beta_final"] == resumed["beta"]
 
 
+@pytest.mark.slow
 def test_an_extruded_ring_opens_its_hole_with_default_flags(tmp_path):
     # a ring 6 mm tall with a 5 mm wall ends its release at 2.5 mm, before its faces (3 mm) dissolve a
     # solid core: a start whose core is solid would keep it; the start without it opens the hole, in

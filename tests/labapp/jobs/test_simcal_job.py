@@ -19,6 +19,7 @@ from labapp.cli.main import main
 from labapp.errors import UsageError
 from labapp.jobs.calibrate_sim import calibrate_sim
 from labapp.records.simcal import SimCalError, load_simcal
+from tests.session_once import once_per_session
 
 SHAPES = ("sphere", "pill", "spinner_top", "csg")
 MATERIAL = Material(1850.0, 1.24)
@@ -36,8 +37,20 @@ def _curve(release, index, *, stop_fraction=None, shift_s=0.0, water_g=500.0):
 
 
 @pytest.fixture(scope="module")
-def releases():
-    return {s: sample_release(s, index=i, resolution=48, material=MATERIAL) for i, s in enumerate(SHAPES)}
+def releases(tmp_path_factory):
+    """The four shapes' releases on the simulated bench (computed once per test session)."""
+    return once_per_session(tmp_path_factory, "simcal-job-releases", lambda _: {
+        s: sample_release(s, index=i, resolution=48, material=MATERIAL) for i, s in enumerate(SHAPES)})[1]
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory, releases):
+    """The complete set calibrated with the constant model and no print physics: its folder (holding ``set/`` and
+    ``cal/``, to be read only) and the calibration's document."""
+    def calibrate(folder):
+        return calibrate_sim(_write_set(folder / "set", releases), None, folder / "cal", resolution=32,
+                             model="constant", physics="none").doc
+    return once_per_session(tmp_path_factory, "simcal-job-calibrated", calibrate)
 
 
 def _write_set(folder, releases, *, stop=None, shift=None, water=None, mass=None):
@@ -62,11 +75,13 @@ def _true_scales(releases):
 
 
 @pytest.mark.parametrize("case", ["complete", "stopped_at_80_percent_and_30_s_drop_error"])
-def test_hidden_scales_are_recovered_and_left_out_shapes_predicted(tmp_path, releases, case):
-    overrides = {} if case == "complete" else dict(stop={"pill": 0.8}, shift={"csg": 30.0})
-    run = calibrate_sim(_write_set(tmp_path / "set", releases, **overrides), None, tmp_path / "cal", resolution=32,
-                        model="constant", physics="none")
-    doc = run.doc
+def test_hidden_scales_are_recovered_and_left_out_shapes_predicted(tmp_path, releases, case, request):
+    if case == "complete":
+        folder, doc = request.getfixturevalue("calibrated")
+    else:
+        folder = tmp_path
+        doc = calibrate_sim(_write_set(tmp_path / "set", releases, stop={"pill": 0.8}, shift={"csg": 30.0}), None,
+                            tmp_path / "cal", resolution=32, model="constant", physics="none").doc
     rate, g_per_mm3 = _true_scales(releases)
     assert doc["seconds_per_mm"] == pytest.approx(rate, rel=0.02)
     assert doc["g_per_mm3"] == pytest.approx(g_per_mm3, rel=0.02)
@@ -78,11 +93,11 @@ def test_hidden_scales_are_recovered_and_left_out_shapes_predicted(tmp_path, rel
         pill, csg = doc["shapes"][1], doc["shapes"][3]
         assert pill["measured_fraction"] < 0.8
         assert csg["offset_s"] > 10.0       # the late drop is seen (with the print's own rate spread folded in)
-    loo_csv = (tmp_path / "cal" / "loo.csv").read_text().splitlines()
+    loo_csv = (folder / "cal" / "loo.csv").read_text().splitlines()
     assert loo_csv[0] == "run,mesh,model,rel_rmse,seconds_per_mm_without_it" and len(loo_csv) == 1 + 4
-    assert (tmp_path / "cal" / "simcal.png").stat().st_size > 10_000
+    assert (folder / "cal" / "simcal.png").stat().st_size > 10_000
     with pytest.raises(UsageError, match="already holds a simulation calibration"):
-        calibrate_sim(tmp_path / "set" / "set.csv", None, tmp_path / "cal", resolution=32)
+        calibrate_sim(folder / "set" / "set.csv", None, folder / "cal", resolution=32)
 
 
 def test_different_water_masses_share_one_calibration(tmp_path, releases):
@@ -123,10 +138,9 @@ def test_the_loop_measured_curve_to_design_within_3_percent(tmp_path, releases):
     assert (out / "report.png").is_file() and (out / "report_simulation.png").is_file()
 
 
-def test_simulate_with_simcal_writes_the_physical_curve_and_refuses_another_resolution(tmp_path, releases):
-    calibrate_sim(_write_set(tmp_path / "set", releases), None, tmp_path / "cal", resolution=32, model="constant",
-                  physics="none")
-    simcal = tmp_path / "cal" / "simcal.json"
+def test_simulate_with_simcal_writes_the_physical_curve_and_refuses_another_resolution(tmp_path, releases,
+                                                                                      calibrated):
+    simcal = calibrated[0] / "cal" / "simcal.json"
     assert main(["simulate", "sample:pill", "--simcal", str(simcal), "--out", str(tmp_path / "sim")]) == 0
     rows = np.genfromtxt(tmp_path / "sim" / "release_physical.csv", delimiter=",", names=True)
     assert rows.dtype.names == ("t_s", "released_g", "conc_g_per_kg", "released_g_q05", "released_g_q95")
@@ -148,10 +162,8 @@ def _raise_through(argv):
     args._run(args)
 
 
-def test_bad_calibration_files_are_refused(tmp_path, releases):
-    calibrate_sim(_write_set(tmp_path / "set", releases), None, tmp_path / "cal", resolution=32, model="constant",
-                  physics="none")
-    doc = json.loads((tmp_path / "cal" / "simcal.json").read_text())
+def test_bad_calibration_files_are_refused(tmp_path, calibrated):
+    doc = json.loads((calibrated[0] / "cal" / "simcal.json").read_text())
     for change, message in ((dict(model="cubic"), "model 'cubic' is not one of"),
                             (dict(format="sfr-bench-calibration/1"), "format 'sfr-bench-calibration/1' is not"),
                             (dict(forward_model="other"), "calibrated for the simulator 'other'"),
@@ -176,10 +188,14 @@ def test_bad_set_files_name_the_row(tmp_path, releases, edit, message):
     assert not (tmp_path / "cal").exists()
 
 
-def test_impossible_density_and_a_run_without_release_are_named(tmp_path, releases):
+def test_impossible_density_and_a_run_without_release_are_named(tmp_path, releases, monkeypatch):
+    def simulated(*args, **kwargs):
+        raise AssertionError("a mesh was simulated before the set was refused")
+
+    monkeypatch.setattr("labapp.jobs.calibrate_sim.mesh_release", simulated)      # refused before any simulation
     set_csv = _write_set(tmp_path / "set", releases, mass={"spinner_top": 0.5})
-    with pytest.raises(SimCalError, match=r"set.csv row 3 \(spinner_top.csv, spinner_top.stl\): weighed 0.5 g .* "
-                                          r"means 0.3.. g/cm\^3, outside 0.8-2 g/cm\^3"):
+    with pytest.raises(SimCalError, match=r"set.csv row 3 \(spinner_top.csv, spinner_top.stl\): weighed 0.5 g "
+                                          r"over the mesh's .* mm\^3 means 0.3.. g/cm\^3, outside 0.8-2 g/cm\^3"):
         calibrate_sim(set_csv, None, tmp_path / "cal", resolution=32)
     set_csv = _write_set(tmp_path / "set2", releases)
     flat = tmp_path / "set2" / "pill.csv"

@@ -50,6 +50,7 @@ def _bench_set(folder, physics, shapes=None):
     return write_set(folder, rows)
 
 
+@pytest.mark.slow
 def test_hidden_anisotropy_is_recovered_and_earns_its_place(tmp_path):
     set_csv = _bench_set(tmp_path / "set", PrintPhysics(anisotropy=1.4), BUILD_DIRECTION)
     run = calibrate_sim(set_csv, None, tmp_path / "cal", resolution=COARSE, model="constant", physics="anisotropy")
