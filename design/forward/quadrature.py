@@ -32,7 +32,7 @@ BLOCK = 32
 """Lattice cells per axis of a block, the unit of evaluation: only blocks that meet the solid are evaluated."""
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def neighbour_candidates(tri_a, tri_b, ci, cj, ck, cand):
     """The distinct triangles of ``tri_a`` and ``tri_b`` (closest triangles per lattice cell, -1 for none) over
     cell (ci, cj, ck) and its 26 neighbours, written to the front of ``cand``; returns how many."""
@@ -53,7 +53,7 @@ def neighbour_candidates(tri_a, tri_b, ci, cj, ck, cand):
     return n_cand
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def opposite_front(value, toward, n_cand, hs):
     """The candidate front that meets the leading one (least ``value``, arrival time at a sub-cell's centre) inside
     the sub-cell of side hs from the opposite side (its direction ``toward`` the centre within `RIDGE_ANGLE_DEG` of
@@ -70,7 +70,7 @@ def opposite_front(value, toward, n_cand, hs):
     return other
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def folded_ramps(first, second, hs):
     """The two ramps (start, end, start2, end2) of a sub-cell of side hs that opposite fronts reach at times ``first``
     <= ``second`` at its centre: along their common normal T rises from each side to where they meet, so each side's
