@@ -88,6 +88,7 @@ def short_print(monkeypatch):
     return lambda problem: _install_print(monkeypatch, problem, lambda grid, goal: (1.0 - SHORTFALL) * grid)
 
 
+@pytest.mark.slow
 def test_a_known_shortfall_of_the_print_is_corrected(short_print):
     config = DesignConfig(max_iter=140, correction_rounds=3, correction_evals=20, **SMALL)
     problem = _reachable(config)

@@ -32,6 +32,7 @@ def test_coarse_resolution_halves_and_stays_even_from_the_multistart_resolution_
     assert coarse_resolution(66) == 66 and coarse_resolution(16) == 16
 
 
+@pytest.mark.slow
 def test_multistart_runs_the_starts_and_refines_the_best(tmp_path, caplog, monkeypatch):
     # the coarse path, as from resolution 128 on, at a resolution a test can afford
     monkeypatch.setattr(design.inverse.multistart, "MULTISTART_MIN_RESOLUTION", 32)

@@ -18,6 +18,7 @@ def _prints():
     return drug, coat
 
 
+@pytest.mark.slow
 def test_a_coated_print_releases_its_drug_only_after_the_coat():
     drug, coat = _prints()
     plain = sample_release("box", 0, material=MATERIAL, mesh=drug)

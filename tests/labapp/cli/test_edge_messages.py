@@ -225,6 +225,7 @@ def test_a_design_whose_line_search_stalls_is_reported_as_converged(tmp_path):
     assert first.startswith("converged (no step lowers J further) after 73 evaluations") and "stalled" not in first
 
 
+@pytest.mark.slow
 def test_an_extruded_multistart_design_warns_once(tmp_path, capsys, caplog):
     import logging
 

@@ -36,6 +36,7 @@ def test_swelling_that_shuts_no_channel_changes_nothing_and_the_exact_model_rele
     assert outputs.warnings == ()
 
 
+@pytest.mark.slow
 def test_swelling_that_shuts_a_slot_is_the_grid_model_s_named_and_warned(tmp_path, capsys):
     # a 10 mm block with a 0.4 mm slot cut into it: a 0.6 mm swelling width shuts the slot
     block = trimesh.creation.box((10.0, 10.0, 4.0))

@@ -41,6 +41,7 @@ def runs(tmp_path_factory):
     return cal_path, [_retimed(BENCH / "run", tmp / name, f) for name, f in (("a", 1.0), ("b", 1.0), ("slow", 3.0))]
 
 
+@pytest.mark.slow
 def test_batch_on_a_local_cluster_writes_one_table(runs, tmp_path, capsys):
     cal_path, (a, b, c) = runs
     broken = tmp_path / "broken"
