@@ -133,6 +133,12 @@ class BackgroundTask(QObject):
         super().__init__(parent)
         self._fn = fn
         self._thread: threading.Thread | None = None
+        self._delivered = False
+        self.finished.connect(self._deliver)   # connected first: done before any slot connected later sees it
+        self.failed.connect(self._deliver)
+
+    def _deliver(self, _result: object) -> None:
+        self._delivered = True
 
     def start(self) -> None:
         """Start the work (once)."""
@@ -141,8 +147,9 @@ class BackgroundTask(QObject):
 
     @property
     def running(self) -> bool:
-        """True while the work is in progress."""
-        return self._thread is not None and self._thread.is_alive()
+        """True from `start` until the result or error is delivered in the GUI thread (its thread may still be
+        returning then), or the thread ended without one."""
+        return self._thread is not None and not self._delivered and self._thread.is_alive()
 
     def _run(self) -> None:
         try:
