@@ -298,14 +298,15 @@ def _read_runs(set_csv: Path, bench, sims: _Simulations, physics: str, say: Prog
             raise SimCalError(f"{where}: {row.run} records no water mass; give it in a water_g column or give "
                               "the bench calibration")
         keep = curve.t_s >= 0
+        t_s, released_g = curve.t_s[keep], curve.released_g[keep]
         mesh = sims.meshes[row.mesh]
         if mesh.is_volume:      # refused before any mesh is simulated; the simulated volume is checked again
             try:
                 check_weighed_run(f"{where} ({row.run.name}, {row.mesh.name})", float(mass), float(mesh.volume),
-                                  curve.released_g[keep], volume_of="the mesh's")
+                                  released_g, volume_of="the mesh's")
             except AnalysisError as exc:
                 raise SimCalError(str(exc)) from exc
-        sims.measured.append((where, curve.t_s[keep], curve.released_g[keep], float(mass), float(water)))
+        sims.measured.append((where, t_s, released_g, float(mass), float(water)))
     say(0.3 if physics == "none" else 0.05, f"simulating the {len({r.mesh for r in sims.rows})} meshes as designed ...")
     sims.simulate_rows(PHYSICS_IDENTITY)
 
